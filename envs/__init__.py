@@ -1,0 +1,67 @@
+"""Concrete tasks, by name.
+
+    task = mjzoo.envs.make("cartpole_swingup", upright_weight=2.0, ctrl_dt=0.04)
+    mjzoo.envs.names()  # ['cartpole_balance', 'cartpole_swingup', ...]
+
+Every task comes truncated after its episode length and guarded against diverging
+physics; overrides change weights, targets, episode length and physics options
+(`mjzoo.physics.OPTIONS`) without editing code.
+"""
+
+from __future__ import annotations
+
+import difflib
+import inspect
+from typing import Any, Callable
+
+from mjzoo import physics
+from mjzoo.envs import cartpole, cylinder_push, pendulum, point_mass
+from mjzoo.types import Task
+
+__all__ = ["make", "names", "defaults", "register"]
+
+_REGISTRY: dict[str, Callable[..., Task]] = {
+    "pendulum_swingup": pendulum.swingup,
+    "cartpole_balance": cartpole.balance,
+    "cartpole_swingup": cartpole.swingup,
+    "point_mass": point_mass.reach,
+    "cylinder_push": cylinder_push.push,
+}
+
+
+def names() -> list[str]:
+    """The registered task names, sorted."""
+    return sorted(_REGISTRY)
+
+
+def register(name: str, factory: Callable[..., Task]) -> None:
+    """Adds a task factory (keyword-only arguments, each an override) under `name`."""
+    if name in _REGISTRY:
+        raise ValueError(f"a task named {name!r} is already registered")
+    _REGISTRY[name] = factory
+
+
+def defaults(name: str) -> dict[str, Any]:
+    """The overridable arguments of a task and their default values."""
+    signature = inspect.signature(_factory(name))
+    return {
+        k: p.default for k, p in signature.parameters.items() if p.kind == inspect.Parameter.KEYWORD_ONLY
+    }
+
+
+def make(name: str, **overrides: Any) -> Task:
+    """Builds the task `name`, with `overrides` of its defaults or of physics options."""
+    factory = _factory(name)
+    allowed = set(defaults(name)) | set(physics.OPTIONS)
+    unknown = sorted(set(overrides) - allowed)
+    if unknown:
+        raise TypeError(f"{name}: unknown override(s) {unknown}; allowed: {sorted(allowed)}")
+    return factory(**overrides)
+
+
+def _factory(name: str) -> Callable[..., Task]:
+    if name not in _REGISTRY:
+        close = difflib.get_close_matches(name, _REGISTRY, n=1)
+        hint = f" (did you mean {close[0]!r}?)" if close else ""
+        raise KeyError(f"unknown env {name!r}{hint}; registered envs: {names()}")
+    return _REGISTRY[name]

@@ -1,0 +1,64 @@
+"""What every concrete task shares: where its model files live, how its numbers become
+pytree leaves, and how its four functions become a `Task` with an episode limit and a
+divergence guard."""
+
+from __future__ import annotations
+
+from pathlib import Path
+from typing import Any, Callable
+
+import jax
+import jax.numpy as jnp
+from mujoco import mjx
+
+from mjzoo import physics as physics_lib
+from mjzoo.combinators import with_divergence_guard, with_time_limit
+from mjzoo.types import State, Task, bind
+
+__all__ = ["ASSETS", "load", "floats", "build", "advance"]
+
+ASSETS = Path(__file__).parent / "assets"
+
+
+def load(asset: str, **physics_options: Any) -> physics_lib.Physics:
+    """Loads one of the bundled model files (``envs/assets/<asset>``) with physics options."""
+    return physics_lib.load(ASSETS / asset, **physics_options)
+
+
+def floats(**values: Any) -> dict[str, jax.Array]:
+    """Numbers as float32 leaves, so tasks built with different values share a trace."""
+    return {k: jnp.asarray(v, jnp.float32) for k, v in values.items()}
+
+
+def build(
+    physics: physics_lib.Physics,
+    params: Any,
+    reset: Callable,
+    step: Callable,
+    reward: Callable,
+    terminate: Callable,
+    *,
+    episode_steps: int,
+) -> Task:
+    """A Task of module-level functions bound to `params`, guarded against divergence
+    and truncated after `episode_steps` control steps."""
+    task = Task(
+        model=physics.model,
+        reset=bind(reset, params),
+        step=bind(step, params),
+        reward=bind(reward, params),
+        terminate=bind(terminate, params),
+        mj_model=physics.mj_model,
+    )
+    return with_time_limit(with_divergence_guard(task), episode_steps)
+
+
+def advance(model: mjx.Model, state: State, action: jax.Array, n_substeps: int) -> mjx.Data:
+    """Physics of one control step: `action` as the controls (MuJoCo clamps them to
+    ctrlrange), held for `n_substeps` physics steps."""
+    return physics_lib.step(model, state.data, jnp.asarray(action, jnp.float32), n_substeps)
+
+
+def never_terminate(params: Any, model: mjx.Model, state: State) -> tuple[jax.Array, jax.Array]:
+    """For tasks that end only by their time limit."""
+    return jnp.zeros((), bool), jnp.zeros((), bool)

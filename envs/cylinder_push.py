@@ -1,0 +1,110 @@
+"""Cylinder push: a planar pusher must shove a sliding cylinder onto a goal.
+
+Pusher (sphere, r = 5 cm, 2 motors of up to 5 N) and cylinder (r = 10 cm, 0.5 kg) slide
+on slide joints whose damping stands in for floor friction; only they collide.
+
+Observation (12,): pusher position and velocity, cylinder position and velocity, goal
+minus cylinder, cylinder minus pusher (m, m/s; xy each).
+Action (2,): pusher forces in [-1, 1] x 5 N along x and y.
+Reward terms per step (each a weight times a value in [0, 1]):
+  goal      +1.0  * tolerance(cylinder-goal distance, margin=1.5 m, linear)
+  approach  +0.3  * tolerance(distance from the pusher to the point behind the cylinder,
+                    opposite the goal, margin=1.5 m, linear)
+  effort    -0.01 * mean(action^2)
+No termination; truncated after `episode_steps` (500 steps of 0.02 s = 10 s).
+Keeps ``info["goal"]`` (2,), also shown by the model's mocap marker.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+
+import jax
+import jax.numpy as jnp
+from mujoco import mjx
+
+from mjzoo.envs import base
+from mjzoo.rewards import tolerance
+from mjzoo.types import State, Task
+
+__all__ = ["Params", "push"]
+
+Array = jax.Array
+CONTACT_DISTANCE = 0.15  # pusher radius + cylinder radius
+
+
+@jax.tree_util.register_dataclass
+@dataclasses.dataclass(frozen=True)
+class Params:
+    goal_weight: Array
+    approach_weight: Array
+    effort_weight: Array
+    margin: Array
+    spawn_range: Array  # cylinder and goal uniform in [-r, r]^2, pusher in [-1.6 r, 1.6 r]^2
+    n_substeps: int = dataclasses.field(metadata=dict(static=True))
+
+
+def positions(data: mjx.Data) -> tuple[Array, Array]:
+    """(pusher xy, cylinder xy)."""
+    return data.qpos[0:2], data.qpos[2:4]
+
+
+def observe(data: mjx.Data, goal: Array) -> Array:
+    pusher, cylinder = positions(data)
+    return jnp.concatenate([pusher, data.qvel[0:2], cylinder, data.qvel[2:4], goal - cylinder, cylinder - pusher])
+
+
+def reset(p: Params, model: mjx.Model, key: Array) -> State:
+    pusher_key, cylinder_key, goal_key = jax.random.split(key, 3)
+    cylinder = jax.random.uniform(cylinder_key, (2,), minval=-p.spawn_range, maxval=p.spawn_range)
+    goal = jax.random.uniform(goal_key, (2,), minval=-p.spawn_range, maxval=p.spawn_range)
+    pusher = jax.random.uniform(pusher_key, (2,), minval=-1.6 * p.spawn_range, maxval=1.6 * p.spawn_range)
+    # Never start overlapping: move the pusher out along the line from the cylinder.
+    offset = pusher - cylinder
+    gap = jnp.linalg.norm(offset)
+    direction = jnp.where(gap > 1e-6, offset / jnp.maximum(gap, 1e-6), jnp.array([1.0, 0.0]))
+    pusher = jnp.where(gap < 2 * CONTACT_DISTANCE, cylinder + 2 * CONTACT_DISTANCE * direction, pusher)
+    data = mjx.make_data(model)
+    data = data.replace(qpos=jnp.concatenate([pusher, cylinder]), mocap_pos=data.mocap_pos.at[0, :2].set(goal))
+    return State.create(data, observe(data, goal), info={"goal": goal})
+
+
+def step(p: Params, model: mjx.Model, state: State, action: Array, key: Array) -> State:
+    data = base.advance(model, state, action, p.n_substeps)
+    return state.replace(data=data, obs=observe(data, state.info["goal"]))
+
+
+def reward(p: Params, model: mjx.Model, state: State, action: Array, next_state: State) -> dict[str, Array]:
+    pusher, cylinder = positions(next_state.data)
+    to_goal = next_state.info["goal"] - cylinder
+    distance = jnp.linalg.norm(to_goal)
+    behind = cylinder - CONTACT_DISTANCE * to_goal / jnp.maximum(distance, 1e-6)
+    linear = dict(margin=p.margin, sigmoid="linear", value_at_margin=0.0)
+    return {
+        "goal": p.goal_weight * tolerance(distance, **linear),
+        "approach": p.approach_weight * tolerance(jnp.linalg.norm(behind - pusher), **linear),
+        "effort": -p.effort_weight * jnp.mean(jnp.square(jnp.clip(action, -1.0, 1.0))),
+    }
+
+
+def push(
+    *,
+    episode_steps: int = 500,
+    goal_weight: float = 1.0,
+    approach_weight: float = 0.3,
+    effort_weight: float = 0.01,
+    margin: float = 1.5,
+    spawn_range: float = 0.5,
+    ctrl_dt: float = 0.02,
+    **physics_options,
+) -> Task:
+    """The cylinder-push task; keyword arguments override weights and physics."""
+    physics = base.load("cylinder_push.xml", ctrl_dt=ctrl_dt, **physics_options)
+    params = Params(
+        **base.floats(
+            goal_weight=goal_weight, approach_weight=approach_weight, effort_weight=effort_weight,
+            margin=margin, spawn_range=spawn_range,
+        ),
+        n_substeps=physics.n_substeps,
+    )  # fmt: skip
+    return base.build(physics, params, reset, step, reward, base.never_terminate, episode_steps=episode_steps)

@@ -1,0 +1,86 @@
+"""Point mass: drive a 0.3 kg mass in a 1 m square to a target drawn at every reset.
+
+Observation (6,): position (m), velocity (m/s), target minus position (m).
+Action (2,): forces in [-1, 1] N along x and y.
+Reward terms per step (each a weight times a value in [0, 1]):
+  reach   +1.0  * tolerance(distance to target, upper=target_radius, margin=0.5 m)
+  effort  -0.01 * mean(action^2)
+No termination; truncated after `episode_steps` (250 steps of 0.02 s = 5 s).
+Keeps ``info["goal"]`` (2,), the target, also shown by the model's mocap marker.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+
+import jax
+import jax.numpy as jnp
+from mujoco import mjx
+
+from mjzoo.envs import base
+from mjzoo.rewards import tolerance
+from mjzoo.types import State, Task
+
+__all__ = ["Params", "reach"]
+
+Array = jax.Array
+
+
+@jax.tree_util.register_dataclass
+@dataclasses.dataclass(frozen=True)
+class Params:
+    reach_weight: Array
+    effort_weight: Array
+    target_radius: Array
+    reach_margin: Array
+    spawn_range: Array  # start and target are uniform in [-spawn_range, spawn_range]^2
+    n_substeps: int = dataclasses.field(metadata=dict(static=True))
+
+
+def observe(data: mjx.Data, goal: Array) -> Array:
+    return jnp.concatenate([data.qpos, data.qvel, goal - data.qpos])
+
+
+def reset(p: Params, model: mjx.Model, key: Array) -> State:
+    start_key, goal_key = jax.random.split(key)
+    start = jax.random.uniform(start_key, (2,), minval=-p.spawn_range, maxval=p.spawn_range)
+    goal = jax.random.uniform(goal_key, (2,), minval=-p.spawn_range, maxval=p.spawn_range)
+    data = mjx.make_data(model)
+    data = data.replace(qpos=start, mocap_pos=data.mocap_pos.at[0, :2].set(goal))
+    return State.create(data, observe(data, goal), info={"goal": goal})
+
+
+def step(p: Params, model: mjx.Model, state: State, action: Array, key: Array) -> State:
+    data = base.advance(model, state, action, p.n_substeps)
+    return state.replace(data=data, obs=observe(data, state.info["goal"]))
+
+
+def reward(p: Params, model: mjx.Model, state: State, action: Array, next_state: State) -> dict[str, Array]:
+    distance = jnp.linalg.norm(next_state.info["goal"] - next_state.data.qpos)
+    return {
+        "reach": p.reach_weight * tolerance(distance, upper=p.target_radius, margin=p.reach_margin),
+        "effort": -p.effort_weight * jnp.mean(jnp.square(jnp.clip(action, -1.0, 1.0))),
+    }
+
+
+def reach(
+    *,
+    episode_steps: int = 250,
+    reach_weight: float = 1.0,
+    effort_weight: float = 0.01,
+    target_radius: float = 0.03,
+    reach_margin: float = 0.5,
+    spawn_range: float = 0.4,
+    ctrl_dt: float = 0.02,
+    **physics_options,
+) -> Task:
+    """The point-mass reaching task; keyword arguments override weights and physics."""
+    physics = base.load("point_mass.xml", ctrl_dt=ctrl_dt, **physics_options)
+    params = Params(
+        **base.floats(
+            reach_weight=reach_weight, effort_weight=effort_weight, target_radius=target_radius,
+            reach_margin=reach_margin, spawn_range=spawn_range,
+        ),
+        n_substeps=physics.n_substeps,
+    )  # fmt: skip
+    return base.build(physics, params, reset, step, reward, base.never_terminate, episode_steps=episode_steps)

@@ -1,0 +1,43 @@
+"""mjzoo: tasks are data, algorithms are functions.
+
+A `Task` is an immutable pytree of a MuJoCo MJX model and four pure functions (reset,
+step, reward, terminate); combinators turn tasks into tasks; `transition` and `rollout`
+run one environment, and `jax.vmap` runs many.
+"""
+
+from mjzoo import physics, rewards, tree
+from mjzoo.combinators import (
+    with_action_repeat,
+    with_auto_reset,
+    with_divergence_guard,
+    with_reward,
+    with_time_limit,
+)
+from mjzoo.perturbations import with_action_noise, with_domain_randomization, with_observation_noise
+from mjzoo.running import Policy, reset, reward_terms, rollout, transition
+from mjzoo.types import State, Task, Trajectory, bind
+
+__version__ = "0.1.0"
+
+__all__ = [
+    "Task",
+    "State",
+    "Trajectory",
+    "Policy",
+    "bind",
+    "reset",
+    "transition",
+    "rollout",
+    "reward_terms",
+    "with_time_limit",
+    "with_auto_reset",
+    "with_action_repeat",
+    "with_reward",
+    "with_divergence_guard",
+    "with_observation_noise",
+    "with_action_noise",
+    "with_domain_randomization",
+    "physics",
+    "rewards",
+    "tree",
+]

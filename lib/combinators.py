@@ -1,0 +1,220 @@
+"""Episode-structure combinators, `Task -> Task`: time limits, auto-reset, action repeat,
+extra reward terms and the divergence guard.
+
+Each combinator rebinds some of the task's four functions around the originals; its
+numbers are pytree leaves, and any state it needs lives in `state.info` under its own
+key, documented per combinator.
+
+Three of them (auto-reset, action repeat, divergence guard) must see a whole transition
+of the task they wrap before deciding what to return. Their `step` runs
+`mjzoo.transition` on the inner task and records the outcome in
+``state.info["outcome"]``; their `reward` and `terminate` report that record.
+"""
+
+from __future__ import annotations
+
+from typing import Callable
+
+import jax
+import jax.numpy as jnp
+from mujoco import mjx
+
+from mjzoo import tree
+from mjzoo.running import reset, reward_terms, transition
+from mjzoo.types import State, Task, bind
+
+__all__ = [
+    "with_time_limit",
+    "with_auto_reset",
+    "with_action_repeat",
+    "with_reward",
+    "with_divergence_guard",
+]
+
+Array = jax.Array
+OUTCOME = "outcome"
+
+
+# --- time limit ---------------------------------------------------------------------
+
+
+def with_time_limit(task: Task, max_steps: int) -> Task:
+    """Truncates episodes after `max_steps` steps of `task`; never terminates them.
+
+    Keeps ``info["time_limit"]``: int32 steps taken in this episode. An episode that
+    terminates on its last step is reported terminated, not truncated.
+    """
+    if isinstance(max_steps, bool) or not isinstance(max_steps, int) or max_steps < 1:
+        raise ValueError(f"with_time_limit: max_steps={max_steps!r} must be an integer >= 1")
+    return task.replace(
+        reset=bind(_time_limit_reset, task.reset),
+        step=bind(_time_limit_step, task.step),
+        terminate=bind(_time_limit_terminate, task.terminate, jnp.int32(max_steps)),
+    )
+
+
+def _time_limit_reset(reset_fn, model: mjx.Model, key: Array) -> State:
+    state = reset_fn(model, key)
+    return state.replace(info={**state.info, "time_limit": jnp.zeros((), jnp.int32)})
+
+
+def _time_limit_step(step_fn, model: mjx.Model, state: State, action: Array, key: Array) -> State:
+    next_state = step_fn(model, state, action, key)
+    return next_state.replace(info={**next_state.info, "time_limit": state.info["time_limit"] + 1})
+
+
+def _time_limit_terminate(terminate_fn, max_steps: Array, model: mjx.Model, state: State):
+    terminated, truncated = terminate_fn(model, state)
+    out_of_time = state.info["time_limit"] >= max_steps
+    return terminated, (truncated | out_of_time) & ~terminated
+
+
+# --- transitions recorded in info["outcome"] ----------------------------------------
+
+
+def _record(state: State, terms: dict[str, Array], terminated: Array, truncated: Array) -> State:
+    outcome = {"reward": terms, "terminated": terminated, "truncated": truncated}
+    return state.replace(info={**state.info, OUTCOME: outcome})
+
+
+def _select(cond: Array, on_true: State, on_false: State) -> State:
+    """`on_false` with data, obs and info taken from `on_true` where `cond` holds."""
+    return on_false.replace(
+        data=tree.where(cond, on_true.data, on_false.data),
+        obs=tree.where(cond, on_true.obs, on_false.obs),
+        info=tree.where(cond, on_true.info, on_false.info),
+    )
+
+
+def _recorded_reward(model, state, action, next_state) -> dict[str, Array]:
+    return dict(next_state.info[OUTCOME]["reward"])
+
+
+def _recorded_terminate(model, state) -> tuple[Array, Array]:
+    return state.info[OUTCOME]["terminated"], state.info[OUTCOME]["truncated"]
+
+
+def _runs_transitions(task: Task, step_fn: Callable, *params) -> Task:
+    """`task` with `step_fn(*params, inner, model, state, action, key)` as its step."""
+    inner = task.replace(model=None)  # the model comes from the call, so edits to it apply
+    return task.replace(
+        step=bind(step_fn, *params, inner),
+        reward=bind(_recorded_reward),
+        terminate=bind(_recorded_terminate),
+    )
+
+
+# --- auto-reset ---------------------------------------------------------------------
+
+
+def with_auto_reset(task: Task) -> Task:
+    """Starts a new episode inside `step` whenever the inner transition ends one.
+
+    The returned state carries the finished transition's reward, terminated, truncated
+    and metrics, with the new episode's data and observation (the observation the next
+    action is chosen from). Keeps ``info["auto_reset"]["final_obs"]``: the observation
+    the episode actually ended in (equal to `obs` when it did not end), which PPO needs
+    to bootstrap truncated episodes.
+    """
+    return _runs_transitions(task, _auto_reset_step)
+
+
+def _auto_reset_step(inner: Task, model, state: State, action: Array, key: Array) -> State:
+    inner = inner.replace(model=model)
+    step_key, reset_key = jax.random.split(key)
+    ended = transition(inner, state, action, step_key)
+    fresh = reset(inner, reset_key)
+    fresh = fresh.replace(info=tree.fill_missing(fresh.info, ended.info))  # outer keys: zeros
+    chosen = _select(ended.terminated | ended.truncated, fresh, ended)
+    chosen = chosen.replace(info={**chosen.info, "auto_reset": {"final_obs": ended.obs}})
+    return _record(chosen, reward_terms(ended), ended.terminated, ended.truncated)
+
+
+# --- action repeat ------------------------------------------------------------------
+
+
+def with_action_repeat(task: Task, repeats: int) -> Task:
+    """Applies each action for `repeats` (static) steps of `task`, summing the rewards.
+
+    Terminated / truncated if any inner step was; after an inner episode end the
+    remaining repeats leave the state unchanged and add no reward. Keeps nothing in
+    `info` beyond the recorded outcome.
+    """
+    if isinstance(repeats, bool) or not isinstance(repeats, int) or repeats < 1:
+        raise ValueError(f"with_action_repeat: repeats={repeats!r} must be an integer >= 1")
+    return _runs_transitions(task, _repeat_step, tree.Static(repeats))
+
+
+def _repeat_step(repeats: tree.Static, inner: Task, model, state: State, action: Array, key: Array) -> State:
+    inner = inner.replace(model=model)
+
+    def body(carry, key):
+        state, total, terminated, truncated = carry
+        done = terminated | truncated
+        next_state = transition(inner, state, action, key)
+        terms = reward_terms(next_state)
+        total = {k: total[k] + jnp.where(done, 0.0, v) for k, v in terms.items()}
+        state = _select(done, state, next_state)
+        return (state, total, terminated | (~done & next_state.terminated),
+                truncated | (~done & next_state.truncated)), None  # fmt: skip
+
+    zeros = tree.zeros_like_shape(jax.eval_shape(lambda: reward_terms(transition(inner, state, action, key))))
+    keys = jax.random.split(key, repeats.value)
+    init = (state, zeros, jnp.zeros((), bool), jnp.zeros((), bool))
+    (final, total, terminated, truncated), _ = jax.lax.scan(body, init, keys)
+    return _record(final, total, terminated, truncated & ~terminated)
+
+
+# --- extra reward terms -------------------------------------------------------------
+
+
+def with_reward(task: Task, name: str, fn: Callable, weight: float = 1.0) -> Task:
+    """Adds the term ``name: weight * fn(model, state, action, next_state)``.
+
+    `fn` returns a scalar; it may be a `jax.tree_util.Partial` carrying its own numeric
+    parameters (leaves), or a plain module-level function. Keeps nothing in `info`.
+    """
+    if not isinstance(name, str) or not name:
+        raise ValueError(f"with_reward: name must be a non-empty string, got {name!r}")
+    if not callable(fn):
+        raise TypeError(f"with_reward: fn for term {name!r} must be callable, got {type(fn).__name__}")
+    if not isinstance(fn, jax.tree_util.Partial):
+        fn = jax.tree_util.Partial(fn)
+    return task.replace(reward=bind(_extra_reward, task.reward, name, fn, jnp.float32(weight)))
+
+
+def _extra_reward(reward_fn, name, fn, weight, model, state, action, next_state):
+    terms = reward_fn(model, state, action, next_state)
+    if name in terms:
+        raise ValueError(f"with_reward: the task already has a reward term named {name!r}: {sorted(terms)}")
+    return {**terms, name: weight * jnp.asarray(fn(model, state, action, next_state), jnp.float32)}
+
+
+# --- divergence guard ---------------------------------------------------------------
+
+
+def with_divergence_guard(task: Task, max_qvel: float = 1e3) -> Task:
+    """Ends an episode whose physics goes NaN/inf or explodes, without leaking NaN.
+
+    A transition diverges when qpos, qvel, the observation or a reward term is not
+    finite, or when any |qvel| exceeds `max_qvel`. Then the previous (finite) state is
+    returned with terminated=True and every reward term zero, and
+    ``metrics["diverged"]`` is 1. Keeps nothing in `info` beyond the recorded outcome.
+    """
+    if not max_qvel > 0:
+        raise ValueError(f"with_divergence_guard: max_qvel={max_qvel!r} must be > 0")
+    return _runs_transitions(task, _guard_step, jnp.float32(max_qvel))
+
+
+def _guard_step(max_qvel, inner: Task, model, state: State, action: Array, key: Array) -> State:
+    inner = inner.replace(model=model)
+    next_state = transition(inner, state, action, key)
+    terms = reward_terms(next_state)
+    data = next_state.data
+    ok = tree.all_finite((data.qpos, data.qvel, next_state.obs, terms))
+    ok &= jnp.all(jnp.abs(jnp.nan_to_num(data.qvel)) <= max_qvel)
+    safe = _select(ok, next_state, state)
+    metrics = jax.tree.map(lambda v: jnp.where(jnp.isfinite(v), v, 0.0), next_state.metrics)
+    safe = safe.replace(metrics={**metrics, "diverged": (~ok).astype(jnp.float32)})
+    terms = {k: jnp.where(ok, v, 0.0) for k, v in terms.items()}
+    return _record(safe, terms, next_state.terminated | ~ok, next_state.truncated & ok)

@@ -1,0 +1,145 @@
+"""Perturbation combinators, `Task -> Task`: sensor noise, actuator noise and domain
+randomization (new physics drawn at every reset).
+
+Noise scales are pytree leaves, so a sweep over them runs under one trace.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+from typing import Callable
+
+import jax
+import jax.numpy as jnp
+from mujoco import mjx
+
+from mjzoo.types import State, Task, bind
+
+__all__ = ["with_observation_noise", "with_action_noise", "with_domain_randomization"]
+
+Array = jax.Array
+Randomizer = Callable[[mjx.Model, Array], dict[str, Array]]
+
+
+def _check_scale(name: str, scale: float) -> Array:
+    if not scale >= 0:
+        raise ValueError(f"{name}: scale={scale!r} must be >= 0")
+    return jnp.float32(scale)
+
+
+def _add_noise(tree, scale: Array, key: Array):
+    """Adds N(0, scale^2) to every inexact leaf of `tree`."""
+    leaves, treedef = jax.tree.flatten(tree)
+    keys = jax.random.split(key, max(len(leaves), 1))
+    noisy = [
+        leaf + scale * jax.random.normal(k, jnp.shape(leaf), leaf.dtype)
+        if jnp.issubdtype(leaf.dtype, jnp.inexact) else leaf
+        for leaf, k in zip(leaves, keys)
+    ]  # fmt: skip
+    return jax.tree.unflatten(treedef, noisy)
+
+
+# --- observation noise --------------------------------------------------------------
+
+
+def with_observation_noise(task: Task, scale: float) -> Task:
+    """Adds independent Gaussian noise N(0, scale^2) to every observation leaf.
+
+    Applied after reset and after every step; the physics never sees it. Keeps nothing
+    in `info`.
+    """
+    scale = _check_scale("with_observation_noise", scale)
+    return task.replace(
+        reset=bind(_noisy_reset, task.reset, scale), step=bind(_noisy_obs_step, task.step, scale)
+    )
+
+
+def _noisy_reset(reset_fn, scale, model, key) -> State:
+    key, noise_key = jax.random.split(key)
+    state = reset_fn(model, key)
+    return state.replace(obs=_add_noise(state.obs, scale, noise_key))
+
+
+def _noisy_obs_step(step_fn, scale, model, state, action, key) -> State:
+    key, noise_key = jax.random.split(key)
+    next_state = step_fn(model, state, action, key)
+    return next_state.replace(obs=_add_noise(next_state.obs, scale, noise_key))
+
+
+# --- action noise -------------------------------------------------------------------
+
+
+def with_action_noise(task: Task, scale: float) -> Task:
+    """Adds Gaussian noise N(0, scale^2) to the action before the inner step.
+
+    The reward still sees the commanded action. Keeps nothing in `info`.
+    """
+    return task.replace(step=bind(_noisy_action_step, task.step, _check_scale("with_action_noise", scale)))
+
+
+def _noisy_action_step(step_fn, scale, model, state, action, key) -> State:
+    key, noise_key = jax.random.split(key)
+    return step_fn(model, state, _add_noise(action, scale, noise_key), key)
+
+
+# --- domain randomization -----------------------------------------------------------
+
+
+def with_domain_randomization(task: Task, randomize: Randomizer) -> Task:
+    """Draws new physics for every episode: ``randomize(model, key) -> {field: value}``.
+
+    `randomize` returns replacements for top-level `mjx.Model` fields (e.g.
+    ``{"geom_friction": ..., "body_mass": ...}``), each with the field's shape. It may
+    be a `jax.tree_util.Partial` holding its ranges as leaves. The draw happens in
+    `reset`; the episode's physics is kept in ``info["domain_randomization"]`` (the
+    returned dict) and every call of reset, step, reward and terminate sees the model
+    with those fields replaced.
+    """
+    if not callable(randomize):
+        raise TypeError(f"with_domain_randomization: randomize must be callable, got {type(randomize).__name__}")
+    if not isinstance(randomize, jax.tree_util.Partial):
+        randomize = jax.tree_util.Partial(randomize)
+    _check_fields(task.model, randomize)
+    return task.replace(
+        reset=bind(_randomized_reset, task.reset, randomize),
+        step=bind(_randomized_step, task.step),
+        reward=bind(_randomized_reward, task.reward),
+        terminate=bind(_randomized_terminate, task.terminate),
+    )
+
+
+def _check_fields(model: mjx.Model, randomize) -> None:
+    """Fails at construction if `randomize` names unknown fields or changes shapes."""
+    drawn = jax.eval_shape(randomize, model, jax.random.key(0))
+    if not isinstance(drawn, dict):
+        raise TypeError(f"with_domain_randomization: randomize must return a dict of model fields, got {type(drawn).__name__}")
+    fields = {f.name for f in dataclasses.fields(model)}
+    for name, value in drawn.items():
+        if name not in fields:
+            raise KeyError(f"with_domain_randomization: mjx.Model has no field {name!r}")
+        expected = jnp.shape(getattr(model, name))
+        if value.shape != expected:
+            raise ValueError(f"with_domain_randomization: field {name!r} must keep shape {expected}, got {value.shape}")
+
+
+def _randomized(model: mjx.Model, state: State) -> mjx.Model:
+    return model.replace(**state.info["domain_randomization"])
+
+
+def _randomized_reset(reset_fn, randomize, model, key) -> State:
+    key, draw_key = jax.random.split(key)
+    fields = {k: jnp.asarray(v, getattr(model, k).dtype) for k, v in randomize(model, draw_key).items()}
+    state = reset_fn(model.replace(**fields), key)
+    return state.replace(info={**state.info, "domain_randomization": fields})
+
+
+def _randomized_step(step_fn, model, state, action, key) -> State:
+    return step_fn(_randomized(model, state), state, action, key)
+
+
+def _randomized_reward(reward_fn, model, state, action, next_state):
+    return reward_fn(_randomized(model, state), state, action, next_state)
+
+
+def _randomized_terminate(terminate_fn, model, state):
+    return terminate_fn(_randomized(model, state), state)

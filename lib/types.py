@@ -1,0 +1,142 @@
+"""The two data types everything else is written against: `Task` and `State`.
+
+A `Task` is an immutable pytree holding a physics model and four pure functions.
+The functions are `jax.tree_util.Partial`s over module-level functions, so every
+number they use (weights, targets, limits, noise scales) is a pytree leaf: a Task
+passes through `jax.jit` as an ordinary argument, changing a weight or a mass does
+not recompile, and tasks can be stacked and vmapped.
+
+Everything is written for ONE environment; algorithms batch with `jax.vmap`.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+from typing import Any, Callable, Protocol
+
+import jax
+import jax.numpy as jnp
+import mujoco
+from mujoco import mjx
+
+__all__ = ["Task", "State", "Trajectory", "ResetFn", "StepFn", "RewardFn", "TerminateFn"]
+
+Array = jax.Array
+PyTree = Any
+
+
+@jax.tree_util.register_dataclass
+@dataclasses.dataclass(frozen=True)
+class State:
+    """The state of one environment after a reset or a transition.
+
+    Attributes:
+      data: the MJX physics state.
+      obs: the observation the next action is chosen from (any pytree of arrays).
+      reward: scalar float32, the summed reward of the transition that produced this
+        state (0 after a reset).
+      terminated: scalar bool, the episode ended in a terminal state (no bootstrap).
+      truncated: scalar bool, the episode was cut short (e.g. a time limit): bootstrap.
+      info: dict of per-episode state kept by the task and its combinators, each under
+        its own key (goal, step count, randomized physics, ...).
+      metrics: dict of scalars describing the last transition, for logging; holds each
+        reward term under ``"reward/<name>"``.
+    """
+
+    data: mjx.Data
+    obs: PyTree
+    reward: Array
+    terminated: Array
+    truncated: Array
+    info: dict[str, PyTree]
+    metrics: dict[str, Array]
+
+    def replace(self, **changes: Any) -> "State":
+        return dataclasses.replace(self, **changes)
+
+    @classmethod
+    def create(cls, data: mjx.Data, obs: PyTree, info: dict | None = None) -> "State":
+        """A freshly reset state: zero reward, not done, empty metrics."""
+        return cls(
+            data=data,
+            obs=obs,
+            reward=jnp.zeros((), jnp.float32),
+            terminated=jnp.zeros((), bool),
+            truncated=jnp.zeros((), bool),
+            info=dict(info or {}),
+            metrics={},
+        )
+
+
+class ResetFn(Protocol):
+    def __call__(self, model: mjx.Model, key: Array) -> State: ...
+
+
+class StepFn(Protocol):
+    def __call__(self, model: mjx.Model, state: State, action: Array, key: Array) -> State: ...
+
+
+class RewardFn(Protocol):
+    def __call__(
+        self, model: mjx.Model, state: State, action: Array, next_state: State
+    ) -> dict[str, Array]: ...
+
+
+class TerminateFn(Protocol):
+    def __call__(self, model: mjx.Model, state: State) -> tuple[Array, Array]: ...
+
+
+@jax.tree_util.register_dataclass
+@dataclasses.dataclass(frozen=True)
+class Task:
+    """A control problem as data: physics plus four pure functions.
+
+    Attributes:
+      model: the MJX model the functions are called with.
+      reset: ``(model, key) -> State``, a new episode.
+      step: ``(model, state, action, key) -> State``, dynamics and observation. The
+        action has shape ``(model.nu,)`` and is a control in the actuators' ctrlrange.
+      reward: ``(model, state, action, next_state) -> {name: weighted term}``, each term
+        a float32 scalar; `mjzoo.transition` sums them.
+      terminate: ``(model, state) -> (terminated, truncated)``, two bool scalars kept
+        apart because value bootstrapping differs between them.
+      mj_model: the host `mujoco.MjModel` the MJX model was made from (static: names,
+        rendering). Never traced; treat it as read-only.
+    """
+
+    model: mjx.Model
+    reset: ResetFn
+    step: StepFn
+    reward: RewardFn
+    terminate: TerminateFn
+    mj_model: mujoco.MjModel = dataclasses.field(metadata=dict(static=True))
+
+    def replace(self, **changes: Any) -> "Task":
+        return dataclasses.replace(self, **changes)
+
+    @property
+    def action_size(self) -> int:
+        """Length of the action vector: one control per actuator."""
+        return int(self.mj_model.nu)
+
+
+@jax.tree_util.register_dataclass
+@dataclasses.dataclass(frozen=True)
+class Trajectory:
+    """A stacked sequence of T transitions, as returned by `mjzoo.rollout`.
+
+    Attributes:
+      obs: [T, ...] observation each action was chosen from.
+      action: [T, nu] the actions taken.
+      next_state: `State` with a leading [T] axis on every leaf: the state after each
+        action, carrying that transition's reward, terminated, truncated and metrics.
+    """
+
+    obs: PyTree
+    action: Array
+    next_state: State
+
+
+def bind(fn: Callable, *params: PyTree) -> jax.tree_util.Partial:
+    """Binds a module-level function to its parameters so they become pytree leaves."""
+    return jax.tree_util.Partial(fn, *params)
