@@ -5,6 +5,12 @@ step, reward, terminate); combinators turn tasks into tasks; `transition` and `r
 run one environment, and `jax.vmap` runs many.
 """
 
+import contextlib
+import io
+
+with contextlib.redirect_stdout(io.StringIO()):  # mjx prints a notice when its optional warp backend is absent
+    from mujoco import mjx  # noqa: F401
+
 from mjzoo import physics, rewards, tree
 from mjzoo.combinators import (
     with_action_repeat,
@@ -14,7 +20,7 @@ from mjzoo.combinators import (
     with_time_limit,
 )
 from mjzoo.perturbations import with_action_noise, with_domain_randomization, with_observation_noise
-from mjzoo.running import Policy, reset, reward_terms, rollout, transition
+from mjzoo.running import Policy, complete, reset, reward_terms, rollout, transition, transition_with_terms
 from mjzoo.types import State, Task, Trajectory, bind
 
 __version__ = "0.1.0"
@@ -26,7 +32,9 @@ __all__ = [
     "Policy",
     "bind",
     "reset",
+    "complete",
     "transition",
+    "transition_with_terms",
     "rollout",
     "reward_terms",
     "with_time_limit",

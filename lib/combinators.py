@@ -20,7 +20,7 @@ import jax.numpy as jnp
 from mujoco import mjx
 
 from mjzoo import tree
-from mjzoo.running import reset, reward_terms, transition
+from mjzoo.running import complete, reset, transition_with_terms
 from mjzoo.types import State, Task, bind
 
 __all__ = [
@@ -122,12 +122,12 @@ def with_auto_reset(task: Task) -> Task:
 def _auto_reset_step(inner: Task, model, state: State, action: Array, key: Array) -> State:
     inner = inner.replace(model=model)
     step_key, reset_key = jax.random.split(key)
-    ended = transition(inner, state, action, step_key)
+    ended, terms = transition_with_terms(inner, state, action, step_key)
     fresh = reset(inner, reset_key)
     fresh = fresh.replace(info=tree.fill_missing(fresh.info, ended.info))  # outer keys: zeros
     chosen = _select(ended.terminated | ended.truncated, fresh, ended)
     chosen = chosen.replace(info={**chosen.info, "auto_reset": {"final_obs": ended.obs}})
-    return _record(chosen, reward_terms(ended), ended.terminated, ended.truncated)
+    return _record(chosen, terms, ended.terminated, ended.truncated)
 
 
 # --- action repeat ------------------------------------------------------------------
@@ -151,14 +151,14 @@ def _repeat_step(repeats: tree.Static, inner: Task, model, state: State, action:
     def body(carry, key):
         state, total, terminated, truncated = carry
         done = terminated | truncated
-        next_state = transition(inner, state, action, key)
-        terms = reward_terms(next_state)
+        next_state, terms = transition_with_terms(inner, state, action, key)
         total = {k: total[k] + jnp.where(done, 0.0, v) for k, v in terms.items()}
         state = _select(done, state, next_state)
         return (state, total, terminated | (~done & next_state.terminated),
                 truncated | (~done & next_state.truncated)), None  # fmt: skip
 
-    zeros = tree.zeros_like_shape(jax.eval_shape(lambda: reward_terms(transition(inner, state, action, key))))
+    state = complete(inner, state)  # a no-op but while `reset` traces the structure
+    zeros = tree.zeros_like_shape(jax.eval_shape(lambda: transition_with_terms(inner, state, action, key)[1]))
     keys = jax.random.split(key, repeats.value)
     init = (state, zeros, jnp.zeros((), bool), jnp.zeros((), bool))
     (final, total, terminated, truncated), _ = jax.lax.scan(body, init, keys)
@@ -180,10 +180,11 @@ def with_reward(task: Task, name: str, fn: Callable, weight: float = 1.0) -> Tas
         raise TypeError(f"with_reward: fn for term {name!r} must be callable, got {type(fn).__name__}")
     if not isinstance(fn, jax.tree_util.Partial):
         fn = jax.tree_util.Partial(fn)
-    return task.replace(reward=bind(_extra_reward, task.reward, name, fn, jnp.float32(weight)))
+    return task.replace(reward=bind(_extra_reward, task.reward, tree.Static(name), fn, jnp.float32(weight)))
 
 
-def _extra_reward(reward_fn, name, fn, weight, model, state, action, next_state):
+def _extra_reward(reward_fn, name: tree.Static, fn, weight, model, state, action, next_state):
+    name = name.value
     terms = reward_fn(model, state, action, next_state)
     if name in terms:
         raise ValueError(f"with_reward: the task already has a reward term named {name!r}: {sorted(terms)}")
@@ -208,8 +209,8 @@ def with_divergence_guard(task: Task, max_qvel: float = 1e3) -> Task:
 
 def _guard_step(max_qvel, inner: Task, model, state: State, action: Array, key: Array) -> State:
     inner = inner.replace(model=model)
-    next_state = transition(inner, state, action, key)
-    terms = reward_terms(next_state)
+    next_state, terms = transition_with_terms(inner, state, action, key)
+    state = state.replace(info=tree.fill_missing(state.info, next_state.info))  # while `reset` traces
     data = next_state.data
     ok = tree.all_finite((data.qpos, data.qvel, next_state.obs, terms))
     ok &= jnp.all(jnp.abs(jnp.nan_to_num(data.qvel)) <= max_qvel)

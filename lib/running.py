@@ -16,7 +16,7 @@ import jax.numpy as jnp
 from mjzoo import tree
 from mjzoo.types import State, Task, Trajectory
 
-__all__ = ["reset", "transition", "rollout", "reward_terms", "Policy"]
+__all__ = ["reset", "complete", "transition", "transition_with_terms", "rollout", "reward_terms", "Policy"]
 
 Array = jax.Array
 Policy = Callable[[Any, Array], Array]  # (obs, key) -> action
@@ -28,39 +28,68 @@ def transition(task: Task, state: State, action: Array, key: Array) -> State:
     Returns the next state with `reward` = the sum of the task's reward terms, each term
     also in `metrics["reward/<name>"]`, and `terminated` / `truncated` from the task.
     """
+    return transition_with_terms(task, state, action, key)[0]
+
+
+def transition_with_terms(
+    task: Task, state: State, action: Array, key: Array
+) -> tuple[State, dict[str, Array]]:
+    """`transition`, also returning this task's reward terms by name (float32 scalars)."""
     next_state = task.step(task.model, state, action, key)
-    terms = task.reward(task.model, state, action, next_state)
+    terms = {k: jnp.asarray(v, jnp.float32) for k, v in task.reward(task.model, state, action, next_state).items()}
     terminated, truncated = task.terminate(task.model, next_state)
     reward = sum(terms.values(), jnp.zeros((), jnp.float32))
-    return next_state.replace(
-        reward=jnp.asarray(reward, jnp.float32),
+    next_state = next_state.replace(
+        reward=reward,
         terminated=jnp.asarray(terminated, bool),
         truncated=jnp.asarray(truncated, bool),
-        metrics={**next_state.metrics, **{f"reward/{k}": jnp.asarray(v, jnp.float32) for k, v in terms.items()}},
+        metrics={**next_state.metrics, **{f"reward/{k}": v for k, v in terms.items()}},
     )
+    return next_state, terms
 
 
 def reward_terms(state: State) -> dict[str, Array]:
-    """The weighted reward terms of the transition that produced `state`, by name."""
+    """The weighted reward terms of the transition that produced `state`, by name, as
+    recorded in its metrics by the outermost `transition`."""
     prefix = "reward/"
     return {k[len(prefix) :]: v for k, v in state.metrics.items() if k.startswith(prefix)}
 
 
 def reset(task: Task, key: Array) -> State:
-    """Starts an episode of `task`.
+    """Starts an episode of `task`, as a state `complete` for it."""
+    return complete(task, task.reset(task.model, key))
 
-    The state returned has the same pytree structure as every state `transition` can
-    produce from it (same `info` and `metrics` keys, shapes and dtypes); entries that
-    only a transition writes start at zero. This is what lets states be carried through
-    `lax.scan` and selected between with `jnp.where` (auto-reset).
+
+def complete(task: Task, state: State) -> State:
+    """`state` with every `info` and `metrics` entry a transition of `task` writes.
+
+    Entries it lacks are added as zeros, so that the state has the same pytree
+    structure as every state `transition` can produce from it (same keys, shapes and
+    dtypes). This is what lets states be carried through `lax.scan` and selected
+    between with `jnp.where` (auto-reset). Adds no computation: the structure comes
+    from `jax.eval_shape`.
     """
-    state = task.reset(task.model, key)
-    action = jnp.zeros((task.action_size,), jnp.float32)
-    shape = jax.eval_shape(lambda s, k: transition(task, s, action, k), state, key)
+    shape = _transition_shape(task, state)
     return state.replace(
         info=tree.fill_missing(state.info, shape.info),
         metrics=tree.fill_missing(state.metrics, shape.metrics),
     )
+
+
+_SHAPES: dict = {}
+
+
+def _transition_shape(task: Task, state: State) -> State:
+    """`jax.eval_shape` of a transition, memoized on the abstract types of its inputs:
+    nested combinators ask for the same structures many times while tracing."""
+    inputs = (task, state)
+    signature = (jax.tree.structure(inputs), tuple(jax.typeof(x) for x in jax.tree.leaves(inputs)))
+    if signature not in _SHAPES:
+        if len(_SHAPES) > 1024:
+            _SHAPES.clear()
+        action = jnp.zeros((task.action_size,), jnp.float32)
+        _SHAPES[signature] = jax.eval_shape(lambda s: transition(task, s, action, jax.random.key(0)), state)
+    return _SHAPES[signature]
 
 
 def rollout(

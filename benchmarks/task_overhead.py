@@ -1,0 +1,120 @@
+"""What the task layer costs over raw physics.
+
+For each env, in one process and at the same batch: (a) raw batched `mjx.step` of the
+env's model (its substeps per control step, same starting states, same controls), and
+(b) the same batch through `mjzoo.transition` (dynamics, observation, reward terms,
+termination, time limit and divergence guard), bare and with auto-reset. Prints
+env-steps/s for each and the ratios; writes JSON.
+
+    python benchmarks/task_overhead.py                       # all envs, default batches
+    python benchmarks/task_overhead.py --batch 1024 4096 --envs cartpole_balance
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import platform
+import time
+from pathlib import Path
+
+import jax
+import jax.numpy as jnp
+import numpy as np
+
+import mjzoo
+import mjzoo.envs
+
+
+def raw_runner(task: mjzoo.Task, n_substeps: int):
+    """Steps a batch of physics states through a [T, B, nu] control sequence."""
+
+    @jax.jit
+    def run(model, data, controls):
+        def body(data, ctrl):
+            data = jax.vmap(lambda d, u: mjzoo.physics.step(model, d, u, n_substeps))(data, ctrl)
+            return data, None
+
+        return jax.lax.scan(body, data, controls)[0]
+
+    return run
+
+
+def task_runner():
+    """Steps a batch of task states through the same controls with `mjzoo.transition`."""
+
+    @jax.jit
+    def run(task, state, controls, key):
+        def body(state, inputs):
+            ctrl, key = inputs
+            keys = jax.random.split(key, ctrl.shape[0])
+            return jax.vmap(lambda s, u, k: mjzoo.transition(task, s, u, k))(state, ctrl, keys), None
+
+        keys = jax.random.split(key, controls.shape[0])
+        return jax.lax.scan(body, state, (controls, keys))[0]
+
+    return run
+
+
+def best_time(fn, *args, repeats: int) -> float:
+    jax.block_until_ready(fn(*args))  # compile and warm up
+    times = []
+    for _ in range(repeats):
+        start = time.perf_counter()
+        jax.block_until_ready(fn(*args))
+        times.append(time.perf_counter() - start)
+    return min(times)
+
+
+def measure(name: str, batch: int, steps: int, repeats: int) -> dict:
+    base = mjzoo.envs.make(name)
+    key = jax.random.key(0)
+    reset_keys = jax.random.split(key, batch)
+    low, high = np.asarray(base.mj_model.actuator_ctrlrange).T
+    controls = jax.random.uniform(jax.random.key(1), (steps, batch, base.action_size), minval=low, maxval=high)
+    result = {"env": name, "batch": batch, "steps": steps}
+    state = jax.jit(jax.vmap(mjzoo.reset, in_axes=(None, 0)))(base, reset_keys)
+    substeps = round(mjzoo.envs.defaults(name)["ctrl_dt"] / float(base.mj_model.opt.timestep))
+    seconds = best_time(raw_runner(base, substeps), base.model, state.data, controls, repeats=repeats)
+    result["raw_steps_per_s"] = batch * steps / seconds
+    for label, task in (("transition", base), ("auto_reset", mjzoo.with_auto_reset(base))):
+        state = jax.jit(jax.vmap(mjzoo.reset, in_axes=(None, 0)))(task, reset_keys)
+        seconds = best_time(task_runner(), task, state, controls, key, repeats=repeats)
+        result[f"{label}_steps_per_s"] = batch * steps / seconds
+        result[f"{label}_overhead"] = result["raw_steps_per_s"] / result[f"{label}_steps_per_s"] - 1.0
+    return result
+
+
+def main() -> None:
+    gpu = jax.default_backend() != "cpu"
+    parser = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
+    parser.add_argument("--envs", nargs="*", default=mjzoo.envs.names())
+    parser.add_argument("--batch", nargs="*", type=int, default=[1024, 4096] if gpu else [256, 1024])
+    parser.add_argument("--steps", type=int, default=100)
+    parser.add_argument("--repeats", type=int, default=5 if gpu else 2)
+    parser.add_argument("--out", type=Path, default=Path(__file__).parent / "results")
+    args = parser.parse_args()
+
+    device = jax.devices()[0].device_kind
+    print(f"device: {device} ({jax.default_backend()}), jax {jax.__version__}")
+    header = f"{'env':<18} {'batch':>6} {'raw steps/s':>13} {'transition':>13} {'overhead':>9} {'auto-reset':>13} {'overhead':>9}"
+    print(header)
+    rows = []
+    for name in args.envs:
+        for batch in args.batch:
+            r = measure(name, batch, args.steps, args.repeats)
+            rows.append(r)
+            print(
+                f"{name:<18} {batch:>6} {r['raw_steps_per_s']:>13,.0f} {r['transition_steps_per_s']:>13,.0f} "
+                f"{r['transition_overhead']:>8.1%} {r['auto_reset_steps_per_s']:>13,.0f} {r['auto_reset_overhead']:>8.1%}",
+                flush=True,
+            )
+    args.out.mkdir(parents=True, exist_ok=True)
+    path = args.out / f"task_overhead_{jax.default_backend()}.json"
+    meta = {"device": device, "backend": jax.default_backend(), "jax": jax.__version__, "python": platform.python_version()}
+    path.write_text(json.dumps({"meta": meta, "rows": rows}, indent=2))
+    print(f"wrote {path}")
+
+
+if __name__ == "__main__":
+    main()

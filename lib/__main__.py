@@ -1,0 +1,3 @@
+from mjzoo.cli import main
+
+main()
