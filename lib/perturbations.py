@@ -18,6 +18,8 @@ from mjzoo.types import State, Task, bind
 __all__ = ["with_observation_noise", "with_action_noise", "with_domain_randomization"]
 
 Array = jax.Array
+NOISE_STREAM, DRAW_STREAM = 0x0B5, 0xD4A  # fold_in tags: the inner task keeps its own key,
+# so a perturbed task with zero noise replays the clean task's episodes exactly
 Randomizer = Callable[[mjx.Model, Array], dict[str, Array]]
 
 
@@ -55,15 +57,13 @@ def with_observation_noise(task: Task, scale: float) -> Task:
 
 
 def _noisy_reset(reset_fn, scale, model, key) -> State:
-    key, noise_key = jax.random.split(key)
     state = reset_fn(model, key)
-    return state.replace(obs=_add_noise(state.obs, scale, noise_key))
+    return state.replace(obs=_add_noise(state.obs, scale, jax.random.fold_in(key, NOISE_STREAM)))
 
 
 def _noisy_obs_step(step_fn, scale, model, state, action, key) -> State:
-    key, noise_key = jax.random.split(key)
     next_state = step_fn(model, state, action, key)
-    return next_state.replace(obs=_add_noise(next_state.obs, scale, noise_key))
+    return next_state.replace(obs=_add_noise(next_state.obs, scale, jax.random.fold_in(key, NOISE_STREAM)))
 
 
 # --- action noise -------------------------------------------------------------------
@@ -78,8 +78,8 @@ def with_action_noise(task: Task, scale: float) -> Task:
 
 
 def _noisy_action_step(step_fn, scale, model, state, action, key) -> State:
-    key, noise_key = jax.random.split(key)
-    return step_fn(model, state, _add_noise(action, scale, noise_key), key)
+    noisy = _add_noise(action, scale, jax.random.fold_in(key, NOISE_STREAM))
+    return step_fn(model, state, noisy, key)
 
 
 # --- domain randomization -----------------------------------------------------------
@@ -127,8 +127,8 @@ def _randomized(model: mjx.Model, state: State) -> mjx.Model:
 
 
 def _randomized_reset(reset_fn, randomize, model, key) -> State:
-    key, draw_key = jax.random.split(key)
-    fields = {k: jnp.asarray(v, getattr(model, k).dtype) for k, v in randomize(model, draw_key).items()}
+    drawn = randomize(model, jax.random.fold_in(key, DRAW_STREAM))
+    fields = {k: jnp.asarray(v, getattr(model, k).dtype) for k, v in drawn.items()}
     state = reset_fn(model.replace(**fields), key)
     return state.replace(info={**state.info, "domain_randomization": fields})
 

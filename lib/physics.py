@@ -14,6 +14,7 @@ from __future__ import annotations
 import dataclasses
 import functools
 import math
+import numbers
 import os
 from pathlib import Path
 from typing import Any
@@ -79,7 +80,7 @@ class Physics:
         index = mujoco.mj_name2id(self.mj_model, obj, name)
         if index < 0:
             known = ", ".join(repr(n) for n in self.names(kind) if n) or "none"
-            raise KeyError(f"{self.source}: no {kind} named {name!r}; {kind}s in this model: {known}")
+            raise KeyError(f"{self.source}: no {kind} named {name!r}; {kind} names in this model: {known}")
         return index
 
     def qpos_address(self, joint: str) -> int:
@@ -133,6 +134,7 @@ def load(
         disable_euler_damping=disable_euler_damping,
     )  # fmt: skip
     _validate(label, options)
+    options = {k: v.item() if hasattr(v, "item") else v for k, v in options.items()}  # numpy scalars
     return _compile(text, label, mtime, tuple(sorted(options.items())))
 
 
@@ -154,25 +156,26 @@ def _read(source: str | os.PathLike) -> tuple[str, str, float]:
     return str(path.resolve()), str(path), path.stat().st_mtime
 
 
+def _is_number(value: Any, minimum: float, *, integer: bool = False, strict: bool = False) -> bool:
+    kind = numbers.Integral if integer else numbers.Real
+    if isinstance(value, bool) or not isinstance(value, kind) or not math.isfinite(value):
+        return False
+    return value > minimum if strict else value >= minimum
+
+
 def _validate(label: str, o: dict[str, Any]) -> None:
-    def bad(name: str, allowed: str) -> ValueError:
-        return ValueError(f"{label}: physics option {name}={o[name]!r} is invalid; expected {allowed}")
+    def check(name: str, ok: bool, allowed: str, optional: bool = True) -> None:
+        if not ok and not (optional and o[name] is None):
+            raise ValueError(f"{label}: physics option {name}={o[name]!r} is invalid; expected {allowed}")
 
     for name in ("dt", "ctrl_dt"):
-        if o[name] is not None and not (isinstance(o[name], (int, float)) and o[name] > 0):
-            raise bad(name, "a number of seconds > 0")
-    if o["solver"] is not None and o["solver"] not in SOLVERS:
-        raise bad("solver", f"one of {sorted(SOLVERS)}")
-    if o["integrator"] is not None and o["integrator"] not in INTEGRATORS:
-        raise bad("integrator", f"one of {sorted(INTEGRATORS)}")
+        check(name, _is_number(o[name], 0.0, strict=True), "a finite number of seconds > 0")
+    check("solver", o["solver"] in SOLVERS, f"one of {sorted(SOLVERS)}")
+    check("integrator", o["integrator"] in INTEGRATORS, f"one of {sorted(INTEGRATORS)}")
     for name in ("iterations", "ls_iterations"):
-        value = o[name]
-        if value is not None and (isinstance(value, bool) or not isinstance(value, int) or value < 1):
-            raise bad(name, "an integer >= 1")
-    if o["tolerance"] is not None and not (isinstance(o["tolerance"], (int, float)) and o["tolerance"] >= 0):
-        raise bad("tolerance", "a number >= 0")
-    if not isinstance(o["disable_euler_damping"], bool):
-        raise bad("disable_euler_damping", "True or False")
+        check(name, _is_number(o[name], 1, integer=True), "an integer >= 1")
+    check("tolerance", _is_number(o["tolerance"], 0.0), "a finite number >= 0")
+    check("disable_euler_damping", isinstance(o["disable_euler_damping"], bool), "True or False", optional=False)
 
 
 @functools.lru_cache(maxsize=64)
@@ -200,9 +203,9 @@ def _compile(text: str, label: str, mtime: float, options: tuple[tuple[str, Any]
     if o["integrator"] is not None:
         mj_model.opt.integrator = INTEGRATORS[o["integrator"]]
     if o["iterations"] is not None:
-        mj_model.opt.iterations = o["iterations"]
+        mj_model.opt.iterations = int(o["iterations"])
     if o["ls_iterations"] is not None:
-        mj_model.opt.ls_iterations = o["ls_iterations"]
+        mj_model.opt.ls_iterations = int(o["ls_iterations"])
     if o["tolerance"] is not None:
         mj_model.opt.tolerance = o["tolerance"]
     if o["disable_euler_damping"]:

@@ -19,6 +19,8 @@ from mjzoo.types import State, Task, Trajectory
 __all__ = ["reset", "complete", "transition", "transition_with_terms", "rollout", "reward_terms", "Policy"]
 
 Array = jax.Array
+OUTCOME = "outcome"  # info key through which a step may hand a whole transition's outcome
+# to its own reward and terminate (see combinators.py); `transition` consumes it.
 Policy = Callable[[Any, Array], Array]  # (obs, key) -> action
 
 
@@ -40,6 +42,7 @@ def transition_with_terms(
     terminated, truncated = task.terminate(task.model, next_state)
     reward = sum(terms.values(), jnp.zeros((), jnp.float32))
     next_state = next_state.replace(
+        info={k: v for k, v in next_state.info.items() if k != OUTCOME},
         reward=reward,
         terminated=jnp.asarray(terminated, bool),
         truncated=jnp.asarray(truncated, bool),

@@ -190,7 +190,8 @@ def test_disable_euler_damping_sets_only_its_bit():
 def test_disable_euler_damping_keeps_other_disable_flags():
     # A model that already disables gravity keeps that flag when the option adds its own.
     gravity = int(mujoco.mjtDisableBit.mjDSBL_GRAVITY)
-    source = XML.replace('<option timestep="0.01" {option}/>', '<option timestep="0.01"><flag gravity="disable"/></option>')
+    no_gravity = '<option timestep="0.01"><flag gravity="disable"/></option>'
+    source = XML.replace('<option timestep="0.01" {option}/>', no_gravity)
     assert physics.load(source).mj_model.opt.disableflags & gravity
     p = physics.load(source, disable_euler_damping=True)
     assert p.mj_model.opt.disableflags & gravity

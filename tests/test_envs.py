@@ -1,0 +1,130 @@
+"""The env registry and what each env promises in its docstring."""
+
+from __future__ import annotations
+
+import functools
+
+import jax
+import jax.numpy as jnp
+import numpy as np
+import pytest
+
+import mjzoo
+import mjzoo.envs
+
+
+def test_names_and_unknown_name():
+    assert set(mjzoo.envs.names()) >= {
+        "pendulum_swingup", "cartpole_balance", "cartpole_swingup", "point_mass", "cylinder_push",
+    }  # fmt: skip
+    with pytest.raises(KeyError, match=r"unknown env 'cartpole_balanse' \(did you mean 'cartpole_balance'\?\).*point_mass"):
+        mjzoo.envs.make("cartpole_balanse")
+
+
+def test_unknown_override_lists_allowed():
+    with pytest.raises(TypeError, match=r"unknown override\(s\) \['upright_wieght'\]; allowed: .*'ctrl_dt'.*'upright_weight'"):
+        mjzoo.envs.make("cartpole_swingup", upright_wieght=2.0)
+
+
+def test_bad_physics_override_is_named():
+    with pytest.raises(ValueError, match=r"cartpole.xml: physics option solver='pgs'"):
+        mjzoo.envs.make("cartpole_swingup", solver="pgs")
+    with pytest.raises(ValueError, match=r"ctrl_dt=0.025 must be a whole multiple of the physics dt=0.01"):
+        mjzoo.envs.make("cartpole_swingup", ctrl_dt=0.025)
+
+
+def test_register_rejects_duplicates():
+    with pytest.raises(ValueError, match="already registered"):
+        mjzoo.envs.register("point_mass", mjzoo.envs.point_mass.reach)
+
+
+@functools.cache
+def _run(name: str, steps: int, **overrides):
+    task = mjzoo.envs.make(name, **dict(overrides))
+    nu = task.action_size
+
+    def policy(obs, key):
+        return jax.random.uniform(key, (nu,), minval=-1.0, maxval=1.0)
+
+    @jax.jit
+    def run(task, key):
+        state = mjzoo.reset(task, key)
+        return state, mjzoo.rollout(task, policy, state, key, steps)[1]
+
+    return task, run(task, jax.random.key(3))
+
+
+@pytest.mark.parametrize("name", ["pendulum_swingup", "cartpole_balance", "cartpole_swingup", "point_mass", "cylinder_push"])
+def test_reward_terms_are_bounded_by_their_weights(name):
+    task, (_, trajectory) = _run(name, 40)
+    weights = {k[: -len("_weight")]: v for k, v in mjzoo.envs.defaults(name).items() if k.endswith("_weight")}
+    terms = mjzoo.reward_terms(trajectory.next_state)
+    assert set(terms) == set(weights)
+    for term, values in terms.items():
+        assert np.all(np.abs(values) <= weights[term] + 1e-6), term
+
+
+def test_pendulum_starts_hanging_and_observes_angle():
+    _, (first, _) = _run("pendulum_swingup", 2)
+    np.testing.assert_allclose(first.obs[0], -1.0, atol=0.01)  # cos(pi)
+    assert abs(float(first.data.qpos[0]) - np.pi) <= 0.1
+
+
+def test_cartpole_balance_terminates_when_the_pole_falls():
+    task, (first, trajectory) = _run("cartpole_balance", 200)
+    assert abs(float(first.data.qpos[1])) <= 0.1  # starts near upright
+    angles = np.asarray(trajectory.next_state.data.qpos[:, 1])
+    leaning = np.abs(np.arctan2(np.sin(angles), np.cos(angles)))
+    np.testing.assert_array_equal(trajectory.next_state.terminated, leaning > 0.5)
+    assert trajectory.next_state.terminated.any()  # random pushes topple it within 4 s
+
+
+def test_cartpole_swingup_starts_down_and_never_terminates():
+    _, (first, trajectory) = _run("cartpole_swingup", 50)
+    assert float(first.obs[1]) < -0.99
+    assert not trajectory.next_state.terminated.any()
+
+
+def test_point_mass_goal_is_in_info_obs_and_marker():
+    _, (first, _) = _run("point_mass", 2)
+    goal = np.asarray(first.info["goal"])
+    assert np.all(np.abs(goal) <= 0.4)
+    np.testing.assert_allclose(first.obs[4:6], goal - np.asarray(first.data.qpos), atol=1e-6)
+    np.testing.assert_allclose(first.data.mocap_pos[0, :2], goal)
+
+
+def test_point_mass_reach_is_one_on_the_target_and_falls_to_a_tenth_at_the_margin():
+    pm = mjzoo.envs.point_mass
+    params = pm.Params(
+        **mjzoo.envs.base.floats(reach_weight=1.0, effort_weight=0.01, target_radius=0.03, reach_margin=0.5, spawn_range=0.4),
+        n_substeps=2,
+    )  # fmt: skip
+    task = mjzoo.envs.make("point_mass")
+    state = mjzoo.reset(task, jax.random.key(0))
+    goal = state.info["goal"]
+    at = lambda xy: state.replace(data=state.data.replace(qpos=xy))  # noqa: E731
+    terms = pm.reward(params, task.model, state, jnp.zeros(2), at(goal))
+    np.testing.assert_allclose(terms["reach"], 1.0)
+    np.testing.assert_allclose(terms["effort"], 0.0)
+    # 0.03 m radius + 0.5 m margin away: the gaussian tolerance's value at the margin, 0.1.
+    terms = pm.reward(params, task.model, state, jnp.ones(2), at(goal + jnp.array([0.53, 0.0])))
+    np.testing.assert_allclose(terms["reach"], 0.1, rtol=1e-4)
+    np.testing.assert_allclose(terms["effort"], -0.01)
+
+
+def test_cylinder_push_moves_the_cylinder_when_pushed():
+    task = mjzoo.envs.make("cylinder_push")
+    state = mjzoo.reset(task, jax.random.key(0))
+    # Pusher 20 cm left of the cylinder, both at rest; push right for 1 s.
+    qpos = jnp.array([-0.2, 0.0, 0.0, 0.0])
+    state = state.replace(data=state.data.replace(qpos=qpos, qvel=jnp.zeros(4)))
+
+    @jax.jit
+    def push(task, state):
+        return mjzoo.rollout(task, lambda obs, key: jnp.array([1.0, 0.0]), state, jax.random.key(0), 50)[0]
+
+    final = push(task, state)
+    pusher_x, cylinder_x = float(final.data.qpos[0]), float(final.data.qpos[2])
+    assert cylinder_x > 0.1  # pushed along +x
+    assert abs(float(final.data.qpos[3])) < 0.02  # no sideways drift
+    assert cylinder_x - pusher_x >= 0.14  # they touch but never interpenetrate (radii 5 + 10 cm)
