@@ -18,7 +18,7 @@ from mjzoo import physics
 from mjzoo.envs import cartpole, cylinder_push, pendulum, point_mass
 from mjzoo.types import Task
 
-__all__ = ["make", "names", "defaults", "register"]
+__all__ = ["make", "names", "defaults", "register", "hyperparameters"]
 
 _REGISTRY: dict[str, Callable[..., Task]] = {
     "pendulum_swingup": pendulum.swingup,
@@ -27,6 +27,14 @@ _REGISTRY: dict[str, Callable[..., Task]] = {
     "point_mass": point_mass.reach,
     "cylinder_push": cylinder_push.push,
 }
+# Per-env algorithm defaults, defined beside each env.
+_HYPERPARAMETERS: dict[str, dict[str, dict[str, Any]]] = {
+    "pendulum_swingup": {"ppo": pendulum.PPO},
+    "cartpole_balance": {"ppo": cartpole.BALANCE_PPO},
+    "cartpole_swingup": {"ppo": cartpole.SWINGUP_PPO},
+    "point_mass": {"ppo": point_mass.PPO},
+    "cylinder_push": {"ppo": cylinder_push.PPO},
+}
 
 
 def names() -> list[str]:
@@ -34,11 +42,19 @@ def names() -> list[str]:
     return sorted(_REGISTRY)
 
 
-def register(name: str, factory: Callable[..., Task]) -> None:
-    """Adds a task factory (keyword-only arguments, each an override) under `name`."""
+def register(name: str, factory: Callable[..., Task], hyperparameters: dict[str, dict] | None = None) -> None:
+    """Adds a task factory (keyword-only arguments, each an override) under `name`, with
+    optional per-algorithm default hyperparameters ({"ppo": {...}})."""
     if name in _REGISTRY:
         raise ValueError(f"a task named {name!r} is already registered")
     _REGISTRY[name] = factory
+    _HYPERPARAMETERS[name] = dict(hyperparameters or {})
+
+
+def hyperparameters(name: str, algorithm: str) -> dict[str, Any]:
+    """The env's default config fields for `algorithm` (empty if it has none)."""
+    _factory(name)
+    return dict(_HYPERPARAMETERS.get(name, {}).get(algorithm, {}))
 
 
 def defaults(name: str) -> dict[str, Any]:

@@ -32,6 +32,12 @@ __all__ = ["Params", "balance", "swingup"]
 
 Array = jax.Array
 
+# PPO hyperparameters that solve each task (`mjzoo train ppo cartpole_balance`).
+BALANCE_PPO = dict(num_envs=256, unroll_length=32, num_minibatches=8, num_epochs=4, learning_rate=1e-3,
+                   entropy_coef=1e-3, discount=0.99, total_steps=1_000_000)  # fmt: skip
+SWINGUP_PPO = dict(num_envs=256, unroll_length=32, num_minibatches=8, num_epochs=4, learning_rate=1e-3,
+                   entropy_coef=1e-3, discount=0.99, total_steps=3_000_000)  # fmt: skip
+
 
 @jax.tree_util.register_dataclass
 @dataclasses.dataclass(frozen=True)

@@ -32,6 +32,10 @@ __all__ = ["Params", "push"]
 Array = jax.Array
 CONTACT_DISTANCE = 0.15  # pusher radius + cylinder radius
 
+# PPO hyperparameters for this task (`mjzoo train ppo cylinder_push`).
+PPO = dict(num_envs=256, unroll_length=32, num_minibatches=8, num_epochs=4, learning_rate=1e-3,
+           entropy_coef=1e-3, discount=0.99, total_steps=5_000_000)  # fmt: skip
+
 
 @jax.tree_util.register_dataclass
 @dataclasses.dataclass(frozen=True)

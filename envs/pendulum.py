@@ -27,6 +27,10 @@ __all__ = ["Params", "swingup"]
 
 Array = jax.Array
 
+# PPO hyperparameters that solve this task (`mjzoo train ppo pendulum_swingup`).
+PPO = dict(num_envs=256, unroll_length=32, num_minibatches=8, num_epochs=4, learning_rate=1e-3,
+           entropy_coef=1e-3, discount=0.97, total_steps=1_500_000)  # fmt: skip
+
 
 @jax.tree_util.register_dataclass
 @dataclasses.dataclass(frozen=True)
@@ -59,7 +63,8 @@ def step(p: Params, model: mjx.Model, state: State, action: Array, key: Array) -
 def reward(p: Params, model: mjx.Model, state: State, action: Array, next_state: State) -> dict[str, Array]:
     data = next_state.data
     return {
-        "upright": p.upright_weight * (1.0 + jnp.cos(data.qpos[0])) / 2.0,
+        "upright": p.upright_weight * (1.0 + jnp.cos(data.qpos[0])) / 2.0
+        * (1.0 + tolerance(data.qvel[0], margin=p.velocity_margin)) / 2.0,
         "velocity": -p.velocity_weight * (1.0 - tolerance(data.qvel[0], margin=p.velocity_margin)),
         "effort": -p.effort_weight * jnp.mean(jnp.square(jnp.clip(action, -1.0, 1.0))),
     }

@@ -2,11 +2,19 @@
 
     mjzoo envs                    # list the registered tasks and their overrides
     mjzoo demo --steps 200        # random policy on every env, batched, prints returns
+    mjzoo train ppo cartpole_balance --out runs/cb --config num_envs=128 learning_rate=3e-4
+    mjzoo train ppo cartpole_balance --resume runs/cb
+    mjzoo eval runs/cb            # reload the checkpoint, evaluate, write a video
 """
 
 from __future__ import annotations
 
+import ast
+import dataclasses
+import json
 import time
+from pathlib import Path
+from typing import Annotated, Any, Literal
 
 import jax
 import jax.numpy as jnp
@@ -16,7 +24,9 @@ import tyro
 import mjzoo
 import mjzoo.envs
 
-__all__ = ["main", "demo", "envs"]
+__all__ = ["main", "demo", "envs", "train", "evaluate"]
+
+ALGORITHMS = ("ppo",)
 
 
 def envs() -> None:
@@ -67,8 +77,114 @@ def _random_returns(task: mjzoo.Task, keys: jax.Array, steps: int, nu: int):
     return jax.vmap(one)(keys)
 
 
+def _parse_assignments(pairs: tuple[str, ...], what: str) -> dict[str, Any]:
+    """["a=1", "b=(64, 64)", "c=swish"] -> {"a": 1, "b": (64, 64), "c": "swish"}."""
+    parsed = {}
+    for pair in pairs:
+        name, sep, text = pair.partition("=")
+        if not sep or not name:
+            raise SystemExit(f"{what}: expected NAME=VALUE, got {pair!r}")
+        try:
+            parsed[name] = ast.literal_eval(text)
+        except (ValueError, SyntaxError):
+            parsed[name] = text  # a bare word: a string
+    return parsed
+
+
+def _algorithm(name: str):
+    import importlib
+
+    return importlib.import_module(f"mjzoo.algorithms.{name}")
+
+
+def _config(algorithm, env: str, overrides: dict[str, Any]):
+    """The algorithm's Config: its defaults, then the env's, then the command line's."""
+    fields = {f.name: f for f in dataclasses.fields(algorithm.Config)}
+    values = {**mjzoo.envs.hyperparameters(env, algorithm.__name__.split(".")[-1]), **overrides}
+    unknown = sorted(set(values) - set(fields))
+    if unknown:
+        raise SystemExit(f"--config: unknown field(s) {unknown}; fields: {sorted(fields)}")
+    for name, value in values.items():  # JSON and literal lists back to the tuples Config holds
+        if isinstance(value, list):
+            values[name] = tuple(value)
+    try:
+        return algorithm.Config(**values)
+    except (ValueError, TypeError) as e:
+        raise SystemExit(str(e)) from None
+
+
+def train(
+    algorithm: Annotated[Literal["ppo"], tyro.conf.Positional],
+    env: Annotated[str, tyro.conf.Positional],
+    out: Path | None = None,
+    config: tuple[str, ...] = (),
+    env_overrides: tuple[str, ...] = (),
+    total_steps: int | None = None,
+    resume: Path | None = None,
+    seed: int = 0,
+    eval_envs: int = 16,
+    updates_per_chunk: int = 10,
+    video: bool = True,
+) -> None:
+    """Train ALGORITHM on ENV, writing config.json, metrics.jsonl, TensorBoard events,
+    checkpoints, curves.png and eval.mp4 to --out (default runs/ENV-ALGORITHM).
+
+    --config takes NAME=VALUE fields of the algorithm's Config (defaults: the env's);
+    --env-overrides NAME=VALUE overrides of the env (see `mjzoo envs`); --resume DIR
+    continues the run in DIR from its newest checkpoint with its saved settings.
+    """
+    from mjzoo import training
+
+    if resume is not None:
+        saved = json.loads((resume / "task.json").read_text())
+        env, out = saved["env"], resume
+        env_values = saved["overrides"]
+        config_values = {**json.loads((resume / "config.json").read_text())["config"], **_parse_assignments(config, "--config")}
+    else:
+        env_values = _parse_assignments(env_overrides, "--env-overrides")
+        config_values = _parse_assignments(config, "--config")
+    if total_steps is not None:
+        config_values["total_steps"] = total_steps
+    module = _algorithm(algorithm)
+    cfg = _config(module, env, {k: v for k, v in config_values.items() if not str(v).startswith("<custom")})
+    task = mjzoo.envs.make(env, **env_values)
+    out = out or Path("runs") / f"{env}-{algorithm}"
+    out.mkdir(parents=True, exist_ok=True)
+    (out / "task.json").write_text(json.dumps({"env": env, "overrides": env_values}, indent=2))
+    eval_steps = {**mjzoo.envs.defaults(env), **env_values}["episode_steps"]
+    settings = training.Settings(out_dir=out, seed=seed, updates_per_chunk=updates_per_chunk, eval_envs=eval_envs,
+                                 eval_steps=eval_steps, video=video, resume=resume is not None)  # fmt: skip
+    _, last = module.train(cfg, task, settings)
+    print(f"final eval/return {last.get('eval/return', float('nan')):.2f}")
+    print(f"curves: {out / 'curves.png'}")
+    print(f"video:  {out / 'eval.mp4'}" if (out / "eval.mp4").exists() else "video:  (not written)")
+
+
+def evaluate(run: Annotated[Path, tyro.conf.Positional], episodes: int = 16, seed: int = 1, video: Path | None = None) -> None:
+    """Reload RUN's newest checkpoint, run deterministic episodes, print the mean return
+    and write a video (default RUN/eval.mp4)."""
+    from mjzoo import checkpoints, training
+
+    saved = json.loads((run / "task.json").read_text())
+    info = json.loads((run / "config.json").read_text())
+    module = _algorithm(info["algorithm"])
+    cfg = _config(module, saved["env"], {k: v for k, v in info["config"].items() if not str(v).startswith("<custom")})
+    task = mjzoo.envs.make(saved["env"], **saved["overrides"])
+    state = checkpoints.restore(run / "checkpoints", like=module.init(cfg, task, jax.random.key(0)))
+    steps = {**mjzoo.envs.defaults(saved["env"]), **saved["overrides"]}["episode_steps"]
+    mean, returns, trajectory = jax.jit(module.evaluate, static_argnums=(0, 4, 5))(
+        cfg, task, state, jax.random.key(seed), episodes, steps
+    )
+    print(f"{saved['env']}: mean return {float(mean):.2f} ± {float(jnp.std(returns)):.2f} over {episodes} episodes")
+    path = training.write_video(task, trajectory, video or run / "eval.mp4")
+    if path is not None:
+        print(f"video: {path}")
+
+
 def main(argv: list[str] | None = None) -> None:
-    tyro.extras.subcommand_cli_from_dict({"demo": demo, "envs": envs}, args=argv)
+    tyro.extras.subcommand_cli_from_dict(
+        {"demo": demo, "envs": envs, "train": train, "eval": evaluate}, args=argv
+    )
 
 
 if __name__ == "__main__":

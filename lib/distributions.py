@@ -1,0 +1,117 @@
+"""The tanh-squashed diagonal Gaussian, the usual policy distribution for bounded
+continuous actions, as pure functions of its parameters.
+
+raw ~ N(loc, scale) elementwise and action = tanh(raw) in (-1, 1). Functions take
+the pre-tanh sample `raw` rather than the action: tanh saturates in float32 for
+|raw| > ~9, so recovering raw by atanh(action) would give inf and a NaN density. PPO
+stores `raw` at collection time and evaluates `log_prob(loc, scale, raw)` later.
+
+The Gaussian is distrax's `Normal`, the squashing distrax's `Tanh` bijector, whose
+log-det-Jacobian log(1 - tanh(u)^2) is computed in the stable form
+2 * (log 2 - u - softplus(-2u)).
+"""
+
+from __future__ import annotations
+
+import chex
+import distrax
+import jax
+import jax.numpy as jnp
+
+__all__ = ["split_params", "sample", "log_prob", "entropy", "mode"]
+
+Array = jax.Array
+
+# Tanh on each element, its log-det-Jacobian summed over the last (action) axis.
+_SQUASH = distrax.Block(distrax.Tanh(), ndims=1)
+
+
+def _check_shapes(loc: Array, scale: Array, raw: Array) -> None:
+    chex.assert_equal_shape([loc, scale, raw])
+    if jnp.ndim(raw) < 1:
+        raise ValueError("loc, scale and raw need an action axis [..., A]; got scalars")
+
+
+def split_params(output: Array, min_std: float = 1e-3) -> tuple[Array, Array]:
+    """Network output to the Gaussian's loc and scale.
+
+    Args:
+      output: [..., 2 * A]; the first half is the loc, the second half passes through
+        softplus to the scale.
+      min_std: scalar >= 0 added to the scale, so it never collapses to 0.
+
+    Returns:
+      (loc, scale), both [..., A]; scale = softplus(second half) + min_std.
+    """
+    size = jnp.shape(output)[-1] if jnp.ndim(output) else 0
+    if size == 0 or size % 2:
+        raise ValueError(
+            f"split_params: the last axis of output must have even size 2 * A > 0, got shape {jnp.shape(output)}"
+        )
+    loc, raw_scale = jnp.split(output, 2, axis=-1)
+    return loc, jax.nn.softplus(raw_scale) + min_std
+
+
+def sample(loc: Array, scale: Array, key: Array) -> tuple[Array, Array]:
+    """Draws a squashed action and its pre-tanh value.
+
+    Args:
+      loc, scale: [..., A] the Gaussian's mean and standard deviation.
+      key: PRNG key.
+
+    Returns:
+      (action, raw), both [..., A]: raw ~ N(loc, scale), action = tanh(raw).
+    """
+    chex.assert_equal_shape([loc, scale])
+    raw = distrax.Normal(loc, scale).sample(seed=key)
+    return jnp.tanh(raw), raw
+
+
+def log_prob(loc: Array, scale: Array, raw: Array) -> Array:
+    """Log density of the action tanh(raw), given its pre-tanh value.
+
+    By the change of variables a = tanh(u),
+
+      log p(a) = sum_i [log N(u_i; loc_i, scale_i) - log(1 - tanh(u_i)^2)]
+
+    with the second term in a form that stays finite for any finite u.
+
+    Args:
+      loc, scale: [..., A].
+      raw: [..., A] pre-tanh values (as returned by `sample`).
+
+    Returns:
+      [...] log density, summed over the action axis.
+    """
+    _check_shapes(loc, scale, raw)
+    gaussian = jnp.sum(distrax.Normal(loc, scale).log_prob(raw), axis=-1)
+    return gaussian - _SQUASH.forward_log_det_jacobian(raw)
+
+
+def entropy(loc: Array, scale: Array, raw: Array) -> Array:
+    """One-sample estimate of the squashed distribution's entropy.
+
+    The entropy of a = tanh(u) is H[u] + E_u[log|det J_tanh(u)|]; it has no closed
+    form, so the expectation is replaced by its value at the one sample `raw`. The
+    estimate is unbiased when raw ~ N(loc, scale) but noisy; note that with raw fixed
+    its gradient reaches only the Gaussian part (through `scale`).
+
+    Args:
+      loc, scale: [..., A].
+      raw: [..., A] a pre-tanh sample, usually the one the action was taken with.
+
+    Returns:
+      [...] entropy estimate, summed over the action axis.
+    """
+    _check_shapes(loc, scale, raw)
+    gaussian = jnp.sum(distrax.Normal(loc, scale).entropy(), axis=-1)
+    return gaussian + _SQUASH.forward_log_det_jacobian(raw)
+
+
+def mode(loc: Array) -> Array:
+    """The deterministic action, tanh(loc), [..., A] -> [..., A], for evaluation.
+
+    tanh is monotone, so this is exactly the median of each squashed component; it is
+    close to the squashed density's mode and mean when the scale is small.
+    """
+    return jnp.tanh(loc)

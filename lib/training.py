@@ -1,0 +1,170 @@
+"""The training harness shared by the RL algorithms: a host loop over jitted chunks of
+updates, with evaluation, metrics, checkpoints, a progress bar, curves and a video.
+
+An algorithm module provides `init(config, task, key)`, `update(config, task, state)`
+and `evaluate(config, task, state, key, num_envs, num_steps)`, and its config has
+`num_updates`, `steps_per_update` and `num_envs`; `run` does the rest:
+
+    out/config.json       the algorithm config and the run settings
+    out/metrics.jsonl     one JSON object per chunk: step, eval/return, losses, reward terms, steps/s
+    out/tensorboard/      the same scalars for TensorBoard
+    out/checkpoints/      atomic, exactly resumable train states
+    out/curves.png        learning curves;  out/eval.mp4  the final policy (where GL exists)
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import json
+import time
+from pathlib import Path
+from types import ModuleType
+from typing import Any
+
+import jax
+import jax.numpy as jnp
+import numpy as np
+from jax.sharding import NamedSharding, PartitionSpec
+
+from mjzoo import checkpoints, metrics as metrics_lib, plotting, rendering
+from mjzoo.types import Task
+
+__all__ = ["Settings", "run", "shard_envs", "config_dict"]
+
+PER_ENV_FIELDS = ("env_state", "carry", "episode_return", "episode_length")
+
+
+@dataclasses.dataclass(frozen=True, kw_only=True)
+class Settings:
+    """How a run is driven (not what is learned)."""
+
+    out_dir: Path | None = None
+    seed: int = 0
+    updates_per_chunk: int = 10
+    eval_envs: int = 16
+    eval_steps: int = 1000
+    video: bool = True
+    resume: bool = False
+    progress: bool = True
+
+    def __post_init__(self):
+        for field in ("updates_per_chunk", "eval_envs", "eval_steps"):
+            if getattr(self, field) < 1:
+                raise ValueError(f"training.Settings: {field}={getattr(self, field)!r} must be >= 1")
+
+
+def config_dict(config: Any) -> dict[str, Any]:
+    """A dataclass config as JSON-ready data; user-supplied functions become their names."""
+
+    def plain(value):
+        if isinstance(value, (bool, int, float, str)) or value is None:
+            return value
+        if isinstance(value, (tuple, list)):
+            return [plain(v) for v in value]
+        return f"<custom {type(value).__name__}>"
+
+    return {f.name: plain(getattr(config, f.name)) for f in dataclasses.fields(config)}
+
+
+def shard_envs(train_state: Any, devices: list | None = None) -> Any:
+    """Places the per-env leaves of a train state across devices (leading axis), the
+    rest replicated. Under jit, XLA then splits the env batch and averages gradients."""
+    devices = devices or jax.devices()
+    if len(devices) == 1:
+        return train_state
+    mesh = jax.sharding.Mesh(np.array(devices), ("envs",))
+    split, whole = NamedSharding(mesh, PartitionSpec("envs")), NamedSharding(mesh, PartitionSpec())
+    placed = {}
+    for field in dataclasses.fields(train_state):
+        value = getattr(train_state, field.name)
+        if field.name in PER_ENV_FIELDS:
+            placed[field.name] = jax.tree.map(lambda x: jax.device_put(x, split if jnp.ndim(x) else whole), value)
+        else:
+            placed[field.name] = jax.device_put(value, whole)
+    return dataclasses.replace(train_state, **placed)
+
+
+def _chunk_fn(algorithm: ModuleType, config: Any, length: int):
+    def chunk(task: Task, state):
+        state, metrics = jax.lax.scan(lambda s, _: algorithm.update(config, task, s), state, None, length=length)
+        return state, jax.tree.map(jnp.nanmean, metrics)  # NaN: nothing to report that update
+
+    return jax.jit(chunk, donate_argnums=1)
+
+
+def _resume(out_dir: Path, state: Any) -> Any:
+    """The newest checkpoint, with metrics.jsonl cut back to it (lines after it would be
+    written again)."""
+    restored = checkpoints.restore(out_dir / "checkpoints", like=state)
+    metrics_path = out_dir / "metrics.jsonl"
+    if metrics_path.exists():
+        step = checkpoints.latest_step(out_dir / "checkpoints")
+        kept = [line for line in metrics_lib.read_metrics(metrics_path) if line["step"] <= step]
+        metrics_path.write_text("".join(json.dumps(line) + "\n" for line in kept))
+    return restored
+
+
+def run(algorithm: ModuleType, config: Any, task: Task, settings: Settings) -> tuple[Any, dict[str, float]]:
+    """Trains `task` with `algorithm` under `config`; returns the final state and metrics."""
+    out = Path(settings.out_dir) if settings.out_dir else None
+    key = jax.random.key(settings.seed)
+    state = algorithm.init(config, task, key)
+    if out is not None:
+        out.mkdir(parents=True, exist_ok=True)
+        run_info = {"algorithm": algorithm.__name__.split(".")[-1], "config": config_dict(config),
+                    "settings": {k: str(v) if isinstance(v, Path) else v for k, v in dataclasses.asdict(settings).items()}}  # fmt: skip
+        (out / "config.json").write_text(json.dumps(run_info, indent=2))
+        if settings.resume and checkpoints.latest_step(out / "checkpoints") is not None:
+            state = _resume(out, state)
+    # Own every buffer once: the chunk donates the state, and XLA may hand out one buffer
+    # for equal constants (two zero arrays), which cannot be donated twice.
+    state = shard_envs(jax.tree.map(jnp.copy, state))
+    chunk = _chunk_fn(algorithm, config, settings.updates_per_chunk)
+    evaluate = jax.jit(algorithm.evaluate, static_argnums=(0, 4, 5))
+    total_chunks = -(-config.num_updates // settings.updates_per_chunk)
+    writer = metrics_lib.MetricsWriter(out) if out is not None else None
+    progress = metrics_lib.Progress(total_chunks * settings.updates_per_chunk * config.steps_per_update, "train")
+    last: dict[str, float] = {}
+    trajectory = None
+    try:
+        while int(state.updates) < total_chunks * settings.updates_per_chunk:
+            start = time.perf_counter()
+            state, chunk_metrics = chunk(task, state)
+            jax.block_until_ready(state)
+            seconds = time.perf_counter() - start
+            eval_key = jax.random.fold_in(key, int(state.updates))
+            eval_return, _, trajectory = evaluate(config, task, state, eval_key, settings.eval_envs, settings.eval_steps)
+            step = int(state.updates) * config.steps_per_update
+            last = {"eval/return": float(eval_return), "perf/steps_per_s": settings.updates_per_chunk * config.steps_per_update / seconds,
+                    **{k: float(v) for k, v in chunk_metrics.items() if np.isfinite(v)}}  # fmt: skip
+            if writer is not None:
+                writer.write(step, last)
+                checkpoints.save(out / "checkpoints", step, state)
+            if settings.progress:
+                progress.update(step, ret=f"{last['eval/return']:.1f}", sps=f"{last['perf/steps_per_s']:,.0f}")
+    finally:
+        progress.close()
+        if writer is not None:
+            writer.close()
+    if out is not None:
+        _finish(out, task, trajectory, settings)
+    return state, last
+
+
+def _finish(out: Path, task: Task, trajectory, settings: Settings) -> None:
+    """Learning curves and a video of the last evaluation episode."""
+    plotting.plot_curves(out / "metrics.jsonl", out / "curves.png")
+    if settings.video and trajectory is not None:
+        write_video(task, trajectory, out / "eval.mp4")
+
+
+def write_video(task: Task, trajectory, path: Path) -> Path | None:
+    """Renders a single-env trajectory ([T] leaves) at its own control rate, through the
+    model's first camera if it has one."""
+    data = jax.device_get(trajectory.next_state.data)
+    times = np.asarray(data.time)
+    fps = 1.0 / float(times[1] - times[0]) if len(times) > 1 and times[1] > times[0] else 50.0
+    return rendering.render_video(
+        task.mj_model, np.asarray(data.qpos), path, fps, mocap_pos=np.asarray(data.mocap_pos),
+        mocap_quat=np.asarray(data.mocap_quat), camera=0 if task.mj_model.ncam else None,
+    )  # fmt: skip
