@@ -39,6 +39,8 @@ class Params:
     velocity_weight: Array
     effort_weight: Array
     velocity_margin: Array
+    velocity_bound: Array
+    slow_margin: Array
     init_noise: Array  # rad and rad/s, uniform half-width around hanging still
     n_substeps: int = dataclasses.field(metadata=dict(static=True))
 
@@ -64,8 +66,9 @@ def reward(p: Params, model: mjx.Model, state: State, action: Array, next_state:
     data = next_state.data
     return {
         "upright": p.upright_weight * (1.0 + jnp.cos(data.qpos[0])) / 2.0
-        * (1.0 + tolerance(data.qvel[0], margin=p.velocity_margin)) / 2.0,
-        "velocity": -p.velocity_weight * (1.0 - tolerance(data.qvel[0], margin=p.velocity_margin)),
+        * (1.0 + tolerance(data.qvel[0], margin=p.slow_margin)) / 2.0,
+        "velocity": -p.velocity_weight * (1.0 - tolerance(data.qvel[0], lower=-p.velocity_bound, upper=p.velocity_bound,
+                                                          margin=p.velocity_margin, sigmoid="linear", value_at_margin=0.0)),
         "effort": -p.effort_weight * jnp.mean(jnp.square(jnp.clip(action, -1.0, 1.0))),
     }
 
@@ -74,9 +77,11 @@ def swingup(
     *,
     episode_steps: int = 500,
     upright_weight: float = 1.0,
-    velocity_weight: float = 0.1,
+    velocity_weight: float = 0.5,
     effort_weight: float = 0.01,
-    velocity_margin: float = 5.0,
+    velocity_margin: float = 20.0,
+    velocity_bound: float = 10.0,
+    slow_margin: float = 5.0,
     init_noise: float = 0.1,
     ctrl_dt: float = 0.02,
     **physics_options,
@@ -86,7 +91,7 @@ def swingup(
     params = Params(
         **base.floats(
             upright_weight=upright_weight, velocity_weight=velocity_weight, effort_weight=effort_weight,
-            velocity_margin=velocity_margin, init_noise=init_noise,
+            velocity_margin=velocity_margin, velocity_bound=velocity_bound, slow_margin=slow_margin, init_noise=init_noise,
         ),
         n_substeps=physics.n_substeps,
     )  # fmt: skip

@@ -208,12 +208,15 @@ def patch_brax_for_current_jax() -> None:
     to copy the training state onto each device; this installs an equivalent when it is
     missing. Nothing else in ppo.train's path fails on JAX 0.10 (`jax.pmap` is still
     there, rebuilt on shard_map), so nothing else is touched. Idempotent.
+
+    Left alone, as a one-time cost: Brax's evaluator compiles its unroll twice, because
+    the parameters it gets after the first training epoch carry pmap's sharding.
     """
     if not hasattr(jax, "device_put_replicated"):
         jax.device_put_replicated = _device_put_replicated
 
 
-BRAX_PMAP_AXIS = "i"  # the axis name Brax's trainers give jax.pmap
+_BRAX_PMAP_AXIS = "i"  # the axis name Brax's trainers give jax.pmap
 
 
 def _device_put_replicated(x: Any, devices: Sequence[jax.Device]) -> Any:
@@ -224,8 +227,8 @@ def _device_put_replicated(x: Any, devices: Sequence[jax.Device]) -> Any:
     devices = list(devices)
     if not devices:
         raise ValueError("device_put_replicated: devices must be a non-empty sequence")
-    mesh = jax.sharding.Mesh(np.array(devices), (BRAX_PMAP_AXIS,))
-    sharding = jax.sharding.NamedSharding(mesh, jax.sharding.PartitionSpec(BRAX_PMAP_AXIS))
+    mesh = jax.sharding.Mesh(np.array(devices), (_BRAX_PMAP_AXIS,))
+    sharding = jax.sharding.NamedSharding(mesh, jax.sharding.PartitionSpec(_BRAX_PMAP_AXIS))
 
     def put(leaf):
         leaf = jnp.asarray(leaf)

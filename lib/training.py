@@ -15,6 +15,7 @@ and `evaluate(config, task, state, key, num_envs, num_steps)`, and its config ha
 from __future__ import annotations
 
 import dataclasses
+import functools
 import json
 import time
 from pathlib import Path
@@ -29,7 +30,7 @@ from jax.sharding import NamedSharding, PartitionSpec
 from mjzoo import checkpoints, metrics as metrics_lib, plotting, rendering
 from mjzoo.types import Task
 
-__all__ = ["Settings", "run", "shard_envs", "config_dict"]
+__all__ = ["Settings", "run", "shard_envs", "replicate", "config_dict"]
 
 PER_ENV_FIELDS = ("env_state", "carry", "episode_return", "episode_length")
 
@@ -84,12 +85,28 @@ def shard_envs(train_state: Any, devices: list | None = None) -> Any:
     return dataclasses.replace(train_state, **placed)
 
 
+def replicate(tree: Any, devices: list | None = None) -> Any:
+    """Copies every array of `tree` (e.g. a Task) onto all `devices`, to run beside a
+    state placed by `shard_envs`."""
+    devices = devices or jax.devices()
+    if len(devices) == 1:
+        return tree
+    mesh = jax.sharding.Mesh(np.array(devices), ("envs",))
+    return jax.device_put(tree, NamedSharding(mesh, PartitionSpec()))
+
+
+@functools.lru_cache(maxsize=8)  # runs in one process with one config share the compile
 def _chunk_fn(algorithm: ModuleType, config: Any, length: int):
     def chunk(task: Task, state):
         state, metrics = jax.lax.scan(lambda s, _: algorithm.update(config, task, s), state, None, length=length)
         return state, jax.tree.map(jnp.nanmean, metrics)  # NaN: nothing to report that update
 
     return jax.jit(chunk, donate_argnums=1)
+
+
+@functools.lru_cache(maxsize=8)
+def _evaluate_fn(algorithm: ModuleType):
+    return jax.jit(algorithm.evaluate, static_argnums=(0, 4, 5))
 
 
 def _resume(out_dir: Path, state: Any) -> Any:
@@ -118,9 +135,9 @@ def run(algorithm: ModuleType, config: Any, task: Task, settings: Settings) -> t
             state = _resume(out, state)
     # Own every buffer once: the chunk donates the state, and XLA may hand out one buffer
     # for equal constants (two zero arrays), which cannot be donated twice.
-    state = shard_envs(jax.tree.map(jnp.copy, state))
+    state, task = shard_envs(jax.tree.map(jnp.copy, state)), replicate(task)
     chunk = _chunk_fn(algorithm, config, settings.updates_per_chunk)
-    evaluate = jax.jit(algorithm.evaluate, static_argnums=(0, 4, 5))
+    evaluate = _evaluate_fn(algorithm)
     total_chunks = -(-config.num_updates // settings.updates_per_chunk)
     writer = metrics_lib.MetricsWriter(out) if out is not None else None
     progress = metrics_lib.Progress(total_chunks * settings.updates_per_chunk * config.steps_per_update, "train")
