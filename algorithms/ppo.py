@@ -50,7 +50,7 @@ class Config:
     value_clip_epsilon: float | None = None
     value_coef: float = 0.5
     entropy_coef: float = 1e-2
-    max_grad_norm: float = 1.0
+    max_grad_norm: float | None = 1.0  # None: no clipping
     reward_scaling: float = 1.0
     normalize_observations: bool = True
     normalize_advantages: bool = True
@@ -83,8 +83,9 @@ class Config:
             need(0.0 <= getattr(self, field) <= 1.0, field, "in [0, 1]")
         need(self.clip_epsilon > 0, "clip_epsilon", "> 0")
         need(self.value_clip_epsilon is None or self.value_clip_epsilon > 0, "value_clip_epsilon", "None or > 0")
-        for field in ("value_coef", "entropy_coef", "max_grad_norm"):
+        for field in ("value_coef", "entropy_coef"):
             need(getattr(self, field) >= 0, field, ">= 0")
+        need(self.max_grad_norm is None or self.max_grad_norm > 0, "max_grad_norm", "None or > 0")
         need(self.reward_scaling > 0, "reward_scaling", "> 0")
         need(self.activation in ACTIVATIONS, "activation", f"one of {sorted(ACTIVATIONS)}")
 
@@ -143,6 +144,8 @@ def _optimizer(config: Config) -> optax.GradientTransformation:
         "linear": optax.linear_schedule(config.learning_rate, 0.0, steps),
         "cosine": optax.cosine_decay_schedule(config.learning_rate, steps),
     }[config.lr_schedule]
+    if config.max_grad_norm is None:
+        return optax.adam(schedule)
     return optax.chain(optax.clip_by_global_norm(config.max_grad_norm), optax.adam(schedule))
 
 

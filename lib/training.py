@@ -143,6 +143,7 @@ def run(algorithm: ModuleType, config: Any, task: Task, settings: Settings) -> t
     progress = metrics_lib.Progress(total_chunks * settings.updates_per_chunk * config.steps_per_update, "train")
     last: dict[str, float] = {}
     trajectory = None
+    started = time.perf_counter()
     try:
         while int(state.updates) < total_chunks * settings.updates_per_chunk:
             start = time.perf_counter()
@@ -153,6 +154,7 @@ def run(algorithm: ModuleType, config: Any, task: Task, settings: Settings) -> t
             eval_return, _, trajectory = evaluate(config, task, state, eval_key, settings.eval_envs, settings.eval_steps)
             step = int(state.updates) * config.steps_per_update
             last = {"eval/return": float(eval_return), "perf/steps_per_s": settings.updates_per_chunk * config.steps_per_update / seconds,
+                    "perf/elapsed_s": time.perf_counter() - started,
                     **{k: float(v) for k, v in chunk_metrics.items() if np.isfinite(v)}}  # fmt: skip
             if writer is not None:
                 writer.write(step, last)
