@@ -45,6 +45,7 @@ class Settings:
     eval_envs: int = 16
     eval_steps: int = 1000
     video: bool = True
+    checkpoint_every: int = 1  # chunks between checkpoints; 0: never
     resume: bool = False
     progress: bool = True
 
@@ -52,6 +53,8 @@ class Settings:
         for field in ("updates_per_chunk", "eval_envs", "eval_steps"):
             if getattr(self, field) < 1:
                 raise ValueError(f"training.Settings: {field}={getattr(self, field)!r} must be >= 1")
+        if self.checkpoint_every < 0:
+            raise ValueError(f"training.Settings: checkpoint_every={self.checkpoint_every!r} must be >= 0")
 
 
 def config_dict(config: Any) -> dict[str, Any]:
@@ -69,10 +72,14 @@ def config_dict(config: Any) -> dict[str, Any]:
 
 def shard_envs(train_state: Any, devices: list | None = None) -> Any:
     """Places the per-env leaves of a train state across devices (leading axis), the
-    rest replicated. Under jit, XLA then splits the env batch and averages gradients."""
+    rest replicated. Under jit, XLA then splits the env batch and averages gradients.
+
+    On one device this commits the state to it: jit compiles separately for
+    uncommitted inputs and for its own (committed) outputs, which would cost a second
+    compile on the second chunk."""
     devices = devices or jax.devices()
     if len(devices) == 1:
-        return train_state
+        return jax.device_put(train_state, devices[0])
     mesh = jax.sharding.Mesh(np.array(devices), ("envs",))
     split, whole = NamedSharding(mesh, PartitionSpec("envs")), NamedSharding(mesh, PartitionSpec())
     placed = {}
@@ -90,7 +97,7 @@ def replicate(tree: Any, devices: list | None = None) -> Any:
     state placed by `shard_envs`."""
     devices = devices or jax.devices()
     if len(devices) == 1:
-        return tree
+        return jax.device_put(tree, devices[0])
     mesh = jax.sharding.Mesh(np.array(devices), ("envs",))
     return jax.device_put(tree, NamedSharding(mesh, PartitionSpec()))
 
@@ -158,7 +165,9 @@ def run(algorithm: ModuleType, config: Any, task: Task, settings: Settings) -> t
                     **{k: float(v) for k, v in chunk_metrics.items() if np.isfinite(v)}}  # fmt: skip
             if writer is not None:
                 writer.write(step, last)
-                checkpoints.save(out / "checkpoints", step, state)
+                chunks_done = int(state.updates) // settings.updates_per_chunk
+                if settings.checkpoint_every and chunks_done % settings.checkpoint_every == 0:
+                    checkpoints.save(out / "checkpoints", step, state)
             if settings.progress:
                 progress.update(step, ret=f"{last['eval/return']:.1f}", sps=f"{last['perf/steps_per_s']:,.0f}")
     finally:
