@@ -65,7 +65,7 @@ def step(p: Params, model: mjx.Model, state: State, action: Array, key: Array) -
 def reward(p: Params, model: mjx.Model, state: State, action: Array, next_state: State) -> dict[str, Array]:
     data = next_state.data
     return {
-        "upright": p.upright_weight * (1.0 + jnp.cos(data.qpos[0])) / 2.0
+        "upright": p.upright_weight * tolerance(jnp.arctan2(jnp.sin(data.qpos[0]), jnp.cos(data.qpos[0])), margin=jnp.pi, sigmoid="linear", value_at_margin=0.0)
         * (1.0 + tolerance(data.qvel[0], margin=p.slow_margin)) / 2.0,
         "velocity": -p.velocity_weight * (1.0 - tolerance(data.qvel[0], lower=-p.velocity_bound, upper=p.velocity_bound,
                                                           margin=p.velocity_margin, sigmoid="linear", value_at_margin=0.0)),

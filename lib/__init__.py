@@ -16,6 +16,7 @@ from mjzoo.combinators import (
     with_action_repeat,
     with_auto_reset,
     with_divergence_guard,
+    with_observation,
     with_reward,
     with_time_limit,
 )
@@ -37,6 +38,7 @@ __all__ = [
     "transition_with_terms",
     "rollout",
     "reward_terms",
+    "with_observation",
     "with_time_limit",
     "with_auto_reset",
     "with_action_repeat",

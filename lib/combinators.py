@@ -26,6 +26,7 @@ from mjzoo.running import OUTCOME, complete, reset, reward_terms, transition_wit
 from mjzoo.types import State, Task, bind
 
 __all__ = [
+    "with_observation",
     "with_time_limit",
     "with_auto_reset",
     "with_action_repeat",
@@ -35,6 +36,37 @@ __all__ = [
 
 Array = jax.Array
 RESET_STREAM = 0x5E7  # fold_in tag: combinators pass keys through and derive their own
+
+
+# --- observation transform ----------------------------------------------------------
+
+
+def with_observation(task: Task, fn: Callable) -> Task:
+    """Observes ``fn(obs)`` instead of the task's own observation (select, hide, reshape:
+    e.g. drop velocities to make a task partially observable).
+
+    `fn` maps one observation pytree to another; a plain function or a
+    `jax.tree_util.Partial` with its parameters. Keeps ``info["observation"]``: the
+    inner task's own observation, which its step still receives.
+    """
+    if not callable(fn):
+        raise TypeError(f"with_observation: fn must be callable, got {type(fn).__name__}")
+    if not isinstance(fn, jax.tree_util.Partial):
+        fn = jax.tree_util.Partial(fn)
+    return task.replace(reset=bind(_observed_reset, task.reset, fn), step=bind(_observed_step, task.step, fn))
+
+
+def _observed(state: State, fn) -> State:
+    return state.replace(obs=fn(state.obs), info={**state.info, "observation": state.obs})
+
+
+def _observed_reset(reset_fn, fn, model, key) -> State:
+    return _observed(reset_fn(model, key), fn)
+
+
+def _observed_step(step_fn, fn, model, state, action, key) -> State:
+    inner = state.replace(obs=state.info["observation"])
+    return _observed(step_fn(model, inner, action, key), fn)
 
 
 # --- time limit ---------------------------------------------------------------------

@@ -658,3 +658,22 @@ def test_rollout_does_not_retrace():
     _, traj = rollout6(task, reset(task, KEY), KEY, jnp.array([2.0]))
     np.testing.assert_allclose(traj.next_state.reward[0], 0.02 + 0.06, rtol=1e-5)
     np.testing.assert_array_equal(traj.next_state.terminated, [True] * 6)
+
+
+# --- with_observation -----------------------------------------------------------------------
+
+
+def negated_velocity(obs):
+    return -obs[1:]
+
+
+def test_with_observation_transforms_what_is_seen_but_not_the_physics():
+    plain = make_task()
+    seen = mjzoo.with_observation(plain, negated_velocity)
+    _, a = episode(plain, 1.0, 1.0)
+    _, b = episode(seen, 1.0, 1.0)
+    np.testing.assert_allclose(b.obs, -a.obs[:, 1:])
+    np.testing.assert_allclose(b.info["observation"], a.obs)  # the inner task's own
+    chex.assert_trees_all_close(b.data.qpos, a.data.qpos)
+    with pytest.raises(TypeError, match="fn must be callable"):
+        mjzoo.with_observation(plain, 3)

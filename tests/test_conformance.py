@@ -28,6 +28,10 @@ def _alive(model, state, action, next_state):
     return jnp.float32(1.0)
 
 
+def _head(obs):
+    return obs[:2]
+
+
 COMBINATORS = {
     "bare": lambda t: t,
     "time_limit": lambda t: mjzoo.with_time_limit(t, 5),
@@ -38,6 +42,7 @@ COMBINATORS = {
     "action_noise": lambda t: mjzoo.with_action_noise(t, 0.1),
     "domain_randomization": lambda t: mjzoo.with_domain_randomization(t, _heavier),
     "divergence_guard": lambda t: mjzoo.with_divergence_guard(t, 1e3),
+    "observation": lambda t: mjzoo.with_observation(t, _head),
 }
 _EACH = tuple(COMBINATORS.values())
 COMBINATORS["all"] = lambda t: functools.reduce(lambda task, comb: comb(task), _EACH, t)

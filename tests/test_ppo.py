@@ -198,3 +198,19 @@ def test_learns_cartpole_balance():
     state, last = ppo.train(config, task, training.Settings(updates_per_chunk=10, eval_envs=16, eval_steps=500, progress=False))
     assert float(before) < 150
     assert last["eval/return"] > 500
+
+
+def positions_only(obs):
+    """Cart position and the pole angle's cos and sin: no velocities."""
+    return obs[:3]
+
+
+def test_recurrent_gru_policy_learns_a_partially_observed_task():
+    """Without velocities, balancing needs memory: a GRU policy solves it (an MLP with
+    the same budget reached ~270 of ~550 when this was calibrated)."""
+    task = mjzoo.with_observation(mjzoo.envs.make("cartpole_balance"), positions_only)
+    config = ppo.Config(num_envs=64, unroll_length=32, num_minibatches=4, num_epochs=4, learning_rate=1e-3,
+                        entropy_coef=1e-3, recurrent=True, total_steps=409_600)  # fmt: skip
+    state, last = ppo.train(config, task, training.Settings(updates_per_chunk=20, eval_envs=16, eval_steps=500, progress=False))
+    assert jax.tree.leaves(state.carry)[0].shape == (64, config.gru_hidden_size)
+    assert last["eval/return"] > 450
