@@ -1,14 +1,20 @@
-"""Pendulum swing-up: a torque-limited pendulum (1 N m against 4.9 N m of gravity at
+"""Pendulum swing-up: a torque-limited pendulum (2.5 N m against 4.9 N m of gravity at
 horizontal) must pump energy, swing up and balance upright.
 
 Observation (3,): cos and sin of the angle from upright, angular velocity (rad/s).
-Action (1,): torque in [-1, 1] N m.
+Action (1,): torque in [-1, 1] x 2.5 N m.
 Reward terms per step (each a weight times a value in [0, 1]):
-  upright   +1.0  * (1 + cos angle) / 2
-  velocity  -0.1  * (1 - tolerance(angular velocity, margin=5 rad/s))
+  upright   +1.0  * (1 + cos angle) / 2 * (1 + tolerance(angular velocity, margin=5 rad/s)) / 2
+  velocity  -0.5  * (1 - tolerance(angular velocity, bounds=+-10 rad/s, margin=20 rad/s, linear))
   effort    -0.01 * action^2
+The upright term pays in full only when upright and slow (dm_control's small_velocity
+factor), so balancing earns about 1 per step against about 0.25 for spinning through the
+top. The velocity term is 0 up to 10 rad/s (a swing-up passes the bottom at about 9) and
+reaches its full weight at 30 rad/s: the joint is lightly damped, so a pendulum pushed
+one way keeps spinning up (towards 50 rad/s) unless that costs something.
 No termination; truncated after `episode_steps` (500 steps of 0.02 s = 10 s).
 Starts hanging down (angle pi) with a small random offset.
+Solved: a deterministic PPO policy swings up in about 2 s and holds, mean return >= 380.
 """
 
 from __future__ import annotations
@@ -27,9 +33,10 @@ __all__ = ["Params", "swingup"]
 
 Array = jax.Array
 
-# PPO hyperparameters that solve this task (`mjzoo train ppo pendulum_swingup`).
+# PPO hyperparameters that solve this task (`mjzoo train ppo pendulum_swingup`): a
+# deterministic eval return >= 380 (swung up and held) by 0.4-2.4M steps over 8 seeds.
 PPO = dict(num_envs=256, unroll_length=32, num_minibatches=8, num_epochs=4, learning_rate=1e-3,
-           entropy_coef=1e-3, discount=0.97, total_steps=1_500_000)  # fmt: skip
+           entropy_coef=1e-2, discount=0.97, total_steps=3_000_000)  # fmt: skip
 
 
 @jax.tree_util.register_dataclass
@@ -38,9 +45,9 @@ class Params:
     upright_weight: Array
     velocity_weight: Array
     effort_weight: Array
-    velocity_margin: Array
-    velocity_bound: Array
-    slow_margin: Array
+    small_velocity_margin: Array  # rad/s, of the upright term's small-velocity factor
+    velocity_bound: Array  # rad/s, free speed of the velocity term
+    velocity_margin: Array  # rad/s beyond the bound at which the velocity term is full
     init_noise: Array  # rad and rad/s, uniform half-width around hanging still
     n_substeps: int = dataclasses.field(metadata=dict(static=True))
 
@@ -64,11 +71,13 @@ def step(p: Params, model: mjx.Model, state: State, action: Array, key: Array) -
 
 def reward(p: Params, model: mjx.Model, state: State, action: Array, next_state: State) -> dict[str, Array]:
     data = next_state.data
+    angle, speed = data.qpos[0], data.qvel[0]
+    small_velocity = (1.0 + tolerance(speed, margin=p.small_velocity_margin)) / 2.0
+    fast = 1.0 - tolerance(speed, lower=-p.velocity_bound, upper=p.velocity_bound, margin=p.velocity_margin,
+                           sigmoid="linear", value_at_margin=0.0)  # fmt: skip
     return {
-        "upright": p.upright_weight * tolerance(jnp.arctan2(jnp.sin(data.qpos[0]), jnp.cos(data.qpos[0])), margin=jnp.pi, sigmoid="linear", value_at_margin=0.0)
-        * (1.0 + tolerance(data.qvel[0], margin=p.slow_margin)) / 2.0,
-        "velocity": -p.velocity_weight * (1.0 - tolerance(data.qvel[0], lower=-p.velocity_bound, upper=p.velocity_bound,
-                                                          margin=p.velocity_margin, sigmoid="linear", value_at_margin=0.0)),
+        "upright": p.upright_weight * (1.0 + jnp.cos(angle)) / 2.0 * small_velocity,
+        "velocity": -p.velocity_weight * fast,
         "effort": -p.effort_weight * jnp.mean(jnp.square(jnp.clip(action, -1.0, 1.0))),
     }
 
@@ -79,9 +88,9 @@ def swingup(
     upright_weight: float = 1.0,
     velocity_weight: float = 0.5,
     effort_weight: float = 0.01,
-    velocity_margin: float = 20.0,
+    small_velocity_margin: float = 5.0,
     velocity_bound: float = 10.0,
-    slow_margin: float = 5.0,
+    velocity_margin: float = 20.0,
     init_noise: float = 0.1,
     ctrl_dt: float = 0.02,
     **physics_options,
@@ -91,7 +100,8 @@ def swingup(
     params = Params(
         **base.floats(
             upright_weight=upright_weight, velocity_weight=velocity_weight, effort_weight=effort_weight,
-            velocity_margin=velocity_margin, velocity_bound=velocity_bound, slow_margin=slow_margin, init_noise=init_noise,
+            small_velocity_margin=small_velocity_margin, velocity_bound=velocity_bound,
+            velocity_margin=velocity_margin, init_noise=init_noise,
         ),
         n_substeps=physics.n_substeps,
     )  # fmt: skip
