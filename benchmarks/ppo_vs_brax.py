@@ -27,7 +27,7 @@ import numpy as np
 
 sys.path.insert(0, str(Path(__file__).parent))
 from brax_peer import train_brax_ppo  # noqa: E402
-from task_overhead import best_time, raw_runner  # noqa: E402
+from task_overhead import inputs, raw_steps_per_s  # noqa: E402
 
 import mjzoo  # noqa: E402
 import mjzoo.envs  # noqa: E402
@@ -70,15 +70,6 @@ def train_mjzoo(task: mjzoo.Task, total_steps: int, episode_length: int) -> dict
             "compile_s": curve[0][1] - config.steps_per_update / float(np.median(steady))}  # fmt: skip
 
 
-def raw_steps_per_s(task: mjzoo.Task, env: str, num_envs: int, steps: int = 100) -> float:
-    keys = jax.random.split(jax.random.key(0), num_envs)
-    state = jax.jit(jax.vmap(mjzoo.reset, in_axes=(None, 0)))(task, keys)
-    low, high = np.asarray(task.mj_model.actuator_ctrlrange).T
-    controls = jax.random.uniform(jax.random.key(1), (steps, num_envs, task.action_size), minval=low, maxval=high)
-    substeps = round(mjzoo.envs.defaults(env)["ctrl_dt"] / float(task.mj_model.opt.timestep))
-    return num_envs * steps / best_time(raw_runner(task, substeps), task.model, state.data, controls, repeats=3)
-
-
 def time_to(curve: list, threshold: float) -> float | None:
     return next((seconds for _, seconds, ret in curve if ret >= threshold), None)
 
@@ -99,7 +90,7 @@ def main() -> None:
     for env in args.envs:
         task = mjzoo.envs.make(env)
         episode_length = mjzoo.envs.defaults(env)["episode_steps"]
-        raw = raw_steps_per_s(task, env, HYPER["num_envs"])
+        raw = raw_steps_per_s(task, env, *inputs(task, HYPER["num_envs"], 100), repeats=3)
         ours = train_mjzoo(task, args.steps, episode_length)
         print(f"{env}: mjzoo done {ours['steps_per_s']:,.0f} steps/s final {ours['final_return']:.1f}", flush=True)
         peer = train_brax_ppo(task, num_timesteps=args.steps, episode_length=episode_length, num_evals=20, **HYPER)

@@ -19,7 +19,6 @@ import time
 from pathlib import Path
 
 import jax
-import jax.numpy as jnp
 import numpy as np
 
 import mjzoo
@@ -66,17 +65,28 @@ def best_time(fn, *args, repeats: int) -> float:
     return min(times)
 
 
+def inputs(task: mjzoo.Task, batch: int, steps: int) -> tuple[jax.Array, jax.Array]:
+    """Reset keys [batch] and random controls [steps, batch, nu] within ctrlrange."""
+    low, high = np.asarray(task.mj_model.actuator_ctrlrange).T
+    controls = jax.random.uniform(jax.random.key(1), (steps, batch, task.action_size), minval=low, maxval=high)
+    return jax.random.split(jax.random.key(0), batch), controls
+
+
+def raw_steps_per_s(task: mjzoo.Task, name: str, reset_keys: jax.Array, controls: jax.Array, repeats: int) -> float:
+    """Env-steps/s of raw batched `mjx.step` from the task's reset states, with the
+    env's substeps per control step."""
+    state = jax.jit(jax.vmap(mjzoo.reset, in_axes=(None, 0)))(task, reset_keys)
+    substeps = round(mjzoo.envs.defaults(name)["ctrl_dt"] / float(task.mj_model.opt.timestep))
+    seconds = best_time(raw_runner(task, substeps), task.model, state.data, controls, repeats=repeats)
+    return controls.shape[0] * controls.shape[1] / seconds
+
+
 def measure(name: str, batch: int, steps: int, repeats: int) -> dict:
     base = mjzoo.envs.make(name)
-    key = jax.random.key(0)
-    reset_keys = jax.random.split(key, batch)
-    low, high = np.asarray(base.mj_model.actuator_ctrlrange).T
-    controls = jax.random.uniform(jax.random.key(1), (steps, batch, base.action_size), minval=low, maxval=high)
+    reset_keys, controls = inputs(base, batch, steps)
     result = {"env": name, "batch": batch, "steps": steps}
-    state = jax.jit(jax.vmap(mjzoo.reset, in_axes=(None, 0)))(base, reset_keys)
-    substeps = round(mjzoo.envs.defaults(name)["ctrl_dt"] / float(base.mj_model.opt.timestep))
-    seconds = best_time(raw_runner(base, substeps), base.model, state.data, controls, repeats=repeats)
-    result["raw_steps_per_s"] = batch * steps / seconds
+    result["raw_steps_per_s"] = raw_steps_per_s(base, name, reset_keys, controls, repeats)
+    key = jax.random.key(0)
     for label, task in (("transition", base), ("auto_reset", mjzoo.with_auto_reset(base))):
         state = jax.jit(jax.vmap(mjzoo.reset, in_axes=(None, 0)))(task, reset_keys)
         seconds = best_time(task_runner(), task, state, controls, key, repeats=repeats)

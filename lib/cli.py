@@ -98,8 +98,10 @@ def _algorithm(name: str):
 
 
 def _config(algorithm, env: str, overrides: dict[str, Any]):
-    """The algorithm's Config: its defaults, then the env's, then the command line's."""
+    """The algorithm's Config: its defaults, then the env's, then `overrides` (from the
+    command line or a saved config.json, whose user-supplied pieces cannot be rebuilt)."""
     fields = {f.name: f for f in dataclasses.fields(algorithm.Config)}
+    overrides = {k: v for k, v in overrides.items() if not str(v).startswith("<custom")}
     values = {**mjzoo.envs.hyperparameters(env, algorithm.__name__.split(".")[-1]), **overrides}
     unknown = sorted(set(values) - set(fields))
     if unknown:
@@ -111,6 +113,10 @@ def _config(algorithm, env: str, overrides: dict[str, Any]):
         return algorithm.Config(**values)
     except (ValueError, TypeError) as e:
         raise SystemExit(str(e)) from None
+
+
+def _episode_steps(env: str, overrides: dict[str, Any]) -> int:
+    return {**mjzoo.envs.defaults(env), **overrides}["episode_steps"]
 
 
 def train(
@@ -146,12 +152,12 @@ def train(
     if total_steps is not None:
         config_values["total_steps"] = total_steps
     module = _algorithm(algorithm)
-    cfg = _config(module, env, {k: v for k, v in config_values.items() if not str(v).startswith("<custom")})
+    cfg = _config(module, env, config_values)
     task = mjzoo.envs.make(env, **env_values)
     out = out or Path("runs") / f"{env}-{algorithm}"
     out.mkdir(parents=True, exist_ok=True)
     (out / "task.json").write_text(json.dumps({"env": env, "overrides": env_values}, indent=2))
-    eval_steps = {**mjzoo.envs.defaults(env), **env_values}["episode_steps"]
+    eval_steps = _episode_steps(env, env_values)
     settings = training.Settings(out_dir=out, seed=seed, updates_per_chunk=updates_per_chunk, eval_envs=eval_envs,
                                  eval_steps=eval_steps, video=video, resume=resume is not None)  # fmt: skip
     _, last = module.train(cfg, task, settings)
@@ -168,10 +174,10 @@ def evaluate(run: Annotated[Path, tyro.conf.Positional], episodes: int = 16, see
     saved = json.loads((run / "task.json").read_text())
     info = json.loads((run / "config.json").read_text())
     module = _algorithm(info["algorithm"])
-    cfg = _config(module, saved["env"], {k: v for k, v in info["config"].items() if not str(v).startswith("<custom")})
+    cfg = _config(module, saved["env"], info["config"])
     task = mjzoo.envs.make(saved["env"], **saved["overrides"])
     state = checkpoints.restore(run / "checkpoints", like=module.init(cfg, task, jax.random.key(0)))
-    steps = {**mjzoo.envs.defaults(saved["env"]), **saved["overrides"]}["episode_steps"]
+    steps = _episode_steps(saved["env"], saved["overrides"])
     mean, returns, trajectory = jax.jit(module.evaluate, static_argnums=(0, 4, 5))(
         cfg, task, state, jax.random.key(seed), episodes, steps
     )
