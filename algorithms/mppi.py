@@ -1,0 +1,59 @@
+"""Model-predictive path integral control: a softmax-weighted average of noisy plans.
+
+    config = mppi.Config(num_samples=128, temperature=0.1)
+    state = mppi.init(config, task)
+    state, controls = jax.jit(mppi.plan, static_argnums=0)(config, task, state, env_state, key)
+
+At every replan, with the nominal knots mu shifted to the current time:
+    theta_i = clip(mu + sigma * eps_i),  eps_i ~ N(0, I)   (theta_0 = mu)
+    w_i = exp(-(J_i - min_j J_j) / lambda) / sum_k exp(-(J_k - min_j J_j) / lambda)
+    mu' = sum_i w_i theta_i
+The temperature lambda is in cost units: lambda -> 0 recovers predictive sampling,
+large lambda averages all samples. Defaults: 128 samples, 25 planning steps, 4 cubic
+knots, sigma = 0.3 x half ctrl range, lambda = 0.1.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+
+import jax
+import jax.numpy as jnp
+
+from mjzoo import planning
+from mjzoo.planning import Ensemble, PlannerState
+from mjzoo.types import State, Task
+
+__all__ = ["Config", "init", "plan"]
+
+
+@dataclasses.dataclass(frozen=True)
+class Config(planning.SamplingConfig):
+    """`planning.SamplingConfig` plus the softmax temperature lambda (> 0, cost units)."""
+
+    temperature: float = 0.1
+
+    def __post_init__(self) -> None:
+        super().__post_init__()
+        if not self.temperature > 0:
+            raise ValueError(f"mppi.Config: invalid temperature={self.temperature!r}, must be > 0")
+
+
+def init(config: Config, task: Task | Ensemble, knots: jax.Array | None = None) -> PlannerState:
+    """A zero plan, or the warm-start `knots` [K, nu] a task supplies."""
+    return planning.initial_state(config, task, knots)
+
+
+def plan(
+    config: Config, task: Task | Ensemble, state: PlannerState, env_state: State, key: jax.Array
+) -> tuple[PlannerState, jax.Array]:
+    """One replan from `env_state`: returns the new planner state and the plan's [H, nu] controls."""
+    sample_key, rollout_key = jax.random.split(key)
+    state = planning.shift(config, state, env_state.data.time)
+    low, high = planning.control_limits(task)
+    samples = planning.sample_knots(sample_key, state.knots, state.std, config.num_samples, low, high)
+    costs, dt = planning.sample_costs(config, task, env_state, samples, rollout_key)
+    weights = planning.mppi_weights(costs, config.temperature)
+    knots = jnp.tensordot(weights, samples, axes=1)
+    state = state.replace(knots=knots, cost=jnp.sum(weights * jnp.where(weights > 0, costs, 0.0)), dt=dt)
+    return state, planning.controls(config, knots)

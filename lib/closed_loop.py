@@ -1,0 +1,159 @@
+"""Closed-loop control with a sampling planner: simulate one task, plan with another.
+
+The *simulation* task is the world; the *planning* task is the planner's model of it and
+may differ (a coarser timestep, wrong masses, an `Ensemble` of models). Every
+`replan_every` control steps of the simulation the planner replans from the current
+simulated state; in between, the simulation applies the plan's control at its own time
+(`planning.control_at`), so a planning task with a different timestep still lines up.
+
+The whole run is one `jax.jit` of one `lax.scan` over replans (each an inner scan over
+simulation steps): an evaluation episode costs one compile.
+
+Judo's task hooks, as pure functions in `Hooks`:
+  to_planner(sim_state) -> State            what the planner sees of the simulation
+                                            (information flowing sim -> planner)
+  pre_rollout(plan_task, start) -> plan_task  adjust the planning view before each
+                                            rollout batch (e.g. a task phase)
+  warm_start(plan_task, start) -> [K, nu]   the first plan's knots
+  post_sim_step(sim_task, sim_state, key) -> sim_state   simulation-side events
+                                            (e.g. a new goal once one is reached)
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import functools
+from types import ModuleType
+from typing import Callable
+
+import jax
+import jax.numpy as jnp
+
+from mjzoo import planning
+from mjzoo.planning import Ensemble, PlannerState, SamplingConfig
+from mjzoo.running import complete, transition
+from mjzoo.types import State, Task
+
+__all__ = ["Hooks", "Result", "run", "replan", "first_plan", "sim_step"]
+
+Array = jax.Array
+
+
+def _as_partial(fn: Callable | None) -> jax.tree_util.Partial | None:
+    if fn is None or isinstance(fn, jax.tree_util.Partial):
+        return fn
+    if not callable(fn):
+        raise TypeError(f"Hooks: expected a callable, got {type(fn).__name__}")
+    return jax.tree_util.Partial(fn)
+
+
+@jax.tree_util.register_dataclass
+@dataclasses.dataclass(frozen=True)
+class Hooks:
+    """Optional task hooks (see the module docstring); None means the identity / zeros.
+    Plain functions are wrapped as `jax.tree_util.Partial`s, so numbers bound in a
+    Partial are leaves and changing them does not recompile."""
+
+    to_planner: Callable | None = None
+    pre_rollout: Callable | None = None
+    warm_start: Callable | None = None
+    post_sim_step: Callable | None = None
+
+    def __post_init__(self) -> None:
+        for field in dataclasses.fields(self):
+            object.__setattr__(self, field.name, _as_partial(getattr(self, field.name)))
+
+
+@jax.tree_util.register_dataclass
+@dataclasses.dataclass(frozen=True)
+class Result:
+    """A closed-loop run of T = num_replans x replan_every simulation steps.
+
+    Attributes:
+      states: `State` with a leading [T] axis: the simulation after each step.
+      controls: [T, nu] the controls the simulation executed.
+      costs: [T] -reward of each simulation step.
+      plan_costs: [R] the planner's cost of its chosen plan at each replan.
+      planner_state: the planner's state after the last replan.
+    """
+
+    states: State
+    controls: Array
+    costs: Array
+    plan_costs: Array
+    planner_state: PlannerState
+
+
+def replan(
+    planner: ModuleType,
+    config: SamplingConfig,
+    plan_task: Task | Ensemble,
+    planner_state: PlannerState,
+    sim_state: State,
+    key: Array,
+    hooks: Hooks = Hooks(),
+) -> PlannerState:
+    """One replan from the simulated state, through the hooks."""
+    start = hooks.to_planner(sim_state) if hooks.to_planner else sim_state
+    view = hooks.pre_rollout(plan_task, start) if hooks.pre_rollout else plan_task
+    return planner.plan(config, view, planner_state, start, key)[0]
+
+
+def first_plan(
+    planner: ModuleType, config: SamplingConfig, plan_task: Task | Ensemble, sim_state: State, hooks: Hooks = Hooks()
+) -> PlannerState:
+    """The planner's initial state, with the task's warm-start knots if it supplies them."""
+    if hooks.warm_start is None:
+        return planner.init(config, plan_task)
+    start = hooks.to_planner(sim_state) if hooks.to_planner else sim_state
+    return planner.init(config, plan_task, hooks.warm_start(plan_task, start))
+
+
+def sim_step(
+    config: SamplingConfig, sim_task: Task, planner_state: PlannerState, sim_state: State, key: Array, hooks: Hooks
+) -> tuple[State, Array]:
+    """One simulation control step under the current plan: (next state, executed control)."""
+    action = planning.control_at(config, planner_state, sim_state.data.time)
+    step_key, hook_key = jax.random.split(key)
+    next_state = transition(sim_task, sim_state, action, step_key)
+    if hooks.post_sim_step is not None:
+        next_state = hooks.post_sim_step(sim_task, next_state, hook_key)
+    return next_state, action
+
+
+@functools.partial(jax.jit, static_argnames=("planner", "config", "num_replans", "replan_every"))
+def run(
+    planner: ModuleType,
+    config: SamplingConfig,
+    sim_task: Task,
+    plan_task: Task | Ensemble,
+    sim_state: State,
+    key: Array,
+    num_replans: int,
+    replan_every: int = 1,
+    hooks: Hooks = Hooks(),
+) -> Result:
+    """Simulates `sim_task` from `sim_state` for `num_replans x replan_every` control
+    steps, replanning with `planner` (a module: `predictive_sampling`, `cem`, `mppi`)
+    on `plan_task` every `replan_every` steps. One jit; `planner`, `config` and the
+    counts are static."""
+    sim_state = complete(sim_task, sim_state)
+    planner_state = first_plan(planner, config, plan_task, sim_state, hooks)
+
+    def period(carry, key):
+        sim_state, planner_state = carry
+        plan_key, sim_key = jax.random.split(key)
+        planner_state = replan(planner, config, plan_task, planner_state, sim_state, plan_key, hooks)
+        def step(state: State, key: Array):
+            next_state, control = sim_step(config, sim_task, planner_state, state, key, hooks)
+            return next_state, (next_state, control)
+
+        sim_state, (states, controls) = jax.lax.scan(step, sim_state, jax.random.split(sim_key, replan_every))
+        return (sim_state, planner_state), (states, controls, planner_state.cost)
+
+    (_, planner_state), (states, controls, plan_costs) = jax.lax.scan(
+        period, (sim_state, planner_state), jax.random.split(key, num_replans)
+    )
+    flat = lambda x: x.reshape((num_replans * replan_every,) + x.shape[2:])  # noqa: E731
+    states, controls = jax.tree.map(flat, states), flat(controls)
+    return Result(states, controls, -states.reward, plan_costs, planner_state)

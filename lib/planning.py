@@ -1,0 +1,294 @@
+"""The pieces sampling-based planners are made of: plans as control splines, sampling
+around a nominal plan, batched rollouts of a task's own `transition`, costs, risk
+measures over model ensembles, and receding-horizon warm start.
+
+A plan is `K` knots of `nu` controls at evenly spaced positions over `horizon_steps`
+control steps of the *planning* task (`mjzoo.splines`). `PlannerState.time` anchors
+the plan in the environment's clock (`data.time`, seconds) and `PlannerState.dt` is the
+planning task's control step, measured from its rollouts, so a simulation with a
+different timestep can ask for the control at any time (`control_at`).
+
+Cost of a sample = -(sum over the horizon of the task's summed reward terms)
+- terminal_value(final state). Physics runs on past termination: a fall costs the
+rewards it forfeits, as in the task's own reward.
+
+`predictive_sampling`, `cem` and `mppi` in `mjzoo.algorithms` combine these pieces;
+each is a few lines on top of `sample_costs`.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import math
+from typing import Callable
+
+import jax
+import jax.numpy as jnp
+import numpy as np
+
+from mjzoo import splines
+from mjzoo.running import complete, transition
+from mjzoo.types import State, Task
+
+__all__ = [
+    "SamplingConfig", "PlannerState", "Ensemble", "RISKS", "ensemble", "control_limits", "half_range",
+    "initial_state",
+    "shift", "sample_knots", "controls", "control_at", "rollout_costs", "aggregate", "sample_costs",
+    "mppi_weights", "cem_update",
+]  # fmt: skip
+
+Array = jax.Array
+RISKS = ("mean", "worst", "cvar")
+TerminalValue = Callable[[object, State], Array]  # (model, state) -> value to go, float32 scalar
+
+
+@dataclasses.dataclass(frozen=True)
+class SamplingConfig:
+    """What every sampling planner shares (each algorithm's `Config` extends it).
+
+    Attributes:
+      num_samples: rollouts per replan (N), the nominal included where the method keeps it.
+      horizon_steps: control steps of the planning task per rollout (H).
+      num_knots: spline knots over the horizon (K).
+      interpolation: "zero", "linear" or "cubic" (`mjzoo.splines`).
+      noise_scale: sampling std as a fraction of each actuator's half control range.
+      risk: how costs over an `Ensemble` of models become one: "mean", "worst" or "cvar".
+      cvar_alpha: the worst fraction of models CVaR averages over.
+      terminal_value: optional `(model, state) -> value` added to a rollout's return.
+      unroll: `lax.scan` unroll of the rollout loop (a GPU latency knob).
+    """
+
+    num_samples: int = 128
+    horizon_steps: int = 25
+    num_knots: int = 4
+    interpolation: str = "cubic"
+    noise_scale: float = 0.3
+    risk: str = "mean"
+    cvar_alpha: float = 0.25
+    terminal_value: TerminalValue | None = None
+    unroll: int = 1
+
+    def __post_init__(self) -> None:
+        name = type(self).__module__.rsplit(".", 1)[-1] + ".Config"
+        checks = {
+            "num_samples": self.num_samples >= 2, "horizon_steps": self.horizon_steps >= 1,
+            "num_knots": 1 <= self.num_knots <= self.horizon_steps, "noise_scale": self.noise_scale >= 0,
+            "interpolation": self.interpolation in splines.METHODS, "risk": self.risk in RISKS,
+            "cvar_alpha": 0 < self.cvar_alpha <= 1, "unroll": self.unroll >= 1,
+            "terminal_value": self.terminal_value is None or callable(self.terminal_value),
+        }  # fmt: skip
+        for field, ok in checks.items():
+            if not ok:
+                raise ValueError(f"{name}: invalid {field}={getattr(self, field)!r}")
+
+
+@jax.tree_util.register_dataclass
+@dataclasses.dataclass(frozen=True)
+class PlannerState:
+    """A planner's memory between replans.
+
+    Attributes:
+      knots: [K, nu] the nominal plan (CEM: the sampling mean).
+      std: [K, nu] sampling std in control units (fixed for predictive sampling and
+        MPPI; adapted by CEM).
+      time: [] environment time (s) at the plan's first knot.
+      dt: [] control step of the planning task (s); 0 until the first replan.
+      cost: [] cost of the plan chosen at the last replan (inf before).
+    """
+
+    knots: Array
+    std: Array
+    time: Array
+    dt: Array
+    cost: Array
+
+    def replace(self, **changes) -> "PlannerState":
+        return dataclasses.replace(self, **changes)
+
+
+@jax.tree_util.register_dataclass
+@dataclasses.dataclass(frozen=True)
+class Ensemble:
+    """A planning task with M variants of its physics: `fields` holds replacements for
+    `mjx.Model` fields, each with a leading [M] axis. Plan with it where a `Task` goes."""
+
+    task: Task
+    fields: dict[str, Array]
+
+
+def ensemble(task: Task, randomize: Callable, num_models: int, key: Array) -> Ensemble:
+    """M models drawn by `randomize(model, key) -> {field: value}` (the same randomizers
+    `mjzoo.with_domain_randomization` takes), for robust planning."""
+    if num_models < 1:
+        raise ValueError(f"planning.ensemble: num_models must be >= 1, got {num_models}")
+    fields = jax.vmap(randomize, in_axes=(None, 0))(task.model, jax.random.split(key, num_models))
+    return Ensemble(task, {k: jnp.asarray(v, getattr(task.model, k).dtype) for k, v in fields.items()})
+
+
+def control_limits(task: Task | Ensemble) -> tuple[np.ndarray, np.ndarray]:
+    """([nu], [nu]) lower and upper control bounds; +-inf where an actuator is unlimited."""
+    mj_model = _task(task).mj_model
+    limited = np.asarray(mj_model.actuator_ctrllimited, bool)
+    bounds = np.asarray(mj_model.actuator_ctrlrange, np.float32)
+    return np.where(limited, bounds[:, 0], -np.inf), np.where(limited, bounds[:, 1], np.inf)
+
+
+def half_range(task: Task | Ensemble) -> np.ndarray:
+    """[nu] half of each actuator's control range (1 where unlimited): the unit of noise."""
+    low, high = control_limits(task)
+    return np.where(np.isfinite(high - low), (high - low) / 2, 1.0).astype(np.float32)
+
+
+def initial_state(config: SamplingConfig, task: Task | Ensemble, knots: Array | None = None) -> PlannerState:
+    """A plan of `knots` ([K, nu]; default: zero controls, clipped into the limits) with
+    std = noise_scale x half the control range (x 1 for unlimited actuators)."""
+    low, high = control_limits(task)
+    shape = (config.num_knots, low.shape[0])
+    if knots is None:
+        knots = jnp.clip(jnp.zeros(shape, jnp.float32), low, high)
+    elif jnp.shape(knots) != shape:
+        raise ValueError(f"warm-start knots must have shape {shape} (num_knots, nu), got {jnp.shape(knots)}")
+    std = jnp.broadcast_to(jnp.float32(config.noise_scale) * half_range(task), shape)
+    zero = jnp.zeros((), jnp.float32)
+    return PlannerState(jnp.asarray(knots, jnp.float32), std, zero, zero, jnp.full((), jnp.inf, jnp.float32))
+
+
+def shift(config: SamplingConfig, state: PlannerState, now: Array) -> PlannerState:
+    """Receding-horizon warm start: the plan re-anchored at time `now`, its knots read off
+    the old spline that far ahead (the last knot held past the old horizon)."""
+    elapsed = jnp.where(state.dt > 0, (now - state.time) / jnp.maximum(state.dt, 1e-9), 0.0)
+    positions = splines.knot_positions(config.num_knots, config.horizon_steps)
+    knots = splines.evaluate(state.knots, positions, positions + jnp.maximum(elapsed, 0.0), config.interpolation)
+    return state.replace(knots=knots, time=jnp.asarray(now, jnp.float32))
+
+
+def sample_knots(
+    key: Array, mean: Array, std: Array, num_samples: int, low: Array, high: Array, include_mean: bool = True
+) -> Array:
+    """[N, K, nu] samples mean + std * eps, eps ~ N(0, I), clipped to [low, high]; with
+    `include_mean` sample 0 is `mean` itself (so the nominal plan competes)."""
+    eps = jax.random.normal(key, (num_samples,) + mean.shape, mean.dtype)
+    if include_mean:
+        eps = eps.at[0].set(0.0)
+    return jnp.clip(mean + std * eps, low, high)
+
+
+def controls(config: SamplingConfig, knots: Array) -> Array:
+    """[..., H, nu] controls of `knots` [..., K, nu] at control steps 0..H-1."""
+    positions = splines.knot_positions(config.num_knots, config.horizon_steps)
+    steps = jnp.arange(config.horizon_steps, dtype=jnp.float32)
+    evaluate = lambda k: splines.evaluate(k, positions, steps, config.interpolation)  # noqa: E731
+    for _ in range(knots.ndim - 2):
+        evaluate = jax.vmap(evaluate)
+    return evaluate(knots)
+
+
+def control_at(config: SamplingConfig, state: PlannerState, time: Array) -> Array:
+    """[nu] the plan's control at environment time `time` (s)."""
+    step = jnp.where(state.dt > 0, (time - state.time) / jnp.maximum(state.dt, 1e-9), 0.0)
+    positions = splines.knot_positions(config.num_knots, config.horizon_steps)
+    return splines.evaluate(state.knots, positions, jnp.reshape(step, (1,)), config.interpolation)[0]
+
+
+def rollout_costs(
+    task: Task | Ensemble,
+    state: State,
+    controls: Array,
+    key: Array,
+    terminal_value: TerminalValue | None = None,
+    unroll: int = 1,
+) -> tuple[Array, Array]:
+    """Costs of open-loop control sequences from `state`, by `lax.scan` over the horizon
+    of the task's `transition`, vmapped over samples (and over an ensemble's models).
+
+    Args:
+      task: the planning task, or an `Ensemble` of M models of it.
+      state: the start state (one environment).
+      controls: [N, H, nu].
+      key: step keys are drawn from it and shared by all samples (common random numbers).
+
+    Returns:
+      ([M, N] costs, M = 1 for a plain task; [] control step dt of the planning task, s).
+    """
+    variants = task if isinstance(task, Ensemble) else Ensemble(task, {})
+    base = variants.task
+    start = complete(base, state)
+    step_keys = jax.random.split(key, controls.shape[1])
+
+    def cost(model, sample_controls: Array) -> tuple[Array, Array]:
+        planning_task = base.replace(model=model)
+
+        def body(s: State, inputs) -> tuple[State, Array]:
+            action, step_key = inputs
+            s = transition(planning_task, s, action, step_key)
+            return s, s.reward
+
+        final, rewards = jax.lax.scan(body, start, (sample_controls, step_keys), unroll=unroll)
+        value = terminal_value(model, final) if terminal_value is not None else 0.0
+        return -(jnp.sum(rewards) + value), final.data.time
+
+    per_sample = jax.vmap(cost, in_axes=(None, 0))
+    if variants.fields:
+        costs, times = jax.vmap(lambda f: per_sample(base.model.replace(**f), controls))(variants.fields)
+    else:
+        costs, times = jax.tree.map(lambda x: x[None], per_sample(base.model, controls))
+    dt = (times[0, 0] - start.data.time) / controls.shape[1]
+    return costs, dt.astype(jnp.float32)
+
+
+def aggregate(costs: Array, risk: str = "mean", alpha: float = 0.25) -> Array:
+    """[N] one cost per sample from [M, N] costs over models.
+
+    mean:  (1/M) sum_m c_m
+    worst: max_m c_m
+    cvar:  mean of the ceil(alpha M) largest c_m (the expected cost in the worst alpha tail)
+    """
+    if risk == "mean":
+        return jnp.mean(costs, axis=0)
+    if risk == "worst":
+        return jnp.max(costs, axis=0)
+    if risk == "cvar":
+        tail = max(1, math.ceil(alpha * costs.shape[0]))
+        return jnp.mean(jax.lax.top_k(costs.T, tail)[0], axis=-1)
+    raise ValueError(f"planning.aggregate: unknown risk {risk!r}; choose one of {RISKS}")
+
+
+def sample_costs(
+    config: SamplingConfig, task: Task | Ensemble, state: State, samples: Array, key: Array
+) -> tuple[Array, Array]:
+    """([N] risk-aggregated costs of knot samples [N, K, nu] from `state`, [] dt)."""
+    costs, dt = rollout_costs(task, state, controls(config, samples), key, config.terminal_value, config.unroll)
+    costs = aggregate(costs, config.risk, config.cvar_alpha)
+    # A sample whose physics blew up must never win.
+    return jnp.where(jnp.isfinite(costs), costs, jnp.inf), dt
+
+
+def mppi_weights(costs: Array, temperature: float | Array) -> Array:
+    """[N] weights w_i = exp(-(c_i - min c) / lambda) / sum_j exp(-(c_j - min c) / lambda).
+
+    Subtracting the minimum changes nothing mathematically and keeps exp from
+    underflowing; infinite costs get weight 0.
+    """
+    return jax.nn.softmax(-(costs - jnp.min(costs)) / temperature)
+
+
+def cem_update(
+    samples: Array, costs: Array, num_elites: int, sigma_min: Array, sigma_max: Array
+) -> tuple[Array, Array]:
+    """The cross-entropy step: mean and std of the `num_elites` lowest-cost samples.
+
+    Args:
+      samples: [N, ...] sampled plans.
+      costs: [N].
+      sigma_min, sigma_max: bounds the elite std is clipped to (broadcast to a sample).
+
+    Returns:
+      ([...] elite mean, [...] elite std clipped to [sigma_min, sigma_max]).
+    """
+    elite = jax.lax.top_k(-costs, num_elites)[1]
+    elites = samples[elite]
+    return jnp.mean(elites, axis=0), jnp.clip(jnp.std(elites, axis=0), sigma_min, sigma_max)
+
+
+def _task(task: Task | Ensemble) -> Task:
+    return task.task if isinstance(task, Ensemble) else task
