@@ -15,10 +15,10 @@ import inspect
 from typing import Any, Callable
 
 from mjzoo import physics
-from mjzoo.envs import cartpole, cylinder_push, pendulum, point_mass
+from mjzoo.envs import base, cartpole, cylinder_push, pendulum, point_mass
 from mjzoo.types import Task
 
-__all__ = ["make", "names", "defaults", "register", "hyperparameters"]
+__all__ = ["make", "names", "defaults", "register", "hyperparameters", "planning"]
 
 _REGISTRY: dict[str, Callable[..., Task]] = {
     "pendulum_swingup": pendulum.swingup,
@@ -29,11 +29,18 @@ _REGISTRY: dict[str, Callable[..., Task]] = {
 }
 # Per-env algorithm defaults, defined beside each env.
 _HYPERPARAMETERS: dict[str, dict[str, dict[str, Any]]] = {
-    "pendulum_swingup": {"ppo": pendulum.PPO},
+    "pendulum_swingup": {"ppo": pendulum.PPO, **pendulum.PLANNING.configs},
     "cartpole_balance": {"ppo": cartpole.BALANCE_PPO},
-    "cartpole_swingup": {"ppo": cartpole.SWINGUP_PPO},
-    "point_mass": {"ppo": point_mass.PPO},
-    "cylinder_push": {"ppo": cylinder_push.PPO},
+    "cartpole_swingup": {"ppo": cartpole.SWINGUP_PPO, **cartpole.SWINGUP_PLANNING.configs},
+    "point_mass": {"ppo": point_mass.PPO, **point_mass.PLANNING.configs},
+    "cylinder_push": {"ppo": cylinder_push.PPO, **cylinder_push.PLANNING.configs},
+}
+# How the sampling planners solve each env closed loop.
+_PLANNING: dict[str, base.PlanningSetup] = {
+    "pendulum_swingup": pendulum.PLANNING,
+    "cartpole_swingup": cartpole.SWINGUP_PLANNING,
+    "point_mass": point_mass.PLANNING,
+    "cylinder_push": cylinder_push.PLANNING,
 }
 
 
@@ -42,13 +49,28 @@ def names() -> list[str]:
     return sorted(_REGISTRY)
 
 
-def register(name: str, factory: Callable[..., Task], hyperparameters: dict[str, dict] | None = None) -> None:
+def register(
+    name: str,
+    factory: Callable[..., Task],
+    hyperparameters: dict[str, dict] | None = None,
+    planning_setup: base.PlanningSetup | None = None,
+) -> None:
     """Adds a task factory (keyword-only arguments, each an override) under `name`, with
-    optional per-algorithm default hyperparameters ({"ppo": {...}})."""
+    optional per-algorithm default hyperparameters ({"ppo": {...}}) and planning setup."""
     if name in _REGISTRY:
         raise ValueError(f"a task named {name!r} is already registered")
     _REGISTRY[name] = factory
     _HYPERPARAMETERS[name] = dict(hyperparameters or {})
+    if planning_setup is not None:
+        _PLANNING[name] = planning_setup
+
+
+def planning(name: str) -> base.PlanningSetup:
+    """How the sampling planners solve `name` closed loop (error if no setup exists)."""
+    _factory(name)
+    if name not in _PLANNING:
+        raise KeyError(f"{name!r} has no planning setup; envs with one: {sorted(_PLANNING)}")
+    return _PLANNING[name]
 
 
 def hyperparameters(name: str, algorithm: str) -> dict[str, Any]:

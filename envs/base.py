@@ -5,17 +5,20 @@ divergence guard."""
 from __future__ import annotations
 
 from pathlib import Path
+import dataclasses
 from typing import Any, Callable
 
 import jax
 import jax.numpy as jnp
+import numpy as np
 from mujoco import mjx
 
 from mjzoo import physics as physics_lib
+from mjzoo.closed_loop import Hooks
 from mjzoo.combinators import with_divergence_guard, with_time_limit
 from mjzoo.types import State, Task, bind
 
-__all__ = ["ASSETS", "load", "floats", "build", "advance"]
+__all__ = ["ASSETS", "load", "floats", "build", "advance", "never_terminate", "PlanningSetup", "held_near"]
 
 ASSETS = Path(__file__).parent / "assets"
 
@@ -62,3 +65,39 @@ def advance(model: mjx.Model, state: State, action: jax.Array, n_substeps: int) 
 def never_terminate(params: Any, model: mjx.Model, state: State) -> tuple[jax.Array, jax.Array]:
     """For tasks that end only by their time limit."""
     return jnp.zeros((), bool), jnp.zeros((), bool)
+
+
+@dataclasses.dataclass(frozen=True)
+class PlanningSetup:
+    """How the sampling planners solve a task closed loop (`mjzoo plan`, the tests).
+
+    Attributes:
+      seconds: length of the closed-loop run.
+      replan_every: simulation control steps per replan.
+      plan_overrides: the planning task is ``make(name, **plan_overrides)`` (e.g. a
+        coarser control step); the simulation is ``make(name)``.
+      configs: config fields per planner module name ("mppi", "cem", ...).
+      success: ``states -> (solved, score)`` over the run's simulated states [T]
+        (numpy leaves), with the score the criterion thresholds.
+      hooks: the task's planner hooks (`mjzoo.closed_loop.Hooks`).
+    """
+
+    seconds: float
+    replan_every: int
+    plan_overrides: dict[str, Any]
+    configs: dict[str, dict[str, Any]]
+    success: Callable[[Any], tuple[bool, float]]
+    hooks: Hooks = Hooks()
+
+
+def held_near(states, value_fn: Callable[[Any], np.ndarray], tolerance: float, seconds: float = 1.0) -> tuple[bool, float]:
+    """(max |value| over the last `seconds` of the run < tolerance, that max) for a
+    per-step value computed from the stacked states."""
+    time = np.asarray(states.data.time)
+    worst = float(np.max(np.abs(value_fn(states)[time >= time[-1] - seconds + 1e-6])))
+    return worst < tolerance, worst
+
+
+def wrap(angle: np.ndarray) -> np.ndarray:
+    """Angles in (-pi, pi]."""
+    return np.arctan2(np.sin(angle), np.cos(angle))

@@ -21,11 +21,14 @@ import dataclasses
 
 import jax
 import jax.numpy as jnp
+import numpy as np
 from mujoco import mjx
 
+from mjzoo.combinators import with_reward
 from mjzoo.envs import base
 from mjzoo.rewards import tolerance
-from mjzoo.types import State, Task
+from mjzoo.closed_loop import Hooks
+from mjzoo.types import State, Task, bind
 
 __all__ = ["Params", "push"]
 
@@ -35,6 +38,45 @@ CONTACT_DISTANCE = 0.15  # pusher radius + cylinder radius
 # PPO hyperparameters for this task (`mjzoo train ppo cylinder_push`).
 PPO = dict(num_envs=256, unroll_length=32, num_minibatches=8, num_epochs=4, learning_rate=1e-3,
            entropy_coef=1e-3, discount=0.99, total_steps=5_000_000)  # fmt: skip
+
+
+def _behind(data: mjx.Data, goal: Array) -> Array:
+    """[2] where the pusher must be to push the cylinder straight at the goal."""
+    _, cylinder = positions(data)
+    to_goal = goal - cylinder
+    return cylinder - CONTACT_DISTANCE * to_goal / jnp.maximum(jnp.linalg.norm(to_goal), 1e-6)
+
+
+def _approach_distance(model: mjx.Model, state: State, action: Array, next_state: State) -> Array:
+    pusher, _ = positions(next_state.data)
+    return jnp.linalg.norm(_behind(next_state.data, next_state.info["goal"]) - pusher)
+
+
+def phase_view(in_position: Array, approach_weight: Array, plan_task: Task, start: State) -> Task:
+    """Pre-rollout hook, a two-phase task: until the pusher is within `in_position` (m)
+    of the point behind the cylinder, the planner's view also charges
+    `approach_weight` x that distance per step; once there, it plans the push alone."""
+    pusher, _ = positions(start.data)
+    far = jnp.linalg.norm(_behind(start.data, start.info["goal"]) - pusher) > in_position
+    return with_reward(plan_task, "approach_phase", _approach_distance, -jnp.where(far, approach_weight, 0.0))
+
+
+def _on_goal(states) -> tuple[bool, float]:
+    """Solved when the cylinder ends within 5 cm of the goal."""
+    distance = np.linalg.norm(states.data.qpos[-1, 2:4] - states.info["goal"][-1])
+    return bool(distance < 0.05), float(distance)
+
+
+# Sampling planners (`mjzoo plan mppi cylinder_push`): plan with 0.05 s control steps
+# (1.5 s horizon), replan every 2 simulation steps (25 Hz). The planner's view drops the
+# shaped approach term and plans in two phases instead (a pre-rollout hook).
+_SAMPLING = dict(num_samples=32, horizon_steps=30, num_knots=4)
+PLANNING = base.PlanningSetup(
+    seconds=8.0, replan_every=2, plan_overrides=dict(ctrl_dt=0.05, approach_weight=0.0), success=_on_goal,
+    hooks=Hooks(pre_rollout=bind(phase_view, np.float32(0.05), np.float32(1.0))),
+    configs={"predictive_sampling": _SAMPLING, "mppi": dict(_SAMPLING, temperature=0.05),
+             "cem": dict(_SAMPLING, num_elites=4, sigma_min=0.2)},
+)  # fmt: skip
 
 
 @jax.tree_util.register_dataclass

@@ -25,6 +25,7 @@ import jax
 import jax.numpy as jnp
 from mujoco import mjx
 
+from mjzoo.closed_loop import Hooks
 from mjzoo.envs import base
 from mjzoo.rewards import tolerance
 from mjzoo.types import State, Task
@@ -37,6 +38,31 @@ Array = jax.Array
 # deterministic eval return >= 380 (swung up and held) by 0.4-2.4M steps over 8 seeds.
 PPO = dict(num_envs=256, unroll_length=32, num_minibatches=8, num_epochs=4, learning_rate=1e-3,
            entropy_coef=1e-2, discount=0.97, total_steps=3_000_000)  # fmt: skip
+
+
+
+
+def warm_start(plan_task: Task, state: State, num_knots: int) -> Array:
+    """A first plan for the planners: full torque along the current swing (or +), the
+    direction that pumps energy, instead of the default zero torque."""
+    direction = jnp.where(state.data.qvel[0] < 0, -1.0, 1.0)
+    return jnp.full((num_knots, 1), direction, jnp.float32)
+
+
+def _upright_at_end(states) -> tuple[bool, float]:
+    """Solved when |angle from upright| < 0.2 rad over the last second."""
+    return base.held_near(states, lambda s: base.wrap(s.data.qpos[..., 0]), 0.2)
+
+
+# Sampling planners (`mjzoo plan mppi pendulum_swingup`): plan with 0.05 s control steps
+# (1.5 s horizon), replan every 2 simulation steps (25 Hz).
+_SAMPLING = dict(num_samples=32, horizon_steps=30, num_knots=4)
+PLANNING = base.PlanningSetup(
+    seconds=6.0, replan_every=2, plan_overrides=dict(ctrl_dt=0.05), success=_upright_at_end,
+    configs={"predictive_sampling": _SAMPLING, "mppi": dict(_SAMPLING, temperature=0.1),
+             "cem": dict(_SAMPLING, num_elites=4, sigma_min=0.2)},
+    hooks=Hooks(warm_start=warm_start),
+)  # fmt: skip
 
 
 @jax.tree_util.register_dataclass

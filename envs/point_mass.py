@@ -15,11 +15,13 @@ import dataclasses
 
 import jax
 import jax.numpy as jnp
+import numpy as np
 from mujoco import mjx
 
+from mjzoo.closed_loop import Hooks
 from mjzoo.envs import base
 from mjzoo.rewards import tolerance
-from mjzoo.types import State, Task
+from mjzoo.types import State, Task, bind
 
 __all__ = ["Params", "reach"]
 
@@ -28,6 +30,39 @@ Array = jax.Array
 # PPO hyperparameters that solve this task (`mjzoo train ppo point_mass`).
 PPO = dict(num_envs=256, unroll_length=32, num_minibatches=8, num_epochs=4, learning_rate=1e-3,
            entropy_coef=1e-3, discount=0.97, total_steps=2_000_000)  # fmt: skip
+
+
+def new_goal_when_reached(radius: Array, spawn_range: Array, sim_task: Task, state: State, key: Array) -> State:
+    """Post-simulation-step hook: once the mass is within `radius` (m) of its goal, a new
+    goal is drawn uniformly in [-spawn_range, spawn_range]^2 (info, mocap marker and
+    observation follow). The planner sees it through the state it plans from."""
+    reached = jnp.linalg.norm(state.info["goal"] - state.data.qpos) < radius
+    goal = jnp.where(reached, jax.random.uniform(key, (2,), minval=-spawn_range, maxval=spawn_range), state.info["goal"])
+    data = state.data.replace(mocap_pos=state.data.mocap_pos.at[0, :2].set(goal))
+    return state.replace(data=data, obs=observe(data, goal), info={**state.info, "goal": goal})
+
+
+def goals_reached(states) -> int:
+    """How many times the goal moved during a run (each move: one goal reached)."""
+    goals = np.asarray(states.info["goal"])
+    return int(np.sum(np.any(goals[1:] != goals[:-1], axis=-1)))
+
+
+def _reaches_goals(states) -> tuple[bool, float]:
+    """Solved when the mass reaches at least 3 successive goals."""
+    reached = goals_reached(states)
+    return reached >= 3, float(reached)
+
+
+# Sampling planners (`mjzoo plan mppi point_mass`): continuous reaching, a new goal once
+# one is reached (a post-simulation-step hook); 0.05 s planning steps over 1 s.
+_SAMPLING = dict(num_samples=32, horizon_steps=20, num_knots=3)
+PLANNING = base.PlanningSetup(
+    seconds=6.0, replan_every=2, plan_overrides=dict(ctrl_dt=0.05), success=_reaches_goals,
+    hooks=Hooks(post_sim_step=bind(new_goal_when_reached, np.float32(0.05), np.float32(0.3))),
+    configs={"predictive_sampling": _SAMPLING, "mppi": dict(_SAMPLING, temperature=0.05),
+             "cem": dict(_SAMPLING, num_elites=4, sigma_min=0.2)},
+)  # fmt: skip
 
 
 @jax.tree_util.register_dataclass

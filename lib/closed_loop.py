@@ -14,7 +14,7 @@ Judo's task hooks, as pure functions in `Hooks`:
                                             (information flowing sim -> planner)
   pre_rollout(plan_task, start) -> plan_task  adjust the planning view before each
                                             rollout batch (e.g. a task phase)
-  warm_start(plan_task, start) -> [K, nu]   the first plan's knots
+  warm_start(plan_task, start, K) -> [K, nu]   the first plan's knots
   post_sim_step(sim_task, sim_state, key) -> sim_state   simulation-side events
                                             (e.g. a new goal once one is reached)
 """
@@ -106,7 +106,7 @@ def first_plan(
     if hooks.warm_start is None:
         return planner.init(config, plan_task)
     start = hooks.to_planner(sim_state) if hooks.to_planner else sim_state
-    return planner.init(config, plan_task, hooks.warm_start(plan_task, start))
+    return planner.init(config, plan_task, hooks.warm_start(plan_task, start, config.num_knots))
 
 
 def sim_step(
