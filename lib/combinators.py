@@ -1,5 +1,5 @@
 """Episode-structure combinators, `Task -> Task`: time limits, auto-reset, action repeat,
-extra reward terms and the divergence guard.
+extra reward terms, reward clipping and the divergence guard.
 
 Each combinator rebinds some of the task's four functions around the originals; its
 numbers are pytree leaves, and any state it needs lives in `state.info` under its own
@@ -31,7 +31,10 @@ __all__ = [
     "with_auto_reset",
     "with_action_repeat",
     "with_reward",
+    "with_reward_clip",
     "with_divergence_guard",
+    "runs_transitions",
+    "record",
 ]
 
 Array = jax.Array
@@ -106,7 +109,9 @@ def _time_limit_terminate(terminate_fn, max_steps: Array, model: mjx.Model, stat
 # --- transitions recorded in info["outcome"] ----------------------------------------
 
 
-def _record(state: State, terms: dict[str, Array], terminated: Array, truncated: Array) -> State:
+def record(state: State, terms: dict[str, Array], terminated: Array, truncated: Array) -> State:
+    """`state` carrying a whole transition's outcome (reward terms, terminated,
+    truncated) for the reward and terminate that `runs_transitions` installs."""
     outcome = {"reward": terms, "terminated": terminated, "truncated": truncated}
     return state.replace(info={**state.info, OUTCOME: outcome})
 
@@ -128,8 +133,11 @@ def _recorded_terminate(model, state) -> tuple[Array, Array]:
     return state.info[OUTCOME]["terminated"], state.info[OUTCOME]["truncated"]
 
 
-def _runs_transitions(task: Task, step_fn: Callable, *params) -> Task:
-    """`task` with `step_fn(*params, inner, model, state, action, key)` as its step."""
+def runs_transitions(task: Task, step_fn: Callable, *params) -> Task:
+    """`task` with `step_fn(*params, inner, model, state, action, key)` as its step, for
+    combinators that run whole transitions of the inner task (`inner`, with model None:
+    put the call's model back in). The step returns ``record(state, terms, terminated,
+    truncated)``; the task's reward and terminate then report that record."""
     inner = task.replace(model=None)  # the model comes from the call, so edits to it apply
     return task.replace(
         step=bind(step_fn, *params, inner),
@@ -150,7 +158,7 @@ def with_auto_reset(task: Task) -> Task:
     the episode actually ended in (equal to `obs` when it did not end), which PPO needs
     to bootstrap truncated episodes.
     """
-    return _runs_transitions(task, _auto_reset_step)
+    return runs_transitions(task, _auto_reset_step)
 
 
 def _auto_reset_step(inner: Task, model, state: State, action: Array, key: Array) -> State:
@@ -160,7 +168,7 @@ def _auto_reset_step(inner: Task, model, state: State, action: Array, key: Array
     fresh = fresh.replace(info=tree.fill_missing(fresh.info, ended.info))  # outer keys: zeros
     chosen = _select(ended.terminated | ended.truncated, fresh, ended)
     chosen = chosen.replace(info={**chosen.info, "auto_reset": {"final_obs": ended.obs}})
-    return _record(chosen, terms, ended.terminated, ended.truncated)
+    return record(chosen, terms, ended.terminated, ended.truncated)
 
 
 # --- action repeat ------------------------------------------------------------------
@@ -175,7 +183,7 @@ def with_action_repeat(task: Task, repeats: int) -> Task:
     """
     if isinstance(repeats, bool) or not isinstance(repeats, int) or repeats < 1:
         raise ValueError(f"with_action_repeat: repeats={repeats!r} must be an integer >= 1")
-    return _runs_transitions(task, _repeat_step, tree.Static(repeats))
+    return runs_transitions(task, _repeat_step, tree.Static(repeats))
 
 
 def _repeat_step(repeats: tree.Static, inner: Task, model, state: State, action: Array, key: Array) -> State:
@@ -199,7 +207,7 @@ def _repeat_step(repeats: tree.Static, inner: Task, model, state: State, action:
     keys = jax.random.split(key, repeats.value)
     init = (state, zeros, jnp.zeros((), bool), jnp.zeros((), bool))
     (final, total, terminated, truncated), _ = jax.lax.scan(body, init, keys)
-    return _record(final, total, terminated, truncated & ~terminated)
+    return record(final, total, terminated, truncated & ~terminated)
 
 
 # --- extra reward terms -------------------------------------------------------------
@@ -228,6 +236,29 @@ def _extra_reward(reward_fn, name: tree.Static, fn, weight, model, state, action
     return {**terms, name.value: weight * jnp.asarray(fn(model, state, action, next_state), jnp.float32)}
 
 
+def with_reward_clip(task: Task, low: float, high: float) -> Task:
+    """Clips the summed reward of each transition to [low, high] (either may be infinite).
+
+    `mjzoo.transition` sums the task's reward terms; clipping the terms one by one would
+    not clip their sum, so this adds the term ``"clip" = clip(sum, low, high) - sum``
+    (0 when the sum is within bounds). The reward is the clipped sum, and the metrics
+    keep every unclipped term under ``"reward/<name>"`` next to ``"reward/clip"``. Add
+    other terms inside it. Keeps nothing in `info`.
+    """
+    if not (low <= high):  # also rejects NaN
+        raise ValueError(f"with_reward_clip: the range low={low!r}, high={high!r} must have low <= high")
+    existing = reward_terms(jax.eval_shape(lambda key: reset(task, key), jax.random.key(0)))
+    if "clip" in existing:
+        raise ValueError(f"with_reward_clip: the task already has a reward term named 'clip': {sorted(existing)}")
+    return task.replace(reward=bind(_clipped_reward, task.reward, jnp.float32(low), jnp.float32(high)))
+
+
+def _clipped_reward(reward_fn, low, high, model, state, action, next_state) -> dict[str, Array]:
+    terms = reward_fn(model, state, action, next_state)
+    total = sum((jnp.asarray(v, jnp.float32) for v in terms.values()), jnp.zeros((), jnp.float32))
+    return {**terms, "clip": jnp.clip(total, low, high) - total}
+
+
 # --- divergence guard ---------------------------------------------------------------
 
 # The fields of mjx.Data a step integrates from; everything else in it is recomputed.
@@ -250,7 +281,7 @@ def with_divergence_guard(task: Task, max_qvel: float = 1e3) -> Task:
     """
     if not max_qvel > 0:
         raise ValueError(f"with_divergence_guard: max_qvel={max_qvel!r} must be > 0")
-    return _runs_transitions(task, _guard_step, jnp.float32(max_qvel))
+    return runs_transitions(task, _guard_step, jnp.float32(max_qvel))
 
 
 def _revert_physics(ok: Array, new: mjx.Data, old: mjx.Data) -> mjx.Data:
@@ -280,4 +311,4 @@ def _guard_step(max_qvel, inner: Task, model, state: State, action: Array, key: 
     metrics = jax.tree.map(lambda v: jnp.where(jnp.isfinite(v), v, 0.0), next_state.metrics)
     safe = safe.replace(metrics={**metrics, "diverged": (~ok).astype(jnp.float32)})
     terms = {k: jnp.where(ok, v, 0.0) for k, v in terms.items()}
-    return _record(safe, terms, next_state.terminated | ~ok, next_state.truncated & ok)
+    return record(safe, terms, next_state.terminated | ~ok, next_state.truncated & ok)

@@ -15,7 +15,7 @@ from mujoco import mjx
 
 from mjzoo.types import State, Task, bind
 
-__all__ = ["with_observation_noise", "with_action_noise", "with_domain_randomization"]
+__all__ = ["with_observation_noise", "with_action_noise", "with_domain_randomization", "add_noise"]
 
 Array = jax.Array
 NOISE_STREAM, DRAW_STREAM = 0x0B5, 0xD4A  # fold_in tags: the inner task keeps its own key,
@@ -29,8 +29,9 @@ def _check_scale(name: str, scale: float) -> Array:
     return jnp.float32(scale)
 
 
-def _add_noise(tree, scale: Array, key: Array):
-    """Adds N(0, scale^2) to every inexact leaf of `tree`."""
+def add_noise(tree, scale: Array, key: Array):
+    """`tree` plus N(0, scale^2) on every entry of every inexact leaf (one key per leaf,
+    split from `key`); integer and bool leaves are returned unchanged."""
     leaves, treedef = jax.tree.flatten(tree)
     keys = jax.random.split(key, max(len(leaves), 1))
     noisy = [
@@ -58,12 +59,12 @@ def with_observation_noise(task: Task, scale: float) -> Task:
 
 def _noisy_reset(reset_fn, scale, model, key) -> State:
     state = reset_fn(model, key)
-    return state.replace(obs=_add_noise(state.obs, scale, jax.random.fold_in(key, NOISE_STREAM)))
+    return state.replace(obs=add_noise(state.obs, scale, jax.random.fold_in(key, NOISE_STREAM)))
 
 
 def _noisy_obs_step(step_fn, scale, model, state, action, key) -> State:
     next_state = step_fn(model, state, action, key)
-    return next_state.replace(obs=_add_noise(next_state.obs, scale, jax.random.fold_in(key, NOISE_STREAM)))
+    return next_state.replace(obs=add_noise(next_state.obs, scale, jax.random.fold_in(key, NOISE_STREAM)))
 
 
 # --- action noise -------------------------------------------------------------------
@@ -78,7 +79,7 @@ def with_action_noise(task: Task, scale: float) -> Task:
 
 
 def _noisy_action_step(step_fn, scale, model, state, action, key) -> State:
-    noisy = _add_noise(action, scale, jax.random.fold_in(key, NOISE_STREAM))
+    noisy = add_noise(action, scale, jax.random.fold_in(key, NOISE_STREAM))
     return step_fn(model, state, noisy, key)
 
 

@@ -2,7 +2,16 @@
 every combinator alone on the cheapest env, must jit, vmap, keep its shapes and dtypes,
 stay finite, be deterministic per key, and accept new numbers (weights, masses) without
 retracing. (The full env x combinator matrix costs a compile per cell: the stack puts
-every env through every combinator at the price of one.)"""
+every env through every combinator at the price of one.)
+
+The stack ("all") nests them as the catalog says they must (docs/catalog.md): action
+filters, trackers, commands, history, terminations and randomization inside the episode's
+time limit and auto-reset, which the curriculum's tasks add (with force pushes), and the
+curriculum outside them. Left out of it: "resets" (its `observe` is the pendulum's own),
+"time_limit" and "auto_reset" (the curriculum's tasks have them), and entries that would
+keep a second copy of one `info` entry: "domain_randomization" next to "randomizers",
+"action_history" next to the "reward_terms" entry's, "force_pushes" next to the
+curriculum's."""
 
 from __future__ import annotations
 
@@ -16,6 +25,20 @@ import pytest
 
 import mjzoo
 import mjzoo.envs
+from mjzoo import (
+    actuators,
+    commands,
+    curriculum,
+    events,
+    names,
+    observations,
+    randomizers,
+    resets,
+    rewards,
+    terminations,
+    trackers,
+)
+from mjzoo.envs import pendulum
 
 BATCH, STEPS = 3, 12
 
@@ -32,6 +55,58 @@ def _head(obs):
     return obs[:2]
 
 
+def _pendulum_observe(model, state):
+    return pendulum.observe(state.data)
+
+
+def _last_body(t: mjzoo.Task) -> str:
+    return names.all_names(t.mj_model, "body")[-1]
+
+
+def _first_joint(t: mjzoo.Task) -> str:
+    return names.all_names(t.mj_model, "joint", names.joints(t.mj_model, None, "conformance")[:1])[0]
+
+
+def _pushed(t: mjzoo.Task, level: float) -> mjzoo.Task:
+    """`t` pushed with forces up to 2 level N inside a 5-step auto-resetting episode."""
+    pushed = events.with_force_pushes(t, _last_body(t), (0.04, 0.1), (2 * level, 2 * level, 0), 0.04)
+    return mjzoo.with_auto_reset(mjzoo.with_time_limit(pushed, 5))
+
+
+def _randomized(t: mjzoo.Task) -> mjzoo.Task:
+    m = t.mj_model
+    draw = randomizers.combine(
+        randomizers.scale_masses(m), randomizers.add_masses(m, -0.01, 0.01), randomizers.shift_com(m),
+        randomizers.scale_damping(m), randomizers.scale_armature(m), randomizers.scale_friction(m),
+    )  # fmt: skip
+    return mjzoo.with_domain_randomization(t, draw)
+
+
+def _terminated(t: mjzoo.Task) -> mjzoo.Task:
+    return terminations.with_terminations(t, {
+        "fast": terminations.bad_velocity(100.0),
+        "long": terminations.episode_length(1000),
+        "low": terminations.base_too_low(t.mj_model, -10.0, body=_last_body(t)),
+    })  # fmt: skip
+
+
+def _scored(t: mjzoo.Task) -> mjzoo.Task:
+    return rewards.terms(trackers.with_action_history(t, 4), {
+        "stay_alive": (rewards.alive(t), 0.1),
+        "action_rate": (rewards.action_rate, -0.01),
+        "action_jerk": (rewards.action_jerk, -0.01),
+        "torque": (rewards.torque, -0.01),
+        "energy": (rewards.energy, -0.01),
+        "joint_deviation": (rewards.joint_deviation(t.mj_model), -0.01),
+    })  # fmt: skip
+
+
+def _reset_noise(t: mjzoo.Task) -> mjzoo.Task:
+    m = t.mj_model
+    noise = resets.joint_position_noise(m, 0.1), resets.joint_velocities(m, 0.5)
+    return resets.with_resets(t, *noise, observe=_pendulum_observe)
+
+
 COMBINATORS = {
     "bare": lambda t: t,
     "time_limit": lambda t: mjzoo.with_time_limit(t, 5),
@@ -43,9 +118,32 @@ COMBINATORS = {
     "domain_randomization": lambda t: mjzoo.with_domain_randomization(t, _heavier),
     "divergence_guard": lambda t: mjzoo.with_divergence_guard(t, 1e3),
     "observation": lambda t: mjzoo.with_observation(t, _head),
+    # the locomotion catalog
+    "action_latency": lambda t: actuators.with_action_latency(t, 2),
+    "action_drop": lambda t: actuators.with_action_drop(t, 0.2),
+    "action_filter": lambda t: actuators.with_action_filter(t, 0.5),
+    "reward_clip": lambda t: mjzoo.with_reward_clip(t, -1.0, 1.0),
+    "randomizers": _randomized,
+    "observation_history": lambda t: observations.with_observation_history(t, 3),
+    "observation_bias": lambda t: observations.with_observation_bias(t, 0.1),
+    "multiplicative_observation_noise": lambda t: observations.with_multiplicative_observation_noise(t, 0.1),
+    "terminations": _terminated,
+    "action_history": lambda t: trackers.with_action_history(t, 3),
+    "reward_terms": _scored,
+    "resets": _reset_noise,
+    "force_pushes": lambda t: events.with_force_pushes(t, _last_body(t), (0.04, 0.1), (2, 2, 0), 0.04),
+    "velocity_command": lambda t: commands.with_velocity_command(t, resample_interval=(0.04, 0.1)),
+    "joint_position_command": lambda t: commands.with_joint_position_command(
+        t, [_first_joint(t)], ranges=[(-0.5, 0.5)], resample_interval=(0.04, 0.1)),
+    "curriculum": lambda t: curriculum.with_curriculum(functools.partial(_pushed, t), curriculum.by_steps(10)),
 }
-_EACH = tuple(COMBINATORS.values())
-COMBINATORS["all"] = lambda t: functools.reduce(lambda task, comb: comb(task), _EACH, t)
+ALL = (  # innermost first
+    "action_latency", "action_drop", "action_filter", "reward_terms", "velocity_command",
+    "joint_position_command", "observation_history", "observation_bias", "multiplicative_observation_noise",
+    "terminations", "action_repeat", "reward", "observation_noise", "action_noise", "randomizers",
+    "divergence_guard", "reward_clip", "curriculum", "observation",
+)  # fmt: skip
+COMBINATORS["all"] = lambda t: functools.reduce(lambda task, name: COMBINATORS[name](task), ALL, t)
 CASES = [(env, comb) for env in mjzoo.envs.names() for comb in ("bare", "all")]
 CASES += [("pendulum_swingup", comb) for comb in COMBINATORS if comb not in ("bare", "all")]
 

@@ -1,6 +1,7 @@
-"""`mjzoo.rewards.tolerance` against hand-computed values.
+"""Reward shapes and terms (lib/rewards.py) and reward clipping against hand-computed
+values.
 
-Notation: d = (distance outside [lower, upper]) / margin, v = value_at_margin. The four
+`tolerance` notation: d = (distance outside [lower, upper]) / margin, v = value_at_margin. The four
 shapes, as defined in the DeepMind Control Suite, are
   gaussian:   exp(-0.5 (d s)^2),  s = sqrt(-2 ln v)   -> exp(ln(v) d^2) = v^(d^2)
   long_tail:  1 / ((d s)^2 + 1),  s = sqrt(1/v - 1)   -> 1 / ((1/v - 1) d^2 + 1)
@@ -12,15 +13,21 @@ closed forms by hand, not by calling the implementation.
 
 from __future__ import annotations
 
+import dataclasses
 import math
 
 import chex
 import jax
 import jax.numpy as jnp
+import mujoco
 import numpy as np
 import pytest
+from mujoco import mjx
 
+import mjzoo
+from mjzoo import rewards, trackers
 from mjzoo.rewards import SIGMOIDS, tolerance
+from mjzoo.types import State, Task, bind
 
 # A band [1, 2] with margin 0.5 and value_at_margin 0.1 unless a test says otherwise.
 LOWER, UPPER, MARGIN, V = 1.0, 2.0, 0.5, 0.1
@@ -166,3 +173,278 @@ def test_gaussian_closed_form_over_a_grid():
 def test_unknown_sigmoid_raises_naming_it():
     with pytest.raises(ValueError, match="cubic"):
         tolerance(jnp.array(3.0), 0.0, 1.0, 1.0, sigmoid="cubic")
+
+
+# --- locomotion reward terms ---------------------------------------------------------
+#
+# A biped-like test model: a free torso with two legs (hip roll hinges limited to
+# [-1, 1] rad driven by gear-2 motors, unlimited knee hinges), and a free box as a
+# second floating body. qpos: torso 0-6, left_hip 7, left_knee 8, right_hip 9,
+# right_knee 10, box 11-17; qvel: torso 0-5 (linear world, angular local), 6-9 joints.
+# States are made by MuJoCo's own forward pass (`mjx.put_data`): no MJX compile.
+
+BIPED = mujoco.MjModel.from_xml_string("""
+<mujoco model="biped">
+  <compiler angle="radian"/>
+  <worldbody>
+    <geom name="floor" type="plane" size="5 5 .1"/>
+    <body name="torso" pos="0 0 .5">
+      <freejoint name="root"/>
+      <geom name="chest" type="box" size=".2 .1 .05"/>
+      <body name="left" pos="0 .1 0">
+        <joint name="left_hip" type="hinge" axis="1 0 0" range="-1 1"/>
+        <joint name="left_knee" type="hinge" axis="0 1 0"/>
+        <geom name="left_foot" type="sphere" size=".03" pos="0 0 -.3"/>
+      </body>
+      <body name="right" pos="0 -.1 0">
+        <joint name="right_hip" type="hinge" axis="1 0 0" range="-1 1"/>
+        <joint name="right_knee" type="hinge" axis="0 1 0"/>
+        <geom name="right_foot" type="sphere" size=".03" pos="0 0 -.3"/>
+      </body>
+    </body>
+    <body name="box" pos="1 0 .1"><freejoint/><geom type="box" size=".1 .1 .1"/></body>
+  </worldbody>
+  <actuator><motor joint="left_hip" gear="2"/><motor joint="right_hip" gear="2"/></actuator>
+</mujoco>
+""")
+BIPED_MJX = mjx.put_model(BIPED)
+YAW90 = [math.cos(math.pi / 4), 0, 0, math.sin(math.pi / 4)]  # turns body x onto world y
+TILT = 0.6  # rad, about the world x axis
+ROLL = [math.cos(TILT / 2), math.sin(TILT / 2), 0, 0]
+
+
+def biped_state(quat=YAW90, height=0.45, linear=(0, 1, 0.3), angular=(0.1, -0.2, 0.3),
+                joints=(0.95, 0.3, -1.2, -0.2), joint_vel=(2, 5, 3, 7), ctrl=(0.5, -1), **info) -> State:  # fmt: skip
+    d = mujoco.MjData(BIPED)
+    d.qpos[:11] = [0, 0, height, *quat, *joints]
+    d.qvel[:10] = [*linear, *angular, *joint_vel]
+    d.ctrl[:] = ctrl
+    mujoco.mj_forward(BIPED, d)
+    return State.create(mjx.put_data(BIPED, d), jnp.zeros(1), info)
+
+
+COMMAND = dict(command=jnp.array([1.0, 0.5, 0.5], jnp.float32))
+
+
+@jax.jit
+def evaluate(fn, state, next_state):
+    """One term under jit, with its parameters as traced leaves."""
+    return fn(BIPED_MJX, state, jnp.zeros(2), next_state)
+
+
+def value(fn, next_state=None, state=None):
+    fn = fn if isinstance(fn, jax.tree_util.Partial) else jax.tree_util.Partial(fn)  # plain items
+    next_state = biped_state() if next_state is None else next_state
+    out = evaluate(fn, biped_state(**COMMAND) if state is None else state, next_state)
+    chex.assert_shape(out, ())
+    chex.assert_type(out, jnp.float32)
+    return float(out)
+
+
+def test_base_velocity_terms_in_the_base_frame():
+    # Yawed 90 deg: world velocity (0, 1, 0.3) is (1, 0, 0.3) in the base frame.
+    # Command (1, 0.5) m/s: error 0^2 + 0.5^2 = 0.25; sigma 0.25 -> exp(-1).
+    assert math.isclose(value(rewards.linear_velocity_tracking(BIPED)), math.exp(-1), rel_tol=1e-5)
+    assert math.isclose(value(rewards.linear_velocity_tracking(BIPED, sigma=1.0)), math.exp(-0.25), rel_tol=1e-5)
+    # Yaw rate 0.3 vs 0.5: exp(-0.04 / 0.25).
+    assert math.isclose(value(rewards.angular_velocity_tracking(BIPED)), math.exp(-0.16), rel_tol=1e-5)
+    assert math.isclose(value(rewards.vertical_velocity(BIPED)), 0.09, rel_tol=1e-5)
+    assert math.isclose(value(rewards.roll_pitch_velocity(BIPED)), 0.1**2 + 0.2**2, rel_tol=1e-5)
+    # Rolled by 0.6 rad: world (0, 0, 1) is (0, sin 0.6, cos 0.6) in the base frame.
+    rolled = biped_state(quat=ROLL, linear=(0, 0, 1))
+    assert math.isclose(value(rewards.vertical_velocity(BIPED), rolled), math.cos(TILT) ** 2, rel_tol=1e-5)
+    command = biped_state(command=jnp.array([0.0, math.sin(TILT), 0.0]))
+    assert math.isclose(value(rewards.linear_velocity_tracking(BIPED), rolled, command), 1.0, rel_tol=1e-5)
+
+
+def test_base_pose_terms():
+    assert math.isclose(value(rewards.base_height(BIPED, 0.5)), 0.05**2, rel_tol=1e-4)  # z = 0.45
+    assert value(rewards.base_height(BIPED, 0.4, 0.6)) == 0.0
+    assert math.isclose(value(rewards.base_height(BIPED, 0.3, 0.4)), 0.05**2, rel_tol=1e-4)
+    assert value(rewards.base_height(BIPED, 0.1, body="box")) < 1e-10  # the box rests at z = 0.1
+    assert abs(value(rewards.flat_orientation(BIPED))) < 1e-7  # a yaw is still level
+    assert math.isclose(value(rewards.upright(BIPED)), 1.0, rel_tol=1e-6)
+    rolled = biped_state(quat=ROLL)
+    assert math.isclose(value(rewards.flat_orientation(BIPED), rolled), math.sin(TILT) ** 2, rel_tol=1e-5)
+    assert math.isclose(value(rewards.upright(BIPED), rolled), math.cos(TILT), rel_tol=1e-5)
+
+
+def test_joint_terms():
+    # Joints (0.95, 0.3, -1.2, -0.2) against qpos0 = 0: 0.9025 + 0.09 + 1.44 + 0.04.
+    assert math.isclose(value(rewards.joint_deviation(BIPED)), 2.4725, rel_tol=1e-5)
+    knees = rewards.joint_deviation(BIPED, ["left_knee", "right_knee"], pose=[0.1, 0.0])
+    assert math.isclose(value(knees), 0.2**2 + 0.2**2, rel_tol=1e-5)
+    # Hips limited to [-1, 1]; soft 0.9 -> [-0.9, 0.9]: 0.05 over + 0.3 under.
+    assert math.isclose(value(rewards.joint_limits(BIPED)), 0.35, rel_tol=1e-5)
+    assert math.isclose(value(rewards.joint_limits(BIPED, soft=1.0)), 0.2, rel_tol=1e-5)
+    # Hips mirror (sign -1): 0.95 - 1.2; knees alike (+1): 0.3 + 0.2.
+    pairs = [("left_hip", "right_hip"), ("left_knee", "right_knee")]
+    assert math.isclose(value(rewards.symmetry(BIPED, pairs, [-1, 1])), 0.25**2 + 0.5**2, rel_tol=1e-5)
+    assert math.isclose(value(rewards.symmetry(BIPED, pairs)), 2.15**2 + 0.5**2, rel_tol=1e-5)
+
+
+def test_effort_terms():
+    # Motors of gain 1: actuator forces = ctrl = (0.5, -1); joint torques = gear 2 x that.
+    assert math.isclose(value(rewards.torque), 0.25 + 1.0, rel_tol=1e-6)
+    # Power at the hips: |1 N m x 2 rad/s| + |-2 N m x 3 rad/s|; knees and torso unactuated.
+    assert math.isclose(value(rewards.energy), 8.0, rel_tol=1e-5)
+
+
+HISTORY = jnp.array([[1.0, 2.0], [0.0, 1.0], [0.0, 0.0], [1.0, 1.0]])  # most recent first
+
+
+def test_action_difference_terms():
+    after = biped_state(action_history=HISTORY)
+    assert value(rewards.action_rate, after) == 2.0  # (1, 1)
+    assert value(rewards.action_acceleration, after) == 1.0  # (1, 2) - 2 (0, 1) + 0 = (1, 0)
+    assert value(rewards.action_jerk, after) == 4.0  # (1, 2) - 3 (0, 1) + 0 - (1, 1) = (0, -2)
+    with pytest.raises(ValueError, match="with_action_history"):
+        value(rewards.action_rate, biped_state())
+
+
+FEET = dict(
+    contact=jnp.array([True, False]),
+    first_contact=jnp.array([True, False]),
+    air_time=jnp.array([0.0, 0.3]),
+    last_air_time=jnp.array([0.7, 0.3]),
+    position=jnp.array([[0.0, 0.0, 0.03], [0.0, 0.0, 0.1]]),
+    velocity=jnp.array([[0.3, 0.4, 1.0], [0.6, 0.8, 5.0]]),
+)
+
+
+def test_feet_terms():
+    after = biped_state(feet=FEET)
+    # Only foot 0 touched down: 0.7 - 0.5 s.
+    assert math.isclose(value(rewards.feet_air_time(), after), 0.2, rel_tol=1e-5)
+    assert math.isclose(value(rewards.feet_air_time(0.9), after), -0.2, rel_tol=1e-5)
+    # Gated: command |(1, 0.5)| = 1.118 m/s is over 1 but not over 2.
+    assert math.isclose(value(rewards.feet_air_time(min_command=1.0), after), 0.2, rel_tol=1e-5)
+    assert value(rewards.feet_air_time(min_command=2.0), after) == 0.0
+    # Slip: foot 0 stands and slides at (0.3, 0.4): 0.25; foot 1 is in the air.
+    assert math.isclose(value(rewards.foot_slip, after), 0.25, rel_tol=1e-5)
+    # Clearance: foot 1 swings at |(0.6, 0.8)| = 1 m/s, 0.1 m up: (0.1 - 0.08)^2 x 1.
+    assert math.isclose(value(rewards.foot_clearance(0.08), after), 0.02**2, rel_tol=1e-4)
+    with pytest.raises(ValueError, match="with_feet"):
+        value(rewards.foot_slip, biped_state())
+
+
+def test_terms_vmap_over_states_and_new_numbers_do_not_retrace():
+    states = jax.tree.map(lambda *x: jnp.stack(x), biped_state(), biped_state(quat=ROLL, height=0.5))
+    commands = jax.tree.map(lambda *x: jnp.stack(x), biped_state(**COMMAND), biped_state(**COMMAND))
+    height = rewards.base_height(BIPED, 0.5)
+    batch = jax.vmap(evaluate, in_axes=(None, 0, 0))(height, commands, states)
+    np.testing.assert_allclose(batch, [0.05**2, 0.0], atol=1e-6)
+    flat = jax.vmap(evaluate, in_axes=(None, 0, 0))(rewards.flat_orientation(BIPED), commands, states)
+    np.testing.assert_allclose(flat, [0.0, math.sin(TILT) ** 2], rtol=1e-5, atol=1e-7)
+    # Same structure, other numbers: one trace per term kind.
+    value(rewards.base_height(BIPED, 0.5))
+    value(rewards.linear_velocity_tracking(BIPED))
+    traced = evaluate._cache_size()
+    assert math.isclose(value(rewards.base_height(BIPED, 0.3)), 0.15**2, rel_tol=1e-4)
+    assert math.isclose(value(rewards.linear_velocity_tracking(BIPED, 2.0)), math.exp(-0.125), rel_tol=1e-5)
+    assert evaluate._cache_size() == traced
+
+
+def test_bad_names_and_numbers_are_named():
+    with pytest.raises(ValueError, match=r"no body named 'trunk'.*'torso'"):
+        rewards.upright(BIPED, body="trunk")
+    with pytest.raises(ValueError, match=r"body 'left' has no free joint.*\['torso', 'box'\]"):
+        rewards.base_height(BIPED, 0.5, body="left")
+    with pytest.raises(ValueError, match="no joint named 'ankle'"):
+        rewards.joint_deviation(BIPED, ["ankle"])
+    with pytest.raises(ValueError, match="'root' is not a hinge or slide"):
+        rewards.joint_deviation(BIPED, ["root"])
+    with pytest.raises(ValueError, match="one value per joint"):
+        rewards.joint_deviation(BIPED, ["left_hip"], pose=[0.0, 1.0])
+    with pytest.raises(ValueError, match="joint 'left_knee' has no range"):
+        rewards.joint_limits(BIPED, joints=["left_hip", "left_knee"])
+    with pytest.raises(ValueError, match="soft"):
+        rewards.joint_limits(BIPED, soft=1.5)
+    with pytest.raises(ValueError, match="sigma"):
+        rewards.linear_velocity_tracking(BIPED, sigma=0.0)
+    with pytest.raises(ValueError, match="lower <= upper"):
+        rewards.base_height(BIPED, 0.6, 0.4)
+    with pytest.raises(ValueError, match="signs"):
+        rewards.symmetry(BIPED, [("left_hip", "right_hip")], [0.5])
+    with pytest.raises(ValueError, match="pairs"):
+        rewards.symmetry(BIPED, [("left_hip",)])
+    with pytest.raises(ValueError, match="min_command"):
+        rewards.feet_air_time(min_command=-1.0)
+
+
+# --- alive and `terms`, on a task that runs: the step sets the torso height to action[0]
+# (no physics), and the episode terminates once the torso is below `fall` = 0.2 m.
+
+
+@jax.tree_util.register_dataclass
+@dataclasses.dataclass(frozen=True)
+class Fall:
+    fall: jax.Array
+
+
+def _fall_reset(p, model, key):
+    return State.create(mjx.make_data(model), jnp.zeros(1))
+
+
+def _fall_step(p, model, state, action, key):
+    return state.replace(data=state.data.replace(qpos=state.data.qpos.at[2].set(action[0])))
+
+
+def _fall_terminate(p, model, state):
+    return state.data.qpos[2] < p.fall, jnp.zeros((), bool)
+
+
+def fall_task() -> Task:
+    p = Fall(jnp.float32(0.2))
+    return Task(BIPED_MJX, bind(_fall_reset, p), bind(_fall_step, p), bind(lambda p, *a: {}, p),
+                bind(_fall_terminate, p), BIPED)  # fmt: skip
+
+
+@jax.jit
+def fall_run(task, heights):
+    def body(state, h):
+        state = mjzoo.transition(task, state, jnp.array([h, 0.0]), jax.random.key(0))
+        return state, state
+
+    return jax.lax.scan(body, mjzoo.reset(task, jax.random.key(0)), heights)[1]
+
+
+def test_alive_and_terms():
+    base = trackers.with_action_history(fall_task(), length=2)
+    task = rewards.terms(base, {
+        "alive": (rewards.alive(base), 2.0),
+        "rate": (rewards.action_rate, -0.5),
+        "height": (rewards.base_height(BIPED, 0.5), -1.0),
+    })  # fmt: skip
+    states = fall_run(task, jnp.array([0.4, 0.1]))
+    np.testing.assert_array_equal(states.terminated, [False, True])
+    np.testing.assert_allclose(states.metrics["reward/alive"], [2.0, 0.0])
+    np.testing.assert_allclose(states.metrics["reward/rate"], [-0.5 * 0.16, -0.5 * 0.09], rtol=1e-5)
+    np.testing.assert_allclose(states.metrics["reward/height"], [-0.01, -0.16], rtol=1e-5)
+    np.testing.assert_allclose(states.reward, [2.0 - 0.08 - 0.01, -0.045 - 0.16], rtol=1e-5)
+    # Under auto-reset the terminating transition still scores 0, the next one 1 again.
+    reset_task = mjzoo.with_auto_reset(fall_task())
+    reset_task = rewards.terms(reset_task, {"alive": (rewards.alive(reset_task), 1.0)})
+    np.testing.assert_allclose(fall_run(reset_task, jnp.array([0.1, 0.4])).metrics["reward/alive"], [0.0, 1.0])
+    # with_reward's duplicate-name check still fires, and entries must be (fn, weight).
+    with pytest.raises(ValueError, match="already has a reward term named 'alive'"):
+        rewards.terms(task, {"alive": (rewards.alive(base), 1.0)})
+    with pytest.raises(ValueError, match="entry 'rate' must be a \\(fn, weight\\) pair"):
+        rewards.terms(base, {"rate": rewards.action_rate})
+
+
+def _height(model, state, action, next_state):
+    return next_state.data.qpos[2]
+
+
+def test_reward_clip_clips_the_sum_and_keeps_the_terms():
+    # The term "z" is the height the action set (0.3 ... 1.2); the sum is clipped to [0, 0.5].
+    task = mjzoo.with_reward_clip(rewards.terms(fall_task(), {"z": (_height, 1.0)}), 0.0, 0.5)
+    states = fall_run(task, jnp.array([0.3, 0.6, 0.9, 1.2]))
+    np.testing.assert_allclose(states.metrics["reward/z"], [0.3, 0.6, 0.9, 1.2], rtol=1e-6)  # unclipped
+    np.testing.assert_allclose(states.metrics["reward/clip"], [0.0, -0.1, -0.4, -0.7], atol=1e-6)
+    np.testing.assert_allclose(states.reward, [0.3, 0.5, 0.5, 0.5], rtol=1e-6)
+    with pytest.raises(ValueError, match="low <= high"):
+        mjzoo.with_reward_clip(fall_task(), 1.0, 0.0)
+    with pytest.raises(ValueError, match="already has a reward term named 'clip'"):
+        mjzoo.with_reward_clip(task, -1.0, 1.0)

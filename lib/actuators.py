@@ -1,0 +1,344 @@
+"""Actuator models evaluated at every physics substep, and combinators on the action.
+
+An actuator is ``(model, data, action, key) -> ctrl [nu]``: it turns the policy's
+action into MuJoCo controls from the current joint state, once per physics substep, as
+a motor driver running faster than the policy does. `step` runs the substeps; a task
+whose step calls ``actuators.step(model, data, params.actuator, action, n_substeps,
+key)`` instead of `mjzoo.physics.step` gets PD control, torque limits and actuator noise
+in its physics. The actuators here drive ``<motor>`` actuators on hinge or slide joints
+(ctrl is the actuator force; the joint gets ``gear * ctrl``), checked at construction;
+torques and gains are in joint space (N m, or N for a slide joint).
+
+The combinators (`with_action_latency`, `with_action_drop`, `with_action_filter`) change
+the action the inner task receives; its reward still receives the action the policy
+chose. Each keeps its state in ``state.info[<own key>]``, zeroed at reset, so it must
+sit inside `with_auto_reset` (which resets it with every new episode). Clipping the
+summed reward is `mjzoo.with_reward_clip`.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+from typing import Callable, Sequence
+
+import jax
+import jax.numpy as jnp
+import mujoco
+import numpy as np
+from mujoco import mjx
+
+from mjzoo import checks, names, tree
+from mjzoo.types import State, Task, bind
+
+__all__ = [
+    "Actuator",
+    "Motors",
+    "PDParams",
+    "torque",
+    "pd",
+    "position_velocity",
+    "step",
+    "with_action_latency",
+    "with_action_drop",
+    "with_action_filter",
+]
+
+Array = jax.Array
+Actuator = Callable[[mjx.Model, mjx.Data, Array, Array], Array]
+Numbers = float | Sequence[float]
+SUBSTEP_STREAM, LATENCY_STREAM, DROP_STREAM = 0xAC7, 0x1A7, 0xD50  # fold_in tags
+
+
+# --- the motors ---------------------------------------------------------------------
+
+
+@jax.tree_util.register_dataclass
+@dataclasses.dataclass(frozen=True)
+class Motors:
+    """Where each actuator's joint lives and how hard it may push; all [nu].
+
+    qpos, dof: int32 indices of the joint's position and velocity; gear: joint torque
+    per unit of ctrl; limit: joint torque bound, N m (N for slides), > 0.
+    """
+
+    qpos: Array
+    dof: Array
+    gear: Array
+    limit: Array
+
+    def ctrl(self, torque: Array) -> Array:
+        """Joint torques [nu], clipped to +-limit, as the controls that produce them."""
+        return jnp.clip(torque, -self.limit, self.limit) / self.gear
+
+
+def _motors(mj_model: mujoco.MjModel, torque_limit: Numbers | None, who: str) -> Motors:
+    labels = names.all_names(mj_model, "actuator")
+    if mj_model.nu == 0:
+        raise ValueError(f"{who}: the model has no actuators")
+    joints = mj_model.actuator_trnid[:, 0]
+    for i, name in enumerate(labels):
+        joint_ok = mj_model.actuator_trntype[i] == mujoco.mjtTrn.mjTRN_JOINT and int(mj_model.jnt_type[joints[i]]) in (
+            int(mujoco.mjtJoint.mjJNT_HINGE), int(mujoco.mjtJoint.mjJNT_SLIDE))  # fmt: skip
+        motor = (mj_model.actuator_dyntype[i] == mujoco.mjtDyn.mjDYN_NONE
+                 and mj_model.actuator_gaintype[i] == mujoco.mjtGain.mjGAIN_FIXED
+                 and mj_model.actuator_gainprm[i, 0] == 1.0
+                 and mj_model.actuator_biastype[i] == mujoco.mjtBias.mjBIAS_NONE)  # fmt: skip
+        if not (joint_ok and motor and mj_model.actuator_gear[i, 0] != 0):
+            raise ValueError(f"{who}: actuator {name!r} must be a <motor> with a nonzero gear on a hinge or slide "
+                             f"joint (ctrl = force); the model's actuators: {labels}")  # fmt: skip
+    gear = mj_model.actuator_gear[:, 0].astype(np.float64)
+    if torque_limit is None:
+        limit = np.full(mj_model.nu, np.inf)
+        for limited, bounds in ((mj_model.actuator_ctrllimited, mj_model.actuator_ctrlrange),
+                                (mj_model.actuator_forcelimited, mj_model.actuator_forcerange)):  # fmt: skip
+            symmetric = np.minimum(-bounds[:, 0], bounds[:, 1]) * np.abs(gear)
+            limit = np.where(limited.astype(bool), np.minimum(limit, symmetric), limit)
+        if not np.isfinite(limit).all():
+            unlimited = [n for n, lim in zip(labels, limit) if not np.isfinite(lim)]
+            raise ValueError(f"{who}: actuators {unlimited} have no ctrlrange or forcerange; pass torque_limit")
+    else:
+        limit = np.asarray(checks.numbers(who, "torque_limit", torque_limit, mj_model.nu))
+    if not (limit > 0).all():
+        raise ValueError(f"{who}: torque limits {limit.tolist()} must be > 0 (a symmetric range around 0)")
+    return Motors(
+        qpos=jnp.asarray(mj_model.jnt_qposadr[joints], jnp.int32),
+        dof=jnp.asarray(mj_model.jnt_dofadr[joints], jnp.int32),
+        gear=jnp.asarray(gear, jnp.float32),
+        limit=jnp.asarray(limit, jnp.float32),
+    )
+
+
+# --- torque -------------------------------------------------------------------------
+
+
+def torque(mj_model: mujoco.MjModel, torque_limit: Numbers | None = None) -> Actuator:
+    """Torque control: ``torque = clip(action, -1, 1) * torque_limit`` ([nu], N m).
+
+    `torque_limit` (float or [nu], > 0; joint torque) defaults to the largest symmetric
+    range inside the model's ctrlrange and forcerange, times the gear. MuJoCo still clamps
+    ctrl to the model's ctrlrange. Uses no key.
+    """
+    return bind(_torque, _motors(mj_model, torque_limit, "torque"))
+
+
+def _torque(motors: Motors, model, data, action, key) -> Array:
+    return motors.ctrl(jnp.clip(action, -1.0, 1.0) * motors.limit)
+
+
+# --- PD control ---------------------------------------------------------------------
+
+
+@jax.tree_util.register_dataclass
+@dataclasses.dataclass(frozen=True)
+class PDParams:
+    """Parameters of `pd` and `position_velocity`, all float32 [nu] but the noise scales."""
+
+    motors: Motors
+    kp: Array  # N m / rad (N / m for slides)
+    kd: Array  # N m s / rad (N s / m)
+    default_pose: Array  # rad (m), the position target at zero action
+    position_scale: Array  # rad (m) per unit of action
+    velocity_scale: Array  # rad/s (m/s) per unit of action
+    gain_noise: Array  # []: kp and kd are multiplied by U(1 - gain_noise, 1 + gain_noise)
+    torque_noise: Array  # []: N m standard deviation of the added torque
+
+
+def pd(
+    mj_model: mujoco.MjModel,
+    kp: Numbers,
+    kd: Numbers,
+    *,
+    action_scale: Numbers = 1.0,
+    default_pose: Numbers | None = None,
+    torque_limit: Numbers | None = None,
+    gain_noise: float = 0.0,
+    torque_noise: float = 0.0,
+) -> Actuator:
+    """PD position control as on "MIT-style" motor drivers, per actuator ([nu]):
+
+        target = default_pose + action_scale * clip(action, -1, 1)            rad
+        torque = kp' * (target - q) - kd' * qdot + torque_noise * N(0, 1)     N m
+        ctrl   = clip(torque, -torque_limit, torque_limit) / gear
+
+    with ``kp' = kp * U(1 - gain_noise, 1 + gain_noise)`` and kd' likewise, drawn anew at
+    every substep (gain_noise in [0, 1)). `kp`, `kd`, `action_scale` are floats or [nu];
+    `default_pose` defaults to the joints' ``qpos0``; `torque_limit` as in `torque`. The
+    model's actuators must be motors, so that MuJoCo adds no gains of its own.
+    """
+    return bind(_pd, _pd_params(mj_model, "pd", kp, kd, action_scale, 0.0, default_pose, torque_limit,
+                                gain_noise, torque_noise))  # fmt: skip
+
+
+def position_velocity(
+    mj_model: mujoco.MjModel,
+    kp: Numbers,
+    kd: Numbers,
+    *,
+    position_scale: Numbers = 1.0,
+    velocity_scale: Numbers = 1.0,
+    default_pose: Numbers | None = None,
+    torque_limit: Numbers | None = None,
+    gain_noise: float = 0.0,
+    torque_noise: float = 0.0,
+) -> Actuator:
+    """PD control towards a position and a velocity target: the action is [2 nu], the
+    position part first, then the velocity part, each clipped to [-1, 1]:
+
+        target_q    = default_pose + position_scale * action[:nu]      rad
+        target_qdot = velocity_scale * action[nu:]                     rad/s
+        torque      = kp' * (target_q - q) + kd' * (target_qdot - qdot) + noise
+
+    The rest as in `pd`. A task using it takes actions of 2 nu numbers, while
+    `Task.action_size` is nu (one per actuator): code that sizes actions by it (random
+    policies, the conformance suite, algorithms) must be told the larger size.
+    """
+    return bind(_position_velocity, _pd_params(mj_model, "position_velocity", kp, kd, position_scale,
+                                               velocity_scale, default_pose, torque_limit, gain_noise,
+                                               torque_noise))  # fmt: skip
+
+
+def _pd_params(mj_model, who, kp, kd, position_scale, velocity_scale, default_pose, torque_limit,
+               gain_noise, torque_noise) -> PDParams:  # fmt: skip
+    motors = _motors(mj_model, torque_limit, who)
+    if default_pose is None:
+        default_pose = mj_model.qpos0[np.asarray(motors.qpos)]
+    if not 0.0 <= gain_noise < 1.0:
+        raise ValueError(f"{who}: gain_noise={gain_noise!r} must be in [0, 1) so that gains stay positive")
+    torque_noise = checks.number(who, "torque_noise", torque_noise, 0.0)
+
+    def per(value, name: str, minimum: float = 0.0) -> Array:
+        return checks.numbers(who, name, value, mj_model.nu, minimum)
+
+    return PDParams(
+        motors=motors, kp=per(kp, "kp"), kd=per(kd, "kd"), default_pose=per(default_pose, "default_pose", -np.inf),
+        position_scale=per(position_scale, "position_scale"), velocity_scale=per(velocity_scale, "velocity_scale"),
+        gain_noise=jnp.float32(gain_noise), torque_noise=torque_noise,
+    )  # fmt: skip
+
+
+def _pd_ctrl(p: PDParams, data: mjx.Data, target_q: Array, target_qdot: Array, key: Array) -> Array:
+    kp_key, kd_key, torque_key = jax.random.split(key, 3)
+    q, qdot = data.qpos[p.motors.qpos], data.qvel[p.motors.dof]
+    kp, kd = _jitter(p.kp, p.gain_noise, kp_key), _jitter(p.kd, p.gain_noise, kd_key)
+    force = kp * (target_q - q) + kd * (target_qdot - qdot)
+    return p.motors.ctrl(force + p.torque_noise * jax.random.normal(torque_key, force.shape))
+
+
+def _jitter(gain: Array, spread: Array, key: Array) -> Array:
+    """`gain` times U(1 - spread, 1 + spread), per element."""
+    return gain * jax.random.uniform(key, gain.shape, minval=1.0 - spread, maxval=1.0 + spread)
+
+
+def _pd(p: PDParams, model, data, action, key) -> Array:
+    target = p.default_pose + p.position_scale * jnp.clip(action, -1.0, 1.0)
+    return _pd_ctrl(p, data, target, jnp.zeros_like(target), key)
+
+
+def _position_velocity(p: PDParams, model, data, action, key) -> Array:
+    nu = p.kp.shape[0]
+    if action.shape != (2 * nu,):
+        raise ValueError(f"position_velocity: the action must have shape ({2 * nu},), got {action.shape}")
+    action = jnp.clip(action, -1.0, 1.0)
+    return _pd_ctrl(p, data, p.default_pose + p.position_scale * action[:nu], p.velocity_scale * action[nu:], key)
+
+
+# --- stepping -----------------------------------------------------------------------
+
+
+def step(model: mjx.Model, data: mjx.Data, actuator: Actuator, action: Array, n_substeps: int, key: Array) -> mjx.Data:
+    """Advances `n_substeps` (static int) physics steps, setting ``ctrl = actuator(model,
+    data, action, key_i)`` from the current state before each one.
+
+    `action` is held over the substeps; key_i = fold_in(fold_in(key, tag), i), so the
+    task may pass its own step key. Returns the data after the last substep.
+    """
+    key = jax.random.fold_in(key, SUBSTEP_STREAM)
+
+    def substep(i, data: mjx.Data) -> mjx.Data:
+        ctrl = actuator(model, data, action, jax.random.fold_in(key, i))
+        return mjx.step(model, data.replace(ctrl=jnp.asarray(ctrl, data.ctrl.dtype)))
+
+    return jax.lax.fori_loop(0, n_substeps, substep, data)
+
+
+# --- combinators on the action ------------------------------------------------------
+
+
+def _with_info(state: State, name: str, value, **metrics: Array) -> State:
+    return state.replace(info={**state.info, name: value}, metrics={**state.metrics, **metrics})
+
+
+def with_action_latency(task: Task, max_latency: int) -> Task:
+    """Delays every action by d control steps, d ~ U{0, ..., max_latency} drawn per episode.
+
+    Until d actions have been given, the inner task receives zeros. Keeps
+    ``info["action_latency"]``: ``delay`` (int32 []) and ``buffer`` ([max_latency + 1,
+    nu], the latest actions, most recent first); logs ``metrics["action_latency/delay"]``.
+    `max_latency` (static int >= 0) sets the buffer's shape: changing it retraces.
+    """
+    max_latency = checks.integer("with_action_latency", "max_latency", max_latency, 0)
+    return task.replace(
+        reset=bind(_latency_reset, task.reset, tree.Static(max_latency)), step=bind(_latency_step, task.step)
+    )
+
+
+def _latency_reset(reset_fn, max_latency: tree.Static, model, key) -> State:
+    state = reset_fn(model, key)
+    delay = jax.random.randint(jax.random.fold_in(key, LATENCY_STREAM), (), 0, max_latency.value + 1)
+    buffer = jnp.zeros((max_latency.value + 1, model.nu), jnp.float32)
+    return _with_info(state, "action_latency", {"delay": delay.astype(jnp.int32), "buffer": buffer})
+
+
+def _latency_step(step_fn, model, state, action, key) -> State:
+    latency = state.info["action_latency"]
+    buffer = jnp.concatenate([jnp.asarray(action, jnp.float32)[None], latency["buffer"][:-1]])
+    next_state = step_fn(model, state, buffer[latency["delay"]], key)
+    delay = latency["delay"].astype(jnp.float32)
+    return _with_info(next_state, "action_latency", {**latency, "buffer": buffer}, **{"action_latency/delay": delay})
+
+
+def with_action_drop(task: Task, probability: float) -> Task:
+    """With `probability` (in [0, 1]) per step, the inner task receives the action it
+    received at the previous step instead of the new one (a lost command packet).
+
+    Keeps ``info["action_drop"]["previous"]`` ([nu], the last action passed on; zeros at
+    reset); logs ``metrics["action_drop/dropped"]`` (1.0 when this step's was dropped).
+    """
+    probability = checks.number("with_action_drop", "probability", probability, 0.0, 1.0)
+    return task.replace(
+        reset=bind(_previous_reset, task.reset, tree.Static("action_drop")),
+        step=bind(_drop_step, task.step, probability),
+    )
+
+
+def _previous_reset(reset_fn, name: tree.Static, model, key) -> State:
+    state = reset_fn(model, key)
+    return _with_info(state, name.value, {"previous": jnp.zeros((model.nu,), jnp.float32)})
+
+
+def _drop_step(step_fn, probability, model, state, action, key) -> State:
+    previous = state.info["action_drop"]["previous"]
+    dropped = jax.random.uniform(jax.random.fold_in(key, DROP_STREAM)) < probability
+    applied = jnp.where(dropped, previous, jnp.asarray(action, jnp.float32))
+    next_state = step_fn(model, state, applied, key)
+    return _with_info(next_state, "action_drop", {"previous": applied},
+                      **{"action_drop/dropped": dropped.astype(jnp.float32)})  # fmt: skip
+
+
+def with_action_filter(task: Task, alpha: float) -> Task:
+    """First-order low-pass filter on the action: the inner task receives
+    ``a_t = alpha * action_t + (1 - alpha) * a_{t-1}``, with a_{-1} = 0 (alpha in (0, 1]).
+
+    Keeps ``info["action_filter"]["previous"]`` ([nu], a_{t-1}).
+    """
+    alpha = checks.number("with_action_filter", "alpha", alpha, 0.0, 1.0, open_low=True)  # 1: no filtering
+    return task.replace(
+        reset=bind(_previous_reset, task.reset, tree.Static("action_filter")),
+        step=bind(_filter_step, task.step, alpha),
+    )
+
+
+def _filter_step(step_fn, alpha, model, state, action, key) -> State:
+    previous = state.info["action_filter"]["previous"]
+    applied = alpha * jnp.asarray(action, jnp.float32) + (1.0 - alpha) * previous
+    return _with_info(step_fn(model, state, applied, key), "action_filter", {"previous": applied})

@@ -1,0 +1,67 @@
+"""Checking the numbers a catalog constructor is given, once, at construction.
+
+Each function returns the value ready to bind as a pytree leaf (float32 arrays) or a
+static int, or raises a ValueError that says which argument of which constructor is
+wrong and what it must be: ``"{who}: {name}={value!r} must be ..."``.
+"""
+
+from __future__ import annotations
+
+import math
+import numbers as _numbers
+
+import jax
+import jax.numpy as jnp
+import numpy as np
+
+__all__ = ["number", "integer", "interval", "numbers"]
+
+Array = jax.Array
+
+
+def _is_real(value) -> bool:
+    return isinstance(value, _numbers.Real) and not isinstance(value, bool) and math.isfinite(value)
+
+
+def _floats(value) -> np.ndarray:
+    """`value` as a float64 array; NaN (which every check rejects) if it is not numbers."""
+    try:
+        return np.asarray(value, np.float64)
+    except (TypeError, ValueError):
+        return np.full((), np.nan)
+
+
+def number(who: str, name: str, value: float, low: float = -math.inf, high: float = math.inf, *,
+           open_low: bool = False) -> Array:  # fmt: skip
+    """`value` as a float32 [] leaf; it must be finite, >= low (> low if `open_low`) and <= high."""
+    if not (_is_real(value) and (value > low if open_low else value >= low) and value <= high):
+        bounds = [f"{'>' if open_low else '>='} {low:.6g}"] if low > -math.inf else []
+        bounds += [f"<= {high:.6g}"] if high < math.inf else []
+        raise ValueError(f"{who}: {name}={value!r} must be a finite number {' and '.join(bounds)}".rstrip())
+    return jnp.float32(value)
+
+
+def integer(who: str, name: str, value: int, low: int = 1) -> int:
+    """`value` as a Python int (for static shapes and loop counts); it must be an integer >= low."""
+    if isinstance(value, bool) or not isinstance(value, (int, np.integer)) or value < low:
+        raise ValueError(f"{who}: {name}={value!r} must be an integer >= {low}")
+    return int(value)
+
+
+def interval(who: str, name: str, value, low: float = -math.inf, *, open_low: bool = False) -> Array:
+    """A (lo, hi) pair as a float32 [2] leaf: finite, lo <= hi, lo >= low (> low if `open_low`)."""
+    array = _floats(value)
+    ok = array.shape == (2,) and np.isfinite(array).all() and array[0] <= array[1]
+    if not (ok and (array[0] > low if open_low else array[0] >= low)):
+        bound = f" and lo {'>' if open_low else '>='} {low:.6g}" if low > -math.inf else ""
+        raise ValueError(f"{who}: {name}={value!r} must be a finite (lo, hi) with lo <= hi{bound}")
+    return jnp.asarray(array, jnp.float32)
+
+
+def numbers(who: str, name: str, value, n: int, low: float = 0.0) -> Array:
+    """A number or `n` numbers (one per joint, actuator or axis) as a float32 [n] leaf,
+    each finite and >= low."""
+    array = _floats(value)
+    if array.ndim > 1 or (array.ndim == 1 and array.shape[0] != n) or not np.all(np.isfinite(array) & (array >= low)):
+        raise ValueError(f"{who}: {name}={value!r} must be a finite number >= {low:.6g} or {n} of them")
+    return jnp.broadcast_to(jnp.asarray(array, jnp.float32), (n,))

@@ -1,0 +1,95 @@
+"""Contacts between named geoms, read from MJX's contact data, for ONE environment.
+
+MJX (its JAX implementation, ``data._impl.contact``) keeps a fixed set of contact slots,
+one per candidate geom pair, whether the geoms touch or not. A slot is active, a real
+contact, when its distance is below its ``includemargin`` (margin - gap): MuJoCo's test
+for adding a contact constraint. So every function here masks by that test, and the
+slots' geom ids (static) say which pairs they belong to.
+
+Constructors check with `geom_sets` that the geoms they watch can collide at all
+(contype / conaffinity bits or an explicit <pair>), so a typo in a collision mask fails
+at construction instead of reading "never in contact". Parent-child filtering and
+<exclude> are not checked.
+
+Contact data is what the last `mjx.step` or `mjx.forward` computed: before integration,
+one physics substep behind qpos and qvel.
+"""
+
+from __future__ import annotations
+
+import jax
+import jax.numpy as jnp
+import mujoco
+import numpy as np
+from mujoco import mjx
+
+from mjzoo import names
+
+__all__ = ["can_touch", "geom_sets", "pairs", "touching", "normal_forces", "forces"]
+
+Array = jax.Array
+
+
+def can_touch(mj_model: mujoco.MjModel, a: int, b: int) -> bool:
+    """MuJoCo's collision filter for geoms `a` and `b`: compatible contype/conaffinity
+    bits, or an explicit <pair> naming both."""
+    ctype, caff = mj_model.geom_contype, mj_model.geom_conaffinity
+    bits = (ctype[a] & caff[b]) | (ctype[b] & caff[a])
+    paired = any({a, b} == {int(g1), int(g2)} for g1, g2 in zip(mj_model.pair_geom1, mj_model.pair_geom2))
+    return bool(bits) or paired
+
+
+def geom_sets(
+    mj_model: mujoco.MjModel, geoms: names.Names, others: names.Names | None, who: str
+) -> tuple[Array, Array]:
+    """int32 indices of `geoms` [G] and `others` [O] (every geom if None), checked: each
+    of `geoms` is not among `others` and can collide with at least one of them."""
+    ids = names.ids(mj_model, "geom", geoms, who)
+    other = np.arange(mj_model.ngeom, dtype=np.int32) if others is None else names.ids(mj_model, "geom", others, who)
+    for g in ids:
+        name = names.all_names(mj_model, "geom", [g])[0]
+        if others is not None and g in other:
+            raise ValueError(f"{who}: geom {name!r} is listed both as watched and as what it touches")
+        if not any(can_touch(mj_model, g, o) for o in other if o != g):
+            target = repr(others) if others is not None else "any geom"
+            raise ValueError(f"{who}: geom {name!r} can never touch {target}: their contype/conaffinity bits "
+                             f"exclude it and no <pair> lists it")  # fmt: skip
+    return jnp.asarray(ids), jnp.asarray(other)
+
+
+def pairs(data: mjx.Data, geoms: Array, others: Array) -> Array:
+    """[G, C] bool: contact slot c is between geom ``geoms[g]`` and one of `others`."""
+    contact = data._impl.contact
+    other1 = jnp.any(contact.geom1[None, :] == others[:, None], axis=0)
+    other2 = jnp.any(contact.geom2[None, :] == others[:, None], axis=0)
+    return ((contact.geom1 == geoms[:, None]) & other2) | ((contact.geom2 == geoms[:, None]) & other1)
+
+
+def touching(data: mjx.Data, geoms: Array, others: Array) -> Array:
+    """[G] bool: geom ``geoms[g]`` has an active contact with one of `others` ([O] int32)."""
+    contact = data._impl.contact
+    return jnp.any(pairs(data, geoms, others) & (contact.dist < contact.includemargin), axis=1)
+
+
+def normal_forces(model: mjx.Model, data: mjx.Data) -> Array:
+    """[C] float32 normal force of every contact slot, N (0 when inactive).
+
+    A contact's constraint rows start at its ``efc_address`` (static in MJX). With a
+    pyramidal cone its normal force is the sum of its 2 (condim - 1) edge forces (1 row
+    for condim 1); with an elliptic cone it is the first row: what ``mj_contactForce``
+    decodes.
+    """
+    contact = data._impl.contact
+    address, dim = np.asarray(contact.efc_address), np.asarray(contact.dim)
+    if address.size == 0:
+        return jnp.zeros(0, jnp.float32)
+    rows = np.where(dim == 1, 1, 2 * (dim - 1)) if model.opt.cone == mjx.ConeType.PYRAMIDAL else np.ones_like(dim)
+    offsets = np.arange(rows.max())
+    index = np.maximum(address, 0)[:, None] + np.minimum(offsets[None, :], rows[:, None] - 1)
+    used = (offsets[None, :] < rows[:, None]) & (address[:, None] >= 0)
+    return jnp.sum(jnp.where(used, data._impl.efc_force[index], 0.0), axis=1).astype(jnp.float32)
+
+
+def forces(model: mjx.Model, data: mjx.Data, geoms: Array, others: Array) -> Array:
+    """[G] float32 total normal force on geom ``geoms[g]`` from `others`, N (0 apart)."""
+    return jnp.sum(pairs(data, geoms, others) * normal_forces(model, data)[None, :], axis=1)

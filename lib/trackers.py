@@ -1,0 +1,109 @@
+"""Shared per-episode trackers, `Task -> Task`: state in `state.info` that several
+catalog items read (observations of the last actions or foot contacts, the action-rate
+and feet rewards), kept once per task instead of recomputed by each reader.
+
+Both trackers keep per-episode state, so they sit INSIDE `mjzoo.with_auto_reset` (wrap
+the task with them first): the reset that starts a new episode then clears them. Items
+that read them must be added at the same level of any `with_action_repeat`.
+"""
+
+from __future__ import annotations
+
+import jax
+import jax.numpy as jnp
+import numpy as np
+from mujoco import mjx
+
+from mjzoo import checks, contacts, names, tree
+from mjzoo.observations import point_velocity
+from mjzoo.types import State, Task, bind
+
+__all__ = ["with_action_history", "with_feet", "ACTION_HISTORY", "FEET"]
+
+Array = jax.Array
+ACTION_HISTORY, FEET = "action_history", "feet"  # their keys in state.info
+
+
+# --- action history -----------------------------------------------------------------
+
+
+def with_action_history(task: Task, length: int = 3) -> Task:
+    """Keeps the last `length` actions in ``info["action_history"]``: [length, nu]
+    float32, row 0 the action of the transition that produced the state, row k the one
+    k transitions earlier; zeros at reset.
+
+    Records the action its step receives: wrap it outside action filters and noise to
+    record the policy's action, inside them to record what the actuators got.
+    """
+    shape = tree.Static((checks.integer("with_action_history", "length", length), task.action_size))
+    return task.replace(reset=bind(_history_reset, task.reset, shape), step=bind(_history_step, task.step))
+
+
+def _history_reset(reset_fn, shape: tree.Static, model: mjx.Model, key: Array) -> State:
+    state = reset_fn(model, key)
+    return state.replace(info={**state.info, ACTION_HISTORY: jnp.zeros(shape.value, jnp.float32)})
+
+
+def _history_step(step_fn, model: mjx.Model, state: State, action: Array, key: Array) -> State:
+    next_state = step_fn(model, state, action, key)
+    history = state.info[ACTION_HISTORY]
+    history = jnp.concatenate([jnp.asarray(action, jnp.float32)[None], history[:-1]])
+    return next_state.replace(info={**next_state.info, ACTION_HISTORY: history})
+
+
+# --- feet ---------------------------------------------------------------------------
+
+
+def with_feet(task: Task, feet: names.Names, floor: names.Names) -> Task:
+    """Keeps ``info["feet"]``, a dict over the F geoms named in `feet` (in that order):
+
+      contact       [F] bool     the foot touches a `floor` geom (one name or several):
+                                 an active contact (`mjzoo.contacts.touching`)
+      air_time      [F] float32  s since the foot last left the floor (or since reset);
+                                 0 while in contact
+      first_contact [F] bool     the foot touched down in this transition
+      last_air_time [F] float32  s in the air before the last touch-down (0 until one)
+      position      [F, 3]       world position of each foot geom's centre, m
+      velocity      [F, 3]       world linear velocity of that point, m/s
+
+    updated after every step from the new physics (contacts, positions and velocities as
+    of the last physics substep). The time a transition adds to `air_time` is the
+    simulated time it advanced (``data.time``): the control period, whatever the
+    substeps, action repeats or randomized timestep. At reset it reads the contacts of
+    the reset's data, so the task's reset must leave its data forwarded
+    (`mjx.forward`, as `resets.with_resets` does: apply with_feet after it).
+    """
+    geoms, floor = contacts.geom_sets(task.mj_model, feet, floor, "with_feet")
+    bodies = jnp.asarray(task.mj_model.geom_bodyid[np.asarray(geoms)], jnp.int32)
+    indices = {"geom": geoms, "body": bodies, "floor": floor}
+    return task.replace(reset=bind(_feet_reset, task.reset, indices), step=bind(_feet_step, task.step, indices))
+
+
+def _feet_now(indices: dict, model: mjx.Model, data: mjx.Data) -> dict[str, Array]:
+    """Contact, position and velocity of each foot in `data`."""
+    position = data.geom_xpos[indices["geom"]]
+    velocity, _ = point_velocity(model, data, indices["body"], position)
+    contact = contacts.touching(data, indices["geom"], indices["floor"])
+    return {"contact": contact, "position": position, "velocity": velocity}
+
+
+def _feet_reset(reset_fn, indices: dict, model: mjx.Model, key: Array) -> State:
+    state = reset_fn(model, key)
+    now = _feet_now(indices, model, state.data)
+    zeros = jnp.zeros(now["contact"].shape, jnp.float32)
+    feet = {**now, "air_time": zeros, "first_contact": jnp.zeros_like(now["contact"]), "last_air_time": zeros}
+    return state.replace(info={**state.info, FEET: feet})
+
+
+def _feet_step(step_fn, indices: dict, model: mjx.Model, state: State, action: Array, key: Array) -> State:
+    next_state = step_fn(model, state, action, key)
+    before, now = state.info[FEET], _feet_now(indices, model, next_state.data)
+    air_time = before["air_time"] + (next_state.data.time - state.data.time).astype(jnp.float32)
+    first_contact = now["contact"] & ~before["contact"]
+    feet = {
+        **now,
+        "air_time": jnp.where(now["contact"], 0.0, air_time),
+        "first_contact": first_contact,
+        "last_air_time": jnp.where(first_contact, air_time, before["last_air_time"]),
+    }
+    return next_state.replace(info={**next_state.info, FEET: feet})
