@@ -74,4 +74,4 @@ def plan(
         samples, costs, config.num_elites, config.sigma_min * half_range, config.sigma_max * half_range
     )
     state = state.replace(knots=mean, std=std, cost=jnp.sort(costs)[: config.num_elites].mean(), dt=dt)
-    return state, planning.controls(config, mean)
+    return state, planning.controls(config, mean, low, high)

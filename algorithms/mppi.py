@@ -56,4 +56,4 @@ def plan(
     weights = planning.mppi_weights(costs, config.temperature)
     knots = jnp.tensordot(weights, samples, axes=1)
     state = state.replace(knots=knots, cost=jnp.sum(weights * jnp.where(weights > 0, costs, 0.0)), dt=dt)
-    return state, planning.controls(config, knots)
+    return state, planning.controls(config, knots, low, high)

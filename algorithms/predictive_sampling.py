@@ -48,4 +48,4 @@ def plan(
     costs, dt = planning.sample_costs(config, task, env_state, samples, rollout_key)
     best = jnp.argmin(costs)
     state = state.replace(knots=samples[best], cost=costs[best], dt=dt)
-    return state, planning.controls(config, state.knots)
+    return state, planning.controls(config, state.knots, low, high)

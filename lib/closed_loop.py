@@ -113,7 +113,7 @@ def sim_step(
     config: SamplingConfig, sim_task: Task, planner_state: PlannerState, sim_state: State, key: Array, hooks: Hooks
 ) -> tuple[State, Array]:
     """One simulation control step under the current plan: (next state, executed control)."""
-    action = planning.control_at(config, planner_state, sim_state.data.time)
+    action = planning.control_at(config, planner_state, sim_state.data.time, *planning.control_limits(sim_task))
     step_key, hook_key = jax.random.split(key)
     next_state = transition(sim_task, sim_state, action, step_key)
     if hooks.post_sim_step is not None:

@@ -64,15 +64,19 @@ def _control_dt(task: Task) -> float:
     return float(after.data.time - state.data.time)
 
 
-def offline(setup: Setup, key: jax.Array) -> tuple[Result, dict[str, float]]:
+def offline(
+    setup: Setup, key: jax.Array, compiler_options: dict[str, Any] | None = None
+) -> tuple[Result, dict[str, float]]:
     """The whole run as one jitted `lax.scan` (`closed_loop.run`). Timing excludes the
-    compile; the per-replan latency includes the simulation steps in between."""
+    compile; the per-replan latency includes the simulation steps in between.
+    `compiler_options` go to XLA for this compile only (e.g. to undo a global
+    ``--xla_backend_optimization_level=0`` for a long run)."""
     reset_key, run_key = jax.random.split(key)
     sim_state = reset(setup.sim_task, reset_key)
     args = (setup.planner, setup.config, setup.sim_task, setup.plan_task, sim_state, run_key,
             setup.num_replans, setup.replan_every, setup.hooks)  # fmt: skip
     start = time.perf_counter()
-    compiled = closed_loop.run.lower(*args).compile()
+    compiled = closed_loop.run.lower(*args).compile(compiler_options)
     compile_s = time.perf_counter() - start
     start = time.perf_counter()
     result = jax.block_until_ready(compiled(*args[2:6], args[8]))

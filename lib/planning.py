@@ -173,21 +173,24 @@ def sample_knots(
     return jnp.clip(mean + std * eps, low, high)
 
 
-def controls(config: SamplingConfig, knots: Array) -> Array:
-    """[..., H, nu] controls of `knots` [..., K, nu] at control steps 0..H-1."""
+def controls(config: SamplingConfig, knots: Array, low: Array = -np.inf, high: Array = np.inf) -> Array:
+    """[..., H, nu] controls of `knots` [..., K, nu] at control steps 0..H-1, clipped to
+    [low, high] (a cubic spline overshoots between knots that sit at the limits)."""
     positions = splines.knot_positions(config.num_knots, config.horizon_steps)
     steps = jnp.arange(config.horizon_steps, dtype=jnp.float32)
     evaluate = lambda k: splines.evaluate(k, positions, steps, config.interpolation)  # noqa: E731
     for _ in range(knots.ndim - 2):
         evaluate = jax.vmap(evaluate)
-    return evaluate(knots)
+    return jnp.clip(evaluate(knots), low, high)
 
 
-def control_at(config: SamplingConfig, state: PlannerState, time: Array) -> Array:
-    """[nu] the plan's control at environment time `time` (s)."""
+def control_at(
+    config: SamplingConfig, state: PlannerState, time: Array, low: Array = -np.inf, high: Array = np.inf
+) -> Array:
+    """[nu] the plan's control at environment time `time` (s), clipped to [low, high]."""
     step = jnp.where(state.dt > 0, (time - state.time) / jnp.maximum(state.dt, 1e-9), 0.0)
     positions = splines.knot_positions(config.num_knots, config.horizon_steps)
-    return splines.evaluate(state.knots, positions, jnp.reshape(step, (1,)), config.interpolation)[0]
+    return jnp.clip(splines.evaluate(state.knots, positions, jnp.reshape(step, (1,)), config.interpolation)[0], low, high)
 
 
 def rollout_costs(
@@ -248,7 +251,7 @@ def aggregate(costs: Array, risk: str = "mean", alpha: float = 0.25) -> Array:
     if risk == "worst":
         return jnp.max(costs, axis=0)
     if risk == "cvar":
-        tail = max(1, math.ceil(alpha * costs.shape[0]))
+        tail = max(1, math.ceil(alpha * costs.shape[0] - 1e-9))  # 0.28 * 25 is 7.000000000000001
         return jnp.mean(jax.lax.top_k(costs.T, tail)[0], axis=-1)
     raise ValueError(f"planning.aggregate: unknown risk {risk!r}; choose one of {RISKS}")
 
@@ -257,7 +260,8 @@ def sample_costs(
     config: SamplingConfig, task: Task | Ensemble, state: State, samples: Array, key: Array
 ) -> tuple[Array, Array]:
     """([N] risk-aggregated costs of knot samples [N, K, nu] from `state`, [] dt)."""
-    costs, dt = rollout_costs(task, state, controls(config, samples), key, config.terminal_value, config.unroll)
+    sequences = controls(config, samples, *control_limits(task))
+    costs, dt = rollout_costs(task, state, sequences, key, config.terminal_value, config.unroll)
     costs = aggregate(costs, config.risk, config.cvar_alpha)
     # A sample whose physics blew up must never win.
     return jnp.where(jnp.isfinite(costs), costs, jnp.inf), dt
@@ -267,9 +271,12 @@ def mppi_weights(costs: Array, temperature: float | Array) -> Array:
     """[N] weights w_i = exp(-(c_i - min c) / lambda) / sum_j exp(-(c_j - min c) / lambda).
 
     Subtracting the minimum changes nothing mathematically and keeps exp from
-    underflowing; infinite costs get weight 0.
+    underflowing; infinite costs get weight 0. If every cost is infinite (all rollouts
+    diverged) all weight goes to sample 0, the nominal plan, rather than NaN.
     """
-    return jax.nn.softmax(-(costs - jnp.min(costs)) / temperature)
+    lowest = jnp.min(costs)
+    weights = jax.nn.softmax(-(costs - jnp.where(jnp.isfinite(lowest), lowest, 0.0)) / temperature)
+    return jnp.where(jnp.isfinite(lowest), weights, jax.nn.one_hot(0, costs.shape[0], dtype=weights.dtype))
 
 
 def cem_update(

@@ -25,8 +25,11 @@ METHODS = ("zero", "linear", "cubic")
 
 def knot_positions(num_knots: int, horizon_steps: int) -> Array:
     """[K] float32 knot positions, evenly spaced from step 0 to step `horizon_steps - 1`."""
-    if num_knots < 1 or horizon_steps < 1:
-        raise ValueError(f"knot_positions: need num_knots >= 1 and horizon_steps >= 1, got {num_knots}, {horizon_steps}")
+    if num_knots < 1 or horizon_steps < 1 or (num_knots > 1 and horizon_steps < 2):
+        raise ValueError(
+            f"knot_positions: need num_knots >= 1, horizon_steps >= 1 and distinct positions "
+            f"(several knots need horizon_steps >= 2), got {num_knots}, {horizon_steps}"
+        )
     if num_knots == 1:
         return jnp.zeros((1,), jnp.float32)
     return jnp.linspace(0.0, horizon_steps - 1, num_knots, dtype=jnp.float32)

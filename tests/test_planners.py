@@ -1,0 +1,121 @@
+"""Sampling planners closed loop on the CPU, with each env's documented planning setup
+(`mjzoo.envs.planning`): every planner swings the pendulum up and holds it, balances the
+cart-pole after swinging it up, pushes the cylinder onto its goal, and keeps reaching new
+point-mass goals. Plus the task hooks one by one, and robust planning over an ensemble."""
+
+from __future__ import annotations
+
+import dataclasses
+import functools
+import json
+
+import jax
+import jax.numpy as jnp
+import numpy as np
+import pytest
+
+import mjzoo
+import mjzoo.envs
+from mjzoo import closed_loop, planner_runs, planning
+from mjzoo.algorithms import cem, mppi, predictive_sampling
+from mjzoo.envs import cylinder_push, point_mass
+
+# The suite compiles at XLA -O0 (conftest) for short tests; a closed-loop run is long,
+# and at -O3 it runs about 6x faster for the same compile time.
+OPTIMIZED = {"xla_backend_optimization_level": 3}
+PLANNERS = {"predictive_sampling": predictive_sampling, "cem": cem, "mppi": mppi}
+
+
+def setup_for(env: str, planner: str) -> planner_runs.Setup:
+    """The env's documented closed-loop problem for `planner`."""
+    env_setup = mjzoo.envs.planning(env)
+    module = PLANNERS[planner]
+    return planner_runs.Setup(
+        planner=module, config=module.Config(**mjzoo.envs.hyperparameters(env, planner)),
+        sim_task=mjzoo.envs.make(env, episode_steps=10**9),
+        plan_task=mjzoo.envs.make(env, episode_steps=10**9, **env_setup.plan_overrides),
+        seconds=env_setup.seconds, replan_every=env_setup.replan_every, hooks=env_setup.hooks,
+        success=env_setup.success,
+    )  # fmt: skip
+
+
+@pytest.mark.parametrize("planner", PLANNERS)
+@pytest.mark.parametrize("env", ["pendulum_swingup", "cartpole_swingup", "cylinder_push", "point_mass"])
+def test_planner_solves_env_closed_loop(env, planner):
+    setup = setup_for(env, planner)
+    result, stats = planner_runs.offline(setup, jax.random.key(0), OPTIMIZED)
+    solved, score = setup.success(jax.device_get(result.states))
+    print(f"{env} {planner}: score {score:.3f}, {stats['plan_latency_ms']:.1f} ms per replan on the CPU")
+    assert solved, f"{env} with {planner}: score {score}"
+    assert np.all(np.isfinite(np.asarray(result.controls)))
+    low, high = planning.control_limits(setup.sim_task)
+    assert np.all(np.asarray(result.controls) >= low - 1e-6) and np.all(np.asarray(result.controls) <= high + 1e-6)
+
+
+def test_warm_start_hook_sets_the_first_plan():
+    setup = setup_for("pendulum_swingup", "predictive_sampling")
+    state = mjzoo.reset(setup.sim_task, jax.random.key(0))
+    state = state.replace(data=state.data.replace(qvel=state.data.qvel.at[0].set(-0.3)))
+    first = closed_loop.first_plan(setup.planner, setup.config, setup.plan_task, state, setup.hooks)
+    np.testing.assert_array_equal(first.knots, -np.ones((setup.config.num_knots, 1)))  # full torque along the swing
+    bare = closed_loop.first_plan(setup.planner, setup.config, setup.plan_task, state)
+    np.testing.assert_array_equal(bare.knots, 0.0)
+
+
+def test_phase_view_charges_the_approach_only_until_in_position():
+    task = mjzoo.envs.make("cylinder_push", approach_weight=0.0)
+    state = mjzoo.reset(task, jax.random.key(3))
+    pusher, cylinder = cylinder_push.positions(state.data)
+    behind = cylinder_push._behind(state.data, state.info["goal"])
+    action = jnp.zeros(2)
+
+    def phase_term(start):
+        view = cylinder_push.phase_view(np.float32(0.05), np.float32(1.0), task, start)
+        return float(mjzoo.transition_with_terms(view, start, action, jax.random.key(0))[1]["approach_phase"])
+
+    far = float(jnp.linalg.norm(behind - pusher))
+    assert far > 0.05 and phase_term(state) < -0.5 * far  # charged about the distance
+    qpos = state.data.qpos.at[0:2].set(behind)
+    in_position = state.replace(data=state.data.replace(qpos=qpos))
+    assert phase_term(in_position) == 0.0
+
+
+def test_goal_resampling_hook_moves_only_a_reached_goal():
+    task = mjzoo.envs.make("point_mass")
+    state = mjzoo.reset(task, jax.random.key(0))
+    hook = functools.partial(point_mass.new_goal_when_reached, np.float32(0.05), np.float32(0.3), task)
+    away = hook(state, jax.random.key(1))
+    np.testing.assert_array_equal(away.info["goal"], state.info["goal"])
+    there = state.replace(data=state.data.replace(qpos=state.info["goal"]))
+    moved = hook(there, jax.random.key(1))
+    assert float(jnp.linalg.norm(moved.info["goal"] - state.info["goal"])) > 0
+    np.testing.assert_allclose(moved.data.mocap_pos[0, :2], moved.info["goal"])
+    np.testing.assert_allclose(moved.obs[4:], moved.info["goal"] - moved.data.qpos, atol=1e-6)
+
+
+def _heavier(scale_low, scale_high, model, key):
+    return {"body_mass": model.body_mass * jax.random.uniform(key, minval=scale_low, maxval=scale_high)}
+
+
+@pytest.mark.parametrize("risk", ["mean", "cvar"])
+def test_robust_planning_over_an_ensemble_swings_up_a_heavier_pendulum(risk):
+    """The world's pendulum is 30% heavier than the nominal model; the planner plans over
+    4 models with masses 0.9-1.5x and aggregates with the risk measure."""
+    setup = setup_for("pendulum_swingup", "predictive_sampling")
+    sim_task = setup.sim_task.replace(model=setup.sim_task.model.replace(body_mass=setup.sim_task.model.body_mass * 1.3))
+    models = planning.ensemble(setup.plan_task, jax.tree_util.Partial(_heavier, 0.9, 1.5), 4, jax.random.key(7))
+    config = dataclasses.replace(setup.config, risk=risk, cvar_alpha=0.5)
+    robust = dataclasses.replace(setup, sim_task=sim_task, plan_task=models, config=config)
+    result, _ = planner_runs.offline(robust, jax.random.key(0), OPTIMIZED)
+    solved, score = robust.success(jax.device_get(result.states))
+    assert solved, f"{risk}: |angle| over the last second up to {score:.3f} rad"
+
+
+def test_plan_cli_runs_in_real_time_and_writes_its_files(tmp_path):
+    from mjzoo import cli
+
+    cli.main(["plan", "predictive_sampling", "pendulum_swingup", "--seconds", "0.5", "--out", str(tmp_path), "--no-video"])
+    summary = json.loads((tmp_path / "summary.json").read_text())
+    assert {"success", "final_cost", "plan_hz", "plan_latency_ms"} <= set(summary)
+    assert summary["mode"] == "realtime" and summary["plan_hz"] > 0 and summary["plan_latency_ms"] > 0
+    assert (tmp_path / "plan.png").stat().st_size > 0
