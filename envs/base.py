@@ -74,12 +74,14 @@ class PlanningSetup:
     Attributes:
       seconds: length of the closed-loop run.
       replan_every: simulation control steps per replan.
-      plan_overrides: the planning task is ``make(name, **plan_overrides)`` (e.g. a
-        coarser control step); the simulation is ``make(name)``.
+      plan_overrides: the planning task is ``plan_view(make(name, **plan_overrides))``
+        (e.g. a coarser control step); the simulation is ``make(name)``.
       configs: config fields per planner module name ("mppi", "cem", ...).
       success: ``states -> (solved, score)`` over the run's simulated states [T]
         (numpy leaves), with the score the criterion thresholds.
       hooks: the task's planner hooks (`mjzoo.closed_loop.Hooks`).
+      plan_view: ``Task -> Task`` applied to the planning task, e.g. a sharper reward
+        term: a planner only sees the cost differences its samples can resolve.
     """
 
     seconds: float
@@ -88,6 +90,12 @@ class PlanningSetup:
     configs: dict[str, dict[str, Any]]
     success: Callable[[Any], tuple[bool, float]]
     hooks: Hooks = Hooks()
+    plan_view: Callable[[Task], Task] | None = None
+
+    def plan_task(self, make: Callable[..., Task], **overrides: Any) -> Task:
+        """The planning task, from the env factory `make`."""
+        task = make(**self.plan_overrides, **overrides)
+        return self.plan_view(task) if self.plan_view else task
 
 
 def held_near(states, value_fn: Callable[[Any], np.ndarray], tolerance: float, seconds: float = 1.0) -> tuple[bool, float]:

@@ -11,6 +11,7 @@ from __future__ import annotations
 
 import ast
 import dataclasses
+import functools
 import json
 import time
 from pathlib import Path
@@ -217,7 +218,7 @@ def plan(
     setup = planner_runs.Setup(
         planner=module, config=_config(module, env, _parse_assignments(config, "--config")),
         sim_task=mjzoo.envs.make(env, episode_steps=10**9),
-        plan_task=mjzoo.envs.make(env, episode_steps=10**9, **env_setup.plan_overrides),
+        plan_task=env_setup.plan_task(functools.partial(mjzoo.envs.make, env), episode_steps=10**9),
         seconds=seconds or env_setup.seconds, replan_every=env_setup.replan_every, hooks=env_setup.hooks,
         success=env_setup.success,
     )  # fmt: skip

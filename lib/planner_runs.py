@@ -92,7 +92,7 @@ def realtime(setup: Setup, key: jax.Array, plan_hz: float | None = None) -> tupl
     sim_dt = setup.sim_dt
     period = 1.0 / plan_hz if plan_hz else sim_dt * setup.replan_every
     total_steps = round(setup.seconds / sim_dt)
-    reset_key, key = jax.random.split(key)
+    reset_key, plan_key, key = jax.random.split(key, 3)
     sim_state = complete(setup.sim_task, reset(setup.sim_task, reset_key))
     first = jax.jit(lambda s: closed_loop.first_plan(planner, config, setup.plan_task, s, hooks))
     replan = jax.jit(lambda p, s, k: closed_loop.replan(planner, config, setup.plan_task, p, s, k, hooks))
@@ -113,7 +113,7 @@ def realtime(setup: Setup, key: jax.Array, plan_hz: float | None = None) -> tupl
 
     while len(states) < total_steps:
         tick = time.perf_counter()
-        new_plan = jax.block_until_ready(replan(planner_state, sim_state, jax.random.fold_in(key, -len(latencies) - 1)))
+        new_plan = jax.block_until_ready(replan(planner_state, sim_state, jax.random.fold_in(plan_key, len(latencies))))
         latencies.append(time.perf_counter() - tick)
         advance_until(time.perf_counter(), planner_state)  # the world did not wait
         planner_state = new_plan

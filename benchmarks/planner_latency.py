@@ -1,0 +1,173 @@
+"""Planning latency per replan against the bare rollouts it is made of, one process.
+
+For each env, sample count N and horizon H: the median wall time of one jitted
+`mppi.plan` (sample, roll out N x H steps of the task's `transition`, weigh, update) and,
+beside it, of one jitted batch of bare MJX rollouts of the same N x H (raw `mjx.step`
+on the same model, controls given): the physical limit. Also predictive sampling and
+CEM at 1024 samples, and what `lax.scan` unrolling buys.
+
+Envs: `cartpole_swingup`, and `humanoid_stand`, a planning task defined here on Brax's
+bundled humanoid (MJX collisions, 17 actuators) with a coarse planning model (physics
+step 0.025 s, control step 0.05 s; 2 and 4 x coarser than the usual 0.01 / 0.02 s, so a
+0.5 s horizon is 20 sequential physics steps): reward = torso height + uprightness - effort.
+
+    python benchmarks/planner_latency.py --envs cartpole_swingup
+    python benchmarks/planner_latency.py --envs humanoid_stand --horizons 10 20 --tag humanoid
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import os
+import statistics
+import sys
+import time
+from pathlib import Path
+
+import jax
+import jax.numpy as jnp
+from mujoco import mjx
+
+import mjzoo
+import mjzoo.envs
+from mjzoo import physics
+from mjzoo.algorithms import cem, mppi, predictive_sampling
+from mjzoo.envs import base
+
+
+
+# --- humanoid_stand: a planning task on Brax's humanoid --------------------------------
+
+
+def _humanoid_reset(params, model, key):
+    data = mjx.forward(model, mjx.make_data(model))
+    return mjzoo.State.create(data, jnp.concatenate([data.qpos, data.qvel]))
+
+
+def _humanoid_step(n_substeps, model, state, action, key):
+    data = base.advance(model, state, action, n_substeps.value)
+    return state.replace(data=data, obs=jnp.concatenate([data.qpos, data.qvel]))
+
+
+def _humanoid_reward(params, model, state, action, next_state):
+    data = next_state.data
+    return {
+        "height": jnp.minimum(data.qpos[2], 1.4),
+        "upright": data.xmat[1, 2, 2],  # torso z axis, world z component
+        "effort": -0.01 * jnp.mean(jnp.square(action)),
+    }
+
+
+def humanoid_stand(ctrl_dt: float = 0.05, dt: float = 0.025) -> mjzoo.Task:
+    import brax
+
+    path = Path(brax.__file__).parent / "envs" / "assets" / "humanoid.xml"
+    loaded = physics.load(path, dt=dt, ctrl_dt=ctrl_dt, iterations=2, ls_iterations=4)
+    return mjzoo.Task(
+        model=loaded.model, reset=mjzoo.bind(_humanoid_reset, ()),
+        step=mjzoo.bind(_humanoid_step, mjzoo.tree.Static(loaded.n_substeps)),
+        reward=mjzoo.bind(_humanoid_reward, ()), terminate=mjzoo.bind(base.never_terminate, ()),
+        mj_model=loaded.mj_model,
+    )  # fmt: skip
+
+
+def make(env: str) -> tuple[mjzoo.Task, int]:
+    """(planning task, physics substeps per control step)."""
+    if env == "humanoid_stand":
+        task = humanoid_stand()
+        return task, task.step.args[0].value
+    task = mjzoo.envs.make(env, episode_steps=10**9)
+    return task, task_substeps(task)
+
+
+def task_substeps(task: mjzoo.Task) -> int:
+    state = mjzoo.reset(task, jax.random.key(0))
+    after = jax.jit(lambda s: task.step(task.model, s, jnp.zeros(task.action_size), jax.random.key(0)))(state)
+    return round(float(after.data.time - state.data.time) / float(task.model.opt.timestep))
+
+
+# --- measurements ------------------------------------------------------------------------
+
+
+def median_ms(fn, *args, repeats: int) -> float:
+    jax.block_until_ready(fn(*args))  # compile
+    times = []
+    for _ in range(repeats):
+        start = time.perf_counter()
+        jax.block_until_ready(fn(*args))
+        times.append(time.perf_counter() - start)
+    return 1e3 * statistics.median(times)
+
+
+def bare_rollouts(task: mjzoo.Task, n_substeps: int, unroll: int = 1):
+    @jax.jit
+    def run(data, controls):  # controls [N, H, nu]
+        def one(sample_controls):
+            step = lambda d, u: (physics.step(task.model, d, u, n_substeps), None)  # noqa: E731
+            return jax.lax.scan(step, data, sample_controls, unroll=unroll)[0].qpos
+
+        return jax.vmap(one)(controls)
+
+    return run
+
+
+def measure(env: str, samples: list[int], horizons: list[int], repeats: int, extras: bool, save) -> list[dict]:
+    task, n_substeps = make(env)
+    state = mjzoo.complete(task, mjzoo.reset(task, jax.random.key(0)))
+    rows = []
+
+    def row(planner, n, h, unroll=1):
+        config = planner.Config(num_samples=n, horizon_steps=h, num_knots=min(4, h), unroll=unroll)
+        plan = jax.jit(planner.plan, static_argnums=0)
+        planner_state = planner.init(config, task)
+        plan_ms = median_ms(plan, config, task, planner_state, state, jax.random.key(1), repeats=repeats)
+        controls = jax.random.uniform(jax.random.key(2), (n, h, task.action_size), minval=-1, maxval=1)
+        bare_ms = median_ms(bare_rollouts(task, n_substeps, unroll), state.data, controls, repeats=repeats)
+        result = {"env": env, "planner": planner.__name__.rsplit(".", 1)[-1], "samples": n, "horizon_steps": h,
+                  "horizon_s": h * n_substeps * float(task.model.opt.timestep), "unroll": unroll,
+                  "plan_ms": plan_ms, "bare_ms": bare_ms, "overhead": plan_ms / bare_ms - 1.0,
+                  "ms_per_physics_step": plan_ms / (h * n_substeps), "plan_hz": 1e3 / plan_ms}  # fmt: skip
+        print(f"{env:<16} {result['planner']:<20} N={n:<6} H={h:<3} ({result['horizon_s']:.2f} s) unroll={unroll} "
+              f"plan {plan_ms:8.2f} ms  bare {bare_ms:8.2f} ms  overhead {100 * result['overhead']:+6.1f}%  "
+              f"{result['ms_per_physics_step']:.3f} ms/step  {result['plan_hz']:.0f} Hz", flush=True)  # fmt: skip
+        rows.append(result)
+        save(rows)
+
+    for h in horizons:
+        for n in samples:
+            row(mppi, n, h)
+    if extras:
+        for planner in (predictive_sampling, cem):
+            row(planner, 1024, horizons[0])
+        row(mppi, 1024, horizons[0], unroll=4)
+    return rows
+
+
+def main() -> None:
+    parser = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
+    parser.add_argument("--envs", nargs="*", default=["cartpole_swingup", "humanoid_stand"])
+    parser.add_argument("--samples", nargs="*", type=int, default=[64, 256, 1024, 4096, 16384])
+    parser.add_argument("--horizons", nargs="*", type=int, default=[13, 25], help="planning control steps")
+    parser.add_argument("--repeats", type=int, default=10)
+    parser.add_argument("--no-extras", action="store_true", help="only MPPI over the samples x horizons grid")
+    parser.add_argument("--out", type=Path, default=Path(__file__).parent / "results")
+    parser.add_argument("--tag", default="", help="suffix of the JSON file, e.g. for a run under other XLA_FLAGS")
+    args = parser.parse_args()
+    device = jax.devices()[0].device_kind
+    print(f"device: {device}, jax {jax.__version__}, XLA_FLAGS={os.environ.get('XLA_FLAGS', '')!r}", flush=True)
+    rows = []
+    args.out.mkdir(parents=True, exist_ok=True)
+    path = args.out / f"planner_latency_{jax.default_backend()}{'_' + args.tag if args.tag else ''}.json"
+    flags = os.environ.get("XLA_FLAGS", "")
+    def save(env_rows: list[dict]) -> None:
+        path.write_text(json.dumps({"device": device, "jax": jax.__version__, "xla_flags": flags,
+                                    "rows": rows + env_rows}, indent=2))  # fmt: skip
+
+    for env in args.envs:
+        rows += measure(env, args.samples, args.horizons, args.repeats, not args.no_extras, save)
+    print(f"wrote {path}")
+
+
+if __name__ == "__main__":
+    main()
