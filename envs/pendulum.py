@@ -25,7 +25,6 @@ import jax
 import jax.numpy as jnp
 from mujoco import mjx
 
-from mjzoo.closed_loop import Hooks
 from mjzoo.combinators import with_reward
 from mjzoo.envs import base
 from mjzoo.rewards import tolerance
@@ -41,13 +40,6 @@ PPO = dict(num_envs=256, unroll_length=32, num_minibatches=8, num_epochs=4, lear
            entropy_coef=1e-2, discount=0.97, total_steps=3_000_000)  # fmt: skip
 
 
-
-
-def warm_start(plan_task: Task, state: State, num_knots: int) -> Array:
-    """A first plan for the planners: full torque along the current swing (or +), the
-    direction that pumps energy, instead of the default zero torque."""
-    direction = jnp.where(state.data.qvel[0] < 0, -1.0, 1.0)
-    return jnp.full((num_knots, 1), direction, jnp.float32)
 
 
 def _angle_squared(model: mjx.Model, state: State, action: Array, next_state: State) -> Array:
@@ -75,7 +67,7 @@ PLANNING = base.PlanningSetup(
     seconds=6.0, replan_every=2, plan_overrides={}, success=_upright_at_end,
     configs={"predictive_sampling": _SAMPLING, "mppi": dict(_SAMPLING, temperature=0.1),
              "cem": dict(_SAMPLING, num_elites=4, sigma_min=0.2)},
-    hooks=Hooks(warm_start=warm_start), plan_view=precise_upright,
+    plan_view=precise_upright,
 )  # fmt: skip
 
 
