@@ -6,3 +6,15 @@ import os
 os.environ["XLA_FLAGS"] = " ".join(
     filter(None, [os.environ.get("XLA_FLAGS", ""), "--xla_backend_optimization_level=0"])
 )
+
+
+import jax  # noqa: E402
+import pytest  # noqa: E402
+
+
+@pytest.fixture(autouse=True, scope="module")
+def _free_compiled_code():
+    """Drops each test module's compiled executables when it ends: a whole-suite process
+    otherwise keeps hundreds of MJX executables alive (one run aborted inside LLVM)."""
+    yield
+    jax.clear_caches()
