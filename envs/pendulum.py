@@ -66,7 +66,7 @@ _SAMPLING = dict(num_samples=64, horizon_steps=60, num_knots=4, noise_scale=0.2)
 PLANNING = base.PlanningSetup(
     seconds=6.0, replan_every=2, plan_overrides={}, success=_upright_at_end,
     configs={"predictive_sampling": _SAMPLING, "mppi": dict(_SAMPLING, temperature=0.1),
-             "cem": dict(_SAMPLING, num_elites=4, sigma_min=0.2)},
+             "cem": dict(_SAMPLING, num_elites=8, sigma_min=0.1)},
     plan_view=precise_upright,
 )  # fmt: skip
 
