@@ -93,12 +93,17 @@ def realtime(setup: Setup, key: jax.Array, plan_hz: float | None = None) -> tupl
     period = 1.0 / plan_hz if plan_hz else sim_dt * setup.replan_every
     total_steps = round(setup.seconds / sim_dt)
     reset_key, plan_key, key = jax.random.split(key, 3)
-    sim_state = complete(setup.sim_task, reset(setup.sim_task, reset_key))
+    # Committed to the device like every jit output, so the loop's calls match the warm-up compile.
+    sim_state = jax.device_put(complete(setup.sim_task, reset(setup.sim_task, reset_key)), jax.devices()[0])
     first = jax.jit(lambda s: closed_loop.first_plan(planner, config, setup.plan_task, s, hooks))
     replan = jax.jit(lambda p, s, k: closed_loop.replan(planner, config, setup.plan_task, p, s, k, hooks))
     step = jax.jit(lambda p, s, k: closed_loop.sim_step(config, setup.sim_task, p, s, k, hooks))
     planner_state = first(sim_state)
-    jax.block_until_ready((replan(planner_state, sim_state, key), step(planner_state, sim_state, key)))  # compile
+    # Compile before the clock starts, for the first state and for states the loop makes
+    # (their leaves can differ in weak type from a reset's, which would recompile mid-run).
+    later_plan = replan(planner_state, sim_state, key)
+    later_state, _ = step(later_plan, sim_state, key)
+    jax.block_until_ready((replan(later_plan, later_state, key), step(later_plan, later_state, key)))
 
     states, controls, plan_costs, latencies = [], [], [], []
     begin = time.perf_counter()
