@@ -50,28 +50,22 @@ class Config(planning.SamplingConfig):
                 raise ValueError(f"cem.Config: invalid {field}={getattr(self, field)!r}")
 
 
-def init(config: Config, task: Task | Ensemble, knots: jax.Array | None = None) -> PlannerState:
-    """Mean = zero plan (or the warm-start `knots` [K, nu]), std = noise_scale x half range."""
-    return planning.initial_state(config, task, knots)
+init = planning.initial_state  # (config, task, knots=None): mean = a zero plan or warm-start knots
 
 
 def plan(
     config: Config, task: Task | Ensemble, state: PlannerState, env_state: State, key: jax.Array
 ) -> tuple[PlannerState, jax.Array]:
     """One replan from `env_state`: returns the new planner state and the plan's [H, nu] controls."""
-    sample_key, rollout_key = jax.random.split(key)
-    state = planning.shift(config, state, env_state.data.time)
-    low, high = planning.control_limits(task)
     half_range = planning.half_range(task)
     num_explore = int(config.explore_fraction * config.num_samples)
     stds = jnp.concatenate([
         jnp.broadcast_to(state.std, (config.num_samples - num_explore,) + state.std.shape),
         jnp.broadcast_to(config.sigma_max * half_range, (num_explore,) + state.std.shape),
     ])  # [N, K, nu]  # fmt: skip
-    samples = planning.sample_knots(sample_key, state.knots, stds, config.num_samples, low, high)
-    costs, dt = planning.sample_costs(config, task, env_state, samples, rollout_key)
+    state, samples, costs = planning.sample_around(config, task, state, env_state, key, stds)
     mean, std = planning.cem_update(
         samples, costs, config.num_elites, config.sigma_min * half_range, config.sigma_max * half_range
     )
-    state = state.replace(knots=mean, std=std, cost=jnp.sort(costs)[: config.num_elites].mean(), dt=dt)
-    return state, planning.controls(config, mean, low, high)
+    state = state.replace(knots=mean, std=std, cost=jnp.sort(costs)[: config.num_elites].mean())
+    return state, planning.controls(config, mean, *planning.control_limits(task))

@@ -39,21 +39,15 @@ class Config(planning.SamplingConfig):
             raise ValueError(f"mppi.Config: invalid temperature={self.temperature!r}, must be > 0")
 
 
-def init(config: Config, task: Task | Ensemble, knots: jax.Array | None = None) -> PlannerState:
-    """A zero plan, or the warm-start `knots` [K, nu] a task supplies."""
-    return planning.initial_state(config, task, knots)
+init = planning.initial_state  # (config, task, knots=None): a zero plan, or warm-start knots [K, nu]
 
 
 def plan(
     config: Config, task: Task | Ensemble, state: PlannerState, env_state: State, key: jax.Array
 ) -> tuple[PlannerState, jax.Array]:
     """One replan from `env_state`: returns the new planner state and the plan's [H, nu] controls."""
-    sample_key, rollout_key = jax.random.split(key)
-    state = planning.shift(config, state, env_state.data.time)
-    low, high = planning.control_limits(task)
-    samples = planning.sample_knots(sample_key, state.knots, state.std, config.num_samples, low, high)
-    costs, dt = planning.sample_costs(config, task, env_state, samples, rollout_key)
+    state, samples, costs = planning.sample_around(config, task, state, env_state, key)
     weights = planning.mppi_weights(costs, config.temperature)
     knots = jnp.tensordot(weights, samples, axes=1)
-    state = state.replace(knots=knots, cost=jnp.sum(weights * jnp.where(weights > 0, costs, 0.0)), dt=dt)
-    return state, planning.controls(config, knots, low, high)
+    state = state.replace(knots=knots, cost=jnp.sum(weights * jnp.where(weights > 0, costs, 0.0)))
+    return state, planning.controls(config, knots, *planning.control_limits(task))

@@ -32,20 +32,14 @@ class Config(planning.SamplingConfig):
     """Predictive sampling has only the shared sampling settings (`planning.SamplingConfig`)."""
 
 
-def init(config: Config, task: Task | Ensemble, knots: jax.Array | None = None) -> PlannerState:
-    """A zero plan, or the warm-start `knots` [K, nu] a task supplies."""
-    return planning.initial_state(config, task, knots)
+init = planning.initial_state  # (config, task, knots=None): a zero plan, or warm-start knots [K, nu]
 
 
 def plan(
     config: Config, task: Task | Ensemble, state: PlannerState, env_state: State, key: jax.Array
 ) -> tuple[PlannerState, jax.Array]:
     """One replan from `env_state`: returns the new planner state and the plan's [H, nu] controls."""
-    sample_key, rollout_key = jax.random.split(key)
-    state = planning.shift(config, state, env_state.data.time)
-    low, high = planning.control_limits(task)
-    samples = planning.sample_knots(sample_key, state.knots, state.std, config.num_samples, low, high)
-    costs, dt = planning.sample_costs(config, task, env_state, samples, rollout_key)
+    state, samples, costs = planning.sample_around(config, task, state, env_state, key)
     best = jnp.argmin(costs)
-    state = state.replace(knots=samples[best], cost=costs[best], dt=dt)
-    return state, planning.controls(config, state.knots, low, high)
+    state = state.replace(knots=samples[best], cost=costs[best])
+    return state, planning.controls(config, state.knots, *planning.control_limits(task))

@@ -33,7 +33,7 @@ from mjzoo.types import State, Task
 __all__ = [
     "SamplingConfig", "PlannerState", "Ensemble", "RISKS", "ensemble", "control_limits", "half_range",
     "initial_state",
-    "shift", "sample_knots", "controls", "control_at", "rollout_costs", "aggregate", "sample_costs",
+    "shift", "sample_knots", "sample_around", "controls", "control_at", "rollout_costs", "aggregate", "sample_costs",
     "mppi_weights", "cem_update",
 ]  # fmt: skip
 
@@ -265,6 +265,29 @@ def sample_costs(
     costs = aggregate(costs, config.risk, config.cvar_alpha)
     # A sample whose physics blew up must never win.
     return jnp.where(jnp.isfinite(costs), costs, jnp.inf), dt
+
+
+def sample_around(
+    config: SamplingConfig,
+    task: Task | Ensemble,
+    state: PlannerState,
+    env_state: State,
+    key: Array,
+    std: Array | None = None,
+) -> tuple[PlannerState, Array, Array]:
+    """The step every sampling planner starts with: shift the plan to `env_state`'s time,
+    sample knots around it (sample 0 = the nominal) with `std` ([K, nu] or [N, K, nu];
+    default `state.std`), and cost them.
+
+    Returns (the shifted state with the measured dt, [N, K, nu] samples, [N] costs).
+    """
+    sample_key, rollout_key = jax.random.split(key)
+    state = shift(config, state, env_state.data.time)
+    low, high = control_limits(task)
+    std = state.std if std is None else std
+    samples = sample_knots(sample_key, state.knots, std, config.num_samples, low, high)
+    costs, dt = sample_costs(config, task, env_state, samples, rollout_key)
+    return state.replace(dt=dt), samples, costs
 
 
 def mppi_weights(costs: Array, temperature: float | Array) -> Array:
