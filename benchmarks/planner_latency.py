@@ -21,7 +21,6 @@ import argparse
 import json
 import os
 import statistics
-import sys
 import time
 from pathlib import Path
 
@@ -31,7 +30,7 @@ from mujoco import mjx
 
 import mjzoo
 import mjzoo.envs
-from mjzoo import physics
+from mjzoo import physics, planner_runs
 from mjzoo.algorithms import cem, mppi, predictive_sampling
 from mjzoo.envs import base
 
@@ -78,13 +77,7 @@ def make(env: str) -> tuple[mjzoo.Task, int]:
         task = humanoid_stand()
         return task, task.step.args[0].value
     task = mjzoo.envs.make(env, episode_steps=10**9)
-    return task, task_substeps(task)
-
-
-def task_substeps(task: mjzoo.Task) -> int:
-    state = mjzoo.reset(task, jax.random.key(0))
-    after = jax.jit(lambda s: task.step(task.model, s, jnp.zeros(task.action_size), jax.random.key(0)))(state)
-    return round(float(after.data.time - state.data.time) / float(task.model.opt.timestep))
+    return task, round(planner_runs.control_dt(task) / float(task.model.opt.timestep))
 
 
 # --- measurements ------------------------------------------------------------------------

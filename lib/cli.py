@@ -11,7 +11,6 @@ from __future__ import annotations
 
 import ast
 import dataclasses
-import functools
 import json
 import time
 from pathlib import Path
@@ -211,17 +210,11 @@ def plan(
     from mjzoo import planner_runs
 
     try:
-        env_setup = mjzoo.envs.planning(env)
+        mjzoo.envs.planning(env)
     except KeyError as e:
         raise SystemExit(str(e.args[0])) from None
     module = _algorithm(algorithm)
-    setup = planner_runs.Setup(
-        planner=module, config=_config(module, env, _parse_assignments(config, "--config")),
-        sim_task=mjzoo.envs.make(env, episode_steps=10**9),
-        plan_task=env_setup.plan_task(functools.partial(mjzoo.envs.make, env), episode_steps=10**9),
-        seconds=seconds or env_setup.seconds, replan_every=env_setup.replan_every, hooks=env_setup.hooks,
-        success=env_setup.success,
-    )  # fmt: skip
+    setup = planner_runs.for_env(env, module, _config(module, env, _parse_assignments(config, "--config")), seconds)
     key = jax.random.key(seed)
     result, stats = planner_runs.offline(setup, key) if offline else planner_runs.realtime(setup, key, plan_hz)
     out = out or Path("runs") / f"{env}-{algorithm}-plan"

@@ -32,7 +32,7 @@ from mjzoo.planning import Ensemble, SamplingConfig
 from mjzoo.running import complete, reset
 from mjzoo.types import Task
 
-__all__ = ["Setup", "offline", "realtime", "write"]
+__all__ = ["Setup", "for_env", "control_dt", "offline", "realtime", "write"]
 
 
 @dataclasses.dataclass(frozen=True)
@@ -51,14 +51,28 @@ class Setup:
     @functools.cached_property
     def sim_dt(self) -> float:
         """The simulation's control step (s), measured from one transition."""
-        return _control_dt(self.sim_task)
+        return control_dt(self.sim_task)
 
     @property
     def num_replans(self) -> int:
         return max(1, round(self.seconds / (self.sim_dt * self.replan_every)))
 
 
-def _control_dt(task: Task) -> float:
+def for_env(name: str, planner: ModuleType, config: SamplingConfig, seconds: float | None = None) -> Setup:
+    """The registered env `name`'s documented closed-loop problem (`mjzoo.envs.planning`):
+    the env as the world, its planning view as the model, its hooks and success test."""
+    import mjzoo.envs
+
+    env = mjzoo.envs.planning(name)
+    return Setup(
+        planner=planner, config=config, sim_task=mjzoo.envs.make(name, episode_steps=10**9),
+        plan_task=env.plan_task(functools.partial(mjzoo.envs.make, name), episode_steps=10**9),
+        seconds=seconds or env.seconds, replan_every=env.replan_every, hooks=env.hooks, success=env.success,
+    )  # fmt: skip
+
+
+def control_dt(task: Task) -> float:
+    """A task's control step (s), measured from one transition from a reset."""
     state = reset(task, jax.random.key(0))
     after = jax.jit(lambda s: task.step(task.model, s, jnp.zeros(task.action_size), jax.random.key(0)))(state)
     return float(after.data.time - state.data.time)

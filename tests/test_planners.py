@@ -28,15 +28,8 @@ PLANNERS = {"predictive_sampling": predictive_sampling, "cem": cem, "mppi": mppi
 
 def setup_for(env: str, planner: str) -> planner_runs.Setup:
     """The env's documented closed-loop problem for `planner`."""
-    env_setup = mjzoo.envs.planning(env)
     module = PLANNERS[planner]
-    return planner_runs.Setup(
-        planner=module, config=module.Config(**mjzoo.envs.hyperparameters(env, planner)),
-        sim_task=mjzoo.envs.make(env, episode_steps=10**9),
-        plan_task=env_setup.plan_task(functools.partial(mjzoo.envs.make, env), episode_steps=10**9),
-        seconds=env_setup.seconds, replan_every=env_setup.replan_every, hooks=env_setup.hooks,
-        success=env_setup.success,
-    )  # fmt: skip
+    return planner_runs.for_env(env, module, module.Config(**mjzoo.envs.hyperparameters(env, planner)))
 
 
 @pytest.mark.parametrize("planner", PLANNERS)
