@@ -15,7 +15,7 @@ import inspect
 from typing import Any, Callable
 
 from mjzoo import physics
-from mjzoo.envs import base, cartpole, cylinder_push, pendulum, point_mass
+from mjzoo.envs import base, cartpole, cylinder_push, joystick, locomotion, pendulum, point_mass
 from mjzoo.types import Task
 
 __all__ = ["make", "names", "defaults", "register", "hyperparameters", "planning"]
@@ -26,6 +26,15 @@ _REGISTRY: dict[str, Callable[..., Task]] = {
     "cartpole_swingup": cartpole.swingup,
     "point_mass": point_mass.reach,
     "cylinder_push": cylinder_push.push,
+    # Brax's models, from the installed brax package (envs/locomotion.py)
+    "hopper": locomotion.hopper,
+    "walker": locomotion.walker,
+    "cheetah": locomotion.cheetah,
+    "ant": locomotion.ant,
+    "humanoid_walk": locomotion.humanoid_walk,
+    "humanoid_run": locomotion.humanoid_run,
+    "humanoid_standup": locomotion.humanoid_standup,
+    "ant_joystick": joystick.joystick,  # train with joystick.joystick_curriculum()
 }
 # Per-env algorithm defaults, defined beside each env.
 _HYPERPARAMETERS: dict[str, dict[str, dict[str, Any]]] = {
@@ -34,6 +43,8 @@ _HYPERPARAMETERS: dict[str, dict[str, dict[str, Any]]] = {
     "cartpole_swingup": {"ppo": cartpole.SWINGUP_PPO, **cartpole.SWINGUP_PLANNING.configs},
     "point_mass": {"ppo": point_mass.PPO, **point_mass.PLANNING.configs},
     "cylinder_push": {"ppo": cylinder_push.PPO, **cylinder_push.PLANNING.configs},
+    **{name: {"ppo": config} for name, config in locomotion.PPO.items()},
+    "ant_joystick": {"ppo": joystick.PPO},
 }
 # How the sampling planners solve each env closed loop.
 _PLANNING: dict[str, base.PlanningSetup] = {

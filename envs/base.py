@@ -18,7 +18,7 @@ from mjzoo.closed_loop import Hooks
 from mjzoo.combinators import with_divergence_guard, with_time_limit
 from mjzoo.types import State, Task, bind
 
-__all__ = ["ASSETS", "load", "floats", "build", "advance", "never_terminate", "PlanningSetup", "held_near"]
+__all__ = ["ASSETS", "load", "brax_asset", "floats", "build", "advance", "never_terminate", "PlanningSetup", "held_near"]
 
 ASSETS = Path(__file__).parent / "assets"
 
@@ -26,6 +26,14 @@ ASSETS = Path(__file__).parent / "assets"
 def load(asset: str, **physics_options: Any) -> physics_lib.Physics:
     """Loads one of the bundled model files (``envs/assets/<asset>``) with physics options."""
     return physics_lib.load(ASSETS / asset, **physics_options)
+
+
+def brax_asset(asset: str, **physics_options: Any) -> physics_lib.Physics:
+    """Loads a model file bundled with the installed brax package
+    (``brax/envs/assets/<asset>``), found at run time, with physics options."""
+    import brax  # a dependency; imported here so envs without its models do not pay for it
+
+    return physics_lib.load(Path(brax.__file__).parent / "envs" / "assets" / asset, **physics_options)
 
 
 def floats(**values: Any) -> dict[str, jax.Array]:

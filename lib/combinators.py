@@ -157,8 +157,25 @@ def with_auto_reset(task: Task) -> Task:
     action is chosen from). Keeps ``info["auto_reset"]["final_obs"]``: the observation
     the episode actually ended in (equal to `obs` when it did not end), which PPO needs
     to bootstrap truncated episodes.
+
+    A task that already resets itself (an auto-reset inside, as under a curriculum) is
+    returned unchanged: a second reset would restart the combinators between the two
+    (the curriculum's level) with every episode.
     """
+    if resets_itself(task):
+        return task
     return runs_transitions(task, _auto_reset_step)
+
+
+def resets_itself(task: Task) -> bool:
+    """Whether `with_auto_reset` is somewhere inside `task` (its functions' bound args)."""
+
+    def found(node) -> bool:
+        partials = jax.tree.leaves(node, is_leaf=lambda x: isinstance(x, jax.tree_util.Partial))
+        return any(isinstance(p, jax.tree_util.Partial) and (p.func is _auto_reset_step or found((p.args, p.keywords)))
+                   for p in partials)  # fmt: skip
+
+    return found(task.replace(model=None))
 
 
 def _auto_reset_step(inner: Task, model, state: State, action: Array, key: Array) -> State:

@@ -41,7 +41,7 @@ from mjzoo.types import State, Task, bind
 
 __all__ = [
     "joint_positions", "joint_velocities", "joint_positions_of", "joint_velocities_of",
-    "base_position", "base_orientation", "base_linear_velocity", "base_angular_velocity",
+    "base_position", "base_height", "base_orientation", "base_linear_velocity", "base_angular_velocity",
     "projected_gravity", "body_positions", "body_velocities", "site_positions", "site_velocities",
     "point_velocity", "sensors", "actuator_forces", "geom_contacts", "foot_contacts", "foot_forces",
     "last_action", "concat",
@@ -120,6 +120,16 @@ def point_velocity(model: mjx.Model, data: mjx.Data, bodies: Array, points: Arra
 def base_position(mj_model: mujoco.MjModel, body: str | None = None) -> Partial:
     """World position of the base body's origin: [3] m."""
     return _gather("xpos", _base(mj_model, body, "base_position"))
+
+
+def base_height(mj_model: mujoco.MjModel, body: str | None = None) -> Partial:
+    """World height of the base body's origin: [1] m (its x, y left out: a running
+    policy should not depend on where it is)."""
+    return bind(_height, _base(mj_model, body, "base_height"))
+
+
+def _height(body, model, state) -> Array:
+    return state.data.xpos[body, 2:].astype(jnp.float32)
 
 
 def base_orientation(mj_model: mujoco.MjModel, body: str | None = None) -> Partial:

@@ -40,6 +40,7 @@ __all__ = [
     "joint_deviation", "joint_limits", "symmetry",
     "action_rate", "action_acceleration", "action_jerk", "torque", "energy",
     "feet_air_time", "foot_slip", "foot_clearance",
+    "forward_velocity", "body_height", "effort",
 ]  # fmt: skip
 
 Array = jax.Array
@@ -286,6 +287,41 @@ def symmetry(
 def _symmetry(adr, signs, model, state, action, next_state) -> Array:
     q = next_state.data.qpos[adr]  # [P, 2]
     return jnp.sum(jnp.square(q[:, 0] - signs * q[:, 1]))
+
+
+# --- progress (the gym-style running and standing objectives) ------------------------
+
+
+def forward_velocity(mj_model: mujoco.MjModel, body: str | None = None, max_speed: float | None = None) -> Partial:
+    """Reward: the world-x velocity (m/s) of the centre of mass of `body`'s subtree
+    (default: the first free joint's body; a planar model's torso gives the whole
+    robot), over the control step: (com'_x - com_x) / elapsed time; capped at
+    `max_speed` (m/s, > 0) if given, so that moving faster earns nothing more."""
+    who = "forward_velocity"
+    cap = np.inf if max_speed is None else checks.number(who, "max_speed", max_speed, 0.0, open_low=True)
+    return bind(_forward_velocity, jnp.int32(names.base_body(mj_model, body, who)), jnp.float32(cap))
+
+
+def _forward_velocity(body, cap, model, state, action, next_state) -> Array:
+    elapsed = jnp.maximum(next_state.data.time - state.data.time, 1e-6)
+    velocity = (next_state.data.subtree_com[body, 0] - state.data.subtree_com[body, 0]) / elapsed
+    return jnp.minimum(velocity, cap)
+
+
+def body_height(mj_model: mujoco.MjModel, body: str | None = None) -> Partial:
+    """Reward: the world height z (m) of `body`'s origin (default: the first free
+    joint's body), from ``xpos``."""
+    return bind(_body_height, jnp.int32(names.base_body(mj_model, body, "body_height")))
+
+
+def _body_height(body, model, state, action, next_state) -> Array:
+    return next_state.data.xpos[body, 2]
+
+
+def effort(model, state: State, action: Array, next_state: State) -> Array:
+    """Cost: sum of squared actions [nu], in the units the task takes them (e.g. motor
+    controls): the gym tasks' control cost."""
+    return jnp.sum(jnp.square(action))
 
 
 # --- actions and effort -------------------------------------------------------------

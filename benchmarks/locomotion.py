@@ -1,0 +1,153 @@
+"""PPO on the locomotion tasks, on one GPU: `ant`, `humanoid_walk` and the ant joystick.
+
+Per task, in one process: (a) raw batched `mjx.step` of the task's physics at PPO's number
+of envs (the physical limit), (b) PPO with the env's registered hyperparameters
+(`mjzoo.envs.hyperparameters(name, "ppo")`, after Brax's / Playground's), its curves,
+metrics and evaluation video under ``--out/<task>/``, (c) a final deterministic
+evaluation of 256 envs over one full episode, with the task's own measure:
+
+  ant            return; forward speed of the centre of mass (m/s)
+  humanoid_walk  return; forward speed; the fraction of episodes that never fall.
+                 Walking: every episode lasts its 1000 steps (15 s) at >= 1 m/s, which
+                 under the task's reward (alive 5 + 1.25 x speed - effort per step)
+                 means a return >= 6000 (standing still earns at most 5000).
+  ant_joystick   trained through `joystick_curriculum()`; evaluated at level 1 (the
+                 hardest pushes and noise): mean |v_xy - command_xy| (m/s, base frame)
+                 over the steps before any fall, and the fraction of falls.
+
+Time to the stated return is wall-clock from the start of training (compile included).
+
+    python benchmarks/locomotion.py --tasks ant ant_joystick --out benchmarks/results/locomotion
+    python benchmarks/locomotion.py --tasks humanoid_walk --steps 60000000
+"""
+
+from __future__ import annotations
+
+import argparse
+import dataclasses
+import json
+import sys
+import time
+from pathlib import Path
+from typing import Callable
+
+import jax
+import jax.numpy as jnp
+import numpy as np
+
+sys.path.insert(0, str(Path(__file__).parent))
+from task_overhead import inputs, raw_steps_per_s  # noqa: E402
+
+import mjzoo  # noqa: E402
+import mjzoo.envs  # noqa: E402
+from mjzoo import metrics, observations, planner_runs, training  # noqa: E402
+from mjzoo.algorithms import ppo  # noqa: E402
+from mjzoo.envs import joystick  # noqa: E402
+
+
+@dataclasses.dataclass(frozen=True)
+class Spec:
+    train_task: Callable[[], mjzoo.Task]
+    eval_task: Callable[[], mjzoo.Task]
+    threshold: float  # the stated return
+
+
+SPECS = {
+    "ant": Spec(lambda: mjzoo.envs.make("ant"), lambda: mjzoo.envs.make("ant"), 3000.0),
+    "humanoid_walk": Spec(lambda: mjzoo.envs.make("humanoid_walk"), lambda: mjzoo.envs.make("humanoid_walk"), 6000.0),
+    "ant_joystick": Spec(joystick.joystick_curriculum, lambda: mjzoo.envs.make("ant_joystick", level=1.0), 400.0),
+}
+
+
+def evaluate(config: ppo.Config, task: mjzoo.Task, train_state, num_envs: int, num_steps: int) -> dict:
+    """Deterministic first episodes of `num_envs` envs: return, length, forward speed of
+    the centre of mass, and the velocity-command error where the task has a command."""
+    act, params = ppo.policy(config, task), ppo.policy_params(train_state)
+    velocity = observations.base_linear_velocity(task.mj_model)
+    dt = planner_runs.control_dt(task)
+
+    def one(key):
+        state = mjzoo.reset(task, key)
+
+        def body(carry, key):
+            state, alive = carry
+            next_state = mjzoo.transition(task, state, act(params, state.obs, key), key)
+            command = state.info.get("command", jnp.zeros(3))
+            error = jnp.linalg.norm(velocity(task.model, next_state)[:2] - command[:2])
+            out = dict(reward=next_state.reward * alive, alive=alive, error=error * alive,
+                       com=next_state.data.subtree_com[1, 0], fell=next_state.terminated & alive)  # fmt: skip
+            return (next_state, alive & ~(next_state.terminated | next_state.truncated)), out
+
+        start = state.data.subtree_com[1, 0]
+        _, out = jax.lax.scan(body, (state, jnp.ones((), bool)), jax.random.split(key, num_steps))
+        steps = jnp.sum(out["alive"])
+        last = out["com"][jnp.maximum(steps - 1, 0).astype(jnp.int32)]
+        return dict(ret=jnp.sum(out["reward"]), length=steps, speed=(last - start) / (steps * dt),
+                    error=jnp.sum(out["error"]) / steps, fell=jnp.any(out["fell"]))  # fmt: skip
+
+    run = jax.jit(jax.vmap(one))
+    result = jax.device_get(run(jax.random.split(jax.random.key(123), num_envs)))
+    return {"return": float(np.mean(result["ret"])), "length": float(np.mean(result["length"])),
+            "forward_speed_m_s": float(np.mean(result["speed"])), "velocity_error_m_s": float(np.mean(result["error"])),
+            "fell_fraction": float(np.mean(result["fell"]))}  # fmt: skip
+
+
+def run_task(name: str, total_steps: int | None, out: Path, eval_envs: int, smoke: bool) -> dict:
+    spec = SPECS[name]
+    fields = mjzoo.envs.hyperparameters(name, "ppo")
+    if total_steps:
+        fields["total_steps"] = total_steps
+    if smoke:
+        fields.update(num_envs=8, unroll_length=8, num_minibatches=4, num_epochs=1)
+    config = ppo.Config(**fields)
+    episode = mjzoo.envs.defaults(name)["episode_steps"]
+    train_task, eval_task = spec.train_task(), spec.eval_task()
+    raw = raw_steps_per_s(eval_task, name, *inputs(eval_task, config.num_envs, 20 if smoke else 100), repeats=3)
+    print(f"{name}: raw stepping {raw:,.0f} steps/s at {config.num_envs} envs", flush=True)
+    settings = training.Settings(out_dir=out / name, updates_per_chunk=1 if smoke else 10,
+                                 eval_envs=16 if smoke else 128, eval_steps=episode, checkpoint_every=0)  # fmt: skip
+    start = time.perf_counter()
+    train_state, _ = ppo.train(config, train_task, settings)
+    total = time.perf_counter() - start
+    lines = metrics.read_metrics(out / name / "metrics.jsonl")
+    offset = total - lines[-1]["perf/elapsed_s"]
+    curve = [(line["step"], line["perf/elapsed_s"] + offset, line["eval/return"]) for line in lines]
+    steady = [line["perf/steps_per_s"] for line in lines[1:]] or [lines[0]["perf/steps_per_s"]]
+    final = evaluate(config, eval_task, train_state, eval_envs, episode)
+    # The video of the task as evaluated (the joystick: at level 1).
+    _, _, trajectory = ppo.evaluate(config, eval_task, train_state, jax.random.key(7), 1, episode)
+    training.write_video(eval_task, trajectory, out / name / "final_policy.mp4")
+    return {"task": name, "config": training.config_dict(config), "raw_steps_per_s": raw,
+            "steps_per_s": float(np.median(steady)), "train_s": total, "threshold": spec.threshold,
+            "time_to_threshold_s": next((s for _, s, r in curve if r >= spec.threshold), None),
+            "curve": curve, "final": final}  # fmt: skip
+
+
+def main() -> None:
+    parser = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
+    parser.add_argument("--tasks", nargs="*", default=list(SPECS), choices=list(SPECS))
+    parser.add_argument("--steps", type=int, default=None, help="env steps per task (default: the registered ones)")
+    parser.add_argument("--eval-envs", type=int, default=256)
+    parser.add_argument("--out", type=Path, default=Path(__file__).parent / "results" / "locomotion")
+    parser.add_argument("--smoke", action="store_true", help="tiny sizes, to check the script on a CPU")
+    args = parser.parse_args()
+    device = jax.devices()[0].device_kind
+    print(f"device: {device}, jax {jax.__version__}", flush=True)
+    rows = []
+    for name in args.tasks:
+        row = run_task(name, args.steps, args.out, args.eval_envs, args.smoke)
+        rows.append(row)
+        f = row["final"]
+        print(f"{name}: {row['steps_per_s']:,.0f} steps/s ({row['steps_per_s'] / row['raw_steps_per_s']:.2f} of raw), "
+              f"return {f['return']:.1f} (threshold {row['threshold']:.0f} at "
+              f"{row['time_to_threshold_s'] and round(row['time_to_threshold_s'], 1)} s), speed "
+              f"{f['forward_speed_m_s']:.2f} m/s, velocity error {f['velocity_error_m_s']:.3f} m/s, "
+              f"fell {f['fell_fraction']:.2f}, length {f['length']:.0f}, trained {row['train_s']:.0f} s", flush=True)
+        args.out.mkdir(parents=True, exist_ok=True)
+        path = args.out / f"locomotion_{jax.default_backend()}_{'_'.join(args.tasks)}.json"
+        path.write_text(json.dumps({"device": device, "jax": jax.__version__, "rows": rows}, indent=2))
+    print(f"wrote {path}")
+
+
+if __name__ == "__main__":
+    main()

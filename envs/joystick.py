@@ -1,0 +1,115 @@
+"""Joystick: Brax's ant follows random velocity commands under pushes, action latency,
+observation noise and randomized friction and masses, with a curriculum.
+
+Built only from the catalog, innermost first (docs/catalog.md's nesting order):
+
+  the ant (`locomotion.bare`, 0.05 s control steps), reset with joint noise and a random
+  heading; action latency U{0, 1} steps; the action history (for the action rate); a
+  velocity command [vx, vy, yaw rate] ~ U(+-1 m/s, +-1 m/s, +-1 rad/s), stand still with
+  probability 0.1, redrawn every 5-10 s and appended to the observation; observation
+  noise; terminations; randomized friction (x U(0.5, 1.5)) and link masses
+  (x U(0.8, 1.2)) per episode; velocity pushes of up to `push` m/s every 5-10 s; the
+  divergence guard and the time limit.
+
+Observation (29,): projected gravity (3), base height (1), base linear and angular
+velocity in the base frame (3 + 3), hinge positions and velocities (8 + 8), the next
+command (3), plus N(0, noise^2) noise.
+Action (8,): the motor controls in [-1, 1].
+Reward terms (weights): linear velocity tracking exp(-|v_xy - c_xy|^2 / 0.25) (1.0),
+yaw-rate tracking exp(-(w_z - c_yaw)^2 / 0.25) (0.5), vertical velocity^2 (-0.5),
+roll/pitch rate^2 (-0.05), action rate^2 (-0.01), effort (-0.02).
+Terminated when the torso tilts over 1.2 rad or drops below 0.2 m; 500 steps (25 s).
+
+`joystick(level=...)` is the task at a fixed difficulty: pushes and noise scale with the
+level in [0, 1]. `joystick_curriculum()` trains through the levels: each environment's
+level rises by 0.1 after an episode that lasted 80% of its steps and falls by 0.05
+otherwise (`curriculum.by_episode_length`).
+"""
+
+from __future__ import annotations
+
+from typing import Any
+
+from mjzoo import (
+    actuators,
+    commands,
+    curriculum,
+    events,
+    observations,
+    randomizers,
+    resets,
+    rewards,
+    terminations,
+    trackers,
+)
+from mjzoo.combinators import with_auto_reset, with_divergence_guard, with_time_limit
+from mjzoo.envs import base
+from mjzoo.envs.locomotion import MJX_OPTIONS, bare
+from mjzoo.perturbations import with_domain_randomization, with_observation_noise
+from mjzoo.types import Task
+
+__all__ = ["joystick", "joystick_curriculum", "PPO"]
+
+# PPO hyperparameters (`mjzoo train ppo ant_joystick`; the benchmark trains the
+# curriculum), after MuJoCo Playground's for its quadruped joysticks.
+PPO = dict(num_envs=4096, unroll_length=40, num_minibatches=32, num_epochs=4, learning_rate=3e-4,
+           entropy_coef=1e-2, discount=0.97, clip_epsilon=0.3, max_grad_norm=1.0, policy_hidden_sizes=(128,) * 4,
+           value_hidden_sizes=(256,) * 5, activation="swish", total_steps=100_000_000)  # fmt: skip
+
+
+def joystick(
+    *,
+    level: float = 1.0,
+    episode_steps: int = 500,
+    push: float = 0.5,
+    noise: float = 0.05,
+    max_action_latency: int = 1,
+    tracking_weight: float = 1.0,
+    yaw_tracking_weight: float = 0.5,
+    vertical_weight: float = 0.5,
+    roll_pitch_weight: float = 0.05,
+    action_rate_weight: float = 0.01,
+    effort_weight: float = 0.02,
+    ctrl_dt: float = 0.05,
+    **physics_options: Any,
+) -> Task:
+    """The joystick task at curriculum `level` in [0, 1] (pushes of up to level * push
+    m/s, observation noise of level * noise)."""
+    physics = base.brax_asset("ant.xml", **{**MJX_OPTIONS, "ctrl_dt": ctrl_dt, **physics_options})
+    m = physics.mj_model
+    observe = observations.concat(
+        observations.projected_gravity(m), observations.base_height(m), observations.base_linear_velocity(m),
+        observations.base_angular_velocity(m), observations.joint_positions, observations.joint_velocities,
+    )  # fmt: skip
+    noisy_start = resets.joint_position_noise(m, 0.1), resets.joint_velocities(m, 0.1), resets.base_heading(m)
+    task = resets.with_resets(bare(physics, observe), *noisy_start, observe=observe)
+    task = trackers.with_action_history(actuators.with_action_latency(task, max_action_latency), length=2)
+    task = commands.with_velocity_command(task, vx=(-1.0, 1.0), vy=(-1.0, 1.0), yaw_rate=(-1.0, 1.0),
+                                          resample_interval=(5.0, 10.0), stand_probability=0.1)  # fmt: skip
+    task = rewards.terms(task, {
+        "tracking": (rewards.linear_velocity_tracking(m, sigma=0.25), tracking_weight),
+        "yaw_tracking": (rewards.angular_velocity_tracking(m, sigma=0.25), yaw_tracking_weight),
+        "vertical": (rewards.vertical_velocity(m), -vertical_weight),
+        "roll_pitch": (rewards.roll_pitch_velocity(m), -roll_pitch_weight),
+        "action_rate": (rewards.action_rate, -action_rate_weight),
+        "effort": (rewards.effort, -effort_weight),
+    })  # fmt: skip
+    task = with_observation_noise(task, level * noise)
+    task = terminations.with_terminations(task, {
+        "tilted": terminations.not_upright(m, 1.2), "too_low": terminations.base_too_low(m, 0.2),
+    })  # fmt: skip
+    physics_draw = randomizers.combine(randomizers.scale_friction(m, 0.5, 1.5), randomizers.scale_masses(m, 0.8, 1.2))
+    task = with_domain_randomization(task, physics_draw)
+    task = events.with_velocity_pushes(task, interval=(5.0, 10.0), linear=(level * push, level * push, 0.0))
+    return with_time_limit(with_divergence_guard(task), episode_steps)
+
+
+def joystick_curriculum(**overrides: Any) -> Task:
+    """`joystick` with each environment's level moved by its episode lengths (starting
+    at 0); auto-resets inside, so the level survives episode ends."""
+    steps = overrides.get("episode_steps", 500)
+
+    def at(level: float) -> Task:
+        return with_auto_reset(joystick(level=level, **overrides))
+
+    return curriculum.with_curriculum(at, curriculum.by_episode_length(steps, fraction=0.8, up=0.1, down=0.05))

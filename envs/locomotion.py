@@ -1,0 +1,269 @@
+"""Running and standing tasks on Brax's bundled models, built only from the catalog.
+
+Each task is `bare` (a model and nothing else) wrapped in catalog items:
+
+    task = locomotion.bare(physics, observe)                  # reset pose, torque physics
+    task = resets.with_resets(task, resets.joint_position_noise(m, 0.01), observe=observe)
+    task = terminations.with_terminations(task, {"fallen": terminations.base_too_low(m, 1.0)})
+    task = rewards.terms(task, {"forward": (rewards.forward_velocity(m), 1.25), ...})
+
+Actions are the motors' controls (MuJoCo clamps them to ``ctrlrange``; PPO maps its
+[-1, 1] actions onto that range), held over the physics substeps of a control step. The models are loaded at run time from
+the installed brax package; physics defaults follow Brax's MJX settings (Newton solver,
+few iterations, no Euler damping), each overridable like any physics option.
+
+| task | model | control step | observation | terminated when | reward terms (weight) |
+|---|---|---|---|---|---|
+| hopper | hopper.xml | 0.008 s | joints but rootx, velocities (11) | torso z < 0.7 m or tilt > 0.2 rad | forward 1, alive 1, effort -1e-3 |
+| walker | walker2d.xml | 0.008 s | (17) | torso z < 0.8 m or tilt > 1 rad | forward 1, alive 1, effort -1e-3 |
+| cheetah | half_cheetah.xml | 0.05 s | (17) | never | forward 1, effort -0.1 |
+| ant | ant.xml | 0.05 s | base z, quat, joints, base velocities, joint vel (27) | torso z < 0.2 m | forward 1, alive 1, effort -0.5 |
+| humanoid_walk | humanoid.xml | 0.015 s | the same (45) | torso z < 1 m | forward (capped at 1.5 m/s) 1.25, alive 5, effort -0.1 |
+| humanoid_run | humanoid.xml | 0.015 s | (45) | torso z < 1 m | forward 1.25, alive 5, effort -0.1 |
+| humanoid_standup | humanoidstandup.xml | 0.015 s | (45) | never | torso height 1, effort -1e-3 |
+
+"forward" is the world-x velocity of the robot's centre of mass (m/s,
+`rewards.forward_velocity`), "alive" 1 per step not terminated, "effort" the sum of
+squared actions. Episodes are 1000 control steps; resets add uniform noise to every
+hinge joint's position and velocity.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+from typing import Any, Callable, Mapping
+
+import jax
+import jax.numpy as jnp
+from mujoco import mjx
+
+from mjzoo import actuators, names, observations, physics as physics_lib, resets, rewards, terminations
+from mjzoo.combinators import with_divergence_guard, with_time_limit
+from mjzoo.envs import base
+from mjzoo.types import State, Task, bind
+
+__all__ = ["bare", "gym_task", "hopper", "walker", "cheetah", "ant", "humanoid_walk", "humanoid_run",
+           "humanoid_standup", "free_base_observation", "MJX_OPTIONS", "PPO"]  # fmt: skip
+
+Array = jax.Array
+Term = tuple[Callable, float]
+# Brax's MJX settings for its free-floating models (fast, few solver iterations).
+MJX_OPTIONS = dict(solver="newton", iterations=1, ls_iterations=4, disable_euler_damping=True)
+_PLANAR = dict(solver="newton", iterations=4, ls_iterations=4, disable_euler_damping=True)
+
+
+# --- the bare model -----------------------------------------------------------------
+
+
+@jax.tree_util.register_dataclass
+@dataclasses.dataclass(frozen=True)
+class Params:
+    qpos0: Array  # [nq] the reset pose
+    observe: Callable  # observation item (model, state) -> [k]
+    actuator: Callable | None  # catalog actuator (model, data, action, key) -> ctrl [nu]
+    n_substeps: int = dataclasses.field(metadata=dict(static=True))
+
+
+def bare(physics: physics_lib.Physics, observe: Callable, actuator: Callable | None = None) -> Task:
+    """The model alone: reset to its pose (``qpos0``), a step of `n_substeps` physics
+    steps driven by `actuator` (a catalog actuator, e.g. `actuators.pd`; default: the
+    action is the controls), observed by the item `observe`; no reward term, no
+    termination, no time limit."""
+    as_leaf = lambda fn: fn if fn is None or isinstance(fn, jax.tree_util.Partial) else jax.tree_util.Partial(fn)  # noqa: E731
+    params = Params(jnp.asarray(physics.mj_model.qpos0, jnp.float32), as_leaf(observe), as_leaf(actuator),
+                    physics.n_substeps)  # fmt: skip
+    return Task(model=physics.model, reset=bind(_reset, params), step=bind(_step, params),
+                reward=bind(_no_terms), terminate=bind(base.never_terminate, ()), mj_model=physics.mj_model)  # fmt: skip
+
+
+def _reset(p: Params, model: mjx.Model, key: Array) -> State:
+    data = mjx.forward(model, mjx.make_data(model).replace(qpos=p.qpos0))
+    state = State.create(data, jnp.zeros((0,), jnp.float32))
+    return state.replace(obs=p.observe(model, state))
+
+
+def _step(p: Params, model: mjx.Model, state: State, action: Array, key: Array) -> State:
+    if p.actuator is None:
+        data = physics_lib.step(model, state.data, jnp.asarray(action, jnp.float32), p.n_substeps)
+    else:
+        data = actuators.step(model, state.data, p.actuator, action, p.n_substeps, key)
+    next_state = state.replace(data=data)
+    return next_state.replace(obs=p.observe(model, next_state))
+
+
+def _no_terms(model, state, action, next_state) -> dict[str, Array]:
+    return {}
+
+
+def free_base_observation(mj_model) -> Callable:
+    """Base height, orientation (quat), hinge positions, base linear and angular velocity
+    (base frame), hinge velocities: [1 + 4 + J + 3 + 3 + J]. No x, y: where the robot
+    is should not change what it does."""
+    return observations.concat(
+        observations.base_height(mj_model), observations.base_orientation(mj_model), observations.joint_positions,
+        observations.base_linear_velocity(mj_model), observations.base_angular_velocity(mj_model),
+        observations.joint_velocities,
+    )  # fmt: skip
+
+
+def _planar_observation(mj_model) -> Callable:
+    """Every joint position but the horizontal rootx, and every velocity."""
+    hinges = [n for n in names.all_names(mj_model, "joint") if n != "rootx"]
+    return observations.concat(observations.joint_positions_of(mj_model, hinges), observations.joint_velocities)
+
+
+# --- the gym-style task -------------------------------------------------------------
+
+
+def gym_task(
+    physics: physics_lib.Physics,
+    observe: Callable,
+    *,
+    progress: Mapping[str, Term],
+    fallen: Mapping[str, Callable] | None,
+    alive_weight: float,
+    effort_weight: float,
+    reset_noise: float,
+    episode_steps: int,
+) -> Task:
+    """`bare` with joint reset noise U(+-reset_noise) (rad, rad/s), the `fallen`
+    terminations, the `progress` reward terms, alive (if `fallen`) and effort, a
+    divergence guard and a time limit."""
+    m = physics.mj_model
+    noise = resets.joint_position_noise(m, reset_noise), resets.joint_velocities(m, reset_noise)
+    task = resets.with_resets(bare(physics, observe), *noise, observe=observe)
+    spec = dict(progress)
+    if fallen:
+        task = terminations.with_terminations(task, fallen)
+        spec["alive"] = (rewards.alive(task), alive_weight)
+    spec["effort"] = (rewards.effort, -effort_weight)
+    return with_time_limit(with_divergence_guard(rewards.terms(task, spec)), episode_steps)
+
+
+def _upright_torso(m, min_height: float, max_tilt: float | None = None) -> dict[str, Callable]:
+    fallen = {"too_low": terminations.base_too_low(m, min_height, body="torso")}
+    if max_tilt is not None:
+        fallen["tilted"] = terminations.not_upright(m, max_tilt, body="torso")
+    return fallen
+
+
+# --- planar runners -----------------------------------------------------------------
+
+
+def _planar(asset: str, min_height: float | None, max_tilt: float | None, forward_weight: float,
+            alive_weight: float, effort_weight: float, reset_noise: float, episode_steps: int,
+            physics_options: dict[str, Any]) -> Task:  # fmt: skip
+    physics = base.brax_asset(asset, **physics_options)
+    m = physics.mj_model
+    return gym_task(
+        physics, _planar_observation(m), progress={"forward": (rewards.forward_velocity(m, "torso"), forward_weight)},
+        fallen=None if min_height is None else _upright_torso(m, min_height, max_tilt), alive_weight=alive_weight,
+        effort_weight=effort_weight, reset_noise=reset_noise, episode_steps=episode_steps,
+    )  # fmt: skip
+
+
+def hopper(*, episode_steps: int = 1000, forward_weight: float = 1.0, alive_weight: float = 1.0,
+           effort_weight: float = 1e-3, min_height: float = 0.7, max_tilt: float = 0.2,
+           reset_noise: float = 5e-3, ctrl_dt: float = 0.008, **physics_options) -> Task:  # fmt: skip
+    """One-legged hopper running along +x (Brax's hopper.xml)."""
+    options = {**_PLANAR, "ctrl_dt": ctrl_dt, **physics_options}
+    return _planar("hopper.xml", min_height, max_tilt, forward_weight, alive_weight, effort_weight, reset_noise,
+                   episode_steps, options)  # fmt: skip
+
+
+def walker(*, episode_steps: int = 1000, forward_weight: float = 1.0, alive_weight: float = 1.0,
+           effort_weight: float = 1e-3, min_height: float = 0.8, max_tilt: float = 1.0,
+           reset_noise: float = 5e-3, ctrl_dt: float = 0.008, **physics_options) -> Task:  # fmt: skip
+    """Planar biped walker running along +x (Brax's walker2d.xml)."""
+    options = {**_PLANAR, "ctrl_dt": ctrl_dt, **physics_options}
+    return _planar("walker2d.xml", min_height, max_tilt, forward_weight, alive_weight, effort_weight, reset_noise,
+                   episode_steps, options)  # fmt: skip
+
+
+def cheetah(*, episode_steps: int = 1000, forward_weight: float = 1.0, effort_weight: float = 0.1,
+            reset_noise: float = 0.1, ctrl_dt: float = 0.05, **physics_options) -> Task:  # fmt: skip
+    """Planar half-cheetah running along +x (Brax's half_cheetah.xml); never terminates."""
+    options = {**_PLANAR, "ctrl_dt": ctrl_dt, **physics_options}
+    return _planar("half_cheetah.xml", None, None, forward_weight, 0.0, effort_weight, reset_noise,
+                   episode_steps, options)  # fmt: skip
+
+
+# --- free-floating runners ----------------------------------------------------------
+
+
+def ant(*, episode_steps: int = 1000, forward_weight: float = 1.0, alive_weight: float = 1.0,
+        effort_weight: float = 0.5, min_height: float = 0.2, reset_noise: float = 0.1, ctrl_dt: float = 0.05,
+        **physics_options) -> Task:  # fmt: skip
+    """Four-legged ant running along +x (Brax's ant.xml)."""
+    physics = base.brax_asset("ant.xml", **{**MJX_OPTIONS, "ctrl_dt": ctrl_dt, **physics_options})
+    m = physics.mj_model
+    return gym_task(
+        physics, free_base_observation(m), progress={"forward": (rewards.forward_velocity(m), forward_weight)},
+        fallen=_upright_torso(m, min_height), alive_weight=alive_weight, effort_weight=effort_weight,
+        reset_noise=reset_noise, episode_steps=episode_steps,
+    )  # fmt: skip
+
+
+def _humanoid(max_speed: float | None, episode_steps: int, forward_weight: float, alive_weight: float,
+              effort_weight: float, min_height: float, reset_noise: float, options: dict[str, Any]) -> Task:  # fmt: skip
+    physics = base.brax_asset("humanoid.xml", **options)
+    m = physics.mj_model
+    forward = rewards.forward_velocity(m, max_speed=max_speed)
+    return gym_task(
+        physics, free_base_observation(m), progress={"forward": (forward, forward_weight)},
+        fallen=_upright_torso(m, min_height), alive_weight=alive_weight, effort_weight=effort_weight,
+        reset_noise=reset_noise, episode_steps=episode_steps,
+    )  # fmt: skip
+
+
+def humanoid_walk(*, episode_steps: int = 1000, forward_weight: float = 1.25, max_speed: float = 1.5,
+                  alive_weight: float = 5.0, effort_weight: float = 0.1, min_height: float = 1.0,
+                  reset_noise: float = 0.01, ctrl_dt: float = 0.015, **physics_options) -> Task:  # fmt: skip
+    """Humanoid walking along +x (Brax's humanoid.xml); speed beyond `max_speed` (m/s)
+    earns nothing more."""
+    options = {**MJX_OPTIONS, "ctrl_dt": ctrl_dt, **physics_options}
+    return _humanoid(max_speed, episode_steps, forward_weight, alive_weight, effort_weight, min_height,
+                     reset_noise, options)  # fmt: skip
+
+
+def humanoid_run(*, episode_steps: int = 1000, forward_weight: float = 1.25, alive_weight: float = 5.0,
+                 effort_weight: float = 0.1, min_height: float = 1.0, reset_noise: float = 0.01,
+                 ctrl_dt: float = 0.015, **physics_options) -> Task:  # fmt: skip
+    """Humanoid running along +x as fast as it can (Brax's humanoid.xml)."""
+    options = {**MJX_OPTIONS, "ctrl_dt": ctrl_dt, **physics_options}
+    return _humanoid(None, episode_steps, forward_weight, alive_weight, effort_weight, min_height, reset_noise,
+                     options)  # fmt: skip
+
+
+def humanoid_standup(*, episode_steps: int = 1000, height_weight: float = 1.0, effort_weight: float = 1e-3,
+                     reset_noise: float = 0.01, ctrl_dt: float = 0.015, **physics_options) -> Task:  # fmt: skip
+    """Humanoid getting up from lying on its back (Brax's humanoidstandup.xml): reward
+    the torso's height (m) per step; never terminates."""
+    physics = base.brax_asset("humanoidstandup.xml", **{**MJX_OPTIONS, "ctrl_dt": ctrl_dt, **physics_options})
+    m = physics.mj_model
+    return gym_task(
+        physics, free_base_observation(m), progress={"height": (rewards.body_height(m, "torso"), height_weight)},
+        fallen=None, alive_weight=0.0, effort_weight=effort_weight, reset_noise=reset_noise,
+        episode_steps=episode_steps,
+    )  # fmt: skip
+
+
+# PPO hyperparameters (`mjzoo train ppo <task>`, benchmarks/locomotion.py), after Brax's
+# published ones for these models (Brax collects batch x minibatches sequences of `unroll`
+# steps per update; here each env collects that many steps in one unroll).
+_BRAX = dict(num_minibatches=32, learning_rate=3e-4, discount=0.97, clip_epsilon=0.3, max_grad_norm=None,
+             policy_hidden_sizes=(32,) * 4, value_hidden_sizes=(256,) * 5, activation="swish")  # fmt: skip
+_HUMANOID = dict(_BRAX, num_envs=2048, unroll_length=160, num_epochs=8, entropy_coef=1e-3, reward_scaling=0.1,
+                 total_steps=50_000_000)  # fmt: skip
+PPO = {
+    "hopper": dict(_BRAX, num_envs=2048, unroll_length=160, num_epochs=8, entropy_coef=1e-3, total_steps=20_000_000),
+    "walker": dict(_BRAX, num_envs=2048, unroll_length=160, num_epochs=8, entropy_coef=1e-3, total_steps=20_000_000),
+    "cheetah": dict(_BRAX, num_envs=2048, unroll_length=160, num_epochs=8, entropy_coef=1e-3, discount=0.95,
+                    total_steps=50_000_000),
+    "ant": dict(_BRAX, num_envs=4096, unroll_length=80, num_epochs=4, entropy_coef=1e-2, reward_scaling=10.0,
+                total_steps=50_000_000),
+    "humanoid_walk": _HUMANOID,
+    "humanoid_run": _HUMANOID,
+    "humanoid_standup": dict(_HUMANOID, unroll_length=240, learning_rate=6e-4, entropy_coef=1e-2,
+                             total_steps=100_000_000),
+}  # fmt: skip
