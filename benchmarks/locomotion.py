@@ -16,6 +16,8 @@ evaluation of 256 envs over one full episode, with the task's own measure:
                  over the steps before any fall, and the fraction of falls.
 
 Time to the stated return is wall-clock from the start of training (compile included).
+Where the machine has no video encoder (the GPU image lacks ffmpeg), `--no-video` saves
+each final episode as .npz and `--render` makes the videos elsewhere.
 
     python benchmarks/locomotion.py --tasks ant ant_joystick --out benchmarks/results/locomotion
     python benchmarks/locomotion.py --tasks humanoid_walk --steps 60000000
@@ -40,7 +42,7 @@ from task_overhead import inputs, raw_steps_per_s  # noqa: E402
 
 import mjzoo  # noqa: E402
 import mjzoo.envs  # noqa: E402
-from mjzoo import metrics, observations, planner_runs, training  # noqa: E402
+from mjzoo import metrics, observations, planner_runs, rendering, training  # noqa: E402
 from mjzoo.algorithms import ppo  # noqa: E402
 from mjzoo.envs import joystick  # noqa: E402
 
@@ -92,7 +94,27 @@ def evaluate(config: ppo.Config, task: mjzoo.Task, train_state, num_envs: int, n
             "fell_fraction": float(np.mean(result["fell"]))}  # fmt: skip
 
 
-def run_task(name: str, total_steps: int | None, out: Path, eval_envs: int, smoke: bool) -> dict:
+def save_final_episode(task: mjzoo.Task, trajectory, path: Path, video: bool) -> None:
+    """The episode's qpos [T, nq] and times [T] as .npz (`--render` turns it into a video
+    on a machine with a video encoder), and its video now if `video`."""
+    data = jax.device_get(trajectory.next_state.data)
+    np.savez_compressed(path.with_suffix(".npz"), qpos=np.asarray(data.qpos), time=np.asarray(data.time))
+    if video:
+        training.write_video(task, trajectory, path.with_suffix(".mp4"))
+
+
+def render_saved(out: Path) -> None:
+    """Videos of the final episodes saved under `out`/<task>/final_policy.npz."""
+    for saved in sorted(out.glob("*/final_policy.npz")):
+        episode = np.load(saved)
+        fps = 1.0 / float(episode["time"][1] - episode["time"][0])
+        mj_model = SPECS[saved.parent.name].eval_task().mj_model
+        path = rendering.render_video(mj_model, episode["qpos"], saved.with_suffix(".mp4"), fps,
+                                      camera=0 if mj_model.ncam else None)  # fmt: skip
+        print(f"wrote {path}")
+
+
+def run_task(name: str, total_steps: int | None, out: Path, eval_envs: int, smoke: bool, video: bool) -> dict:
     spec = SPECS[name]
     fields = mjzoo.envs.hyperparameters(name, "ppo")
     if total_steps:
@@ -105,7 +127,8 @@ def run_task(name: str, total_steps: int | None, out: Path, eval_envs: int, smok
     raw = raw_steps_per_s(eval_task, name, *inputs(eval_task, config.num_envs, 20 if smoke else 100), repeats=3)
     print(f"{name}: raw stepping {raw:,.0f} steps/s at {config.num_envs} envs", flush=True)
     settings = training.Settings(out_dir=out / name, updates_per_chunk=1 if smoke else 10,
-                                 eval_envs=16 if smoke else 128, eval_steps=episode, checkpoint_every=0)  # fmt: skip
+                                 eval_envs=16 if smoke else 128, eval_steps=episode, checkpoint_every=0,
+                                 video=video)  # fmt: skip
     start = time.perf_counter()
     train_state, _ = ppo.train(config, train_task, settings)
     total = time.perf_counter() - start
@@ -116,7 +139,7 @@ def run_task(name: str, total_steps: int | None, out: Path, eval_envs: int, smok
     final = evaluate(config, eval_task, train_state, eval_envs, episode)
     # The video of the task as evaluated (the joystick: at level 1).
     _, _, trajectory = ppo.evaluate(config, eval_task, train_state, jax.random.key(7), 1, episode)
-    training.write_video(eval_task, trajectory, out / name / "final_policy.mp4")
+    save_final_episode(eval_task, trajectory, out / name / "final_policy.mp4", video)
     return {"task": name, "config": training.config_dict(config), "raw_steps_per_s": raw,
             "steps_per_s": float(np.median(steady)), "train_s": total, "threshold": spec.threshold,
             "time_to_threshold_s": next((s for _, s, r in curve if r >= spec.threshold), None),
@@ -130,12 +153,16 @@ def main() -> None:
     parser.add_argument("--eval-envs", type=int, default=256)
     parser.add_argument("--out", type=Path, default=Path(__file__).parent / "results" / "locomotion")
     parser.add_argument("--smoke", action="store_true", help="tiny sizes, to check the script on a CPU")
+    parser.add_argument("--no-video", action="store_true", help="save the final episodes, render them later")
+    parser.add_argument("--render", action="store_true", help="only render the saved final episodes under --out")
     args = parser.parse_args()
+    if args.render:
+        return render_saved(args.out)
     device = jax.devices()[0].device_kind
     print(f"device: {device}, jax {jax.__version__}", flush=True)
     rows = []
     for name in args.tasks:
-        row = run_task(name, args.steps, args.out, args.eval_envs, args.smoke)
+        row = run_task(name, args.steps, args.out, args.eval_envs, args.smoke, not args.no_video)
         rows.append(row)
         f = row["final"]
         print(f"{name}: {row['steps_per_s']:,.0f} steps/s ({row['steps_per_s'] / row['raw_steps_per_s']:.2f} of raw), "

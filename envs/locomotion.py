@@ -35,6 +35,8 @@ from typing import Any, Callable, Mapping
 
 import jax
 import jax.numpy as jnp
+import mujoco
+import numpy as np
 from mujoco import mjx
 
 from mjzoo import actuators, names, observations, physics as physics_lib, resets, rewards, terminations
@@ -42,7 +44,7 @@ from mjzoo.combinators import with_divergence_guard, with_time_limit
 from mjzoo.envs import base
 from mjzoo.types import State, Task, bind
 
-__all__ = ["bare", "gym_task", "hopper", "walker", "cheetah", "ant", "humanoid_walk", "humanoid_run",
+__all__ = ["bare", "reset_pose", "gym_task", "hopper", "walker", "cheetah", "ant", "humanoid_walk", "humanoid_run",
            "humanoid_standup", "free_base_observation", "MJX_OPTIONS", "PPO"]  # fmt: skip
 
 Array = jax.Array
@@ -65,15 +67,24 @@ class Params:
 
 
 def bare(physics: physics_lib.Physics, observe: Callable, actuator: Callable | None = None) -> Task:
-    """The model alone: reset to its pose (``qpos0``), a step of `n_substeps` physics
+    """The model alone: reset to its pose (`reset_pose`), a step of `n_substeps` physics
     steps driven by `actuator` (a catalog actuator, e.g. `actuators.pd`; default: the
     action is the controls), observed by the item `observe`; no reward term, no
     termination, no time limit."""
     as_leaf = lambda fn: fn if fn is None or isinstance(fn, jax.tree_util.Partial) else jax.tree_util.Partial(fn)  # noqa: E731
-    params = Params(jnp.asarray(physics.mj_model.qpos0, jnp.float32), as_leaf(observe), as_leaf(actuator),
+    params = Params(jnp.asarray(reset_pose(physics.mj_model), jnp.float32), as_leaf(observe), as_leaf(actuator),
                     physics.n_substeps)  # fmt: skip
     return Task(model=physics.model, reset=bind(_reset, params), step=bind(_step, params),
                 reward=bind(_no_terms), terminate=bind(base.never_terminate, ()), mj_model=physics.mj_model)  # fmt: skip
+
+
+def reset_pose(mj_model: mujoco.MjModel) -> np.ndarray:
+    """[nq] the model's custom numeric ``init_qpos`` where it has one (Brax's convention:
+    the ant's ankles, whose ranges exclude 0), else its ``qpos0``."""
+    for i in range(mj_model.nnumeric):
+        if mj_model.numeric(i).name == "init_qpos" and mj_model.numeric(i).data.shape == (mj_model.nq,):
+            return np.asarray(mj_model.numeric(i).data)
+    return np.asarray(mj_model.qpos0)
 
 
 def _reset(p: Params, model: mjx.Model, key: Array) -> State:
