@@ -104,12 +104,13 @@ def joystick(
     return with_time_limit(with_divergence_guard(task), episode_steps)
 
 
-def joystick_curriculum(**overrides: Any) -> Task:
-    """`joystick` with each environment's level moved by its episode lengths (starting
-    at 0); auto-resets inside, so the level survives episode ends."""
+def joystick_curriculum(rule: curriculum.Rule | None = None, **overrides: Any) -> Task:
+    """`joystick` with each environment's level moved by `rule` (default: by its episode
+    lengths, from 0); auto-resets inside, so the level survives episode ends."""
     steps = overrides.get("episode_steps", 500)
+    rule = rule or curriculum.by_episode_length(steps, fraction=0.8, up=0.1, down=0.05)
 
     def at(level: float) -> Task:
         return with_auto_reset(joystick(level=level, **overrides))
 
-    return curriculum.with_curriculum(at, curriculum.by_episode_length(steps, fraction=0.8, up=0.1, down=0.05))
+    return curriculum.with_curriculum(at, rule)
