@@ -18,7 +18,7 @@ from mjzoo import physics
 from mjzoo.envs import base, cartpole, cylinder_push, joystick, locomotion, pendulum, point_mass
 from mjzoo.types import Task
 
-__all__ = ["make", "names", "defaults", "register", "hyperparameters", "planning"]
+__all__ = ["make", "names", "factory", "defaults", "register", "hyperparameters", "planning"]
 
 _REGISTRY: dict[str, Callable[..., Task]] = {
     "pendulum_swingup": pendulum.swingup,
@@ -78,7 +78,7 @@ def register(
 
 def planning(name: str) -> base.PlanningSetup:
     """How the sampling planners solve `name` closed loop (error if no setup exists)."""
-    _factory(name)
+    factory(name)
     if name not in _PLANNING:
         raise KeyError(f"{name!r} has no planning setup; envs with one: {sorted(_PLANNING)}")
     return _PLANNING[name]
@@ -86,13 +86,13 @@ def planning(name: str) -> base.PlanningSetup:
 
 def hyperparameters(name: str, algorithm: str) -> dict[str, Any]:
     """The env's default config fields for `algorithm` (empty if it has none)."""
-    _factory(name)
+    factory(name)
     return dict(_HYPERPARAMETERS.get(name, {}).get(algorithm, {}))
 
 
 def defaults(name: str) -> dict[str, Any]:
     """The overridable arguments of a task and their default values."""
-    signature = inspect.signature(_factory(name))
+    signature = inspect.signature(factory(name))
     return {
         k: p.default for k, p in signature.parameters.items() if p.kind == inspect.Parameter.KEYWORD_ONLY
     }
@@ -100,15 +100,16 @@ def defaults(name: str) -> dict[str, Any]:
 
 def make(name: str, **overrides: Any) -> Task:
     """Builds the task `name`, with `overrides` of its defaults or of physics options."""
-    factory = _factory(name)
+    build = factory(name)
     allowed = set(defaults(name)) | set(physics.OPTIONS)
     unknown = sorted(set(overrides) - allowed)
     if unknown:
         raise TypeError(f"{name}: unknown override(s) {unknown}; allowed: {sorted(allowed)}")
-    return factory(**overrides)
+    return build(**overrides)
 
 
-def _factory(name: str) -> Callable[..., Task]:
+def factory(name: str) -> Callable[..., Task]:
+    """The function that builds `name` (KeyError naming the registered envs if unknown)."""
     if name not in _REGISTRY:
         close = difflib.get_close_matches(name, _REGISTRY, n=1)
         hint = f" (did you mean {close[0]!r}?)" if close else ""
