@@ -245,22 +245,15 @@ def test_time_limit_truncates_and_never_terminates(env):
 
 def check_time_limit(env: str) -> None:
     """With a short limit, an episode is truncated exactly at its last step unless it
-    terminated first; truncated and terminated are never both set."""
+    terminated first; truncated and terminated are never both set. Runs the bare case's
+    compiled rollout (the limit is a number, not a new trace) and checks each of its
+    episodes over the limit's steps."""
     limit = 6
-    task = mjzoo.envs.make(env, episode_steps=limit)
-    nu = task.action_size
-
-    def policy(obs, key):
-        return jnp.zeros((nu,))
-
-    @jax.jit
-    def run(task, key):
-        state = mjzoo.reset(task, key)
-        return mjzoo.rollout(task, policy, state, key, limit)[1].next_state
-
-    states = run(task, jax.random.key(1))
-    terminated, truncated = np.asarray(states.terminated), np.asarray(states.truncated)
+    run = batched_rollout(env, "bare")
+    _, trajectory = run(mjzoo.envs.make(env, episode_steps=limit), _keys(1))
+    states = trajectory.next_state
+    terminated, truncated = (np.asarray(x)[:, :limit] for x in (states.terminated, states.truncated))
     assert not (terminated & truncated).any()
-    assert not truncated[: limit - 1].any()
-    assert truncated[limit - 1] or terminated.any()
-    np.testing.assert_array_equal(states.info["time_limit"], np.arange(1, limit + 1))
+    assert not truncated[:, : limit - 1].any()
+    assert (truncated[:, limit - 1] | terminated.any(axis=1)).all()
+    np.testing.assert_array_equal(states.info["time_limit"][:, :limit], np.tile(np.arange(1, limit + 1), (BATCH, 1)))
