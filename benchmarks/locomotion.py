@@ -38,11 +38,12 @@ import jax.numpy as jnp
 import numpy as np
 
 sys.path.insert(0, str(Path(__file__).parent))
+from ppo_vs_brax import time_to, training_curve  # noqa: E402
 from task_overhead import inputs, raw_steps_per_s  # noqa: E402
 
 import mjzoo  # noqa: E402
 import mjzoo.envs  # noqa: E402
-from mjzoo import metrics, observations, planner_runs, rendering, training  # noqa: E402
+from mjzoo import observations, planner_runs, rendering, training  # noqa: E402
 from mjzoo.algorithms import ppo  # noqa: E402
 from mjzoo.envs import joystick  # noqa: E402
 
@@ -132,17 +133,14 @@ def run_task(name: str, total_steps: int | None, out: Path, eval_envs: int, smok
     start = time.perf_counter()
     train_state, _ = ppo.train(config, train_task, settings)
     total = time.perf_counter() - start
-    lines = metrics.read_metrics(out / name / "metrics.jsonl")
-    offset = total - lines[-1]["perf/elapsed_s"]
-    curve = [(line["step"], line["perf/elapsed_s"] + offset, line["eval/return"]) for line in lines]
-    steady = [line["perf/steps_per_s"] for line in lines[1:]] or [lines[0]["perf/steps_per_s"]]
+    curve, steps_per_s = training_curve(out / name / "metrics.jsonl", total)
     final = evaluate(config, eval_task, train_state, eval_envs, episode)
     # The video of the task as evaluated (the joystick: at level 1).
     _, _, trajectory = ppo.evaluate(config, eval_task, train_state, jax.random.key(7), 1, episode)
     save_final_episode(eval_task, trajectory, out / name / "final_policy.mp4", video)
     return {"task": name, "config": training.config_dict(config), "raw_steps_per_s": raw,
-            "steps_per_s": float(np.median(steady)), "train_s": total, "threshold": spec.threshold,
-            "time_to_threshold_s": next((s for _, s, r in curve if r >= spec.threshold), None),
+            "steps_per_s": steps_per_s, "train_s": total, "threshold": spec.threshold,
+            "time_to_threshold_s": time_to(curve, spec.threshold),
             "curve": curve, "final": final}  # fmt: skip
 
 

@@ -61,13 +61,19 @@ def train_mjzoo(task: mjzoo.Task, total_steps: int, episode_length: int) -> dict
                                      video=False, progress=False, checkpoint_every=0)  # fmt: skip
         start = time.perf_counter()
         training.run(ppo, config, task, settings)
-        total = time.perf_counter() - start
-        lines = metrics.read_metrics(Path(out) / "metrics.jsonl")
-    offset = total - lines[-1]["perf/elapsed_s"]  # init before the loop's clock started
+        curve, steps_per_s = training_curve(Path(out) / "metrics.jsonl", time.perf_counter() - start)
+    return {"steps_per_s": steps_per_s, "curve": curve, "final_return": curve[-1][2],
+            "compile_s": curve[0][1] - config.steps_per_update / steps_per_s}  # fmt: skip
+
+
+def training_curve(metrics_path: Path, total_s: float) -> tuple[list, float]:
+    """([(step, wall-clock s since training started, eval return)], median steps/s after
+    the first chunk) of a harness run that took `total_s` in all."""
+    lines = metrics.read_metrics(metrics_path)
+    offset = total_s - lines[-1]["perf/elapsed_s"]  # init before the loop's clock started
     curve = [(line["step"], line["perf/elapsed_s"] + offset, line["eval/return"]) for line in lines]
     steady = [line["perf/steps_per_s"] for line in lines[1:]] or [lines[0]["perf/steps_per_s"]]
-    return {"steps_per_s": float(np.median(steady)), "curve": curve, "final_return": curve[-1][2],
-            "compile_s": curve[0][1] - config.steps_per_update / float(np.median(steady))}  # fmt: skip
+    return curve, float(np.median(steady))
 
 
 def time_to(curve: list, threshold: float) -> float | None:

@@ -71,6 +71,8 @@ def bare(physics: physics_lib.Physics, observe: Callable, actuator: Callable | N
     steps driven by `actuator` (a catalog actuator, e.g. `actuators.pd`; default: the
     action is the controls), observed by the item `observe`; no reward term, no
     termination, no time limit."""
+    # Plain functions become Partials (pytrees); a Partial stays itself, since wrapping it
+    # again makes a treedef that compares by identity and retraces every new task.
     as_leaf = lambda fn: fn if fn is None or isinstance(fn, jax.tree_util.Partial) else jax.tree_util.Partial(fn)  # noqa: E731
     params = Params(jnp.asarray(reset_pose(physics.mj_model), jnp.float32), as_leaf(observe), as_leaf(actuator),
                     physics.n_substeps)  # fmt: skip
@@ -95,7 +97,7 @@ def _reset(p: Params, model: mjx.Model, key: Array) -> State:
 
 def _step(p: Params, model: mjx.Model, state: State, action: Array, key: Array) -> State:
     if p.actuator is None:
-        data = physics_lib.step(model, state.data, jnp.asarray(action, jnp.float32), p.n_substeps)
+        data = base.advance(model, state, action, p.n_substeps)
     else:
         data = actuators.step(model, state.data, p.actuator, action, p.n_substeps, key)
     next_state = state.replace(data=data)
@@ -206,18 +208,15 @@ def ant(*, episode_steps: int = 1000, forward_weight: float = 1.0, alive_weight:
         effort_weight: float = 0.5, min_height: float = 0.2, reset_noise: float = 0.1, ctrl_dt: float = 0.05,
         **physics_options) -> Task:  # fmt: skip
     """Four-legged ant running along +x (Brax's ant.xml)."""
-    physics = base.brax_asset("ant.xml", **{**MJX_OPTIONS, "ctrl_dt": ctrl_dt, **physics_options})
-    m = physics.mj_model
-    return gym_task(
-        physics, free_base_observation(m), progress={"forward": (rewards.forward_velocity(m), forward_weight)},
-        fallen=_upright_torso(m, min_height), alive_weight=alive_weight, effort_weight=effort_weight,
-        reset_noise=reset_noise, episode_steps=episode_steps,
-    )  # fmt: skip
+    options = {**MJX_OPTIONS, "ctrl_dt": ctrl_dt, **physics_options}
+    return _free_runner("ant.xml", None, episode_steps, forward_weight, alive_weight, effort_weight, min_height,
+                        reset_noise, options)  # fmt: skip
 
 
-def _humanoid(max_speed: float | None, episode_steps: int, forward_weight: float, alive_weight: float,
-              effort_weight: float, min_height: float, reset_noise: float, options: dict[str, Any]) -> Task:  # fmt: skip
-    physics = base.brax_asset("humanoid.xml", **options)
+def _free_runner(asset: str, max_speed: float | None, episode_steps: int, forward_weight: float,
+                 alive_weight: float, effort_weight: float, min_height: float, reset_noise: float,
+                 options: dict[str, Any]) -> Task:  # fmt: skip
+    physics = base.brax_asset(asset, **options)
     m = physics.mj_model
     forward = rewards.forward_velocity(m, max_speed=max_speed)
     return gym_task(
@@ -233,8 +232,8 @@ def humanoid_walk(*, episode_steps: int = 1000, forward_weight: float = 1.25, ma
     """Humanoid walking along +x (Brax's humanoid.xml); speed beyond `max_speed` (m/s)
     earns nothing more."""
     options = {**MJX_OPTIONS, "ctrl_dt": ctrl_dt, **physics_options}
-    return _humanoid(max_speed, episode_steps, forward_weight, alive_weight, effort_weight, min_height,
-                     reset_noise, options)  # fmt: skip
+    return _free_runner("humanoid.xml", max_speed, episode_steps, forward_weight, alive_weight, effort_weight,
+                        min_height, reset_noise, options)  # fmt: skip
 
 
 def humanoid_run(*, episode_steps: int = 1000, forward_weight: float = 1.25, alive_weight: float = 5.0,
@@ -242,8 +241,8 @@ def humanoid_run(*, episode_steps: int = 1000, forward_weight: float = 1.25, ali
                  ctrl_dt: float = 0.015, **physics_options) -> Task:  # fmt: skip
     """Humanoid running along +x as fast as it can (Brax's humanoid.xml)."""
     options = {**MJX_OPTIONS, "ctrl_dt": ctrl_dt, **physics_options}
-    return _humanoid(None, episode_steps, forward_weight, alive_weight, effort_weight, min_height, reset_noise,
-                     options)  # fmt: skip
+    return _free_runner("humanoid.xml", None, episode_steps, forward_weight, alive_weight, effort_weight,
+                        min_height, reset_noise, options)  # fmt: skip
 
 
 def humanoid_standup(*, episode_steps: int = 1000, height_weight: float = 1.0, effort_weight: float = 1e-3,
