@@ -16,6 +16,7 @@ ctrlrange. GAE bootstraps truncated episodes from their true final observation.
 from __future__ import annotations
 
 import dataclasses
+import functools
 import sys
 from typing import Any, Callable, Literal
 
@@ -163,6 +164,7 @@ def _to_ctrl(task: Task, action: Array) -> Array:
 # --- init ---------------------------------------------------------------------------
 
 
+@functools.partial(jax.jit, static_argnums=0)  # one compile: resetting op by op took minutes on a GPU
 def init(config: Config, task: Task, key: Array) -> TrainState:
     """A fresh train state: networks, optimizer, normalizer and `num_envs` reset envs."""
     policy_net, value_net = _networks(config, task)

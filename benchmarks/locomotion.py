@@ -27,6 +27,7 @@ from __future__ import annotations
 
 import argparse
 import dataclasses
+import functools
 import json
 import sys
 import time
@@ -62,12 +63,14 @@ SPECS = {
 }
 
 
-def evaluate(config: ppo.Config, task: mjzoo.Task, train_state, num_envs: int, num_steps: int) -> dict:
-    """Deterministic first episodes of `num_envs` envs: return, length, forward speed of
-    the centre of mass, and the velocity-command error where the task has a command."""
+@functools.partial(jax.jit, static_argnums=(0, 4, 5))
+def episode_measures(config: ppo.Config, task: mjzoo.Task, train_state, key, num_envs: int, num_steps: int) -> dict:
+    """Deterministic first episodes of `num_envs` envs, each measure [num_envs]: return,
+    length (steps), forward distance of the centre of mass (m), velocity-command error
+    (m/s; 0 where the task has no command) and whether it fell. One compile per task
+    structure."""
     act, params = ppo.policy(config, task), ppo.policy_params(train_state)
     velocity = observations.base_linear_velocity(task.mj_model)
-    dt = planner_runs.control_dt(task)
 
     def one(key):
         state = mjzoo.reset(task, key)
@@ -85,11 +88,16 @@ def evaluate(config: ppo.Config, task: mjzoo.Task, train_state, num_envs: int, n
         _, out = jax.lax.scan(body, (state, jnp.ones((), bool)), jax.random.split(key, num_steps))
         steps = jnp.sum(out["alive"])
         last = out["com"][jnp.maximum(steps - 1, 0).astype(jnp.int32)]
-        return dict(ret=jnp.sum(out["reward"]), length=steps, speed=(last - start) / (steps * dt),
+        return dict(ret=jnp.sum(out["reward"]), length=steps, distance=last - start,
                     error=jnp.sum(out["error"]) / steps, fell=jnp.any(out["fell"]))  # fmt: skip
 
-    run = jax.jit(jax.vmap(one))
-    result = jax.device_get(run(jax.random.split(jax.random.key(123), num_envs)))
+    return jax.vmap(one)(jax.random.split(key, num_envs))
+
+
+def evaluate(config: ppo.Config, task: mjzoo.Task, train_state, num_envs: int, num_steps: int) -> dict:
+    """The means of `episode_measures` over `num_envs` envs; speed in m/s."""
+    result = jax.device_get(episode_measures(config, task, train_state, jax.random.key(123), num_envs, num_steps))
+    result["speed"] = result["distance"] / (result["length"] * planner_runs.control_dt(task))
     return {"return": float(np.mean(result["ret"])), "length": float(np.mean(result["length"])),
             "forward_speed_m_s": float(np.mean(result["speed"])), "velocity_error_m_s": float(np.mean(result["error"])),
             "fell_fraction": float(np.mean(result["fell"]))}  # fmt: skip

@@ -65,6 +65,7 @@ def joystick(
     noise: float = 0.05,
     max_action_latency: int = 1,
     tracking_weight: float = 1.0,
+    tracking_sigma: float = 0.25,
     yaw_tracking_weight: float = 0.5,
     vertical_weight: float = 0.5,
     roll_pitch_weight: float = 0.05,
@@ -87,8 +88,8 @@ def joystick(
     task = commands.with_velocity_command(task, vx=(-1.0, 1.0), vy=(-1.0, 1.0), yaw_rate=(-1.0, 1.0),
                                           resample_interval=(5.0, 10.0), stand_probability=0.1)  # fmt: skip
     task = rewards.terms(task, {
-        "tracking": (rewards.linear_velocity_tracking(m, sigma=0.25), tracking_weight),
-        "yaw_tracking": (rewards.angular_velocity_tracking(m, sigma=0.25), yaw_tracking_weight),
+        "tracking": (rewards.linear_velocity_tracking(m, tracking_sigma), tracking_weight),
+        "yaw_tracking": (rewards.angular_velocity_tracking(m, tracking_sigma), yaw_tracking_weight),
         "vertical": (rewards.vertical_velocity(m), -vertical_weight),
         "roll_pitch": (rewards.roll_pitch_velocity(m), -roll_pitch_weight),
         "action_rate": (rewards.action_rate, -action_rate_weight),
