@@ -67,8 +67,8 @@ SPECS = {
 def episode_measures(config: ppo.Config, task: mjzoo.Task, train_state, key, num_envs: int, num_steps: int) -> dict:
     """Deterministic first episodes of `num_envs` envs, each measure [num_envs]: return,
     length (steps), forward distance of the centre of mass (m), velocity-command error
-    (m/s; 0 where the task has no command) and whether it fell. One compile per task
-    structure."""
+    (m/s; 0 where the task has no command), whether it fell, and qpos [num_envs, T, nq]
+    (for the video). One compile per task structure."""
     act, params = ppo.policy(config, task), ppo.policy_params(train_state)
     velocity = observations.base_linear_velocity(task.mj_model)
 
@@ -81,7 +81,8 @@ def episode_measures(config: ppo.Config, task: mjzoo.Task, train_state, key, num
             command = state.info.get("command", jnp.zeros(3))
             error = jnp.linalg.norm(velocity(task.model, next_state)[:2] - command[:2])
             out = dict(reward=next_state.reward * alive, alive=alive, error=error * alive,
-                       com=next_state.data.subtree_com[1, 0], fell=next_state.terminated & alive)  # fmt: skip
+                       com=next_state.data.subtree_com[1, 0], fell=next_state.terminated & alive,
+                       qpos=next_state.data.qpos)  # fmt: skip
             return (next_state, alive & ~(next_state.terminated | next_state.truncated)), out
 
         start = state.data.subtree_com[1, 0]
@@ -89,38 +90,34 @@ def episode_measures(config: ppo.Config, task: mjzoo.Task, train_state, key, num
         steps = jnp.sum(out["alive"])
         last = out["com"][jnp.maximum(steps - 1, 0).astype(jnp.int32)]
         return dict(ret=jnp.sum(out["reward"]), length=steps, distance=last - start,
-                    error=jnp.sum(out["error"]) / steps, fell=jnp.any(out["fell"]))  # fmt: skip
+                    error=jnp.sum(out["error"]) / steps, fell=jnp.any(out["fell"]), qpos=out["qpos"])  # fmt: skip
 
     return jax.vmap(one)(jax.random.split(key, num_envs))
 
 
-def evaluate(config: ppo.Config, task: mjzoo.Task, train_state, num_envs: int, num_steps: int) -> dict:
-    """The means of `episode_measures` over `num_envs` envs; speed in m/s."""
+def evaluate(config: ppo.Config, task: mjzoo.Task, train_state, num_envs: int, num_steps: int):
+    """The means of `episode_measures` over `num_envs` envs (speed in m/s), and the first
+    env's qpos [T, nq] (its episode runs on after an end: it is the video)."""
     result = jax.device_get(episode_measures(config, task, train_state, jax.random.key(123), num_envs, num_steps))
-    result["speed"] = result["distance"] / (result["length"] * planner_runs.control_dt(task))
-    return {"return": float(np.mean(result["ret"])), "length": float(np.mean(result["length"])),
-            "forward_speed_m_s": float(np.mean(result["speed"])), "velocity_error_m_s": float(np.mean(result["error"])),
-            "fell_fraction": float(np.mean(result["fell"]))}  # fmt: skip
+    speed = result["distance"] / (result["length"] * planner_runs.control_dt(task))
+    means = {"return": float(np.mean(result["ret"])), "length": float(np.mean(result["length"])),
+             "forward_speed_m_s": float(np.mean(speed)), "velocity_error_m_s": float(np.mean(result["error"])),
+             "fell_fraction": float(np.mean(result["fell"]))}  # fmt: skip
+    return means, np.asarray(result["qpos"][0])
 
 
-def save_final_episode(task: mjzoo.Task, trajectory, path: Path, video: bool) -> None:
-    """The episode's qpos [T, nq] and times [T] as .npz (`--render` turns it into a video
-    on a machine with a video encoder), and its video now if `video`."""
-    data = jax.device_get(trajectory.next_state.data)
-    np.savez_compressed(path.with_suffix(".npz"), qpos=np.asarray(data.qpos), time=np.asarray(data.time))
-    if video:
-        training.write_video(task, trajectory, path.with_suffix(".mp4"))
+def render(name: str, qpos: np.ndarray, path: Path) -> None:
+    """The video of an episode's qpos [T, nq] of task `name` at its control rate."""
+    task = SPECS[name].eval_task()
+    rendering.render_video(task.mj_model, qpos, path, 1.0 / planner_runs.control_dt(task),
+                           camera=0 if task.mj_model.ncam else None)  # fmt: skip
+    print(f"wrote {path}")
 
 
 def render_saved(out: Path) -> None:
     """Videos of the final episodes saved under `out`/<task>/final_policy.npz."""
     for saved in sorted(out.glob("*/final_policy.npz")):
-        episode = np.load(saved)
-        fps = 1.0 / float(episode["time"][1] - episode["time"][0])
-        mj_model = SPECS[saved.parent.name].eval_task().mj_model
-        path = rendering.render_video(mj_model, episode["qpos"], saved.with_suffix(".mp4"), fps,
-                                      camera=0 if mj_model.ncam else None)  # fmt: skip
-        print(f"wrote {path}")
+        render(saved.parent.name, np.load(saved)["qpos"], saved.with_suffix(".mp4"))
 
 
 def run_task(name: str, total_steps: int | None, out: Path, eval_envs: int, smoke: bool, video: bool) -> dict:
@@ -142,14 +139,17 @@ def run_task(name: str, total_steps: int | None, out: Path, eval_envs: int, smok
     train_state, _ = ppo.train(config, train_task, settings)
     total = time.perf_counter() - start
     curve, steps_per_s = training_curve(out / name / "metrics.jsonl", total)
-    final = evaluate(config, eval_task, train_state, eval_envs, episode)
-    # The video of the task as evaluated (the joystick: at level 1).
-    _, _, trajectory = ppo.evaluate(config, eval_task, train_state, jax.random.key(7), 1, episode)
-    save_final_episode(eval_task, trajectory, out / name / "final_policy.mp4", video)
-    return {"task": name, "config": training.config_dict(config), "raw_steps_per_s": raw,
-            "steps_per_s": steps_per_s, "train_s": total, "threshold": spec.threshold,
-            "time_to_threshold_s": time_to(curve, spec.threshold),
-            "curve": curve, "final": final}  # fmt: skip
+    row = {"task": name, "config": training.config_dict(config), "raw_steps_per_s": raw,
+           "steps_per_s": steps_per_s, "train_s": total, "threshold": spec.threshold,
+           "time_to_threshold_s": time_to(curve, spec.threshold), "curve": curve}  # fmt: skip
+    # Kept before evaluating: compiling the evaluation takes minutes on a GPU.
+    (out / name / "training.json").write_text(json.dumps(row, indent=2))
+    row["final"], qpos = evaluate(config, eval_task, train_state, eval_envs, episode)
+    # The task as evaluated (the joystick: at level 1); --render makes the video elsewhere.
+    np.savez_compressed(out / name / "final_policy.npz", qpos=qpos)
+    if video:
+        render(name, qpos, out / name / "final_policy.mp4")
+    return row
 
 
 def main() -> None:

@@ -16,6 +16,8 @@ velocity in the base frame (3 + 3), hinge positions and velocities (8 + 8), the 
 command (3), plus N(0, noise^2) noise.
 Action (8,): the motor controls in [-1, 1].
 Reward terms (weights): linear velocity tracking exp(-|v_xy - c_xy|^2 / 0.25) (1.0),
+progress along the command min(v_xy . c_xy / |c_xy|, |c_xy|) (2.0; without it PPO
+settles on standing still, which the exp kernel rewards more than aimless steps),
 yaw-rate tracking exp(-(w_z - c_yaw)^2 / 0.25) (0.5), vertical velocity^2 (-0.5),
 roll/pitch rate^2 (-0.05), action rate^2 (-0.01), effort (-0.02).
 Terminated when the torso tilts over 1.2 rad or drops below 0.2 m; 500 steps (25 s).
@@ -66,6 +68,7 @@ def joystick(
     max_action_latency: int = 1,
     tracking_weight: float = 1.0,
     tracking_sigma: float = 0.25,
+    progress_weight: float = 2.0,
     yaw_tracking_weight: float = 0.5,
     vertical_weight: float = 0.5,
     roll_pitch_weight: float = 0.05,
@@ -89,6 +92,7 @@ def joystick(
                                           resample_interval=(5.0, 10.0), stand_probability=0.1)  # fmt: skip
     task = rewards.terms(task, {
         "tracking": (rewards.linear_velocity_tracking(m, tracking_sigma), tracking_weight),
+        "progress": (rewards.command_progress(m), progress_weight),
         "yaw_tracking": (rewards.angular_velocity_tracking(m, tracking_sigma), yaw_tracking_weight),
         "vertical": (rewards.vertical_velocity(m), -vertical_weight),
         "roll_pitch": (rewards.roll_pitch_velocity(m), -roll_pitch_weight),

@@ -35,7 +35,7 @@ from mjzoo.types import State, Task, bind
 
 __all__ = [
     "tolerance", "SIGMOIDS", "terms", "alive",
-    "linear_velocity_tracking", "angular_velocity_tracking", "vertical_velocity", "roll_pitch_velocity",
+    "linear_velocity_tracking", "command_progress", "angular_velocity_tracking", "vertical_velocity", "roll_pitch_velocity",
     "base_height", "flat_orientation", "upright",
     "joint_deviation", "joint_limits", "symmetry",
     "action_rate", "action_acceleration", "action_jerk", "torque", "energy",
@@ -162,6 +162,21 @@ def _sigma(who: str, sigma: float) -> Array:
 def _linear_tracking(base, sigma, model, state, action, next_state) -> Array:
     velocity = _base_state(next_state, base)[1]
     return jnp.exp(-jnp.sum(jnp.square(velocity[:2] - state.info["command"][:2])) / sigma)
+
+
+def command_progress(mj_model: mujoco.MjModel, body: str | None = None) -> Partial:
+    """Reward (m/s): the base's horizontal velocity along the commanded one, capped at
+    the commanded speed: min(v_xy . c_xy / |c_xy|, |c_xy|), base frame; 0 for a zero
+    command. Unlike the exp kernel of `linear_velocity_tracking`, aimless motion earns
+    nothing on average and every step toward the command pays, so policies that start
+    by standing still still find the gait. Reads ``state.info["command"]``."""
+    return bind(_command_progress, _base(mj_model, body, "command_progress"))
+
+
+def _command_progress(base, model, state, action, next_state) -> Array:
+    velocity, command = _base_state(next_state, base)[1][:2], state.info["command"][:2]
+    speed = jnp.sqrt(jnp.sum(jnp.square(command)))
+    return jnp.minimum(jnp.dot(velocity, command) / jnp.maximum(speed, 1e-6), speed)
 
 
 def angular_velocity_tracking(mj_model: mujoco.MjModel, sigma: float = 0.25, body: str | None = None) -> Partial:

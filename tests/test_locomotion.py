@@ -146,6 +146,7 @@ def test_joystick_observes_its_command_and_only_noise_and_pushes_follow_the_leve
     command = states.info["velocity_command"]["target"]
     np.testing.assert_allclose(states.obs[:, -3:], command, atol=0.3)  # N(0, 0.05^2) noise at level 1
     assert (np.abs(command) <= 1.0).all()
+    assert {"reward/tracking", "reward/progress", "reward/yaw_tracking"} <= set(states.metrics)
     moved = {(np.asarray(a).tobytes(), np.asarray(b).tobytes()): (np.asarray(a), np.asarray(b))
              for a, b in zip(jax.tree.leaves(easy), jax.tree.leaves(hard)) if not np.array_equal(a, b)}  # fmt: skip
     assert len(moved) == 2  # the noise scale and the push limits (each bound where used), nothing else

@@ -257,6 +257,17 @@ def test_base_velocity_terms_in_the_base_frame():
     assert math.isclose(value(rewards.linear_velocity_tracking(BIPED), rolled, command), 1.0, rel_tol=1e-5)
 
 
+def test_command_progress_is_the_capped_velocity_along_the_command():
+    # Base-frame velocity (1, 0); command (1, 0.5): along = 1 / |c| = 0.894 < |c| = 1.118.
+    speed = math.hypot(1.0, 0.5)
+    assert math.isclose(value(rewards.command_progress(BIPED)), 1.0 / speed, rel_tol=1e-5)
+    # Command (0.6, 0): along 1 m/s, capped at 0.6; backwards (-1, 0): -1.
+    capped, backwards = (biped_state(command=jnp.array(c, jnp.float32)) for c in ([0.6, 0, 0], [-1.0, 0, 0]))
+    assert math.isclose(value(rewards.command_progress(BIPED), state=capped), 0.6, rel_tol=1e-5)
+    assert math.isclose(value(rewards.command_progress(BIPED), state=backwards), -1.0, rel_tol=1e-5)
+    assert value(rewards.command_progress(BIPED), state=biped_state(command=jnp.zeros(3))) == 0.0
+
+
 def test_base_pose_terms():
     assert math.isclose(value(rewards.base_height(BIPED, 0.5)), 0.05**2, rel_tol=1e-4)  # z = 0.45
     assert value(rewards.base_height(BIPED, 0.4, 0.6)) == 0.0
