@@ -14,10 +14,12 @@ Built only from the catalog, innermost first (docs/catalog.md's nesting order):
 Observation (29,): projected gravity (3), base height (1), base linear and angular
 velocity in the base frame (3 + 3), hinge positions and velocities (8 + 8), the next
 command (3), plus N(0, noise^2) noise.
-Action (8,): the motor controls in [-1, 1].
+Action (8,) in [-1, 1]: PD joint targets, Brax's pose + 0.5 rad x action (kp 200 N m/rad,
+kd 15 N m s/rad). With torque actions PPO learned only to stand still (curves in
+benchmarks/results/locomotion/ant_joystick_torque/); with targets it tracks commands.
 Reward terms (weights): linear velocity tracking exp(-|v_xy - c_xy|^2 / 0.25) (1.0),
-progress along the command min(v_xy . c_xy / |c_xy|, |c_xy|) (2.0; without it PPO
-settles on standing still, which the exp kernel rewards more than aimless steps),
+progress along the command min(v_xy . c_xy / |c_xy|, |c_xy|) (2.0; under the exp kernel
+alone aimless steps earn less than standing still),
 yaw-rate tracking exp(-(w_z - c_yaw)^2 / 0.25) (0.5), vertical velocity^2 (-0.5),
 roll/pitch rate^2 (-0.05), action rate^2 (-0.01), effort (-0.02).
 Terminated when the torso tilts over 1.2 rad or drops below 0.2 m; 500 steps (25 s).
@@ -30,7 +32,7 @@ otherwise (`curriculum.by_episode_length`).
 
 from __future__ import annotations
 
-from typing import Any
+from typing import Any, Callable
 
 from mjzoo import (
     actuators,
@@ -46,7 +48,7 @@ from mjzoo import (
 )
 from mjzoo.combinators import with_auto_reset, with_divergence_guard, with_time_limit
 from mjzoo.envs import base
-from mjzoo.envs.locomotion import MJX_OPTIONS, bare
+from mjzoo.envs.locomotion import MJX_OPTIONS, actuated_pose, bare
 from mjzoo.perturbations import with_domain_randomization, with_observation_noise
 from mjzoo.types import Task
 
@@ -75,18 +77,26 @@ def joystick(
     action_rate_weight: float = 0.01,
     effort_weight: float = 0.02,
     ctrl_dt: float = 0.05,
+    kp: float = 200.0,
+    kd: float = 15.0,
+    action_scale: float = 0.5,
+    actuator: Callable | None = None,
     **physics_options: Any,
 ) -> Task:
     """The joystick task at curriculum `level` in [0, 1] (pushes of up to level * push
-    m/s, observation noise of level * noise)."""
+    m/s, observation noise of level * noise). Actions are PD joint targets
+    (`actuators.pd`: Brax's pose + `action_scale` x action rad, gains `kp` N m/rad and
+    `kd` N m s/rad, torques up to the motors' 150 N m); `actuator` replaces that with
+    any catalog actuator built on the ant's model."""
     physics = base.brax_asset("ant.xml", **{**MJX_OPTIONS, "ctrl_dt": ctrl_dt, **physics_options})
     m = physics.mj_model
+    actuator = actuator or actuators.pd(m, kp, kd, action_scale=action_scale, default_pose=actuated_pose(m))
     observe = observations.concat(
         observations.projected_gravity(m), observations.base_height(m), observations.base_linear_velocity(m),
         observations.base_angular_velocity(m), observations.joint_positions, observations.joint_velocities,
     )  # fmt: skip
     noisy_start = resets.joint_position_noise(m, 0.1), resets.joint_velocities(m, 0.1), resets.base_heading(m)
-    task = resets.with_resets(bare(physics, observe), *noisy_start, observe=observe)
+    task = resets.with_resets(bare(physics, observe, actuator), *noisy_start, observe=observe)
     task = trackers.with_action_history(actuators.with_action_latency(task, max_action_latency), length=2)
     task = commands.with_velocity_command(task, vx=(-1.0, 1.0), vy=(-1.0, 1.0), yaw_rate=(-1.0, 1.0),
                                           resample_interval=(5.0, 10.0), stand_probability=0.1)  # fmt: skip

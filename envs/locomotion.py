@@ -44,7 +44,7 @@ from mjzoo.combinators import with_divergence_guard, with_time_limit
 from mjzoo.envs import base
 from mjzoo.types import State, Task, bind
 
-__all__ = ["bare", "reset_pose", "gym_task", "hopper", "walker", "cheetah", "ant", "humanoid_walk", "humanoid_run",
+__all__ = ["bare", "reset_pose", "actuated_pose", "gym_task", "hopper", "walker", "cheetah", "ant", "humanoid_walk", "humanoid_run",
            "humanoid_standup", "free_base_observation", "MJX_OPTIONS", "PPO"]  # fmt: skip
 
 Array = jax.Array
@@ -87,6 +87,12 @@ def reset_pose(mj_model: mujoco.MjModel) -> np.ndarray:
         if mj_model.numeric(i).name == "init_qpos" and mj_model.numeric(i).data.shape == (mj_model.nq,):
             return np.asarray(mj_model.numeric(i).data)
     return np.asarray(mj_model.qpos0)
+
+
+def actuated_pose(mj_model: mujoco.MjModel) -> np.ndarray:
+    """[nu] the reset pose (`reset_pose`) of the joint each actuator drives: the default
+    targets of PD actuators (`actuators.pd`), whose order is the actuators', not the joints'."""
+    return reset_pose(mj_model)[mj_model.jnt_qposadr[mj_model.actuator_trnid[:, 0]]]
 
 
 def _reset(p: Params, model: mjx.Model, key: Array) -> State:

@@ -144,7 +144,7 @@ ALL = (  # innermost first
     "divergence_guard", "reward_clip", "curriculum", "observation",
 )  # fmt: skip
 COMBINATORS["all"] = lambda t: functools.reduce(lambda task, name: COMBINATORS[name](task), ALL, t)
-# The envs on Brax's models run in test_conformance_locomotion.py: one process compiling
+# The envs on Brax's models run in test_conformance_locomotion(_stacked).py: one process compiling
 # every case crashed inside XLA's CPU compiler, and the suite frees compiled code per module.
 LOCOMOTION = [e for e in mjzoo.envs.names() if mjzoo.envs.factory(e).__module__ in ("mjzoo.envs.locomotion",
                                                                                     "mjzoo.envs.joystick")]  # fmt: skip
