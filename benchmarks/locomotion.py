@@ -108,9 +108,8 @@ def evaluate(config: ppo.Config, task: mjzoo.Task, train_state, num_envs: int, n
     return means, np.asarray(result["qpos"][0])
 
 
-def render(name: str, qpos: np.ndarray, path: Path) -> None:
-    """The video of an episode's qpos [T, nq] of task `name` at its control rate."""
-    task = SPECS[name].eval_task()
+def render(task: mjzoo.Task, qpos: np.ndarray, path: Path) -> None:
+    """The video of an episode's qpos [T, nq] of `task` at its control rate."""
     rendering.render_video(task.mj_model, qpos, path, 1.0 / planner_runs.control_dt(task),
                            camera=0 if task.mj_model.ncam else None)  # fmt: skip
     print(f"wrote {path}")
@@ -119,7 +118,7 @@ def render(name: str, qpos: np.ndarray, path: Path) -> None:
 def render_saved(out: Path) -> None:
     """Videos of the final episodes saved under `out`/<task>/final_policy.npz."""
     for saved in sorted(out.glob("*/final_policy.npz")):
-        render(saved.parent.name, np.load(saved)["qpos"], saved.with_suffix(".mp4"))
+        render(SPECS[saved.parent.name].eval_task(), np.load(saved)["qpos"], saved.with_suffix(".mp4"))
 
 
 def run_task(name: str, total_steps: int | None, out: Path, eval_envs: int, smoke: bool, video: bool) -> dict:
@@ -150,7 +149,7 @@ def run_task(name: str, total_steps: int | None, out: Path, eval_envs: int, smok
     # The task as evaluated (the joystick: at level 1); --render makes the video elsewhere.
     np.savez_compressed(out / name / "final_policy.npz", qpos=qpos)
     if video:
-        render(name, qpos, out / name / "final_policy.mp4")
+        render(eval_task, qpos, out / name / "final_policy.mp4")
     return row
 
 

@@ -35,7 +35,8 @@ from mjzoo.types import State, Task, bind
 
 __all__ = [
     "tolerance", "SIGMOIDS", "terms", "alive",
-    "linear_velocity_tracking", "command_progress", "angular_velocity_tracking", "vertical_velocity", "roll_pitch_velocity",
+    "linear_velocity_tracking", "command_progress", "angular_velocity_tracking",
+    "vertical_velocity", "roll_pitch_velocity",
     "base_height", "flat_orientation", "upright",
     "joint_deviation", "joint_limits", "symmetry",
     "action_rate", "action_acceleration", "action_jerk", "torque", "energy",
