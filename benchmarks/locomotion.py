@@ -6,7 +6,10 @@ of envs (the physical limit), (b) PPO with the env's registered hyperparameters
 metrics and evaluation video under ``--out/<task>/``, (c) a final deterministic
 evaluation of 256 envs over one full episode, with the task's own measure:
 
-  ant            return; forward speed of the centre of mass (m/s)
+  ant            return; forward speed of the centre of mass (m/s). Running: a return
+                 >= 3000, which under the task's reward (alive 1 + speed - effort per
+                 step) takes at least 2 m/s over a full 1000-step episode (faster
+                 over a shorter one).
   humanoid_walk  return; forward speed; the fraction of episodes that never fall.
                  Walking: every episode lasts its 1000 steps (15 s) at >= 1 m/s, which
                  under the task's reward (alive 5 + 1.25 x speed - effort per step)
@@ -21,8 +24,9 @@ Time to the stated return is wall-clock from the start of training (compile incl
 Where the machine has no video encoder (the GPU image lacks ffmpeg), `--no-video` saves
 each final episode as .npz and `--render` makes the videos elsewhere.
 
-    python benchmarks/locomotion.py --tasks ant ant_joystick --out benchmarks/results/locomotion
-    python benchmarks/locomotion.py --tasks humanoid_walk --steps 60000000
+    python benchmarks/locomotion.py --tasks ant --steps 100000000
+    python benchmarks/locomotion.py --tasks humanoid_walk --steps 45000000
+    python benchmarks/locomotion.py --tasks ant_joystick --steps 40000000
 """
 
 from __future__ import annotations
@@ -126,10 +130,11 @@ def run_task(name: str, total_steps: int | None, out: Path, eval_envs: int, smok
     fields = mjzoo.envs.hyperparameters(name, "ppo")
     if total_steps:
         fields["total_steps"] = total_steps
-    if smoke:
-        fields.update(num_envs=8, unroll_length=8, num_minibatches=4, num_epochs=1)
+    if smoke:  # two updates of 8 envs; 50-step evaluations
+        fields.update(num_envs=8, unroll_length=8, num_minibatches=4, num_epochs=1, total_steps=128)
+        eval_envs = min(eval_envs, 8)
     config = ppo.Config(**fields)
-    episode = mjzoo.envs.defaults(name)["episode_steps"]
+    episode = 50 if smoke else mjzoo.envs.defaults(name)["episode_steps"]
     train_task, eval_task = spec.train_task(), spec.eval_task()
     raw = raw_steps_per_s(eval_task, name, *inputs(eval_task, config.num_envs, 20 if smoke else 100), repeats=3)
     print(f"{name}: raw stepping {raw:,.0f} steps/s at {config.num_envs} envs", flush=True)

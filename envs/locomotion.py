@@ -17,7 +17,7 @@ few iterations, no Euler damping), each overridable like any physics option.
 | hopper | hopper.xml | 0.008 s | joints but rootx, velocities (11) | torso z < 0.7 m or tilt > 0.2 rad | forward 1, alive 1, effort -1e-3 |
 | walker | walker2d.xml | 0.008 s | (17) | torso z < 0.8 m or tilt > 1 rad | forward 1, alive 1, effort -1e-3 |
 | cheetah | half_cheetah.xml | 0.05 s | (17) | never | forward 1, effort -0.1 |
-| ant | ant.xml | 0.05 s | base z, quat, joints, base velocities, joint vel (27) | torso z < 0.2 m | forward 1, alive 1, effort -0.5 |
+| ant | ant.xml | 0.05 s | base z, quat, joints, base velocities, joint vel (27) | torso z < 0.2 m or > 1 m | forward 1, alive 1, effort -0.5 |
 | humanoid_walk | humanoid.xml | 0.015 s | the same (45) | torso z < 1 m | forward (capped at 1.5 m/s) 1.25, alive 5, effort -0.1 |
 | humanoid_run | humanoid.xml | 0.015 s | (45) | torso z < 1 m | forward 1.25, alive 5, effort -0.1 |
 | humanoid_standup | humanoidstandup.xml | 0.015 s | (45) | never | torso height 1, effort -1e-3 |
@@ -159,8 +159,11 @@ def gym_task(
     return with_time_limit(with_divergence_guard(rewards.terms(task, spec)), episode_steps)
 
 
-def _upright_torso(m, min_height: float, max_tilt: float | None = None) -> dict[str, Callable]:
+def _upright_torso(m, min_height: float, max_tilt: float | None = None,
+                   max_height: float | None = None) -> dict[str, Callable]:  # fmt: skip
     fallen = {"too_low": terminations.base_too_low(m, min_height, body="torso")}
+    if max_height is not None:
+        fallen["too_high"] = terminations.base_too_high(m, max_height, body="torso")
     if max_tilt is not None:
         fallen["tilted"] = terminations.not_upright(m, max_tilt, body="torso")
     return fallen
@@ -211,23 +214,25 @@ def cheetah(*, episode_steps: int = 1000, forward_weight: float = 1.0, effort_we
 
 
 def ant(*, episode_steps: int = 1000, forward_weight: float = 1.0, alive_weight: float = 1.0,
-        effort_weight: float = 0.5, min_height: float = 0.2, reset_noise: float = 0.1, ctrl_dt: float = 0.05,
-        **physics_options) -> Task:  # fmt: skip
-    """Four-legged ant running along +x (Brax's ant.xml)."""
+        effort_weight: float = 0.5, min_height: float = 0.2, max_height: float | None = 1.0,
+        reset_noise: float = 0.1, ctrl_dt: float = 0.05, **physics_options) -> Task:  # fmt: skip
+    """Four-legged ant running along +x (Brax's ant.xml). Its torso must stay between
+    `min_height` and `max_height` (m): without the ceiling PPO learns to bounce metres
+    high off the soft contacts instead of running."""
     options = {**MJX_OPTIONS, "ctrl_dt": ctrl_dt, **physics_options}
-    return _free_runner("ant.xml", None, episode_steps, forward_weight, alive_weight, effort_weight, min_height,
-                        reset_noise, options)  # fmt: skip
+    return _free_runner("ant.xml", None, episode_steps, forward_weight, alive_weight, effort_weight,
+                        (min_height, max_height), reset_noise, options)  # fmt: skip
 
 
 def _free_runner(asset: str, max_speed: float | None, episode_steps: int, forward_weight: float,
-                 alive_weight: float, effort_weight: float, min_height: float, reset_noise: float,
-                 options: dict[str, Any]) -> Task:  # fmt: skip
+                 alive_weight: float, effort_weight: float, heights: tuple[float, float | None],
+                 reset_noise: float, options: dict[str, Any]) -> Task:  # fmt: skip
     physics = base.brax_asset(asset, **options)
     m = physics.mj_model
     forward = rewards.forward_velocity(m, max_speed=max_speed)
     return gym_task(
         physics, free_base_observation(m), progress={"forward": (forward, forward_weight)},
-        fallen=_upright_torso(m, min_height), alive_weight=alive_weight, effort_weight=effort_weight,
+        fallen=_upright_torso(m, heights[0], max_height=heights[1]), alive_weight=alive_weight, effort_weight=effort_weight,
         reset_noise=reset_noise, episode_steps=episode_steps,
     )  # fmt: skip
 
@@ -239,7 +244,7 @@ def humanoid_walk(*, episode_steps: int = 1000, forward_weight: float = 1.25, ma
     earns nothing more."""
     options = {**MJX_OPTIONS, "ctrl_dt": ctrl_dt, **physics_options}
     return _free_runner("humanoid.xml", max_speed, episode_steps, forward_weight, alive_weight, effort_weight,
-                        min_height, reset_noise, options)  # fmt: skip
+                        (min_height, None), reset_noise, options)  # fmt: skip
 
 
 def humanoid_run(*, episode_steps: int = 1000, forward_weight: float = 1.25, alive_weight: float = 5.0,
@@ -248,7 +253,7 @@ def humanoid_run(*, episode_steps: int = 1000, forward_weight: float = 1.25, ali
     """Humanoid running along +x as fast as it can (Brax's humanoid.xml)."""
     options = {**MJX_OPTIONS, "ctrl_dt": ctrl_dt, **physics_options}
     return _free_runner("humanoid.xml", None, episode_steps, forward_weight, alive_weight, effort_weight,
-                        min_height, reset_noise, options)  # fmt: skip
+                        (min_height, None), reset_noise, options)  # fmt: skip
 
 
 def humanoid_standup(*, episode_steps: int = 1000, height_weight: float = 1.0, effort_weight: float = 1e-3,

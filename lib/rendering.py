@@ -160,12 +160,12 @@ class _Frames:
             raise ValueError(f"width and height must be >= 1, got {width}x{height}")
         self.width, self.height = int(width), int(height)
         self.camera = _camera_id(mj_model, camera)
-        self.model = mj_model
-        if width > mj_model.vis.global_.offwidth or height > mj_model.vis.global_.offheight:
-            # Renderer draws into the model's offscreen buffer; enlarge it on a copy.
-            self.model = copy.copy(mj_model)
-            self.model.vis.global_.offwidth = max(width, mj_model.vis.global_.offwidth)
-            self.model.vis.global_.offheight = max(height, mj_model.vis.global_.offheight)
+        # Drawn from a copy: the renderer draws into the model's offscreen buffer, which
+        # may need enlarging, and the floor may need extending.
+        self.model = copy.copy(mj_model)
+        self.model.vis.global_.offwidth = max(width, mj_model.vis.global_.offwidth)
+        self.model.vis.global_.offheight = max(height, mj_model.vis.global_.offheight)
+        _extend_floors(self.model, self.qpos)
 
     def open_renderer(self, what: str) -> mujoco.Renderer | None:
         global _no_opengl
@@ -195,6 +195,28 @@ class _Frames:
             mujoco.mj_forward(self.model, data)
             renderer.update_scene(data, camera=self.camera)
             yield renderer.render()
+
+
+def _extend_floors(model: mujoco.MjModel, qpos: np.ndarray, margin: float = 10.0) -> None:
+    """Grows each plane's drawn extent to cover every free body's path plus `margin` (m),
+    in place. A plane collides everywhere but is drawn only over its size, so a runner
+    otherwise leaves the floor behind; its texture repeats are scaled with the size, so
+    the checker squares keep their size."""
+    free = np.flatnonzero(model.jnt_type == mujoco.mjtJoint.mjJNT_FREE)
+    if free.size == 0:
+        return
+    xy = np.stack([qpos[:, model.jnt_qposadr[j] : model.jnt_qposadr[j] + 2] for j in free], 1)  # [T, free, 2]
+    level = (model.geom_bodyid == 0) & np.all(model.geom_quat == (1, 0, 0, 0), 1)  # floors, not walls
+    for g in np.flatnonzero((model.geom_type == mujoco.mjtGeom.mjGEOM_PLANE) & level):
+        size = model.geom_size[g, :2]
+        if np.any(size == 0):  # already drawn without end
+            continue
+        reach = np.abs(xy - model.geom_pos[g, :2]).max((0, 1)) + margin
+        scale = np.maximum(reach / size, 1.0)
+        model.geom_size[g, :2] = size * scale
+        material = model.geom_matid[g]
+        if material >= 0 and not model.mat_texuniform[material] and np.sum(model.geom_matid == material) == 1:
+            model.mat_texrepeat[material] = model.mat_texrepeat[material] * scale
 
 
 def _trajectory(name: str, value: ArrayLike, tail: tuple[int, ...]) -> np.ndarray:

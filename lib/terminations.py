@@ -33,6 +33,7 @@ from mjzoo.types import State, Task, bind
 __all__ = [
     "not_upright",
     "base_too_low",
+    "base_too_high",
     "illegal_contact",
     "bad_velocity",
     "far_from_origin",
@@ -74,6 +75,18 @@ def base_too_low(mj_model: mujoco.MjModel, min_height: float, body: str | None =
 
 def _base_too_low(body, min_height, model, state) -> Array:
     return state.data.xpos[body, 2] < min_height
+
+
+def base_too_high(mj_model: mujoco.MjModel, max_height: float, body: str | None = None) -> Partial:
+    """True when the body's origin is above `max_height` (m, world z): a legged robot
+    that leaves the ground by that much has found a contact exploit, not a gait. The
+    body defaults to the first body with a free joint."""
+    max_height = checks.number("base_too_high", "max_height", max_height)
+    return bind(_base_too_high, _base(mj_model, body, "base_too_high"), max_height)
+
+
+def _base_too_high(body, max_height, model, state) -> Array:
+    return state.data.xpos[body, 2] > max_height
 
 
 def illegal_contact(mj_model: mujoco.MjModel, geoms: Names, others: Names | None = None) -> Partial:

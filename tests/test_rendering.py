@@ -187,3 +187,27 @@ def test_large_images_enlarge_the_framebuffer_of_a_copy(model, no_opengl):
     assert (width, height) == (1280, 720)
     assert (used.vis.global_.offwidth, used.vis.global_.offheight) == (1280, 720)
     assert (model.vis.global_.offwidth, model.vis.global_.offheight) == (640, 480)  # the caller's is untouched
+
+
+def test_floors_are_drawn_under_the_whole_path_with_checker_squares_kept():
+    model = mujoco.MjModel.from_xml_string("""
+    <mujoco>
+      <asset>
+        <texture name="checker" type="2d" builtin="checker" width="8" height="8"/>
+        <material name="grid" texture="checker" texrepeat="4 4"/>
+      </asset>
+      <worldbody>
+        <geom name="floor" type="plane" size="2 2 0.1" material="grid"/>
+        <geom name="wall" type="plane" size="2 2 0.1" pos="3 0 0" zaxis="1 0 0"/>
+        <body name="runner" pos="0 0 0.5"><freejoint/><geom type="sphere" size="0.1"/></body>
+      </worldbody>
+    </mujoco>""")
+    qpos = np.zeros((3, 7))
+    qpos[:, 0] = [0.0, 15.0, 30.0]  # runs 30 m along +x
+    qpos[:, 1] = [0.0, -1.0, 0.0]
+    frames = rendering._Frames(model, qpos, None, None, width=32, height=24, camera=None)
+    # Reach 30 + 10 m along x (x20 the size), 1 + 10 m along y (x5.5).
+    np.testing.assert_allclose(frames.model.geom_size[0, :2], [40.0, 11.0])
+    np.testing.assert_allclose(frames.model.mat_texrepeat[0], [80.0, 22.0])
+    np.testing.assert_allclose(frames.model.geom_size[1, :2], [2.0, 2.0])  # a wall is left alone
+    np.testing.assert_allclose(model.geom_size[0, :2], [2.0, 2.0])  # the caller's model is untouched

@@ -65,10 +65,12 @@ def test_not_upright_compares_the_tilt_of_the_z_axis():
     assert not check(term.not_upright(MJ, max_angle=np.pi), pose(roll=-np.pi + 1e-3))
 
 
-def test_base_too_low_and_far_from_origin():
+def test_base_too_low_too_high_and_far_from_origin():
     assert not check(term.base_too_low(MJ, min_height=0.3), pose(z=0.31))
     assert check(term.base_too_low(MJ, min_height=0.3), pose(z=0.29))
     assert check(term.base_too_low(MJ, min_height=0.3, body="base"), pose(z=-1.0))
+    assert not check(term.base_too_high(MJ, max_height=1.0), pose(z=0.99))
+    assert check(term.base_too_high(MJ, max_height=1.0), pose(z=1.01))
     # (1, 2) is sqrt(5) = 2.236 m from the origin; the height does not count.
     assert check(term.far_from_origin(MJ, radius=2.2), pose(x=1.0, y=2.0))
     assert not check(term.far_from_origin(MJ, radius=2.3), pose(x=1.0, y=2.0, z=100.0))
@@ -106,6 +108,7 @@ def test_bad_velocity_and_non_finite_physics():
         (lambda: term.not_upright(MJ, max_angle=4.0), "max_angle"),
         (lambda: term.not_upright(MJ, max_angle=True), "max_angle"),
         (lambda: term.base_too_low(MJ, min_height=float("nan")), "min_height"),
+        (lambda: term.base_too_high(MJ, max_height=float("inf")), "max_height"),
         (lambda: term.far_from_origin(MJ, radius=-1.0), "radius"),
         (lambda: term.bad_velocity(0.0), "max_qvel"),
         (lambda: term.episode_length(0), "max_steps"),
