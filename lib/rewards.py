@@ -1,10 +1,6 @@
-"""Reward shapes and locomotion reward terms.
+"""Reward terms, and the bounded shape `tolerance` (from `mjzoo.shapes`).
 
-`tolerance` is a bounded shape in [0, 1] (the DeepMind Control Suite's smooth
-tolerance): 1 inside `bounds`, falling off with the distance outside them, to
-`value_at_margin` at distance `margin`.
-
-Every other item is a reward term ``(model, state, action, next_state) -> float32
+Every item but `tolerance` is a reward term ``(model, state, action, next_state) -> float32
 scalar``, UNWEIGHTED: the weight comes from ``mjzoo.with_reward(task, name, fn, weight)``
 or `terms`. A term documented as a "Reward" grows with good behaviour (give it a
 positive weight); a "Cost" is >= 0 and grows with bad behaviour (give it a negative
@@ -31,6 +27,7 @@ import numpy as np
 
 from mjzoo import checks, names
 from mjzoo.combinators import with_reward
+from mjzoo.shapes import SIGMOIDS, tolerance
 from mjzoo.types import State, Task, bind
 
 __all__ = [
@@ -46,52 +43,6 @@ __all__ = [
 
 Array = jax.Array
 Partial = jax.tree_util.Partial
-SIGMOIDS = ("gaussian", "long_tail", "linear", "quadratic")
-
-
-# --- bounded shapes -----------------------------------------------------------------
-
-
-def _sigmoid(d: Array, value_at_margin: Array, kind: str) -> Array:
-    """Decreasing shape of d >= 0 with value 1 at d = 0 and `value_at_margin` at d = 1."""
-    if kind == "gaussian":
-        scale = jnp.sqrt(-2.0 * jnp.log(value_at_margin))
-        return jnp.exp(-0.5 * (d * scale) ** 2)
-    if kind == "long_tail":
-        scale = jnp.sqrt(1.0 / value_at_margin - 1.0)
-        return 1.0 / ((d * scale) ** 2 + 1.0)
-    if kind == "linear":
-        return jnp.clip(1.0 - (1.0 - value_at_margin) * d, 0.0, 1.0)
-    if kind == "quadratic":
-        return jnp.clip(1.0 - (1.0 - value_at_margin) * d**2, 0.0, 1.0)
-    raise ValueError(f"unknown sigmoid {kind!r}; expected one of {SIGMOIDS}")
-
-
-def tolerance(
-    x: Array,
-    lower: Array | float = 0.0,
-    upper: Array | float = 0.0,
-    margin: Array | float = 0.0,
-    sigmoid: str = "gaussian",
-    value_at_margin: Array | float = 0.1,
-) -> Array:
-    """1 where lower <= x <= upper, else a smooth fall-off with the distance outside.
-
-    Args:
-      x: any shape; the result has the same shape, values in [0, 1].
-      lower, upper: the band in which the reward is 1 (lower <= upper).
-      margin: distance outside the band at which the value is `value_at_margin`
-        (> 0); with margin 0 the reward is the band's indicator.
-      sigmoid: the fall-off shape, one of SIGMOIDS (static).
-      value_at_margin: in (0, 1) for "gaussian" and "long_tail", [0, 1) otherwise.
-    """
-    x = jnp.asarray(x, jnp.float32)
-    inside = (x >= lower) & (x <= upper)
-    distance = jnp.where(x < lower, lower - x, x - upper)
-    safe_margin = jnp.maximum(margin, 1e-12)
-    smooth = _sigmoid(distance / safe_margin, jnp.asarray(value_at_margin, jnp.float32), sigmoid)
-    outside = jnp.where(jnp.asarray(margin) > 0, smooth, 0.0)
-    return jnp.where(inside, 1.0, outside).astype(jnp.float32)
 
 
 # --- composing terms ----------------------------------------------------------------

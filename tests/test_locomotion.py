@@ -140,13 +140,8 @@ def test_standup_starts_lying_and_rewards_the_torso_height():
     np.testing.assert_allclose(height, states.data.xpos[:, 1, 2], rtol=1e-6)
 
 
-def test_joystick_observes_its_command_and_only_noise_and_pushes_follow_the_level():
+def test_only_noise_and_pushes_follow_the_joystick_level():
     easy, hard = joystick.joystick(level=0.0), joystick.joystick(level=1.0)
-    _, states = _rollout(hard, jax.random.key(0))
-    command = states.info["velocity_command"]["target"]
-    np.testing.assert_allclose(states.obs[:, -3:], command, atol=0.3)  # N(0, 0.05^2) noise at level 1
-    assert (np.abs(command) <= 1.0).all()
-    assert {"reward/tracking", "reward/progress", "reward/yaw_tracking"} <= set(states.metrics)
     moved = {(np.asarray(a).tobytes(), np.asarray(b).tobytes()): (np.asarray(a), np.asarray(b))
              for a, b in zip(jax.tree.leaves(easy), jax.tree.leaves(hard)) if not np.array_equal(a, b)}  # fmt: skip
     assert len(moved) == 2  # the noise scale and the push limits (each bound where used), nothing else
@@ -156,11 +151,17 @@ def test_joystick_observes_its_command_and_only_noise_and_pushes_follow_the_leve
     np.testing.assert_allclose(push_1, [0.5, 0.5, 0.0, 0.0, 0.0, 0.0])
 
 
-def test_joystick_curriculum_resets_itself():
+def test_joystick_curriculum_resets_itself_and_observes_the_command():
+    """One compile of the whole joystick stack (a minute of CPU), so one rollout."""
     task = joystick.joystick_curriculum(episode_steps=3)
     assert mjzoo.with_auto_reset(task) is task
     _, states = _rollout(task, jax.random.key(0))
     assert "curriculum/level" in states.metrics and states.truncated[2]
+    command = states.info["velocity_command"]["target"]
+    np.testing.assert_allclose(states.obs[:3, -3:], command[:3])  # level 0 until the first episode ends: no noise
+    np.testing.assert_allclose(states.obs[3:, -3:], command[3:], atol=0.3)  # then N(0, (0.05 level)^2) noise
+    assert (np.abs(command) <= 1.0).all() and np.abs(command).max() > 0.0
+    assert {"reward/tracking", "reward/progress", "reward/yaw_tracking"} <= set(states.metrics)
 
 
 def test_bare_runs_a_catalog_actuator():

@@ -50,7 +50,7 @@ def pose(x=0.0, y=0.0, z=0.5, roll=0.0) -> State:
 
 
 @jax.jit
-@chex.assert_max_traces(n=7)  # one per item function and index shape below: new limits do not retrace
+@chex.assert_max_traces(n=8)  # one per item function and index shape below: new limits do not retrace
 def check(item, state):
     return item(MODEL, state)
 

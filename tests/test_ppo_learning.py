@@ -1,0 +1,52 @@
+"""PPO learns real tasks from scratch: cartpole balance, a partially observed cartpole
+with a GRU policy, and the pendulum swing-up. A module of its own (minutes of CPU), so
+xdist runs it beside the rest of the PPO tests."""
+
+from __future__ import annotations
+
+import jax
+import numpy as np
+
+import mjzoo
+import mjzoo.envs
+from mjzoo import training
+from mjzoo.algorithms import ppo
+
+
+def test_learns_cartpole_balance():
+    """From a random policy (return ~40 of ~550) to balancing for the whole episode."""
+    task = mjzoo.envs.make("cartpole_balance")
+    config = ppo.Config(**{**mjzoo.envs.hyperparameters("cartpole_balance", "ppo"), "total_steps": 163_840})
+    before = ppo.evaluate(config, task, ppo.init(config, task, jax.random.key(0)), jax.random.key(1), 16, 500)[0]
+    state, last = ppo.train(config, task, training.Settings(updates_per_chunk=10, eval_envs=16, eval_steps=500, progress=False))
+    assert float(before) < 150
+    assert last["eval/return"] > 500
+
+
+def positions_only(obs):
+    """Cart position and the pole angle's cos and sin: no velocities."""
+    return obs[:3]
+
+
+def test_recurrent_gru_policy_learns_a_partially_observed_task():
+    """Without velocities, balancing needs memory: a GRU policy solves it (an MLP with
+    4x this budget reached ~270 of ~550 when this was calibrated; the GRU passed 500 by
+    82k steps, and stayed above 400 to 410k)."""
+    task = mjzoo.with_observation(mjzoo.envs.make("cartpole_balance"), positions_only)
+    config = ppo.Config(num_envs=64, unroll_length=32, num_minibatches=4, num_epochs=4, learning_rate=1e-3,
+                        entropy_coef=1e-3, recurrent=True, total_steps=163_840)  # fmt: skip
+    state, last = ppo.train(config, task, training.Settings(updates_per_chunk=20, eval_envs=16, eval_steps=500, progress=False))
+    assert jax.tree.leaves(state.carry)[0].shape == (64, config.gru_hidden_size)
+    assert last["eval/return"] > 450
+
+
+def test_learns_pendulum_swingup():
+    """From hanging still (random-policy return ~20) to swinging up and holding upright:
+    a mean deterministic return >= 380 of ~500 means upright within ~3 s and held."""
+    task = mjzoo.envs.make("pendulum_swingup")
+    config = ppo.Config(**mjzoo.envs.hyperparameters("pendulum_swingup", "ppo"))
+    state, last = ppo.train(config, task, training.Settings(updates_per_chunk=10, eval_envs=16, eval_steps=500, progress=False))
+    assert last["eval/return"] >= 380
+    _, _, trajectory = ppo.evaluate(config, task, state, jax.random.key(7), 4, 500)
+    angle = np.asarray(trajectory.next_state.data.qpos[-50:, 0])  # the last second
+    assert np.max(np.abs(np.arctan2(np.sin(angle), np.cos(angle)))) < 0.2
