@@ -26,7 +26,7 @@ import mujoco
 import numpy as np
 
 from mjzoo import checks, names
-from mjzoo.combinators import with_reward
+from mjzoo.combinators import with_rewards
 from mjzoo.shapes import SIGMOIDS, tolerance
 from mjzoo.types import State, Task, bind
 
@@ -49,15 +49,14 @@ Partial = jax.tree_util.Partial
 
 
 def terms(task: Task, spec: Mapping[str, tuple[Callable, float]]) -> Task:
-    """Adds each ``name: (fn, weight)`` of `spec` with `mjzoo.with_reward`, in order.
+    """Adds each ``name: (fn, weight)`` of `spec` as `mjzoo.with_reward` would, in order.
 
     A name the task already has raises `with_reward`'s ValueError.
     """
     for name, entry in spec.items():
         if not (isinstance(entry, tuple) and len(entry) == 2):
             raise ValueError(f"terms: entry {name!r} must be a (fn, weight) pair, got {entry!r}")
-        task = with_reward(task, name, *entry)
-    return task
+    return with_rewards(task, dict(spec))
 
 
 def alive(task: Task) -> Partial:
