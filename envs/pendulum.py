@@ -39,6 +39,7 @@ Array = jax.Array
 PPO = dict(num_envs=256, unroll_length=32, num_minibatches=8, num_epochs=4, learning_rate=1e-3,
            entropy_coef=1e-2, discount=0.97, total_steps=3_000_000)  # fmt: skip
 
+
 def _angle_squared(model: mjx.Model, state: State, action: Array, next_state: State) -> Array:
     angle = next_state.data.qpos[0]
     return jnp.square(jnp.arctan2(jnp.sin(angle), jnp.cos(angle)))
