@@ -36,8 +36,9 @@ Array = jax.Array
 
 # PPO hyperparameters that solve this task (`mjzoo train ppo pendulum_swingup`): a
 # deterministic eval return >= 380 (swung up and held) by 0.4-2.4M steps over 8 seeds
-# when calibrated; re-measured under XLA's default optimization, seeds 1-4 got there by
-# 0.4-1.6M steps but seed 0 ended at 229 (scratch runs, 2026-11-22): not every seed.
+# when calibrated. Re-measured under XLA's default optimization level: seeds 1-4 by
+# 0.4-1.6M steps, but seed 0 ends at 229 (the suite's level 0 changes its numerics and
+# it passes there): not every seed solves it.
 PPO = dict(num_envs=256, unroll_length=32, num_minibatches=8, num_epochs=4, learning_rate=1e-3,
            entropy_coef=1e-2, discount=0.97, total_steps=3_000_000)  # fmt: skip
 
