@@ -221,19 +221,19 @@ def ant(*, episode_steps: int = 1000, forward_weight: float = 1.0, alive_weight:
     high off the soft contacts instead of running."""
     options = {**MJX_OPTIONS, "ctrl_dt": ctrl_dt, **physics_options}
     return _free_runner("ant.xml", None, episode_steps, forward_weight, alive_weight, effort_weight,
-                        (min_height, max_height), reset_noise, options)  # fmt: skip
+                        min_height, max_height, reset_noise, options)  # fmt: skip
 
 
 def _free_runner(asset: str, max_speed: float | None, episode_steps: int, forward_weight: float,
-                 alive_weight: float, effort_weight: float, heights: tuple[float, float | None],
+                 alive_weight: float, effort_weight: float, min_height: float, max_height: float | None,
                  reset_noise: float, options: dict[str, Any]) -> Task:  # fmt: skip
     physics = base.brax_asset(asset, **options)
     m = physics.mj_model
     forward = rewards.forward_velocity(m, max_speed=max_speed)
     return gym_task(
         physics, free_base_observation(m), progress={"forward": (forward, forward_weight)},
-        fallen=_upright_torso(m, heights[0], max_height=heights[1]), alive_weight=alive_weight, effort_weight=effort_weight,
-        reset_noise=reset_noise, episode_steps=episode_steps,
+        fallen=_upright_torso(m, min_height, max_height=max_height), alive_weight=alive_weight,
+        effort_weight=effort_weight, reset_noise=reset_noise, episode_steps=episode_steps,
     )  # fmt: skip
 
 
@@ -244,7 +244,7 @@ def humanoid_walk(*, episode_steps: int = 1000, forward_weight: float = 1.25, ma
     earns nothing more."""
     options = {**MJX_OPTIONS, "ctrl_dt": ctrl_dt, **physics_options}
     return _free_runner("humanoid.xml", max_speed, episode_steps, forward_weight, alive_weight, effort_weight,
-                        (min_height, None), reset_noise, options)  # fmt: skip
+                        min_height, None, reset_noise, options)  # fmt: skip
 
 
 def humanoid_run(*, episode_steps: int = 1000, forward_weight: float = 1.25, alive_weight: float = 5.0,
@@ -253,7 +253,7 @@ def humanoid_run(*, episode_steps: int = 1000, forward_weight: float = 1.25, ali
     """Humanoid running along +x as fast as it can (Brax's humanoid.xml)."""
     options = {**MJX_OPTIONS, "ctrl_dt": ctrl_dt, **physics_options}
     return _free_runner("humanoid.xml", None, episode_steps, forward_weight, alive_weight, effort_weight,
-                        (min_height, None), reset_noise, options)  # fmt: skip
+                        min_height, None, reset_noise, options)  # fmt: skip
 
 
 def humanoid_standup(*, episode_steps: int = 1000, height_weight: float = 1.0, effort_weight: float = 1e-3,

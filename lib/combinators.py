@@ -15,7 +15,7 @@ of the task they wrap before deciding what to return. Their `step` runs
 from __future__ import annotations
 
 import dataclasses
-from typing import Callable
+from typing import Callable, Mapping
 
 import jax
 import jax.numpy as jnp
@@ -239,25 +239,28 @@ def with_reward(task: Task, name: str, fn: Callable, weight: float = 1.0) -> Tas
     return with_rewards(task, {name: (fn, weight)})
 
 
-def with_rewards(task: Task, terms: dict[str, tuple[Callable, float]]) -> Task:
+def with_rewards(task: Task, terms: Mapping[str, tuple[Callable, float]]) -> Task:
     """`with_reward` for each ``name: (fn, weight)`` of `terms`, in order, checking the
     names against the task's with one trace of its reset (seconds, for a legged robot's
     stack) instead of one per term."""
-    fns = {}
-    for name, (fn, _) in terms.items():
+    reward = task.reward
+    for name, (fn, weight) in terms.items():
         if not isinstance(name, str) or not name:
             raise ValueError(f"with_reward: name must be a non-empty string, got {name!r}")
         if not callable(fn):
             raise TypeError(f"with_reward: fn for term {name!r} must be callable, got {type(fn).__name__}")
-        fns[name] = fn if isinstance(fn, jax.tree_util.Partial) else jax.tree_util.Partial(fn)
-    existing = reward_terms(jax.eval_shape(lambda key: reset(task, key), jax.random.key(0)))
-    for name in terms:
-        if name in existing:
-            raise ValueError(f"with_reward: the task already has a reward term named {name!r}: {sorted(existing)}")
-    reward = task.reward
-    for name, (_, weight) in terms.items():
-        reward = bind(_extra_reward, reward, tree.Static(name), fns[name], jnp.float32(weight))
+        fn = fn if isinstance(fn, jax.tree_util.Partial) else jax.tree_util.Partial(fn)
+        reward = bind(_extra_reward, reward, tree.Static(name), fn, jnp.float32(weight))
+    _refuse_taken_names(task, terms, "with_reward")
     return task.replace(reward=reward)
+
+
+def _refuse_taken_names(task: Task, names, who: str) -> None:
+    """Raises if `task` already has a reward term named like one of `names`."""
+    existing = reward_terms(jax.eval_shape(lambda key: reset(task, key), jax.random.key(0)))
+    for name in names:
+        if name in existing:
+            raise ValueError(f"{who}: the task already has a reward term named {name!r}: {sorted(existing)}")
 
 
 def _extra_reward(reward_fn, name: tree.Static, fn, weight, model, state, action, next_state):
@@ -276,9 +279,7 @@ def with_reward_clip(task: Task, low: float, high: float) -> Task:
     """
     if not (low <= high):  # also rejects NaN
         raise ValueError(f"with_reward_clip: the range low={low!r}, high={high!r} must have low <= high")
-    existing = reward_terms(jax.eval_shape(lambda key: reset(task, key), jax.random.key(0)))
-    if "clip" in existing:
-        raise ValueError(f"with_reward_clip: the task already has a reward term named 'clip': {sorted(existing)}")
+    _refuse_taken_names(task, ["clip"], "with_reward_clip")
     return task.replace(reward=bind(_clipped_reward, task.reward, jnp.float32(low), jnp.float32(high)))
 
 

@@ -1,8 +1,8 @@
 """Reward terms, and the bounded shape `tolerance` (from `mjzoo.shapes`).
 
-Every item but `tolerance` is a reward term ``(model, state, action, next_state) -> float32
-scalar``, UNWEIGHTED: the weight comes from ``mjzoo.with_reward(task, name, fn, weight)``
-or `terms`. A term documented as a "Reward" grows with good behaviour (give it a
+Every item but `tolerance` and `terms` is a reward term ``(model, state, action,
+next_state) -> float32 scalar``, UNWEIGHTED: the weight comes from
+``mjzoo.with_reward(task, name, fn, weight)`` or `terms`. A term documented as a "Reward" grows with good behaviour (give it a
 positive weight); a "Cost" is >= 0 and grows with bad behaviour (give it a negative
 weight). Unless said otherwise a term reads the physics of `next_state` (after the
 action), so add terms inside `with_auto_reset`; the command is ``state.info["command"]``
@@ -56,7 +56,7 @@ def terms(task: Task, spec: Mapping[str, tuple[Callable, float]]) -> Task:
     for name, entry in spec.items():
         if not (isinstance(entry, tuple) and len(entry) == 2):
             raise ValueError(f"terms: entry {name!r} must be a (fn, weight) pair, got {entry!r}")
-    return with_rewards(task, dict(spec))
+    return with_rewards(task, spec)
 
 
 def alive(task: Task) -> Partial:
