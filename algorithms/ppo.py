@@ -26,7 +26,8 @@ import numpy as np
 import optax
 
 import mjzoo
-from mjzoo import advantages, distributions, losses, networks, normalization, training
+from mjzoo.learning import advantages, distributions, losses, networks, normalization
+from mjzoo.harness import training
 from mjzoo.types import State, Task
 
 __all__ = ["Config", "TrainState", "init", "update", "train", "policy", "policy_params", "evaluate"]
@@ -416,7 +417,7 @@ def evaluate(config: Config, task: Task, train_state: TrainState, key: Array, nu
 
 
 def train(config: Config, task: Task, settings: "training.Settings | None" = None, **settings_kwargs):
-    """Trains with the shared harness (`mjzoo.training.run`): jitted chunks of updates,
+    """Trains with the shared harness (`mjzoo.harness.training.run`): jitted chunks of updates,
     evaluation, metrics.jsonl / TensorBoard, checkpoints, curves and a video when
     `settings.out_dir` is set. Returns (final TrainState, last metrics)."""
     settings = settings or training.Settings(**settings_kwargs)

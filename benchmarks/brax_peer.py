@@ -1,6 +1,6 @@
 """The peer baseline: Brax's own PPO (`brax.training.agents.ppo.train`) on an mjzoo task.
 
-The task goes through `mjzoo.brax_adapter`, so both trainers see the same physics,
+The task goes through `mjzoo.interop.brax`, so both trainers see the same physics,
 observations, rewards and episode ends. Import `train_brax_ppo` from a benchmark script
 (this folder is not a package):
 
@@ -24,7 +24,7 @@ import jax
 
 import mjzoo
 import mjzoo.envs
-from mjzoo import brax_adapter
+from mjzoo.interop import brax
 
 __all__ = ["train_brax_ppo"]
 

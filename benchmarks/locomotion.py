@@ -50,7 +50,8 @@ from task_overhead import inputs, raw_steps_per_s  # noqa: E402
 
 import mjzoo  # noqa: E402
 import mjzoo.envs  # noqa: E402
-from mjzoo import observations, planner_runs, rendering, training  # noqa: E402
+from mjzoo.catalog import observations  # noqa: E402
+from mjzoo.harness import rendering, training  # noqa: E402
 from mjzoo.algorithms import ppo  # noqa: E402
 from mjzoo.envs import joystick  # noqa: E402
 
@@ -105,7 +106,7 @@ def evaluate(config: ppo.Config, task: mjzoo.Task, train_state, num_envs: int, n
     """The means of `episode_measures` over `num_envs` envs (speed in m/s), and the first
     env's qpos [T, nq] (its episode runs on after an end: it is the video)."""
     result = jax.device_get(episode_measures(config, task, train_state, jax.random.key(123), num_envs, num_steps))
-    speed = result["distance"] / (result["length"] * planner_runs.control_dt(task))
+    speed = result["distance"] / (result["length"] * mjzoo.control_dt(task))
     means = {"return": float(np.mean(result["ret"])), "length": float(np.mean(result["length"])),
              "forward_speed_m_s": float(np.mean(speed)), "velocity_error_m_s": float(np.mean(result["error"])),
              "fell_fraction": float(np.mean(result["fell"]))}  # fmt: skip
@@ -114,7 +115,7 @@ def evaluate(config: ppo.Config, task: mjzoo.Task, train_state, num_envs: int, n
 
 def render(task: mjzoo.Task, qpos: np.ndarray, path: Path) -> None:
     """The video of an episode's qpos [T, nq] of `task` at its control rate."""
-    rendering.render_video(task.mj_model, qpos, path, 1.0 / planner_runs.control_dt(task),
+    rendering.render_video(task.mj_model, qpos, path, 1.0 / mjzoo.control_dt(task),
                            camera=0 if task.mj_model.ncam else None)  # fmt: skip
     print(f"wrote {path}")
 

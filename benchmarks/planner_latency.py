@@ -29,14 +29,14 @@ import jax
 
 import mjzoo
 import mjzoo.envs
-from mjzoo import physics, planner_runs
+from mjzoo import physics
 from mjzoo.algorithms import cem, mppi, predictive_sampling
 
 
 def make(env: str, physics_options: dict) -> tuple[mjzoo.Task, int]:
     """(planning task, physics substeps per control step)."""
     task = mjzoo.envs.make(env, episode_steps=10**9, **physics_options)
-    return task, round(planner_runs.control_dt(task) / float(task.model.opt.timestep))
+    return task, round(mjzoo.control_dt(task) / float(task.model.opt.timestep))
 
 
 # --- measurements ------------------------------------------------------------------------

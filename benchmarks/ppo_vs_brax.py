@@ -2,7 +2,7 @@
 
 For each env: (a) raw batched stepping of the task's physics at the same number of envs,
 (b) mjzoo PPO (`mjzoo.algorithms.ppo.train`), (c) Brax PPO (`brax.training.agents.ppo.train`)
-through `mjzoo.brax_adapter`. Hyperparameters: MuJoCo Playground's DM Control defaults
+through `mjzoo.interop.brax`. Hyperparameters: MuJoCo Playground's DM Control defaults
 (2048 envs, batch 1024, unroll 30, 32 minibatches, 16 updates per batch, lr 1e-3,
 entropy 1e-2, discount 0.995, reward scaling 10, normalized observations, clip 0.3, no
 gradient clipping, Brax's default networks: policy 4x32, value 5x256, swish).
@@ -31,7 +31,7 @@ from task_overhead import inputs, raw_steps_per_s  # noqa: E402
 
 import mjzoo  # noqa: E402
 import mjzoo.envs  # noqa: E402
-from mjzoo import metrics, training  # noqa: E402
+from mjzoo.harness import metrics, training  # noqa: E402
 from mjzoo.algorithms import ppo  # noqa: E402
 
 HYPER = dict(num_envs=2048, batch_size=1024, unroll_length=30, num_minibatches=32, num_updates_per_batch=16,

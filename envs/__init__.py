@@ -11,14 +11,19 @@ physics; overrides change weights, targets, episode length and physics options
 from __future__ import annotations
 
 import difflib
+import functools
 import inspect
+from types import ModuleType
 from typing import Any, Callable
 
 from mjzoo import physics
 from mjzoo.envs import base, cartpole, cylinder_push, joystick, locomotion, pendulum, point_mass
+from mjzoo.planning.realtime import Problem
+from mjzoo.planning.sampling import SamplingConfig
 from mjzoo.types import Task
 
-__all__ = ["make", "names", "factory", "defaults", "register", "hyperparameters", "planning"]
+__all__ = ["make", "names", "factory", "defaults", "register", "hyperparameters", "planning",
+           "closed_loop_problem"]
 
 _REGISTRY: dict[str, Callable[..., Task]] = {
     "pendulum_swingup": pendulum.swingup,
@@ -82,6 +87,20 @@ def planning(name: str) -> base.PlanningSetup:
     if name not in _PLANNING:
         raise KeyError(f"{name!r} has no planning setup; envs with one: {sorted(_PLANNING)}")
     return _PLANNING[name]
+
+
+def closed_loop_problem(
+    name: str, planner: ModuleType, config: SamplingConfig, seconds: float | None = None
+) -> Problem:
+    """The env `name`'s tested closed-loop problem (its `planning` setup): the env as the
+    world, its planning view as the planner's model, its hooks and success test, for
+    `seconds` (default: the setup's) of simulated time with no episode limit."""
+    setup = planning(name)
+    return Problem(
+        planner=planner, config=config, sim_task=make(name, episode_steps=10**9),
+        plan_task=setup.plan_task(functools.partial(make, name), episode_steps=10**9),
+        seconds=seconds or setup.seconds, replan_every=setup.replan_every, hooks=setup.hooks, success=setup.success,
+    )  # fmt: skip
 
 
 def hyperparameters(name: str, algorithm: str) -> dict[str, Any]:

@@ -14,7 +14,7 @@ import numpy as np
 from mujoco import mjx
 
 from mjzoo import physics as physics_lib
-from mjzoo.closed_loop import Hooks
+from mjzoo.planning.closed_loop import Hooks
 from mjzoo.combinators import with_divergence_guard, with_time_limit
 from mjzoo.types import State, Task, bind
 
@@ -55,7 +55,7 @@ def build(
     and truncated after `episode_steps` control steps."""
     task = Task(
         model=physics.model,
-        reset=bind(reset, params),
+        start=bind(reset, params),
         step=bind(step, params),
         reward=bind(reward, params),
         terminate=bind(terminate, params),
@@ -87,7 +87,7 @@ class PlanningSetup:
       configs: config fields per planner module name ("mppi", "cem", ...).
       success: ``states -> (solved, score)`` over the run's simulated states [T]
         (numpy leaves), with the score the criterion thresholds.
-      hooks: the task's planner hooks (`mjzoo.closed_loop.Hooks`).
+      hooks: the task's planner hooks (`mjzoo.planning.closed_loop.Hooks`).
       plan_view: ``Task -> Task`` applied to the planning task, e.g. a sharper reward
         term: a planner only sees the cost differences its samples can resolve.
     """

@@ -25,7 +25,7 @@ import jax.numpy as jnp
 from mujoco import mjx
 
 from mjzoo.envs import base
-from mjzoo.rewards import tolerance
+from mjzoo.catalog.rewards import tolerance
 from mjzoo.types import State, Task
 
 __all__ = ["Params", "balance", "swingup"]

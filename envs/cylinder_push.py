@@ -26,8 +26,8 @@ from mujoco import mjx
 
 from mjzoo.combinators import with_reward
 from mjzoo.envs import base
-from mjzoo.rewards import tolerance
-from mjzoo.closed_loop import Hooks
+from mjzoo.catalog.rewards import tolerance
+from mjzoo.planning.closed_loop import Hooks
 from mjzoo.types import State, Task, bind
 
 __all__ = ["Params", "push"]

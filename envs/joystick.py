@@ -34,7 +34,7 @@ from __future__ import annotations
 
 from typing import Any, Callable
 
-from mjzoo import (
+from mjzoo.catalog import (
     actuators,
     commands,
     curriculum,

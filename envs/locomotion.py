@@ -39,7 +39,8 @@ import mujoco
 import numpy as np
 from mujoco import mjx
 
-from mjzoo import actuators, names, observations, physics as physics_lib, resets, rewards, terminations
+from mjzoo.catalog import actuators, observations, resets, rewards, terminations
+from mjzoo import names, physics as physics_lib
 from mjzoo.combinators import with_divergence_guard, with_time_limit
 from mjzoo.envs import base
 from mjzoo.types import State, Task, bind
@@ -76,7 +77,7 @@ def bare(physics: physics_lib.Physics, observe: Callable, actuator: Callable | N
     as_leaf = lambda fn: fn if fn is None or isinstance(fn, jax.tree_util.Partial) else jax.tree_util.Partial(fn)  # noqa: E731
     params = Params(jnp.asarray(reset_pose(physics.mj_model), jnp.float32), as_leaf(observe), as_leaf(actuator),
                     physics.n_substeps)  # fmt: skip
-    return Task(model=physics.model, reset=bind(_reset, params), step=bind(_step, params),
+    return Task(model=physics.model, start=bind(_reset, params), step=bind(_step, params),
                 reward=bind(_no_terms), terminate=bind(base.never_terminate, ()), mj_model=physics.mj_model)  # fmt: skip
 
 

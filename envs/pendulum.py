@@ -27,7 +27,7 @@ from mujoco import mjx
 
 from mjzoo.combinators import with_reward
 from mjzoo.envs import base
-from mjzoo.rewards import tolerance
+from mjzoo.catalog.rewards import tolerance
 from mjzoo.types import State, Task
 
 __all__ = ["Params", "swingup"]

@@ -18,9 +18,9 @@ import jax.numpy as jnp
 import numpy as np
 from mujoco import mjx
 
-from mjzoo.closed_loop import Hooks
+from mjzoo.planning.closed_loop import Hooks
 from mjzoo.envs import base
-from mjzoo.rewards import tolerance
+from mjzoo.catalog.rewards import tolerance
 from mjzoo.types import State, Task, bind
 
 __all__ = ["Params", "reach"]

@@ -2,34 +2,31 @@
 
 A `Task` is an immutable pytree of a MuJoCo MJX model and four pure functions (reset,
 step, reward, terminate); combinators turn tasks into tasks; `transition` and `rollout`
-run one environment, and `jax.vmap` runs many. The locomotion catalog (observations,
-rewards, terminations, resets, events, commands, curricula, randomizers, actuators and
-the trackers they share) is a set of modules of small items: see docs/catalog.md.
+run one environment, and `jax.vmap` runs many. This package's root is that core; the
+rest is grouped by concern, each subpackage importing only what sits below it:
+
+    mjzoo               the core: Task and State, running a task, physics, combinators
+    mjzoo.catalog       building blocks of tasks (observations, rewards, terminations, ...)
+    mjzoo.learning      pure pieces RL algorithms are composed from (gae, losses, networks)
+    mjzoo.planning      pieces sampling planners are composed from, the closed loop
+    mjzoo.harness       running experiments: training loop, metrics, checkpoints, CLI
+    mjzoo.interop       other ecosystems (Brax)
+    mjzoo.algorithms    PPO, MPPI, CEM, predictive sampling
+    mjzoo.envs          concrete tasks and their registry
+
+The subpackages load on first use (``mjzoo.learning.gae`` works after ``import mjzoo``),
+so importing the core does not pay for the harness's or Brax's imports. See
+docs/design.md.
 """
 
 import contextlib
+import importlib
 import io
 
 with contextlib.redirect_stdout(io.StringIO()):  # mjx prints a notice when its optional warp backend is absent
     from mujoco import mjx  # noqa: F401
 
-from mjzoo import (  # the core, then the locomotion catalog (docs/catalog.md)
-    actuators,
-    checks,
-    commands,
-    contacts,
-    curriculum,
-    events,
-    names,
-    observations,
-    physics,
-    randomizers,
-    resets,
-    rewards,
-    terminations,
-    trackers,
-    tree,
-)
+from mjzoo import checks, names, physics, tree
 from mjzoo.combinators import (
     with_action_repeat,
     with_auto_reset,
@@ -40,10 +37,21 @@ from mjzoo.combinators import (
     with_time_limit,
 )
 from mjzoo.perturbations import with_action_noise, with_domain_randomization, with_observation_noise
-from mjzoo.running import Policy, complete, reset, reward_terms, rollout, transition, transition_with_terms
+from mjzoo.running import (
+    Policy,
+    complete,
+    control_dt,
+    reset,
+    reward_terms,
+    rollout,
+    transition,
+    transition_with_terms,
+)
 from mjzoo.types import State, Task, Trajectory, bind
 
 __version__ = "0.1.0"
+
+SUBPACKAGES = ("catalog", "learning", "planning", "harness", "interop", "algorithms", "envs")
 
 __all__ = [
     "Task",
@@ -57,6 +65,7 @@ __all__ = [
     "transition_with_terms",
     "rollout",
     "reward_terms",
+    "control_dt",
     "with_observation",
     "with_time_limit",
     "with_auto_reset",
@@ -71,15 +80,16 @@ __all__ = [
     "tree",
     "names",
     "checks",
-    "contacts",
-    "observations",
-    "rewards",
-    "terminations",
-    "trackers",
-    "resets",
-    "events",
-    "commands",
-    "curriculum",
-    "randomizers",
-    "actuators",
+    *SUBPACKAGES,
 ]
+
+
+def __getattr__(name: str):
+    """Imports a subpackage the first time it is named (PEP 562)."""
+    if name in SUBPACKAGES:
+        return importlib.import_module(f"mjzoo.{name}")
+    raise AttributeError(f"module 'mjzoo' has no attribute {name!r}")
+
+
+def __dir__() -> list[str]:
+    return sorted(set(globals()) | set(SUBPACKAGES))

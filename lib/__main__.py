@@ -1,3 +1,3 @@
-from mjzoo.cli import main
+from mjzoo.harness.cli import main
 
 main()

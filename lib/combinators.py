@@ -56,7 +56,7 @@ def with_observation(task: Task, fn: Callable) -> Task:
         raise TypeError(f"with_observation: fn must be callable, got {type(fn).__name__}")
     if not isinstance(fn, jax.tree_util.Partial):
         fn = jax.tree_util.Partial(fn)
-    return task.replace(reset=bind(_observed_reset, task.reset, fn), step=bind(_observed_step, task.step, fn))
+    return task.replace(start=bind(_observed_reset, task.start, fn), step=bind(_observed_step, task.step, fn))
 
 
 def _observed(state: State, fn) -> State:
@@ -84,7 +84,7 @@ def with_time_limit(task: Task, max_steps: int) -> Task:
     if isinstance(max_steps, bool) or not isinstance(max_steps, int) or max_steps < 1:
         raise ValueError(f"with_time_limit: max_steps={max_steps!r} must be an integer >= 1")
     return task.replace(
-        reset=bind(_time_limit_reset, task.reset),
+        start=bind(_time_limit_reset, task.start),
         step=bind(_time_limit_step, task.step),
         terminate=bind(_time_limit_terminate, task.terminate, jnp.int32(max_steps)),
     )

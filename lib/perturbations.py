@@ -53,7 +53,7 @@ def with_observation_noise(task: Task, scale: float) -> Task:
     """
     scale = _check_scale("with_observation_noise", scale)
     return task.replace(
-        reset=bind(_noisy_reset, task.reset, scale), step=bind(_noisy_obs_step, task.step, scale)
+        start=bind(_noisy_reset, task.start, scale), step=bind(_noisy_obs_step, task.step, scale)
     )
 
 
@@ -102,7 +102,7 @@ def with_domain_randomization(task: Task, randomize: Randomizer) -> Task:
         randomize = jax.tree_util.Partial(randomize)
     _check_fields(task.model, randomize)
     return task.replace(
-        reset=bind(_randomized_reset, task.reset, randomize),
+        start=bind(_randomized_reset, task.start, randomize),
         step=bind(_randomized_step, task.step),
         reward=bind(_randomized_reward, task.reward),
         terminate=bind(_randomized_terminate, task.terminate),

@@ -16,7 +16,9 @@ import jax.numpy as jnp
 from mjzoo import tree
 from mjzoo.types import State, Task, Trajectory
 
-__all__ = ["reset", "complete", "transition", "transition_with_terms", "rollout", "reward_terms", "Policy"]
+__all__ = [
+    "reset", "complete", "transition", "transition_with_terms", "rollout", "reward_terms", "control_dt", "Policy",
+]  # fmt: skip
 
 Array = jax.Array
 OUTCOME = "outcome"  # info key through which a step may hand a whole transition's outcome
@@ -59,8 +61,9 @@ def reward_terms(state: State) -> dict[str, Array]:
 
 
 def reset(task: Task, key: Array) -> State:
-    """Starts an episode of `task`, as a state `complete` for it."""
-    return complete(task, task.reset(task.model, key))
+    """Starts an episode of `task`: ``task.reset(task.model, key)``, a state `complete`
+    for it."""
+    return complete(task, task.start(task.model, key))
 
 
 def complete(task: Task, state: State) -> State:
@@ -112,3 +115,10 @@ def rollout(
         return next_state, Trajectory(obs=state.obs, action=action, next_state=next_state)
 
     return jax.lax.scan(body, state, jax.random.split(key, num_steps))
+
+
+def control_dt(task: Task) -> float:
+    """A task's control step (s), measured on the host from one transition from a reset."""
+    state = reset(task, jax.random.key(0))
+    after = jax.jit(lambda s: task.step(task.model, s, jnp.zeros(task.action_size), jax.random.key(0)))(state)
+    return float(after.data.time - state.data.time)

@@ -19,7 +19,7 @@ import jax.numpy as jnp
 import mujoco
 from mujoco import mjx
 
-__all__ = ["Task", "State", "Trajectory", "ResetFn", "StepFn", "RewardFn", "TerminateFn"]
+__all__ = ["Task", "State", "Trajectory", "StartFn", "StepFn", "RewardFn", "TerminateFn"]
 
 Array = jax.Array
 PyTree = Any
@@ -68,7 +68,7 @@ class State:
         )
 
 
-class ResetFn(Protocol):
+class StartFn(Protocol):
     def __call__(self, model: mjx.Model, key: Array) -> State: ...
 
 
@@ -91,9 +91,16 @@ class TerminateFn(Protocol):
 class Task:
     """A control problem as data: physics plus four pure functions.
 
+    Start an episode with ``task.reset(model, key)`` (or ``mjzoo.reset(task, key)``):
+    the `start` function's state, completed so that it has the pytree structure of
+    every state a transition makes from it. `lax.scan` over `mjzoo.transition` from it
+    just works; combinators wrap `start`, the function a task's own code writes.
+
     Attributes:
       model: the MJX model the functions are called with.
-      reset: ``(model, key) -> State``, a new episode.
+      start: ``(model, key) -> State``, how an episode starts, as the task's own code
+        writes it: it need not hold the `info` and `metrics` entries only a transition
+        writes (the reward terms, an inner combinator's records).
       step: ``(model, state, action, key) -> State``, dynamics and observation. The
         action has shape ``(model.nu,)`` and is a control in the actuators' ctrlrange.
       reward: ``(model, state, action, next_state) -> {name: weighted term}``, each term
@@ -105,7 +112,7 @@ class Task:
     """
 
     model: mjx.Model
-    reset: ResetFn
+    start: StartFn
     step: StepFn
     reward: RewardFn
     terminate: TerminateFn
@@ -113,6 +120,13 @@ class Task:
 
     def replace(self, **changes: Any) -> "Task":
         return dataclasses.replace(self, **changes)
+
+    def reset(self, model: mjx.Model, key: jax.Array) -> State:
+        """A new episode: ``start(model, key)`` with every `info` and `metrics` entry a
+        transition of this task writes added as zeros (`mjzoo.complete`)."""
+        from mjzoo.running import complete  # running is built on this module
+
+        return complete(self.replace(model=model), self.start(model, key))
 
     @property
     def action_size(self) -> int:

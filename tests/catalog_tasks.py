@@ -107,7 +107,7 @@ def _terminate(p: Params, model, state):
 def make_task(qpos=QPOS0, qvel=np.zeros(9)) -> Task:
     """The BASE_AND_ARM task, reset to `qpos` [10] and `qvel` [9]."""
     p = Params(jnp.asarray(qpos, jnp.float32), jnp.asarray(qvel, jnp.float32))
-    return Task(model=BASE_AND_ARM.model, reset=bind(_reset, p), step=bind(_step, p), reward=bind(_reward, p),
+    return Task(model=BASE_AND_ARM.model, start=bind(_reset, p), step=bind(_step, p), reward=bind(_reward, p),
                 terminate=bind(_terminate, p), mj_model=MJ)  # fmt: skip
 
 

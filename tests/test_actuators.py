@@ -23,7 +23,7 @@ import pytest
 from mujoco import mjx
 
 import mjzoo
-from mjzoo import actuators
+from mjzoo.catalog import actuators
 from mjzoo.types import State, Task, bind
 
 JOINTS_XML = """

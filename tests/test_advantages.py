@@ -1,4 +1,4 @@
-"""`mjzoo.advantages.gae` against hand-computed numbers, its two limits (Monte-Carlo
+"""`mjzoo.learning.advantages.gae` against hand-computed numbers, its two limits (Monte-Carlo
 returns at lambda = discount = 1, TD errors at lambda = 0), a plain-python reference on
 random data, and jit / vmap / batch-axis agreement."""
 
@@ -10,7 +10,7 @@ import jax.numpy as jnp
 import numpy as np
 import pytest
 
-from mjzoo.advantages import gae
+from mjzoo.learning.advantages import gae
 
 F, T_ = False, True
 

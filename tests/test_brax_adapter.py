@@ -17,7 +17,7 @@ from brax.envs.wrappers import training as brax_training
 
 import mjzoo
 import mjzoo.envs
-from mjzoo import brax_adapter
+from mjzoo.interop import brax
 
 L = 6  # the task's episode length in these tests (mjzoo's own time limit)
 

@@ -13,7 +13,7 @@ import numpy as np
 import orbax.checkpoint as ocp
 import pytest
 
-from mjzoo import checkpoints
+from mjzoo.harness import checkpoints
 
 
 @jax.tree_util.register_dataclass
@@ -176,7 +176,7 @@ SHARDED_SCRIPT = """
 import sys
 import jax, jax.numpy as jnp, numpy as np
 from jax.sharding import Mesh, NamedSharding, PartitionSpec as P
-from mjzoo import checkpoints
+from mjzoo.harness import checkpoints
 
 mesh = Mesh(np.array(jax.devices()), ("envs",))
 shard = NamedSharding(mesh, P("envs"))

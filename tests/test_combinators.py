@@ -93,7 +93,7 @@ def make_task(threshold=NEVER, nan_above=1e30, spawn=0.0) -> Task:
     p = Params(jnp.float32(threshold), jnp.float32(nan_above), jnp.float32(spawn))
     return Task(
         model=PHYSICS.model,
-        reset=bind(_reset, p),
+        start=bind(_reset, p),
         step=bind(_step, p),
         reward=bind(_reward, p),
         terminate=bind(_terminate, p),

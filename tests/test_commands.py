@@ -15,7 +15,7 @@ from catalog_tasks import DT, QPOS0, B, T, make_task, resets_of, run
 
 import mjzoo
 import mjzoo.envs
-from mjzoo import commands
+from mjzoo.catalog import commands
 from mjzoo.types import Task
 
 

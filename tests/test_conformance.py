@@ -25,12 +25,11 @@ import pytest
 
 import mjzoo
 import mjzoo.envs
-from mjzoo import (
+from mjzoo.catalog import (
     actuators,
     commands,
     curriculum,
     events,
-    names,
     observations,
     randomizers,
     resets,
@@ -38,6 +37,7 @@ from mjzoo import (
     terminations,
     trackers,
 )
+from mjzoo import names
 from mjzoo.envs import pendulum
 
 BATCH, STEPS = 3, 12
@@ -173,7 +173,7 @@ def batched_rollout(env: str, comb: str):
 
         def one(key):
             reset_key, run_key = jax.random.split(key)
-            state = mjzoo.reset(task, reset_key)
+            state = task.reset(task.model, reset_key)  # the Task contract: its own reset, then a scan
             final, trajectory = mjzoo.rollout(task, policy, state, run_key, STEPS)
             return state, trajectory
 

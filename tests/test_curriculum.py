@@ -27,7 +27,7 @@ from mujoco import mjx
 
 import mjzoo
 import mjzoo.envs
-from mjzoo import curriculum, events
+from mjzoo.catalog import curriculum, events
 from mjzoo import physics as physics_lib
 from mjzoo.types import State, Task, bind
 
@@ -81,7 +81,7 @@ def _terminate(p, model, state):
 def make(level: float, *, speed=0.0, spawn=0.0, threshold=np.inf, push=0.0, gravity=0.0, limit=100) -> Task:
     p = Params(jnp.float32(speed), jnp.float32(spawn), jnp.float32(threshold))
     model = PHYSICS.model.replace(opt=PHYSICS.model.opt.replace(gravity=jnp.array([0.0, 0.0, -gravity * level])))
-    task = Task(model=model, reset=bind(_reset, p), step=bind(_step, p), reward=bind(_reward, p),
+    task = Task(model=model, start=bind(_reset, p), step=bind(_step, p), reward=bind(_reward, p),
                 terminate=bind(_terminate, p), mj_model=MJ)  # fmt: skip
     task = events.with_velocity_pushes(task, interval=(DT, DT), linear=(push * level, 0.0, 0.0))
     return mjzoo.with_auto_reset(mjzoo.with_time_limit(task, limit))

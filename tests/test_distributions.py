@@ -1,4 +1,4 @@
-"""`mjzoo.distributions`: the squashed Gaussian's density against distrax and against a
+"""`mjzoo.learning.distributions`: the squashed Gaussian's density against distrax and against a
 change of variables by hand, normalization of the density, stability where tanh
 saturates, sampling statistics, the entropy estimate, jit / vmap."""
 
@@ -13,7 +13,7 @@ import jax.numpy as jnp
 import numpy as np
 import pytest
 
-from mjzoo.distributions import entropy, log_prob, mode, sample, split_params
+from mjzoo.learning.distributions import entropy, log_prob, mode, sample, split_params
 
 HALF_LOG_2PI = 0.5 * math.log(2.0 * math.pi)
 

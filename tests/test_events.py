@@ -16,7 +16,7 @@ from catalog_tasks import DT, MASS, B, T, make_task, run
 
 import mjzoo
 import mjzoo.envs
-from mjzoo import events
+from mjzoo.catalog import events
 
 PUSH_STEPS = np.array([6, 11, 16, 21]) - 1  # 0-based steps at which a (0.1, 0.1) s interval pushes
 KEY = jax.random.key(0)

@@ -19,7 +19,7 @@ from mujoco import mjx
 import catalog_tasks as ct
 import mjzoo
 import mjzoo.envs
-from mjzoo import actuators, curriculum, observations, rewards
+from mjzoo.catalog import actuators, curriculum, observations, rewards
 from mjzoo.envs import joystick, locomotion, pendulum
 from mjzoo.types import State
 

@@ -1,4 +1,4 @@
-"""`mjzoo.losses` against hand-computed numbers, including which elements the clipping
+"""`mjzoo.learning.losses` against hand-computed numbers, including which elements the clipping
 cuts off from the gradient, and jit / vmap agreement."""
 
 from __future__ import annotations
@@ -11,7 +11,7 @@ import jax.numpy as jnp
 import numpy as np
 import pytest
 
-from mjzoo.losses import clipped_surrogate_loss, normalize_advantages, value_loss
+from mjzoo.learning.losses import clipped_surrogate_loss, normalize_advantages, value_loss
 
 EPS = 0.2
 # ratios r = [0.5, 0.9, 1.1, 1.5], advantages A = [1, -1, 2, -2], eps = 0.2:

@@ -12,8 +12,8 @@ import numpy as np
 import pytest
 from tensorboardX.proto import event_pb2
 
-from mjzoo import metrics
-from mjzoo.metrics import MetricsWriter, Progress, read_metrics
+from mjzoo.harness import metrics
+from mjzoo.harness.metrics import MetricsWriter, Progress, read_metrics
 
 
 def tensorboard_events(directory) -> list[list[event_pb2.Event]]:

@@ -1,4 +1,4 @@
-"""`mjzoo.networks`: shapes, initialization, the output scale, the MLP and GRU against
+"""`mjzoo.learning.networks`: shapes, initialization, the output scale, the MLP and GRU against
 hand-written numpy forward passes, episode resets, jit / vmap / scan."""
 
 from __future__ import annotations
@@ -9,7 +9,7 @@ import jax.numpy as jnp
 import numpy as np
 import pytest
 
-from mjzoo.networks import Network, RecurrentNetwork, gru_mlp, mlp
+from mjzoo.learning.networks import Network, RecurrentNetwork, gru_mlp, mlp
 
 KEY = jax.random.key(0)
 

@@ -1,4 +1,4 @@
-"""`mjzoo.normalization`: running moments against numpy on the concatenated data,
+"""`mjzoo.learning.normalization`: running moments against numpy on the concatenated data,
 independence from how the data is chunked, hand-checked normalization, jit."""
 
 from __future__ import annotations
@@ -9,7 +9,7 @@ import jax.numpy as jnp
 import numpy as np
 import pytest
 
-from mjzoo.normalization import RunningStats, init_stats, normalize, update_stats
+from mjzoo.learning.normalization import RunningStats, init_stats, normalize, update_stats
 
 EXAMPLE = {"joints": jnp.zeros(3), "image": jnp.zeros((2, 2))}
 

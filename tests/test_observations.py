@@ -23,7 +23,7 @@ from catalog_tasks import BLOCK
 from mujoco import mjx
 
 import mjzoo
-from mjzoo import observations as obs
+from mjzoo.catalog import observations as obs
 from mjzoo import physics as physics_lib
 from mjzoo.types import State, Task, bind
 
@@ -211,7 +211,7 @@ def _terminate(model, state):
 
 
 def block_task() -> Task:
-    fns = {name: bind(fn) for name, fn in dict(reset=_reset, step=_step, reward=_reward, terminate=_terminate).items()}
+    fns = {name: bind(fn) for name, fn in dict(start=_reset, step=_step, reward=_reward, terminate=_terminate).items()}
     return Task(model=BLOCK.model, mj_model=BLOCK.mj_model, **fns)
 
 

@@ -16,7 +16,8 @@ import pytest
 
 import mjzoo
 import mjzoo.envs
-from mjzoo import closed_loop, planner_runs, planning
+from mjzoo import planning
+from mjzoo.planning import closed_loop, realtime
 from mjzoo.algorithms import cem, mppi, predictive_sampling
 from mjzoo.envs import cylinder_push, point_mass
 
@@ -26,17 +27,17 @@ OPTIMIZED = {"xla_backend_optimization_level": 3}
 PLANNERS = {"predictive_sampling": predictive_sampling, "cem": cem, "mppi": mppi}
 
 
-def setup_for(env: str, planner: str) -> planner_runs.Setup:
+def setup_for(env: str, planner: str) -> realtime.Problem:
     """The env's documented closed-loop problem for `planner`."""
     module = PLANNERS[planner]
-    return planner_runs.for_env(env, module, module.Config(**mjzoo.envs.hyperparameters(env, planner)))
+    return mjzoo.envs.closed_loop_problem(env, module, module.Config(**mjzoo.envs.hyperparameters(env, planner)))
 
 
 @pytest.mark.parametrize("planner", PLANNERS)
 @pytest.mark.parametrize("env", ["pendulum_swingup", "cartpole_swingup", "cylinder_push", "point_mass"])
 def test_planner_solves_env_closed_loop(env, planner):
     setup = setup_for(env, planner)
-    result, stats = planner_runs.offline(setup, jax.random.key(0), OPTIMIZED)
+    result, stats = realtime.offline(setup, jax.random.key(0), OPTIMIZED)
     solved, score = setup.success(jax.device_get(result.states))
     print(f"{env} {planner}: score {score:.3f}, {stats['plan_latency_ms']:.1f} ms per replan on the CPU")
     assert solved, f"{env} with {planner}: score {score}"
@@ -100,13 +101,13 @@ def test_robust_planning_over_an_ensemble_swings_up_a_heavier_pendulum(risk):
     models = planning.ensemble(setup.plan_task, jax.tree_util.Partial(_heavier, 0.9, 1.5), 4, jax.random.key(7))
     config = dataclasses.replace(setup.config, risk=risk, cvar_alpha=0.5)
     robust = dataclasses.replace(setup, sim_task=sim_task, plan_task=models, config=config, seconds=8.0)
-    result, _ = planner_runs.offline(robust, jax.random.key(0), OPTIMIZED)
+    result, _ = realtime.offline(robust, jax.random.key(0), OPTIMIZED)
     solved, score = robust.success(jax.device_get(result.states))
     assert solved, f"{risk}: |angle| over the last second up to {score:.3f} rad"
 
 
 def test_plan_cli_runs_in_real_time_and_writes_its_files(tmp_path):
-    from mjzoo import cli
+    from mjzoo.harness import cli
 
     cli.main(["plan", "predictive_sampling", "pendulum_swingup", "--seconds", "0.5", "--out", str(tmp_path), "--no-video"])
     summary = json.loads((tmp_path / "summary.json").read_text())

@@ -20,7 +20,9 @@ import numpy as np
 import pytest
 
 import mjzoo
-from mjzoo import envs, planning, randomizers, splines
+from mjzoo import envs, planning
+from mjzoo.catalog import randomizers
+from mjzoo.planning import splines
 from mjzoo.algorithms import cem, mppi, predictive_sampling
 from mjzoo.planning import PlannerState
 

@@ -8,8 +8,8 @@ import sys
 import imageio.v3 as iio
 import numpy as np
 
-from mjzoo.metrics import MetricsWriter
-from mjzoo.plotting import plot_curves
+from mjzoo.harness.metrics import MetricsWriter
+from mjzoo.harness.plotting import plot_curves
 
 PNG_SIGNATURE = b"\x89PNG\r\n\x1a\n"
 
@@ -54,7 +54,7 @@ def test_chosen_keys_and_missing_keys_are_skipped(tmp_path):
 
 
 def test_import_selects_no_matplotlib_backend():
-    code = "import mjzoo.plotting, sys; print('matplotlib.pyplot' in sys.modules)"
+    code = "import mjzoo.harness.plotting, sys; print('matplotlib.pyplot' in sys.modules)"
     # close_fds=False lets Python use posix_spawn: no fork of this multithreaded (JAX) process.
     result = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True, close_fds=False)
     assert result.stdout.strip() == "False"

@@ -18,7 +18,8 @@ import pytest
 
 import mjzoo
 import mjzoo.envs
-from mjzoo import checkpoints, networks, training
+from mjzoo.harness import checkpoints, training
+from mjzoo.learning import networks
 from mjzoo.algorithms import ppo
 
 SMALL = ppo.Config(num_envs=8, unroll_length=8, num_minibatches=2, num_epochs=1, total_steps=8 * 8 * 4)
@@ -159,7 +160,7 @@ TWO_DEVICES = textwrap.dedent(
     """
     import jax, jax.numpy as jnp, numpy as np
     import mjzoo.envs
-    from mjzoo import training
+    from mjzoo.harness import training
     from mjzoo.algorithms import ppo
     assert jax.device_count() == 2
     config = ppo.Config(num_envs=8, unroll_length=8, num_minibatches=2, num_epochs=2, total_steps=256)

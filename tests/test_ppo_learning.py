@@ -9,7 +9,7 @@ import numpy as np
 
 import mjzoo
 import mjzoo.envs
-from mjzoo import training
+from mjzoo.harness import training
 from mjzoo.algorithms import ppo
 
 

@@ -25,7 +25,7 @@ import pytest
 from mujoco import mjx
 
 import mjzoo
-from mjzoo import randomizers
+from mjzoo.catalog import randomizers
 from mjzoo.types import State, Task, bind
 
 DT, G = 0.01, 9.81

@@ -15,7 +15,7 @@ import mujoco
 import numpy as np
 import pytest
 
-from mjzoo import rendering
+from mjzoo.harness import rendering
 
 # A pendulum, a mocap box and a named camera; a small shadow map keeps CPU rendering fast.
 PENDULUM_XML = """
@@ -50,7 +50,7 @@ RENDER_SCRIPT = textwrap.dedent(
     """
     import json, sys
     import jax, mujoco, numpy as np
-    from mjzoo.rendering import render_frames, render_video
+    from mjzoo.harness.rendering import render_frames, render_video
 
     jax.numpy.zeros(1).block_until_ready()  # JAX running, as in a training process
 

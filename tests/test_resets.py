@@ -18,7 +18,7 @@ from mujoco import mjx
 import mjzoo
 import mjzoo.envs
 from mjzoo import physics as physics_lib
-from mjzoo import resets
+from mjzoo.catalog import resets
 from mjzoo.types import State, Task
 
 N = 512  # resets per vmapped batch

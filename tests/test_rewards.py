@@ -25,8 +25,8 @@ import pytest
 from mujoco import mjx
 
 import mjzoo
-from mjzoo import rewards, trackers
-from mjzoo.rewards import SIGMOIDS, tolerance
+from mjzoo.catalog import rewards, trackers
+from mjzoo.catalog.rewards import SIGMOIDS, tolerance
 from mjzoo.types import State, Task, bind
 
 # A band [1, 2] with margin 0.5 and value_at_margin 0.1 unless a test says otherwise.

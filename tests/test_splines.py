@@ -1,4 +1,4 @@
-"""`mjzoo.splines` against hand-computed numbers: zero-order hold, linear and cubic
+"""`mjzoo.planning.splines` against hand-computed numbers: zero-order hold, linear and cubic
 (Catmull-Rom Hermite) interpolation, end values held outside the knots, one knot,
 `knot_positions`, construction errors, and jit / vmap agreement."""
 
@@ -12,7 +12,7 @@ import jax.numpy as jnp
 import numpy as np
 import pytest
 
-from mjzoo import splines
+from mjzoo.planning import splines
 
 # The line y = s sampled at three knots: knots [[0], [2], [4]] at positions [0, 2, 4].
 LINE_KNOTS = np.array([[0.0], [2.0], [4.0]], np.float32)

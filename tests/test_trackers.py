@@ -26,7 +26,7 @@ from mujoco import mjx
 
 import mjzoo
 from mjzoo import physics as physics_lib
-from mjzoo import contacts, rewards, trackers
+from mjzoo.catalog import contacts, rewards, trackers
 from mjzoo.types import State, Task, bind
 
 DT = 0.02

@@ -26,7 +26,8 @@ import jax.numpy as jnp
 import mujoco
 from mujoco import mjx
 
-from mjzoo import checks, contacts, names, tree
+from mjzoo import checks, names, tree
+from mjzoo.catalog import contacts
 from mjzoo.running import reset
 from mjzoo.types import State, Task, bind
 
@@ -172,7 +173,7 @@ def with_terminations(task: Task, items: Mapping[str, Termination]) -> Task:
     fns = tuple(fn if isinstance(fn, Partial) else Partial(fn) for fn in items.values())
     _check_items(task, names.value, fns)
     return task.replace(
-        reset=bind(_terminations_reset, task.reset, names),
+        start=bind(_terminations_reset, task.start, names),
         step=bind(_terminations_step, task.step, names, fns),
         terminate=bind(_terminations_terminate, task.terminate, fns),
     )

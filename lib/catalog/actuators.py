@@ -278,7 +278,7 @@ def with_action_latency(task: Task, max_latency: int) -> Task:
     """
     max_latency = checks.integer("with_action_latency", "max_latency", max_latency, 0)
     return task.replace(
-        reset=bind(_latency_reset, task.reset, tree.Static(max_latency)), step=bind(_latency_step, task.step)
+        start=bind(_latency_reset, task.start, tree.Static(max_latency)), step=bind(_latency_step, task.step)
     )
 
 
@@ -306,7 +306,7 @@ def with_action_drop(task: Task, probability: float) -> Task:
     """
     probability = checks.number("with_action_drop", "probability", probability, 0.0, 1.0)
     return task.replace(
-        reset=bind(_previous_reset, task.reset, tree.Static("action_drop")),
+        start=bind(_previous_reset, task.start, tree.Static("action_drop")),
         step=bind(_drop_step, task.step, probability),
     )
 
@@ -333,7 +333,7 @@ def with_action_filter(task: Task, alpha: float) -> Task:
     """
     alpha = checks.number("with_action_filter", "alpha", alpha, 0.0, 1.0, open_low=True)  # 1: no filtering
     return task.replace(
-        reset=bind(_previous_reset, task.reset, tree.Static("action_filter")),
+        start=bind(_previous_reset, task.start, tree.Static("action_filter")),
         step=bind(_filter_step, task.step, alpha),
     )
 

@@ -1,45 +1,35 @@
-"""The pieces sampling-based planners are made of: plans as control splines, sampling
-around a nominal plan, batched rollouts of a task's own `transition`, costs, risk
-measures over model ensembles, and receding-horizon warm start.
+"""Plans and how planners sample them: control splines around a nominal plan,
+receding-horizon warm start, and the update rules of MPPI and CEM.
 
 A plan is `K` knots of `nu` controls at evenly spaced positions over `horizon_steps`
-control steps of the *planning* task (`mjzoo.splines`). `PlannerState.time` anchors
-the plan in the environment's clock (`data.time`, seconds) and `PlannerState.dt` is the
-planning task's control step, measured from its rollouts, so a simulation with a
-different timestep can ask for the control at any time (`control_at`).
-
-Cost of a sample = -(sum over the horizon of the task's summed reward terms)
-- terminal_value(final state). Physics runs on past termination: a fall costs the
-rewards it forfeits, as in the task's own reward.
+control steps of the *planning* task (`mjzoo.planning.splines`). `PlannerState.time`
+anchors the plan in the environment's clock (`data.time`, seconds) and `PlannerState.dt`
+is the planning task's control step, measured from its rollouts, so a simulation with a
+different timestep can ask for the control at any time (`control_at`). Samples are
+costed by `mjzoo.planning.rollouts`.
 
 `predictive_sampling`, `cem` and `mppi` in `mjzoo.algorithms` combine these pieces;
-each is a few lines on top of `sample_costs`.
+each is a few lines on top of `sample_around`.
 """
 
 from __future__ import annotations
 
 import dataclasses
-import math
-from typing import Callable
 
 import jax
 import jax.numpy as jnp
 import numpy as np
 
-from mjzoo import splines
-from mjzoo.running import complete, transition
+from mjzoo.planning import splines
+from mjzoo.planning.rollouts import RISKS, Ensemble, TerminalValue, aggregate, base_task, rollout_costs
 from mjzoo.types import State, Task
 
 __all__ = [
-    "SamplingConfig", "PlannerState", "Ensemble", "RISKS", "ensemble", "control_limits", "half_range",
-    "initial_state",
-    "shift", "sample_knots", "sample_around", "controls", "control_at", "rollout_costs", "aggregate", "sample_costs",
-    "mppi_weights", "cem_update",
+    "SamplingConfig", "PlannerState", "control_limits", "half_range", "initial_state", "shift", "sample_knots",
+    "sample_around", "controls", "control_at", "sample_costs", "mppi_weights", "cem_update",
 ]  # fmt: skip
 
 Array = jax.Array
-RISKS = ("mean", "worst", "cvar")
-TerminalValue = Callable[[object, State], Array]  # (model, state) -> value to go, float32 scalar
 
 
 @dataclasses.dataclass(frozen=True)
@@ -50,7 +40,7 @@ class SamplingConfig:
       num_samples: rollouts per replan (N), the nominal included where the method keeps it.
       horizon_steps: control steps of the planning task per rollout (H).
       num_knots: spline knots over the horizon (K).
-      interpolation: "zero", "linear" or "cubic" (`mjzoo.splines`).
+      interpolation: "zero", "linear" or "cubic" (`mjzoo.planning.splines`).
       noise_scale: sampling std as a fraction of each actuator's half control range.
       risk: how costs over an `Ensemble` of models become one: "mean", "worst" or "cvar".
       cvar_alpha: the worst fraction of models CVaR averages over.
@@ -106,28 +96,9 @@ class PlannerState:
         return dataclasses.replace(self, **changes)
 
 
-@jax.tree_util.register_dataclass
-@dataclasses.dataclass(frozen=True)
-class Ensemble:
-    """A planning task with M variants of its physics: `fields` holds replacements for
-    `mjx.Model` fields, each with a leading [M] axis. Plan with it where a `Task` goes."""
-
-    task: Task
-    fields: dict[str, Array]
-
-
-def ensemble(task: Task, randomize: Callable, num_models: int, key: Array) -> Ensemble:
-    """M models drawn by `randomize(model, key) -> {field: value}` (the same randomizers
-    `mjzoo.with_domain_randomization` takes), for robust planning."""
-    if num_models < 1:
-        raise ValueError(f"planning.ensemble: num_models must be >= 1, got {num_models}")
-    fields = jax.vmap(randomize, in_axes=(None, 0))(task.model, jax.random.split(key, num_models))
-    return Ensemble(task, {k: jnp.asarray(v, getattr(task.model, k).dtype) for k, v in fields.items()})
-
-
 def control_limits(task: Task | Ensemble) -> tuple[np.ndarray, np.ndarray]:
     """([nu], [nu]) lower and upper control bounds; +-inf where an actuator is unlimited."""
-    mj_model = _task(task).mj_model
+    mj_model = base_task(task).mj_model
     limited = np.asarray(mj_model.actuator_ctrllimited, bool)
     bounds = np.asarray(mj_model.actuator_ctrlrange, np.float32)
     return np.where(limited, bounds[:, 0], -np.inf), np.where(limited, bounds[:, 1], np.inf)
@@ -193,69 +164,6 @@ def control_at(
     return jnp.clip(splines.evaluate(state.knots, positions, jnp.reshape(step, (1,)), config.interpolation)[0], low, high)
 
 
-def rollout_costs(
-    task: Task | Ensemble,
-    state: State,
-    controls: Array,
-    key: Array,
-    terminal_value: TerminalValue | None = None,
-    unroll: int = 1,
-) -> tuple[Array, Array]:
-    """Costs of open-loop control sequences from `state`, by `lax.scan` over the horizon
-    of the task's `transition`, vmapped over samples (and over an ensemble's models).
-
-    Args:
-      task: the planning task, or an `Ensemble` of M models of it.
-      state: the start state (one environment).
-      controls: [N, H, nu].
-      key: step keys are drawn from it and shared by all samples (common random numbers).
-
-    Returns:
-      ([M, N] costs, M = 1 for a plain task; [] control step dt of the planning task, s).
-    """
-    variants = task if isinstance(task, Ensemble) else Ensemble(task, {})
-    base = variants.task
-    start = complete(base, state)
-    step_keys = jax.random.split(key, controls.shape[1])
-
-    def cost(model, sample_controls: Array) -> tuple[Array, Array]:
-        planning_task = base.replace(model=model)
-
-        def body(s: State, inputs) -> tuple[State, Array]:
-            action, step_key = inputs
-            s = transition(planning_task, s, action, step_key)
-            return s, s.reward
-
-        final, rewards = jax.lax.scan(body, start, (sample_controls, step_keys), unroll=unroll)
-        value = terminal_value(model, final) if terminal_value is not None else 0.0
-        return -(jnp.sum(rewards) + value), final.data.time
-
-    per_sample = jax.vmap(cost, in_axes=(None, 0))
-    if variants.fields:
-        costs, times = jax.vmap(lambda f: per_sample(base.model.replace(**f), controls))(variants.fields)
-    else:
-        costs, times = jax.tree.map(lambda x: x[None], per_sample(base.model, controls))
-    dt = (times[0, 0] - start.data.time) / controls.shape[1]
-    return costs, dt.astype(jnp.float32)
-
-
-def aggregate(costs: Array, risk: str = "mean", alpha: float = 0.25) -> Array:
-    """[N] one cost per sample from [M, N] costs over models.
-
-    mean:  (1/M) sum_m c_m
-    worst: max_m c_m
-    cvar:  mean of the ceil(alpha M) largest c_m (the expected cost in the worst alpha tail)
-    """
-    if risk == "mean":
-        return jnp.mean(costs, axis=0)
-    if risk == "worst":
-        return jnp.max(costs, axis=0)
-    if risk == "cvar":
-        tail = max(1, math.ceil(alpha * costs.shape[0] - 1e-9))  # 0.28 * 25 is 7.000000000000001
-        return jnp.mean(jax.lax.top_k(costs.T, tail)[0], axis=-1)
-    raise ValueError(f"planning.aggregate: unknown risk {risk!r}; choose one of {RISKS}")
-
-
 def sample_costs(
     config: SamplingConfig, task: Task | Ensemble, state: State, samples: Array, key: Array
 ) -> tuple[Array, Array]:
@@ -318,7 +226,3 @@ def cem_update(
     elite = jax.lax.top_k(-costs, num_elites)[1]
     elites = samples[elite]
     return jnp.mean(elites, axis=0), jnp.clip(jnp.std(elites, axis=0), sigma_min, sigma_max)
-
-
-def _task(task: Task | Ensemble) -> Task:
-    return task.task if isinstance(task, Ensemble) else task

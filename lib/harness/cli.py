@@ -139,7 +139,7 @@ def train(
     --env-overrides NAME=VALUE overrides of the env (see `mjzoo envs`); --resume DIR
     continues the run in DIR from its newest checkpoint with its saved settings.
     """
-    from mjzoo import training
+    from mjzoo.harness import training
 
     if resume is not None:
         saved = json.loads((resume / "task.json").read_text())
@@ -169,7 +169,7 @@ def train(
 def evaluate(run: Annotated[Path, tyro.conf.Positional], episodes: int = 16, seed: int = 1, video: Path | None = None) -> None:
     """Reload RUN's newest checkpoint, run deterministic episodes, print the mean return
     and write a video (default RUN/eval.mp4)."""
-    from mjzoo import checkpoints, training
+    from mjzoo.harness import checkpoints, training
 
     saved = json.loads((run / "task.json").read_text())
     info = json.loads((run / "config.json").read_text())
@@ -207,18 +207,19 @@ def plan(
     as one jitted scan instead. --config takes NAME=VALUE fields of the planner's Config
     (defaults: the env's); the planning task and hooks are the env's (`mjzoo.envs.planning`).
     """
-    from mjzoo import planner_runs
+    from mjzoo.harness import plan_report
+    from mjzoo.planning import realtime
 
     try:
         mjzoo.envs.planning(env)
     except KeyError as e:
         raise SystemExit(str(e.args[0])) from None
     module = _algorithm(algorithm)
-    setup = planner_runs.for_env(env, module, _config(module, env, _parse_assignments(config, "--config")), seconds)
+    problem = mjzoo.envs.closed_loop_problem(env, module, _config(module, env, _parse_assignments(config, "--config")), seconds)
     key = jax.random.key(seed)
-    result, stats = planner_runs.offline(setup, key) if offline else planner_runs.realtime(setup, key, plan_hz)
+    result, stats = realtime.offline(problem, key) if offline else realtime.realtime(problem, key, plan_hz)
     out = out or Path("runs") / f"{env}-{algorithm}-plan"
-    summary = planner_runs.write(out, setup, result, stats, video, env=env, algorithm=algorithm,
+    summary = plan_report.write(out, problem, result, stats, video, env=env, algorithm=algorithm,
                                  mode="offline" if offline else "realtime")  # fmt: skip
     print(json.dumps(summary, indent=2))
     print(f"plot:  {out / 'plan.png'}")

@@ -4,7 +4,7 @@ The *simulation* task is the world; the *planning* task is the planner's model o
 may differ (a coarser timestep, wrong masses, an `Ensemble` of models). Every
 `replan_every` control steps of the simulation the planner replans from the current
 simulated state; in between, the simulation applies the plan's control at its own time
-(`planning.control_at`), so a planning task with a different timestep still lines up.
+(`sampling.control_at`), so a planning task with a different timestep still lines up.
 
 The whole run is one `jax.jit` of one `lax.scan` over replans (each an inner scan over
 simulation steps): an evaluation episode costs one compile.
@@ -29,8 +29,9 @@ from typing import Callable
 import jax
 import jax.numpy as jnp
 
-from mjzoo import planning
-from mjzoo.planning import Ensemble, PlannerState, SamplingConfig
+from mjzoo.planning import sampling
+from mjzoo.planning.rollouts import Ensemble
+from mjzoo.planning.sampling import PlannerState, SamplingConfig
 from mjzoo.running import complete, transition
 from mjzoo.types import State, Task
 
@@ -113,7 +114,7 @@ def sim_step(
     config: SamplingConfig, sim_task: Task, planner_state: PlannerState, sim_state: State, key: Array, hooks: Hooks
 ) -> tuple[State, Array]:
     """One simulation control step under the current plan: (next state, executed control)."""
-    action = planning.control_at(config, planner_state, sim_state.data.time, *planning.control_limits(sim_task))
+    action = sampling.control_at(config, planner_state, sim_state.data.time, *sampling.control_limits(sim_task))
     step_key, hook_key = jax.random.split(key)
     next_state = transition(sim_task, sim_state, action, step_key)
     if hooks.post_sim_step is not None:

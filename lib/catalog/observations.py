@@ -35,7 +35,8 @@ import mujoco
 import numpy as np
 from mujoco import mjx
 
-from mjzoo import checks, contacts, names, tree
+from mjzoo import checks, names, tree
+from mjzoo.catalog import contacts
 from mjzoo.perturbations import add_noise
 from mjzoo.types import State, Task, bind
 
@@ -214,7 +215,7 @@ def actuator_forces(model: mjx.Model, state: State) -> Array:
     return state.data.actuator_force.astype(jnp.float32)
 
 
-# --- contacts (see `mjzoo.contacts`) -------------------------------------------------
+# --- contacts (see `mjzoo.catalog.contacts`) -------------------------------------------------
 
 
 def geom_contacts(mj_model: mujoco.MjModel, geoms: Names, others: Names | None = None) -> Partial:
@@ -282,10 +283,10 @@ def with_observation_history(task: Task, length: int) -> Task:
     episode starts a new history); noise combinators inside it perturb each frame once.
     """
     length = checks.integer("with_observation_history", "length", length)
-    if "observation_history" in jax.eval_shape(task.reset, task.model, jax.random.key(0)).info:
+    if "observation_history" in jax.eval_shape(task.start, task.model, jax.random.key(0)).info:
         raise ValueError("with_observation_history: the task already keeps an observation history; raise its length")
-    reset = bind(_history_reset, task.reset, tree.Static(length))
-    return task.replace(reset=reset, step=bind(_history_step, task.step))
+    start = bind(_history_reset, task.start, tree.Static(length))
+    return task.replace(start=start, step=bind(_history_step, task.step))
 
 
 def _with_history(state: State, history) -> State:
@@ -318,7 +319,7 @@ def with_observation_bias(task: Task, scale: float) -> Task:
     `with_auto_reset`, every episode draws a new bias.
     """
     scale = checks.number("with_observation_bias", "scale", scale, 0.0)
-    return task.replace(reset=bind(_bias_reset, task.reset, scale), step=bind(_bias_step, task.step))
+    return task.replace(start=bind(_bias_reset, task.start, scale), step=bind(_bias_step, task.step))
 
 
 def _biased(state: State, bias) -> State:
@@ -339,7 +340,7 @@ def with_multiplicative_observation_noise(task: Task, scale: float) -> Task:
     floating leaf after reset and after every step: noise proportional to the signal.
     Keeps nothing in `info`."""
     scale = checks.number("with_multiplicative_observation_noise", "scale", scale, 0.0)
-    return task.replace(reset=bind(_scaled_reset, task.reset, scale), step=bind(_scaled_step, task.step, scale))
+    return task.replace(start=bind(_scaled_reset, task.start, scale), step=bind(_scaled_step, task.step, scale))
 
 
 def _scaled(state: State, scale: Array, key: Array) -> State:

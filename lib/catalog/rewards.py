@@ -1,4 +1,4 @@
-"""Reward terms, and the bounded shape `tolerance` (from `mjzoo.shapes`).
+"""Reward terms, and the bounded shape `tolerance` (from `mjzoo.catalog.shapes`).
 
 Every item but `tolerance` and `terms` is a reward term ``(model, state, action,
 next_state) -> float32 scalar``, UNWEIGHTED: the weight comes from
@@ -27,7 +27,7 @@ import numpy as np
 
 from mjzoo import checks, names
 from mjzoo.combinators import with_rewards
-from mjzoo.shapes import SIGMOIDS, tolerance
+from mjzoo.catalog.shapes import SIGMOIDS, tolerance
 from mjzoo.types import State, Task, bind
 
 __all__ = [

@@ -16,7 +16,7 @@ from collections.abc import Sequence
 from matplotlib.backends.backend_agg import FigureCanvasAgg
 from matplotlib.figure import Figure
 
-from mjzoo.metrics import read_metrics
+from mjzoo.harness.metrics import read_metrics
 
 __all__ = ["plot_curves", "DEFAULT_KEYS"]
 
@@ -29,7 +29,7 @@ def plot_curves(metrics_path: str | Path, out_path: str | Path, keys: Sequence[s
     """Plots metrics against "step", one subplot per key, and writes a PNG.
 
     Args:
-      metrics_path: a metrics.jsonl written by `mjzoo.metrics.MetricsWriter` (or its
+      metrics_path: a metrics.jsonl written by `mjzoo.harness.metrics.MetricsWriter` (or its
         directory).
       out_path: the PNG to write; parent directories are created.
       keys: metric names to plot, in order; default `DEFAULT_KEYS` then the sorted

@@ -14,8 +14,9 @@ import jax.numpy as jnp
 import numpy as np
 from mujoco import mjx
 
-from mjzoo import checks, contacts, names, tree
-from mjzoo.observations import point_velocity
+from mjzoo import checks, names, tree
+from mjzoo.catalog import contacts
+from mjzoo.catalog.observations import point_velocity
 from mjzoo.types import State, Task, bind
 
 __all__ = ["with_action_history", "with_feet", "ACTION_HISTORY", "FEET"]
@@ -36,7 +37,7 @@ def with_action_history(task: Task, length: int = 3) -> Task:
     record the policy's action, inside them to record what the actuators got.
     """
     shape = tree.Static((checks.integer("with_action_history", "length", length), task.action_size))
-    return task.replace(reset=bind(_history_reset, task.reset, shape), step=bind(_history_step, task.step))
+    return task.replace(start=bind(_history_reset, task.start, shape), step=bind(_history_step, task.step))
 
 
 def _history_reset(reset_fn, shape: tree.Static, model: mjx.Model, key: Array) -> State:
@@ -58,7 +59,7 @@ def with_feet(task: Task, feet: names.Names, floor: names.Names) -> Task:
     """Keeps ``info["feet"]``, a dict over the F geoms named in `feet` (in that order):
 
       contact       [F] bool     the foot touches a `floor` geom (one name or several):
-                                 an active contact (`mjzoo.contacts.touching`)
+                                 an active contact (`mjzoo.catalog.contacts.touching`)
       air_time      [F] float32  s since the foot last left the floor (or since reset);
                                  0 while in contact
       first_contact [F] bool     the foot touched down in this transition
@@ -76,7 +77,7 @@ def with_feet(task: Task, feet: names.Names, floor: names.Names) -> Task:
     geoms, floor = contacts.geom_sets(task.mj_model, feet, floor, "with_feet")
     bodies = jnp.asarray(task.mj_model.geom_bodyid[np.asarray(geoms)], jnp.int32)
     indices = {"geom": geoms, "body": bodies, "floor": floor}
-    return task.replace(reset=bind(_feet_reset, task.reset, indices), step=bind(_feet_step, task.step, indices))
+    return task.replace(start=bind(_feet_reset, task.start, indices), step=bind(_feet_step, task.step, indices))
 
 
 def _feet_now(indices: dict, model: mjx.Model, data: mjx.Data) -> dict[str, Array]:

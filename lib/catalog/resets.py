@@ -80,7 +80,7 @@ def with_resets(task: Task, *items: ResetItem, observe: Callable[[mjx.Model, Sta
     if not isinstance(observe, jax.tree_util.Partial):
         observe = jax.tree_util.Partial(observe)
     _check(task, items, observe)
-    return task.replace(reset=bind(_reset, task.reset, items, observe))
+    return task.replace(start=bind(_reset, task.start, items, observe))
 
 
 def _reset(reset_fn, items, observe, model: mjx.Model, key: Array) -> State:
@@ -94,7 +94,7 @@ def _reset(reset_fn, items, observe, model: mjx.Model, key: Array) -> State:
 
 def _check(task: Task, items, observe) -> None:
     key = jax.random.key(0)
-    state = jax.eval_shape(task.reset, task.model, key)
+    state = jax.eval_shape(task.start, task.model, key)
     for i, item in enumerate(items):
         out = jax.eval_shape(item, task.model, state.data, key)
         if jax.tree.structure(out) != jax.tree.structure(state.data):

@@ -78,7 +78,7 @@ def with_velocity_pushes(
     interval = countdown_interval(who, "interval", interval)
     limits = jnp.concatenate([checks.numbers(who, "linear", linear, 3), checks.numbers(who, "angular", angular, 3)])
     return task.replace(
-        reset=bind(_velocity_reset, task.reset, interval),
+        start=bind(_velocity_reset, task.start, interval),
         step=bind(_velocity_step, task.step, jnp.asarray(qvel_idx), interval, limits),
     )
 
@@ -136,7 +136,7 @@ def with_force_pushes(
     interval = countdown_interval(who, "interval", interval)
     duration = checks.number(who, "duration", duration, 0.0, open_low=True)
     params = (body_id, interval, checks.numbers(who, "force", force, 3), duration)
-    return task.replace(reset=bind(_force_reset, task.reset, interval), step=bind(_force_step, task.step, *params))
+    return task.replace(start=bind(_force_reset, task.start, interval), step=bind(_force_step, task.step, *params))
 
 
 def _force_reset(reset_fn, interval, model, key) -> State:

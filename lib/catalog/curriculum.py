@@ -140,7 +140,7 @@ def with_curriculum(make: Callable[[float], Task], rule: Rule) -> Task:
     model = _ramp([t.model for t in tasks], "model")
     easy = tasks[0]
     stepped = runs_transitions(easy, _curriculum_step, functions, model, rule)
-    return stepped.replace(reset=bind(_curriculum_reset, easy.replace(model=None), functions, model, rule))
+    return stepped.replace(start=bind(_curriculum_reset, easy.replace(model=None), functions, model, rule))
 
 
 def _at(inner: Task, functions: _Ramp, model_ramp: _Ramp, model: mjx.Model, level: Array) -> Task:
@@ -150,7 +150,7 @@ def _at(inner: Task, functions: _Ramp, model_ramp: _Ramp, model: mjx.Model, leve
 def _curriculum_reset(inner, functions, model_ramp, rule, model, key) -> State:
     level = rule.initial
     task = _at(inner, functions, model_ramp, model, level)
-    state = task.reset(task.model, key)
+    state = task.start(task.model, key)
     memory = rule.start(task.model, state)
     return state.replace(info={**state.info, "curriculum": {"level": level, "memory": memory}})
 

@@ -39,7 +39,7 @@ import jax.numpy as jnp
 import numpy as np
 
 from mjzoo import checks, names, tree
-from mjzoo.events import countdown_interval, due, elapsed
+from mjzoo.catalog.events import countdown_interval, due, elapsed
 from mjzoo.types import State, Task, bind
 
 __all__ = ["with_velocity_command", "with_heading_command", "with_joint_position_command"]
@@ -68,14 +68,14 @@ class _Command:
 
 def _with_command(task: Task, command: _Command) -> Task:
     if command.observe:
-        obs = jax.eval_shape(task.reset, task.model, jax.random.key(0)).obs
+        obs = jax.eval_shape(task.start, task.model, jax.random.key(0)).obs
         if not (isinstance(obs, jax.ShapeDtypeStruct) and obs.ndim == 1):
             raise ValueError(
                 f"commands: observe=True appends the command to a 1-D array observation, but the task "
                 f"observes {jax.tree.map(lambda x: x.shape, obs)}; pass observe=False and read "
                 f"info[{command.output!r}]"
             )
-    return task.replace(reset=bind(_command_reset, task.reset, command), step=bind(_command_step, task.step, command))
+    return task.replace(start=bind(_command_reset, task.start, command), step=bind(_command_step, task.step, command))
 
 
 def _draw(c: _Command, key: Array) -> dict[str, Array]:

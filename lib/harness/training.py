@@ -27,7 +27,7 @@ import jax.numpy as jnp
 import numpy as np
 from jax.sharding import NamedSharding, PartitionSpec
 
-from mjzoo import checkpoints, metrics as metrics_lib, plotting, rendering
+from mjzoo.harness import checkpoints, metrics as metrics_lib, plotting, rendering
 from mjzoo.types import Task
 
 __all__ = ["Settings", "run", "shard_envs", "replicate", "config_dict"]

@@ -1,8 +1,8 @@
 """One mjzoo `Task` presented as a Brax `Env`, for Brax's own trainers.
 
-    env = mjzoo.brax_adapter.to_brax_env(mjzoo.envs.make("cartpole_balance"))
+    env = mjzoo.interop.brax.to_brax_env(mjzoo.envs.make("cartpole_balance"))
     brax.training.agents.ppo.train(env, ..., episode_length=500,
-                                   wrap_env_fn=mjzoo.brax_adapter.wrap_for_training)
+                                   wrap_env_fn=mjzoo.interop.brax.wrap_for_training)
 
 Every step goes through `mjzoo.transition`, so reward, termination and truncation are
 exactly the task's. The Brax state holds:

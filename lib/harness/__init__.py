@@ -1,0 +1,31 @@
+"""Running experiments: what turns the pure pieces into runs with files on disk.
+
+    training      the host loop over jitted chunks of an RL algorithm's updates:
+                  progress, evaluation, metrics, checkpoints, curves, video
+    metrics       metrics.jsonl and TensorBoard writers, the progress bar
+    checkpoints   atomic orbax checkpoints that resume exactly
+    plotting      learning curves from metrics.jsonl
+    rendering     MuJoCo frames and MP4 videos of trajectories
+    plan_report   summary.json, plan.png and plan.mp4 of a planning run
+    cli           the `mjzoo` command: the application on top, the one module of the
+                  package that reaches up to `mjzoo.envs` and `mjzoo.algorithms`
+
+Submodules load on first use: ``mjzoo.harness.training`` imports orbax,
+TensorBoard and matplotlib, which a planner on a robot does not need.
+"""
+
+import importlib
+
+MODULES = ("training", "metrics", "checkpoints", "plotting", "rendering", "plan_report", "cli")
+
+__all__ = list(MODULES)
+
+
+def __getattr__(name: str):
+    if name in MODULES:
+        return importlib.import_module(f"mjzoo.harness.{name}")
+    raise AttributeError(f"module 'mjzoo.harness' has no attribute {name!r}")
+
+
+def __dir__() -> list[str]:
+    return sorted(set(globals()) | set(MODULES))

@@ -1,0 +1,63 @@
+"""The files a closed-loop planning run writes (`mjzoo plan`):
+
+    out/summary.json   success, score, final_cost, plan_hz, plan_latency_ms, ...
+    out/plan.png       cost and controls over time
+    out/plan.mp4       the run (where an OpenGL backend exists)
+"""
+
+from __future__ import annotations
+
+import json
+from pathlib import Path
+from typing import Any
+
+import jax
+import numpy as np
+
+from mjzoo.harness import rendering
+from mjzoo.planning.closed_loop import Result
+from mjzoo.planning.realtime import Problem
+from mjzoo.types import Task
+
+__all__ = ["write"]
+
+
+def write(out: Path, problem: Problem, result: Result, stats: dict[str, float], video: bool = True, **extra: Any) -> dict:
+    """Writes summary.json, plan.png and (where GL exists) plan.mp4 to `out`; returns the summary.
+
+    final_cost is the mean per-step cost (-reward) over the last second of the run."""
+    out.mkdir(parents=True, exist_ok=True)
+    states = jax.device_get(result.states)
+    time_s = np.asarray(states.data.time)
+    costs, controls = np.asarray(result.costs), np.asarray(result.controls)
+    solved, score = problem.success(states) if problem.success else (None, None)
+    summary = {**extra, "success": solved, "score": score,
+               "final_cost": float(np.mean(costs[time_s >= time_s[-1] - 1.0 + 1e-6])),
+               **{k: float(v) for k, v in stats.items()}}  # fmt: skip
+    (out / "summary.json").write_text(json.dumps(summary, indent=2))
+    _plot(out / "plan.png", time_s, costs, controls, problem.sim_task)
+    if video:
+        mj = problem.sim_task.mj_model
+        rendering.render_video(mj, np.asarray(states.data.qpos), out / "plan.mp4", 1.0 / problem.sim_dt,
+                               mocap_pos=np.asarray(states.data.mocap_pos), mocap_quat=np.asarray(states.data.mocap_quat),
+                               camera=0 if mj.ncam else None)  # fmt: skip
+    return summary
+
+
+def _plot(path: Path, time_s: np.ndarray, costs: np.ndarray, controls: np.ndarray, task: Task) -> None:
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    fig, (top, bottom) = plt.subplots(2, 1, sharex=True, figsize=(7, 5))
+    top.plot(time_s, costs)
+    top.set_ylabel("cost per step (-reward)")
+    for i in range(controls.shape[1]):
+        bottom.plot(time_s, controls[:, i], label=task.mj_model.actuator(i).name or f"u{i}")
+    bottom.set_ylabel("control")
+    bottom.set_xlabel("time (s)")
+    bottom.legend(loc="upper right", fontsize="small")
+    fig.tight_layout()
+    fig.savefig(path, dpi=100)
+    plt.close(fig)

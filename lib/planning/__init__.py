@@ -1,0 +1,60 @@
+"""The pieces sampling-based planners are composed from, and the closed loop they run in.
+
+    splines       plans as K control knots, evaluated at any time (zero, linear, cubic)
+    sampling      SamplingConfig, PlannerState, sampling around a nominal plan, warm
+                  start, the MPPI weights and the CEM update
+    rollouts      batched rollouts of a task's own `transition` and their costs, model
+                  ensembles and risk measures
+    closed_loop   simulate one task while planning with another, as one jit; Judo's hooks
+    realtime      the same closed loop against the wall clock, or timed offline
+
+`mjzoo.algorithms.mppi`, `cem` and `predictive_sampling` are a few lines each on top
+of `sample_around`; a new planner reuses every piece here. The functions of `sampling`
+and `rollouts` are re-exported: ``mjzoo.planning.mppi_weights``.
+"""
+
+from mjzoo.planning import closed_loop, realtime, rollouts, sampling, splines
+from mjzoo.planning.rollouts import RISKS, Ensemble, TerminalValue, aggregate, base_task, ensemble, rollout_costs
+from mjzoo.planning.sampling import (
+    PlannerState,
+    SamplingConfig,
+    cem_update,
+    control_at,
+    control_limits,
+    controls,
+    half_range,
+    initial_state,
+    mppi_weights,
+    sample_around,
+    sample_costs,
+    sample_knots,
+    shift,
+)
+
+__all__ = [
+    "splines",
+    "sampling",
+    "rollouts",
+    "closed_loop",
+    "realtime",
+    "SamplingConfig",
+    "PlannerState",
+    "Ensemble",
+    "TerminalValue",
+    "RISKS",
+    "ensemble",
+    "base_task",
+    "control_limits",
+    "half_range",
+    "initial_state",
+    "shift",
+    "sample_knots",
+    "sample_around",
+    "controls",
+    "control_at",
+    "rollout_costs",
+    "aggregate",
+    "sample_costs",
+    "mppi_weights",
+    "cem_update",
+]

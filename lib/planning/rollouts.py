@@ -1,0 +1,112 @@
+"""Batched rollouts of a task's own `transition`, and the risk measures that turn costs
+over a model ensemble into one cost per sample: the physics side of a sampling planner.
+
+Cost of a control sequence = -(sum over the horizon of the task's summed reward terms)
+- terminal_value(final state). Physics runs on past termination: a fall costs the
+rewards it forfeits, as in the task's own reward.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import math
+from typing import Callable
+
+import jax
+import jax.numpy as jnp
+
+from mjzoo.running import complete, transition
+from mjzoo.types import State, Task
+
+__all__ = ["Ensemble", "ensemble", "base_task", "rollout_costs", "aggregate", "RISKS", "TerminalValue"]
+
+Array = jax.Array
+RISKS = ("mean", "worst", "cvar")
+TerminalValue = Callable[[object, State], Array]  # (model, state) -> value to go, float32 scalar
+
+
+@jax.tree_util.register_dataclass
+@dataclasses.dataclass(frozen=True)
+class Ensemble:
+    """A planning task with M variants of its physics: `fields` holds replacements for
+    `mjx.Model` fields, each with a leading [M] axis. Plan with it where a `Task` goes."""
+
+    task: Task
+    fields: dict[str, Array]
+
+
+def ensemble(task: Task, randomize: Callable, num_models: int, key: Array) -> Ensemble:
+    """M models drawn by `randomize(model, key) -> {field: value}` (the same randomizers
+    `mjzoo.with_domain_randomization` takes), for robust planning."""
+    if num_models < 1:
+        raise ValueError(f"planning.ensemble: num_models must be >= 1, got {num_models}")
+    fields = jax.vmap(randomize, in_axes=(None, 0))(task.model, jax.random.split(key, num_models))
+    return Ensemble(task, {k: jnp.asarray(v, getattr(task.model, k).dtype) for k, v in fields.items()})
+
+
+def rollout_costs(
+    task: Task | Ensemble,
+    state: State,
+    controls: Array,
+    key: Array,
+    terminal_value: TerminalValue | None = None,
+    unroll: int = 1,
+) -> tuple[Array, Array]:
+    """Costs of open-loop control sequences from `state`, by `lax.scan` over the horizon
+    of the task's `transition`, vmapped over samples (and over an ensemble's models).
+
+    Args:
+      task: the planning task, or an `Ensemble` of M models of it.
+      state: the start state (one environment).
+      controls: [N, H, nu].
+      key: step keys are drawn from it and shared by all samples (common random numbers).
+
+    Returns:
+      ([M, N] costs, M = 1 for a plain task; [] control step dt of the planning task, s).
+    """
+    variants = task if isinstance(task, Ensemble) else Ensemble(task, {})
+    base = variants.task
+    start = complete(base, state)
+    step_keys = jax.random.split(key, controls.shape[1])
+
+    def cost(model, sample_controls: Array) -> tuple[Array, Array]:
+        planning_task = base.replace(model=model)
+
+        def body(s: State, inputs) -> tuple[State, Array]:
+            action, step_key = inputs
+            s = transition(planning_task, s, action, step_key)
+            return s, s.reward
+
+        final, rewards = jax.lax.scan(body, start, (sample_controls, step_keys), unroll=unroll)
+        value = terminal_value(model, final) if terminal_value is not None else 0.0
+        return -(jnp.sum(rewards) + value), final.data.time
+
+    per_sample = jax.vmap(cost, in_axes=(None, 0))
+    if variants.fields:
+        costs, times = jax.vmap(lambda f: per_sample(base.model.replace(**f), controls))(variants.fields)
+    else:
+        costs, times = jax.tree.map(lambda x: x[None], per_sample(base.model, controls))
+    dt = (times[0, 0] - start.data.time) / controls.shape[1]
+    return costs, dt.astype(jnp.float32)
+
+
+def aggregate(costs: Array, risk: str = "mean", alpha: float = 0.25) -> Array:
+    """[N] one cost per sample from [M, N] costs over models.
+
+    mean:  (1/M) sum_m c_m
+    worst: max_m c_m
+    cvar:  mean of the ceil(alpha M) largest c_m (the expected cost in the worst alpha tail)
+    """
+    if risk == "mean":
+        return jnp.mean(costs, axis=0)
+    if risk == "worst":
+        return jnp.max(costs, axis=0)
+    if risk == "cvar":
+        tail = max(1, math.ceil(alpha * costs.shape[0] - 1e-9))  # 0.28 * 25 is 7.000000000000001
+        return jnp.mean(jax.lax.top_k(costs.T, tail)[0], axis=-1)
+    raise ValueError(f"planning.aggregate: unknown risk {risk!r}; choose one of {RISKS}")
+
+
+def base_task(task: Task | Ensemble) -> Task:
+    """The task itself, or an ensemble's base task."""
+    return task.task if isinstance(task, Ensemble) else task
