@@ -1,7 +1,19 @@
-"""Algorithms as modules of pure functions: each consumes a `mjzoo.Task`.
+"""Algorithms as modules of pure functions, each consuming a `mjzoo.Task`.
 
-Reinforcement learning (ppo, amp) and sampling-based planners (mppi, cem,
-predictive_sampling) land here; see DESIGN.md for the contract they follow.
+    ppo                   proximal policy optimization (Config, init, update, train,
+                          policy, evaluate)
+    mppi                  model-predictive path integral control  (Config, init, plan)
+    cem                   the cross-entropy method                  (Config, init, plan)
+    predictive_sampling   keep the best of samples around the plan  (Config, init, plan)
+
+Each is assembled from `mjzoo.learning` or `mjzoo.planning` pieces; docs/design.md
+gives the contract a new algorithm follows. Modules load on first use.
 """
 
-__all__: list[str] = []
+from mjzoo import lazy
+
+MODULES = ("ppo", "mppi", "cem", "predictive_sampling")
+
+__all__ = list(MODULES)
+
+__getattr__, __dir__ = lazy.submodules(__name__, MODULES)

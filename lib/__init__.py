@@ -20,13 +20,12 @@ docs/design.md.
 """
 
 import contextlib
-import importlib
 import io
 
 with contextlib.redirect_stdout(io.StringIO()):  # mjx prints a notice when its optional warp backend is absent
     from mujoco import mjx  # noqa: F401
 
-from mjzoo import checks, names, physics, tree
+from mjzoo import checks, lazy, names, physics, tree
 from mjzoo.combinators import (
     with_action_repeat,
     with_auto_reset,
@@ -84,12 +83,4 @@ __all__ = [
 ]
 
 
-def __getattr__(name: str):
-    """Imports a subpackage the first time it is named (PEP 562)."""
-    if name in SUBPACKAGES:
-        return importlib.import_module(f"mjzoo.{name}")
-    raise AttributeError(f"module 'mjzoo' has no attribute {name!r}")
-
-
-def __dir__() -> list[str]:
-    return sorted(set(globals()) | set(SUBPACKAGES))
+__getattr__, __dir__ = lazy.submodules(__name__, SUBPACKAGES)

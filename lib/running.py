@@ -39,6 +39,9 @@ def transition_with_terms(
     task: Task, state: State, action: Array, key: Array
 ) -> tuple[State, dict[str, Array]]:
     """`transition`, also returning this task's reward terms by name (float32 scalars)."""
+    if jnp.shape(action) != (task.action_size,):  # no silent broadcasting of a wrong action
+        raise ValueError(f"transition: the action has shape {jnp.shape(action)}, but the task takes "
+                         f"({task.action_size},): one number per actuator of its model")  # fmt: skip
     next_state = task.step(task.model, state, action, key)
     terms = {k: jnp.asarray(v, jnp.float32) for k, v in task.reward(task.model, state, action, next_state).items()}
     terminated, truncated = task.terminate(task.model, next_state)

@@ -109,6 +109,8 @@ class Task:
         apart because value bootstrapping differs between them.
       mj_model: the host `mujoco.MjModel` the MJX model was made from (static: names,
         rendering). Never traced; treat it as read-only.
+      action_dim: static length of an action where it is not one control per actuator
+        (PD position and velocity targets take 2 nu); None: nu. Read `action_size`.
     """
 
     model: mjx.Model
@@ -117,6 +119,7 @@ class Task:
     reward: RewardFn
     terminate: TerminateFn
     mj_model: mujoco.MjModel = dataclasses.field(metadata=dict(static=True))
+    action_dim: int | None = dataclasses.field(default=None, metadata=dict(static=True))
 
     def replace(self, **changes: Any) -> "Task":
         return dataclasses.replace(self, **changes)
@@ -130,8 +133,8 @@ class Task:
 
     @property
     def action_size(self) -> int:
-        """Length of the action vector: one control per actuator."""
-        return int(self.mj_model.nu)
+        """Length of the action vector: one control per actuator unless `action_dim` says."""
+        return int(self.mj_model.nu) if self.action_dim is None else self.action_dim
 
 
 @jax.tree_util.register_dataclass

@@ -188,9 +188,9 @@ def position_velocity(
         target_qdot = velocity_scale * action[nu:]                     rad/s
         torque      = kp' * (target_q - q) + kd' * (target_qdot - qdot) + noise
 
-    The rest as in `pd`. A task using it takes actions of 2 nu numbers, while
-    `Task.action_size` is nu (one per actuator): code that sizes actions by it (random
-    policies, the conformance suite, algorithms) must be told the larger size.
+    The rest as in `pd`. A task using it takes actions of 2 nu numbers: build it with
+    ``task.replace(action_dim=2 * nu)`` so that `Task.action_size`, which algorithms and
+    random policies size actions by, says so.
     """
     return bind(_position_velocity, _pd_params(mj_model, "position_velocity", kp, kd, position_scale,
                                                velocity_scale, default_pose, torque_limit, gain_noise,

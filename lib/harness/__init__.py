@@ -14,18 +14,10 @@ Submodules load on first use: ``mjzoo.harness.training`` imports orbax,
 TensorBoard and matplotlib, which a planner on a robot does not need.
 """
 
-import importlib
+from mjzoo import lazy
 
 MODULES = ("training", "metrics", "checkpoints", "plotting", "rendering", "plan_report", "cli")
 
 __all__ = list(MODULES)
 
-
-def __getattr__(name: str):
-    if name in MODULES:
-        return importlib.import_module(f"mjzoo.harness.{name}")
-    raise AttributeError(f"module 'mjzoo.harness' has no attribute {name!r}")
-
-
-def __dir__() -> list[str]:
-    return sorted(set(globals()) | set(MODULES))
+__getattr__, __dir__ = lazy.submodules(__name__, MODULES)
