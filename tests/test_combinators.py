@@ -19,6 +19,7 @@ argument, so tasks of one structure share one compile.
 from __future__ import annotations
 
 import dataclasses
+import re
 
 import chex
 import jax
@@ -584,6 +585,31 @@ def test_reset_state_has_the_structure_of_a_transition(name):
     assert (start.reward.shape, start.reward.dtype) == ((), jnp.float32)
     assert (start.terminated.shape, start.terminated.dtype) == ((), jnp.bool_)
     assert (start.truncated.shape, start.truncated.dtype) == ((), jnp.bool_)
+
+
+@pytest.mark.parametrize("name", list(STACKS))
+def test_a_tasks_own_reset_is_its_start_completed(name):
+    """The Task contract: ``task.reset(model, key)``, then a scan of transitions. `start`
+    alone lacks what only transitions write (the reward terms' metrics)."""
+    task = STACKS[name]()
+    own = jax.eval_shape(task.reset, task.model, KEY)
+    after = jax.eval_shape(lambda s: mjzoo.transition(task, s, jnp.ones((1,)), KEY), own)
+    assert jax.tree.structure(own) == jax.tree.structure(after)
+    assert jax.tree.structure(own) == jax.tree.structure(jax.eval_shape(mjzoo.reset, task, KEY))
+    assert "reward/x" not in jax.eval_shape(task.start, task.model, KEY).metrics
+
+
+def test_a_scan_from_the_tasks_own_reset_runs():
+    task = stack(make_task())
+    _, states = run(task, task.reset(task.model, KEY), pushes(1.0, 2.0), KEY)
+    assert states.reward.shape == (2,) and np.isfinite(states.reward).all()
+
+
+@pytest.mark.parametrize("action", [jnp.ones((2,)), jnp.ones(()), jnp.ones((1, 1))])
+def test_an_action_of_the_wrong_shape_is_named(action):
+    task = make_task()
+    with pytest.raises(ValueError, match=re.escape(f"action has shape {action.shape}, but the task takes (1,)")):
+        mjzoo.transition(task, mjzoo.reset(task, KEY), action, KEY)
 
 
 def test_reset_of_a_stack_starts_at_zero():
