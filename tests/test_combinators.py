@@ -1,4 +1,4 @@
-"""Hand-checked behaviour of the combinators (lib/combinators.py, lib/perturbations.py).
+"""Hand-checked behaviour of the combinators (`mjzoo.combinators`, `mjzoo.perturbations`).
 
 Every test runs a tiny hand-made Task whose numbers can be worked out on paper:
 

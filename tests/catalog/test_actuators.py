@@ -1,5 +1,5 @@
 """Hand-checked behaviour of the actuator models and the action combinators
-(lib/actuators.py).
+(`mjzoo.catalog.actuators`).
 
 Two tiny models, no gravity, Euler with dt = 0.1 s:
   JOINTS  a hinge j1 (qpos0 = ref = 0.2 rad) with a motor of gear 1 and ctrlrange +-10,

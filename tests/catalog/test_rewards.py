@@ -1,4 +1,4 @@
-"""Reward shapes and terms (lib/rewards.py) and reward clipping against hand-computed
+"""Reward shapes and terms (`mjzoo.catalog.rewards`) and reward clipping against hand-computed
 values.
 
 `tolerance` notation: d = (distance outside [lower, upper]) / margin, v = value_at_margin. The four

@@ -1,4 +1,4 @@
-"""Commands (lib/commands.py) on the base-and-arm task of catalog_tasks.py, worked out
+"""Commands (`mjzoo.catalog.commands`) on the base-and-arm task of tests/catalog_tasks.py, worked out
 by hand: with a body-frame angular velocity (0, 0, w) the base's heading after n steps
 is w * 0.02 * n. The task observes [qpos, qvel] (19,), and its step reports the size of
 the observation it was given in ``metrics["inner_obs_size"]``.

@@ -1,4 +1,4 @@
-"""Reset items and `with_resets` (lib/resets.py), on the base-and-arm task of
+"""Reset items and `with_resets` (`mjzoo.catalog.resets`), on the base-and-arm task of
 catalog_tasks.py (base qpos 0..6, qvel 0..5; hip qpos 7, qvel 6, range [-1, 0.5] rad;
 wrist qpos 8, qvel 7, range [-0.1, 0.2] m; spin qpos 9, qvel 8, unlimited), whose reset
 puts qpos / qvel at its leaves and observes [qpos, qvel] (19,). All resets run through

@@ -1,4 +1,4 @@
-"""Hand-checked behaviour of the physics randomizers (lib/randomizers.py).
+"""Hand-checked behaviour of the physics randomizers (`mjzoo.catalog.randomizers`).
 
 One small model holds every field they edit. Gravity -9.81 along z, Euler with dt = 0.01.
   block  slide joint along x (gravity has no component along it), mass m = 1.5 kg,

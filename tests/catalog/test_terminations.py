@@ -1,5 +1,5 @@
 """Hand-checked behaviour of the termination items and `with_terminations`
-(lib/terminations.py).
+(`mjzoo.catalog.terminations`).
 
 Items run on a free-floating 1 kg box "torso" (0.2 x 0.2 x 0.1 m) with a sphere "foot"
 below it, over a floor; states are set by hand and completed with one `mjx.forward`.

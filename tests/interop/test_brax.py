@@ -1,4 +1,4 @@
-"""mjzoo tasks as Brax envs (lib/brax_adapter.py): exact agreement with `mjzoo.reset` /
+"""mjzoo tasks as Brax envs (`mjzoo.interop.brax`): exact agreement with `mjzoo.reset` /
 `mjzoo.transition`, flags at episode ends, Brax's training wrappers under jit and vmap,
 and a short run of Brax's own PPO.
 
@@ -17,7 +17,7 @@ from brax.envs.wrappers import training as brax_training
 
 import mjzoo
 import mjzoo.envs
-from mjzoo.interop import brax
+from mjzoo.interop import brax as adapter
 
 L = 6  # the task's episode length in these tests (mjzoo's own time limit)
 
@@ -28,7 +28,7 @@ L = 6  # the task's episode length in these tests (mjzoo's own time limit)
 @jax.jit
 def _both(task: mjzoo.Task, rng: jax.Array, actions: jax.Array):
     """The adapter and mjzoo side by side, from one uint32 key, over `actions` [T, nu]."""
-    env = brax_adapter.to_brax_env(task)
+    env = adapter.to_brax_env(task)
 
     def brax_body(state, action):
         state = env.step(state, action)
@@ -101,7 +101,7 @@ N_ENVS, T, BRAX_LIMIT = 3, 8, 4
 def _wrapped(task: mjzoo.Task, rng: jax.Array):
     """T zero-action steps of N_ENVS envs under Brax's own `wrap` (limit BRAX_LIMIT < L)
     and its `EvalWrapper`, as Brax PPO's evaluator stacks them."""
-    env = brax_adapter.to_brax_env(task)
+    env = adapter.to_brax_env(task)
     wrapped = brax_training.EvalWrapper(brax_training.wrap(env, episode_length=BRAX_LIMIT))
 
     def body(state, _):
@@ -157,7 +157,7 @@ class _Stub(brax_base.Env):
 
 
 def test_wrap_for_training_keeps_the_task_truncation():
-    for wrap, expected in ((brax_training.wrap, 0.0), (brax_adapter.wrap_for_training, 1.0)):
+    for wrap, expected in ((brax_training.wrap, 0.0), (adapter.wrap_for_training, 1.0)):
         env = wrap(_Stub(), episode_length=L)
 
         @jax.jit
@@ -177,15 +177,15 @@ def test_wrap_for_training_keeps_the_task_truncation():
 
 def test_interface_and_errors():
     task = mjzoo.envs.make("cartpole_balance")
-    env = brax_adapter.to_brax_env(task)
+    env = adapter.to_brax_env(task)
     assert (env.observation_size, env.action_size, env.backend) == (5, 1, "mjx")
     assert env.unwrapped is env and env.sys is task.model
-    wrapped = brax_adapter.wrap_for_training(env, episode_length=500)
+    wrapped = adapter.wrap_for_training(env, episode_length=500)
     assert wrapped.unwrapped is env and wrapped.observation_size == 5
     with pytest.raises(TypeError, match="expected an mjzoo.Task"):
-        brax_adapter.to_brax_env("cartpole_balance")
+        adapter.to_brax_env("cartpole_balance")
     with pytest.raises(ValueError, match="action_repeat=2 must be 1"):
-        brax_adapter.wrap_for_training(env, episode_length=500, action_repeat=2)
+        adapter.wrap_for_training(env, episode_length=500, action_repeat=2)
     # Pytree observations travel flat and come back with their structure.
     obs = {"a": jnp.arange(3.0).reshape(3, 1), "b": jnp.float32(7.0)}
     env._obs_tree, env._obs_shapes = jax.tree.structure(obs), [(3, 1), ()]
@@ -198,10 +198,10 @@ def test_interface_and_errors():
 def test_patch_installs_device_put_replicated_only_if_missing(monkeypatch):
     sentinel = object()
     monkeypatch.setattr(jax, "device_put_replicated", sentinel, raising=False)
-    brax_adapter.patch_brax_for_current_jax()
+    adapter.patch_brax_for_current_jax()
     assert jax.device_put_replicated is sentinel  # present: left alone
     monkeypatch.delattr(jax, "device_put_replicated")
-    brax_adapter.patch_brax_for_current_jax()
+    adapter.patch_brax_for_current_jax()
     devices = jax.local_devices()
     out = jax.device_put_replicated({"w": jnp.arange(3.0)}, devices)
     assert out["w"].shape == (len(devices), 3)
@@ -215,7 +215,7 @@ def test_patch_installs_device_put_replicated_only_if_missing(monkeypatch):
 def patched_jax():
     """`patch_brax_for_current_jax`, undone after the test."""
     had = "device_put_replicated" in vars(jax)
-    brax_adapter.patch_brax_for_current_jax()
+    adapter.patch_brax_for_current_jax()
     yield
     if not had:
         vars(jax).pop("device_put_replicated", None)
@@ -228,13 +228,13 @@ def test_brax_ppo_trains_on_an_adapted_task(patched_jax):
     from brax.training.agents.ppo import networks as ppo_networks
     from brax.training.agents.ppo import train as ppo
 
-    env = brax_adapter.to_brax_env(mjzoo.envs.make("cartpole_balance"))
+    env = adapter.to_brax_env(mjzoo.envs.make("cartpole_balance"))
     progress = []
     _, params, metrics = ppo.train(
         env, num_timesteps=2_000, episode_length=500, num_envs=8, batch_size=8, num_minibatches=2,
         unroll_length=5, num_updates_per_batch=1, num_evals=2, run_evals=False,
         log_training_metrics=True, training_metrics_steps=1_000,
-        normalize_observations=True, wrap_env_fn=brax_adapter.wrap_for_training,
+        normalize_observations=True, wrap_env_fn=adapter.wrap_for_training,
         network_factory=lambda *a, **k: ppo_networks.make_ppo_networks(
             *a, **k, policy_hidden_layer_sizes=(16,), value_hidden_layer_sizes=(16,)),
         progress_fn=lambda step, m: progress.append((step, m)), seed=1,

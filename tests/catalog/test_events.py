@@ -1,4 +1,4 @@
-"""Pushes (lib/events.py) on the base-and-arm task of catalog_tasks.py: a free 2 kg box
+"""Pushes (`mjzoo.catalog.events`) on the base-and-arm task of tests/catalog_tasks.py: a free 2 kg box
 "base" in zero gravity, no contacts, semi-implicit Euler with dt = 0.02 s and one physics
 step per control step, so
     qvel' = qvel + dt * F / m,   qpos' = qpos + dt * qvel'.

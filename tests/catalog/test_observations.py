@@ -1,4 +1,4 @@
-"""Hand-checked values of the observation items and combinators (lib/observations.py).
+"""Hand-checked values of the observation items and combinators (`mjzoo.catalog.observations`).
 
 Items run on a small quadruped-like model: a free-floating "base" (a 1.4 kg box, 0.2 m
 square, 0.1 m tall) standing on four 0.1 kg sphere feet at (+-0.1, +-0.1, -0.08), with a

@@ -1,4 +1,4 @@
-"""Hand-checked behaviour of the shared trackers (lib/trackers.py).
+"""Hand-checked behaviour of the shared trackers (`mjzoo.catalog.trackers`).
 
 The test task is kinematic, so every contact and velocity can be worked out on paper:
 two sphere feet (radius 5 cm) on slide joints over a floor plane; the action is the new

@@ -1,4 +1,4 @@
-"""Curricula (lib/curriculum.py) on a body whose motion is worked out by hand.
+"""Curricula (`mjzoo.catalog.curriculum`) on a body whose motion is worked out by hand.
 
 The model: a free 2 kg box "base", no contacts, semi-implicit Euler with dt = 0.02 s and
 one physics step per control step. The task's reset puts the base at x = `spawn` moving
