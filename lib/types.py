@@ -102,7 +102,8 @@ class Task:
         writes it: it need not hold the `info` and `metrics` entries only a transition
         writes (the reward terms, an inner combinator's records).
       step: ``(model, state, action, key) -> State``, dynamics and observation. The
-        action has shape ``(model.nu,)`` and is a control in the actuators' ctrlrange.
+        action has shape ``(action_size,)``: by default a control per actuator, in its
+        ctrlrange.
       reward: ``(model, state, action, next_state) -> {name: weighted term}``, each term
         a float32 scalar; `mjzoo.transition` sums them.
       terminate: ``(model, state) -> (terminated, truncated)``, two bool scalars kept
