@@ -14,7 +14,7 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
-__all__ = ["number", "integer", "interval", "numbers"]
+__all__ = ["number", "integer", "interval", "numbers", "key"]
 
 Array = jax.Array
 
@@ -65,3 +65,13 @@ def numbers(who: str, name: str, value, n: int, low: float = 0.0) -> Array:
     if array.ndim > 1 or (array.ndim == 1 and array.shape[0] != n) or not np.all(np.isfinite(array) & (array >= low)):
         raise ValueError(f"{who}: {name}={value!r} must be a finite number >= {low:.6g} or {n} of them")
     return jnp.broadcast_to(jnp.asarray(array, jnp.float32), (n,))
+
+
+def key(who: str, value) -> None:
+    """Raises unless `value` is one JAX PRNG key: typed (``jax.random.key(0)``) or a legacy
+    uint32 [2] (``jax.random.PRNGKey(0)``)."""
+    dtype, shape = getattr(value, "dtype", None), getattr(value, "shape", None)
+    typed = dtype is not None and jax.dtypes.issubdtype(dtype, jax.dtypes.prng_key) and shape == ()
+    if not (typed or (dtype == np.uint32 and shape == (2,))):
+        got = f"{type(value).__name__} {value!r}" if dtype is None else f"an array of {dtype} {shape}"
+        raise TypeError(f"{who}: key must be one JAX PRNG key such as jax.random.key(0); got {got}")

@@ -13,7 +13,7 @@ from typing import Any, Callable
 import jax
 import jax.numpy as jnp
 
-from mjzoo import tree
+from mjzoo import checks, tree
 from mjzoo.types import State, Task, Trajectory
 
 __all__ = [
@@ -66,6 +66,7 @@ def reward_terms(state: State) -> dict[str, Array]:
 def reset(task: Task, key: Array) -> State:
     """Starts an episode of `task`: ``task.reset(task.model, key)``, a state `complete`
     for it."""
+    checks.key("mjzoo.reset", key)
     return complete(task, task.start(task.model, key))
 
 
@@ -110,6 +111,8 @@ def rollout(
     ([num_steps, ...] on every leaf). Episodes are not reset unless the task does so
     (`with_auto_reset`).
     """
+    checks.key("mjzoo.rollout", key)
+    num_steps = checks.integer("mjzoo.rollout", "num_steps", num_steps)
 
     def body(state: State, key: Array) -> tuple[State, Trajectory]:
         policy_key, step_key = jax.random.split(key)

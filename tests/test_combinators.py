@@ -703,3 +703,15 @@ def test_with_observation_transforms_what_is_seen_but_not_the_physics():
     chex.assert_trees_all_close(b.data.qpos, a.data.qpos)
     with pytest.raises(TypeError, match="fn must be callable"):
         mjzoo.with_observation(plain, 3)
+
+
+@pytest.mark.parametrize("key", [0, jnp.zeros(3), jax.random.split(KEY)])
+def test_reset_names_a_key_that_is_not_one_prng_key(key):
+    with pytest.raises(TypeError, match=r"mjzoo.reset: key must be one JAX PRNG key such as jax.random.key\(0\)"):
+        mjzoo.reset(make_task(), key)
+
+
+def test_rollout_names_a_bad_step_count():
+    task = make_task()
+    with pytest.raises(ValueError, match=r"num_steps=2.5 must be an integer >= 1"):
+        mjzoo.rollout(task, lambda obs, key: jnp.zeros(1), mjzoo.reset(task, KEY), KEY, 2.5)
