@@ -13,8 +13,11 @@ from __future__ import annotations
 import difflib
 import functools
 import inspect
+import numbers
 from types import ModuleType
 from typing import Any, Callable
+
+import numpy as np
 
 from mjzoo import physics
 from mjzoo.envs import base, cartpole, cylinder_push, joystick, locomotion, pendulum, point_mass
@@ -118,13 +121,50 @@ def defaults(name: str) -> dict[str, Any]:
 
 
 def make(name: str, **overrides: Any) -> Task:
-    """Builds the task `name`, with `overrides` of its defaults or of physics options."""
+    """Builds the task `name`, with `overrides` of its defaults or of physics options.
+
+    Each override is checked against its default's type first (physics options by
+    `physics.load`): a wrong one, e.g. episode_steps="abc" from a command line or a
+    config file, would otherwise fail deep inside tracing with a message naming neither."""
     build = factory(name)
     allowed = set(defaults(name)) | set(physics.OPTIONS)
     unknown = sorted(set(overrides) - allowed)
     if unknown:
         raise TypeError(f"{name}: unknown override(s) {unknown}; allowed: {sorted(allowed)}")
+    parameters = inspect.signature(build).parameters
+    for key, value in overrides.items():
+        if key in parameters and parameters[key].kind == inspect.Parameter.KEYWORD_ONLY:
+            expected = _expected_type(parameters[key], value)
+            if expected:
+                raise TypeError(f"{name}: override {key}={value!r} must be {expected}")
     return build(**overrides)
+
+
+def _expected_type(parameter: inspect.Parameter, value: Any) -> str | None:
+    """What `value` should have been for `parameter`, judged by its default (bool is not
+    an int; a float accepts an int; a tuple a list, as JSON gives back) and whether its
+    annotation admits None; None if it fits or nothing can be judged."""
+    default, annotation = parameter.default, str(parameter.annotation)
+    optional = default is None or "None" in annotation or "Optional" in annotation
+    if value is None and optional:
+        return None
+    kinds = {bool: ((bool, np.bool_), "True or False"), int: ((numbers.Integral,), "an int"),
+             float: ((numbers.Real,), "a number"), str: ((str,), "a string"),
+             tuple: ((tuple, list), "a tuple or list"), list: ((tuple, list), "a list or tuple")}  # fmt: skip
+    if default is None:
+        if "Callable" not in annotation or callable(value):
+            return None
+        expected = "callable"
+    elif type(default) in kinds:
+        accepted, expected = kinds[type(default)]
+        if isinstance(value, accepted) and (type(default) is bool or not isinstance(value, (bool, np.bool_))):
+            return None
+        if type(default) is float and getattr(value, "shape", None) == () and hasattr(value, "dtype"):
+            if np.issubdtype(value.dtype, np.number):  # a 0-d NumPy or JAX array, e.g. a swept weight
+                return None
+    else:
+        return None
+    return expected + (" or None" if optional else "")
 
 
 def factory(name: str) -> Callable[..., Task]:

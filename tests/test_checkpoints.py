@@ -216,3 +216,61 @@ def test_empty_arrays_round_trip(tmp_path):
     assert restored["contacts"].shape == (0, 3) and restored["none"].shape == (4, 0)
     assert restored["none"].dtype == np.int32
     np.testing.assert_array_equal(restored["qpos"], tree["qpos"])
+
+
+def _damage(directory, step: int) -> None:
+    """Truncates every array data file of checkpoint `step` (a full disk, a bad copy)."""
+    files = list((directory / str(step) / "arrays" / "d").iterdir())
+    assert files
+    for path in files:
+        path.write_bytes(b"")
+
+
+def test_restore_newest_intact_skips_damaged_checkpoints_with_one_warning(tmp_path):
+    for step in (1, 2, 3):
+        checkpoints.save(tmp_path, step, make_state(step))
+    _damage(tmp_path, 3)
+    (tmp_path / "2" / "tree" / "metadata").unlink()
+    with pytest.warns(checkpoints.DamagedCheckpointWarning) as caught:
+        tree, step, skipped = checkpoints.restore_newest_intact(tmp_path, make_state(0))
+    assert step == 1 and [s for s, _ in skipped] == [3, 2]
+    assert_identical(tree, make_state(1))
+    assert "OUT_OF_RANGE" in skipped[0][1] and "tensorstore_spec" not in skipped[0][1]
+    assert skipped[1][1].startswith("FileNotFoundError") and "metadata" in skipped[1][1]
+    (message,) = [str(w.message) for w in caught]
+    assert "\n" not in message and message.startswith(f"{tmp_path}: checkpoint 3 is damaged (ValueError: ")
+    assert message.endswith("restored checkpoint 1, the newest intact one")
+    with pytest.raises(checkpoints.CheckpointError, match="does not match"):  # it reads, but it is not restored
+        checkpoints.restore(tmp_path, {"x": jnp.zeros(1)}, step=1)
+
+
+def test_restore_newest_intact_when_none_is_intact_or_none_exists(tmp_path):
+    for step in (1, 2):
+        checkpoints.save(tmp_path, step, make_state(step))
+        _damage(tmp_path, step)
+    with pytest.raises(checkpoints.CheckpointError, match=r"no intact checkpoint in .*: checkpoint 2 is damaged \(.*\); checkpoint 1 is damaged"):
+        checkpoints.restore_newest_intact(tmp_path, make_state(0))
+    with pytest.raises(FileNotFoundError, match="no complete checkpoint"):
+        checkpoints.restore_newest_intact(tmp_path / "absent", make_state(0))
+
+
+def test_a_mismatch_is_not_skipped_as_damage(tmp_path):
+    """Every checkpoint of a run mismatches a wrong template alike: falling back would
+    only hide that, so the newest one's mismatch is raised (a CheckpointError, a ValueError)."""
+    checkpoints.save(tmp_path, 1, {"x": jnp.zeros(2)})
+    checkpoints.save(tmp_path, 2, {"x": jnp.zeros(2)})
+    with pytest.raises(ValueError, match=r"checkpoint 2 in .* does not match the template"):
+        checkpoints.restore_newest_intact(tmp_path, {"x": jnp.zeros(3)})
+
+
+def test_a_damaged_checkpoint_set_aside_can_be_saved_again(tmp_path):
+    for step in (1, 2):
+        checkpoints.save(tmp_path, step, {"x": jnp.ones(1) * step})
+    _damage(tmp_path, 2)
+    assert checkpoints.set_aside(tmp_path, 2) == tmp_path / "2.damaged"
+    assert checkpoints.all_steps(tmp_path) == [1]
+    checkpoints.save(tmp_path, 2, {"x": jnp.ones(1) * 5})
+    assert checkpoints.set_aside(tmp_path, 2) == tmp_path / "2.damaged-2"  # the first stays
+    checkpoints.save(tmp_path, 2, {"x": jnp.ones(1) * 7})
+    assert_identical(checkpoints.restore(tmp_path, {"x": jnp.zeros(1)}), {"x": jnp.ones(1) * 7})
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["1", "2", "2.damaged", "2.damaged-2"]

@@ -128,3 +128,46 @@ def test_cylinder_push_moves_the_cylinder_when_pushed():
     assert cylinder_x > 0.1  # pushed along +x
     assert abs(float(final.data.qpos[3])) < 0.02  # no sideways drift
     assert cylinder_x - pusher_x >= 0.14  # they touch but never interpenetrate (radii 5 + 10 cm)
+
+
+def test_an_override_of_the_wrong_type_is_named_with_the_expected_type():
+    cases = [
+        (dict(episode_steps="abc"), "cartpole_balance: override episode_steps='abc' must be an int"),
+        (dict(episode_steps=2.5), "override episode_steps=2.5 must be an int"),
+        (dict(episode_steps=True), "override episode_steps=True must be an int"),  # bool is not an int
+        (dict(upright_weight=[1, 2]), r"override upright_weight=\[1, 2\] must be a number"),
+        (dict(upright_weight="heavy"), "override upright_weight='heavy' must be a number"),
+        (dict(fall_angle=None), "override fall_angle=None must be a number"),
+    ]
+    for overrides, message in cases:
+        with pytest.raises(TypeError, match=message):
+            mjzoo.envs.make("cartpole_balance", **overrides)
+    with pytest.raises(TypeError, match="ant: override max_height='top' must be a number or None"):
+        mjzoo.envs.make("ant", max_height="top")
+    with pytest.raises(TypeError, match="ant_joystick: override actuator=3 must be callable or None"):
+        mjzoo.envs.make("ant_joystick", actuator=3)
+    with pytest.raises(ValueError, match=r"physics option iterations='many' is invalid; expected an integer >= 1"):
+        mjzoo.envs.make("cartpole_balance", iterations="many")  # physics options: physics.load's check
+
+
+def test_an_override_of_a_compatible_type_is_accepted(monkeypatch):
+    """Floats take ints and 0-d arrays (a swept weight), tuples lists (JSON gives lists
+    back), None where the annotation allows it; a default of None judges only callables."""
+    from typing import Callable
+
+    def typed(*, steps: int = 5, weight: float = 1.0, height: float | None = 1.0, sizes: tuple = (64,),
+              flag: bool = False, hook: Callable | None = None, extra=None, **physics_options):  # fmt: skip
+        return dict(steps=steps, weight=weight, height=height, sizes=sizes, flag=flag, hook=hook, extra=extra)
+
+    monkeypatch.setitem(mjzoo.envs._REGISTRY, "typed", typed)
+    accepted = dict(steps=np.int64(7), weight=2, height=None, sizes=[32, 32], flag=np.bool_(True), hook=print, extra="x")
+    assert mjzoo.envs.make("typed", **accepted) == accepted
+    mjzoo.envs.make("typed", weight=np.float32(0.5))
+    mjzoo.envs.make("typed", weight=jnp.asarray(0.02))
+    for overrides, message in [(dict(sizes=64), "sizes=64 must be a tuple or list"),
+                               (dict(flag=1), "flag=1 must be True or False"),
+                               (dict(weight=jnp.zeros(2)), "must be a number"),
+                               (dict(steps=None), "steps=None must be an int")]:  # fmt: skip
+        with pytest.raises(TypeError, match=message):
+            mjzoo.envs.make("typed", **overrides)
+    assert mjzoo.envs.make("cartpole_balance", upright_weight=2).action_size == 1

@@ -2,6 +2,7 @@
 
     path = checkpoints.save("runs/a/ckpt", step, train_state)      # keeps the newest 3
     train_state = checkpoints.restore("runs/a/ckpt", like=fresh_train_state)
+    train_state, step, skipped = checkpoints.restore_newest_intact("runs/a/ckpt", like=fresh_train_state)
 
 Storage is orbax-checkpoint's `CheckpointManager`: it writes each step into a temporary
 directory (``<step>.orbax-checkpoint-tmp-*``) and renames it when complete, so a crash
@@ -16,10 +17,18 @@ a mismatch is reported by path (orbax alone reports a tensorstore shape error, o
 tree diff), then rebuilds the template's structure (custom pytree nodes included),
 wraps keys with the template's key implementation, returns Python and NumPy scalars as
 such, and places arrays with the template's shardings.
+
+A checkpoint can still be damaged after it was committed (a disk filled up, a file was
+truncated or deleted by hand): `restore_newest_intact` then falls back to the newest
+one that reads, with a `DamagedCheckpointWarning`, so a long run loses one checkpoint
+interval rather than everything.
 """
 
 from __future__ import annotations
 
+import logging
+import sys
+import warnings
 from pathlib import Path
 from typing import Any
 
@@ -28,11 +37,25 @@ import jax.numpy as jnp
 import numpy as np
 import orbax.checkpoint as ocp
 
-__all__ = ["save", "restore", "latest_step", "all_steps"]
+__all__ = ["save", "restore", "restore_newest_intact", "set_aside", "latest_step", "all_steps",
+           "CheckpointError", "DamagedCheckpointWarning"]
 
 PyTree = Any
 _ARRAYS, _TREE = "arrays", "tree"  # the two items of every checkpoint step
 _MAX_NAMES = 8  # how many differing paths an error message lists
+_MAX_REASON = 400  # characters of a read error kept in messages (tensorstore's run to kilobytes)
+# What orbax and tensorstore raise on reading a damaged checkpoint: a missing file
+# (FileNotFoundError), bad JSON or bytes (ValueError), a missing item (KeyError).
+_READ_ERRORS = (OSError, ValueError, KeyError)
+
+
+class CheckpointError(ValueError):
+    """A checkpoint that cannot be restored: it does not match the template, or every
+    checkpoint in the directory is damaged. A ValueError, as it was before it had a name."""
+
+
+class DamagedCheckpointWarning(UserWarning):
+    """`restore_newest_intact` skipped damaged checkpoints and restored an older one."""
 
 
 def save(directory: str | Path, step: int, tree: PyTree, *, keep: int = 3) -> Path:
@@ -105,7 +128,8 @@ def restore(directory: str | Path, like: PyTree, step: int | None = None) -> PyT
 
     Raises:
       FileNotFoundError: no (such) complete checkpoint under `directory`.
-      ValueError: the checkpoint's leaves differ from the template's (named by path).
+      CheckpointError: the checkpoint's leaves differ from the template's (named by path).
+      OSError, ValueError, KeyError: the checkpoint is damaged (see `restore_newest_intact`).
     """
     steps = all_steps(directory)
     if not steps:
@@ -123,6 +147,89 @@ def restore(directory: str | Path, like: PyTree, step: int | None = None) -> PyT
         arrays = manager.restore(step, args=ocp.args.Composite(**{_ARRAYS: ocp.args.StandardRestore(target)}))[_ARRAYS]
     restored = [_like(arrays[index[path]], leaf) if _size(leaf) else leaf for path, leaf in template]
     return jax.tree_util.tree_unflatten(treedef, restored)
+
+
+def restore_newest_intact(directory: str | Path, like: PyTree) -> tuple[PyTree, int, list[tuple[int, str]]]:
+    """Restores the newest checkpoint that reads, skipping damaged newer ones.
+
+    Returns (tree, its step, [(skipped step, why), ...] newest first), and warns with a
+    `DamagedCheckpointWarning` (one line) when it skipped any. A template mismatch is not
+    damage: every checkpoint of the run would mismatch alike, so it raises at once.
+
+    Raises:
+      FileNotFoundError: no complete checkpoint under `directory`.
+      CheckpointError: the newest checkpoint does not match `like`, or none is intact
+        (each one named with what failed).
+    """
+    _quiet_abandoned_reads()
+    skipped: list[tuple[int, str]] = []
+    for step in reversed(all_steps(directory)):
+        try:
+            tree = restore(directory, like, step)
+        except CheckpointError:
+            raise
+        except _READ_ERRORS as e:
+            skipped.append((step, _reason(e)))
+            continue
+        if skipped:
+            warnings.warn(f"{directory}: {_damaged(skipped)}; restored checkpoint {step}, the newest intact one",
+                          DamagedCheckpointWarning, stacklevel=2)  # fmt: skip
+        return tree, step, skipped
+    if not skipped:
+        raise FileNotFoundError(f"no complete checkpoint in {directory}")
+    raise CheckpointError(f"no intact checkpoint in {directory}: {_damaged(skipped)}")
+
+
+def set_aside(directory: str | Path, step: int) -> Path:
+    """Renames checkpoint `step` to ``<step>.damaged`` (or ``.damaged-2``, ...), where
+    nothing lists or prunes it: a run that resumed from an older step can save `step`
+    again, and the damaged files stay for inspection."""
+    source = Path(directory) / str(_as_step(step))
+    target, n = source.with_name(f"{step}.damaged"), 1
+    while target.exists():
+        n += 1
+        target = source.with_name(f"{step}.damaged-{n}")
+    return source.rename(target)
+
+
+def _damaged(skipped: list[tuple[int, str]]) -> str:
+    return "; ".join(f"checkpoint {step} is damaged ({why})" for step, why in skipped)
+
+
+def _reason(error: BaseException) -> str:
+    """A read error in one short line. Tensorstore's are "CODE: context: ...: cause [its
+    JSON spec]": the code and the innermost two parts (which file, what is wrong) say it."""
+    text = " ".join(str(error.args[0] if isinstance(error, KeyError) and error.args else error).split())
+    parts = text.split(" [tensorstore_spec")[0].split(": ")
+    if len(parts) > 3:
+        parts = [parts[0], "...", *parts[-2:]]
+    text = f"{type(error).__name__}: " + ": ".join(parts)
+    return text if len(text) <= _MAX_REASON else text[:60] + "..." + text[63 - _MAX_REASON :]
+
+
+_QUIET = False
+
+
+def _quiet_abandoned_reads() -> None:
+    """Silences the aftermath of a failed read (once per process, before the first read
+    that may fail: it starts before the error reaches us): orbax gives up on the first
+    bad array and closes its event loop while tensorstore still reads the others; they
+    then report "Event loop is closed" (as unraisable exceptions), "exception was never
+    retrieved" (to the asyncio logger) and "coroutine ... was never awaited", with
+    tracebacks, after the error itself was handled. Only those reports are dropped."""
+    global _QUIET
+    if _QUIET:
+        return
+    _QUIET = True
+    previous = sys.unraisablehook
+
+    def hook(unraisable) -> None:
+        if not (isinstance(unraisable.exc_value, RuntimeError) and "Event loop is closed" in str(unraisable.exc_value)):
+            previous(unraisable)
+
+    sys.unraisablehook = hook
+    logging.getLogger("asyncio").addFilter(lambda record: "exception was never retrieved" not in record.getMessage())
+    warnings.filterwarnings("ignore", r"coroutine '[\w.<>]+' was never awaited", RuntimeWarning)
 
 
 def _reader(directory: str | Path) -> ocp.CheckpointManager:
@@ -187,7 +294,7 @@ def _match(saved: list[dict], template: list[tuple[str, Any]], what: str) -> dic
     if differ:
         problems.append(f"different shape or dtype: {_names(differ)}")
     if problems:
-        raise ValueError(f"{what} does not match the template; " + "; ".join(problems))
+        raise CheckpointError(f"{what} does not match the template; " + "; ".join(problems))
     return {p: by_path[p][0] for p in wanted}
 
 

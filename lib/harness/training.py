@@ -117,12 +117,14 @@ def _evaluate_fn(algorithm: ModuleType):
 
 
 def _resume(out_dir: Path, state: Any) -> Any:
-    """The newest checkpoint, with metrics.jsonl cut back to it (lines after it would be
-    written again)."""
-    restored = checkpoints.restore(out_dir / "checkpoints", like=state)
+    """The newest intact checkpoint (a `checkpoints.DamagedCheckpointWarning` if it is
+    not the newest), with metrics.jsonl cut back to it (lines after it would be written
+    again) and the damaged newer ones set aside (saving their steps again would fail)."""
+    restored, step, skipped = checkpoints.restore_newest_intact(out_dir / "checkpoints", like=state)
+    for damaged, _ in skipped:
+        checkpoints.set_aside(out_dir / "checkpoints", damaged)
     metrics_path = out_dir / "metrics.jsonl"
     if metrics_path.exists():
-        step = checkpoints.latest_step(out_dir / "checkpoints")
         kept = [line for line in metrics_lib.read_metrics(metrics_path) if line["step"] <= step]
         metrics_path.write_text("".join(json.dumps(line) + "\n" for line in kept))
     return restored
@@ -134,12 +136,13 @@ def run(algorithm: ModuleType, config: Any, task: Task, settings: Settings) -> t
     key = jax.random.key(settings.seed)
     state = algorithm.init(config, task, key)
     if out is not None:
+        # Restore before writing anything: a run that cannot resume is left as it was.
+        if settings.resume and checkpoints.latest_step(out / "checkpoints") is not None:
+            state = _resume(out, state)
         out.mkdir(parents=True, exist_ok=True)
         run_info = {"algorithm": algorithm.__name__.split(".")[-1], "config": config_dict(config),
                     "settings": {k: str(v) if isinstance(v, Path) else v for k, v in dataclasses.asdict(settings).items()}}  # fmt: skip
         (out / "config.json").write_text(json.dumps(run_info, indent=2))
-        if settings.resume and checkpoints.latest_step(out / "checkpoints") is not None:
-            state = _resume(out, state)
     # Own every buffer once: the chunk donates the state, and XLA may hand out one buffer
     # for equal constants (two zero arrays), which cannot be donated twice.
     state, task = shard_envs(jax.tree.map(jnp.copy, state)), replicate(task)

@@ -1,0 +1,295 @@
+"""The `mjzoo` command's surface: a user's mistake is one line on stderr and exit status 2,
+found before anything is compiled or written; damaged checkpoints are skipped with a
+warning. Errors here fire before any MJX compile, except where a template train state
+is needed (PPO's init, compiled once for the module)."""
+
+from __future__ import annotations
+
+import dataclasses
+import glob
+import json
+import subprocess
+import sys
+import types
+from pathlib import Path
+
+import jax
+import jax.numpy as jnp
+import pytest
+
+import mjzoo.envs
+from mjzoo.algorithms import ppo
+from mjzoo.harness import checkpoints, cli, training
+
+ENV = "pendulum_swingup"
+TINY = dict(num_envs=8, unroll_length=8, num_minibatches=2, num_epochs=1, total_steps=128)
+
+
+def run_cli(capsys, *argv: str) -> tuple[int | str | None, str, str]:
+    with pytest.raises(SystemExit) as exit_info:
+        cli.main(list(argv))
+    out, err = capsys.readouterr()
+    return exit_info.value.code, out, err
+
+
+def assert_usage_error(capsys, argv: list[str], *words: str) -> str:
+    """Exit status 2 and exactly one line, `mjzoo COMMAND: ...`, holding `words`."""
+    code, _, err = run_cli(capsys, *argv)
+    lines = err.splitlines()
+    assert code == 2 and len(lines) == 1 and "Traceback" not in err, err
+    assert lines[0].startswith(f"mjzoo {argv[0]}: "), err
+    for word in words:
+        assert word in lines[0], (word, err)
+    return lines[0]
+
+
+def snapshot(directory: Path) -> dict[str, tuple[bytes | None, int]]:
+    """Every path under `directory` with its bytes (files) and mtime."""
+    return {
+        str(p): (p.read_bytes() if p.is_file() else None, p.stat().st_mtime_ns)
+        for p in [directory, *sorted(directory.rglob("*"))]
+    }
+
+
+def write_run(directory: Path, algorithm: str = "ppo", **config) -> Path:
+    """task.json and config.json as `mjzoo train` writes them (no checkpoints yet)."""
+    directory.mkdir(parents=True, exist_ok=True)
+    (directory / "task.json").write_text(json.dumps({"env": ENV, "overrides": {}}))
+    fields = training.config_dict(ppo.Config(**{**TINY, **config}))
+    (directory / "config.json").write_text(json.dumps({"algorithm": algorithm, "config": fields, "settings": {}}))
+    return directory
+
+
+def damage(directory: Path, step: int) -> None:
+    """Truncates the array data of checkpoint `step`, as a full disk would."""
+    files = glob.glob(str(directory / str(step) / "arrays" / "d" / "*"))
+    assert files
+    for name in files:
+        Path(name).write_bytes(b"")
+
+
+@pytest.mark.parametrize(
+    "argv, words",
+    [
+        (["train", "ppo", "cartpole_balanse"], ["unknown env 'cartpole_balanse'", "did you mean 'cartpole_balance'"]),
+        (["demo", "--env", "pendulum", "--steps", "5"], ["unknown env 'pendulum'", "pendulum_swingup"]),
+        (["plan", "mppi", "cartpole_balanse"], ["unknown env 'cartpole_balanse'"]),
+        (["plan", "mppi", "cartpole_balance"], ["'cartpole_balance' has no planning setup", "pendulum_swingup"]),
+        (["train", "ppo", ENV, "--config", "num_envs=-3"], ["num_envs=-3", "integer >= 1"]),
+        (["train", "ppo", ENV, "--config", "nonsense=1"], ["--config: unknown field(s) ['nonsense']", "num_envs"]),
+        (["train", "ppo", ENV, "--config", "num_envs"], ["--config: expected NAME=VALUE, got 'num_envs'"]),
+        (["train", "ppo", ENV, "--config", "learning_rate=abc"], ["learning_rate='abc' must be a number"]),
+        (["train", "ppo", ENV, "--config", "policy_hidden_sizes=64"], ["policy_hidden_sizes=64 must be a tuple of int"]),
+        (["train", "ppo", ENV, "--config", "activation=gelu"], ["activation='gelu' must be one of 'swish'"]),
+        (["plan", "mppi", ENV, "--config", "num_samples=many"], ["num_samples='many' must be an int"]),
+        (["train", "ppo", ENV, "--env-overrides", "nope=1"], ["unknown override(s) ['nope']", "upright_weight"]),
+        (["train", "ppo", ENV, "--env-overrides", "episode_steps=abc"], [f"{ENV}: override episode_steps='abc' must be an int"]),
+        (["train", "ppo", ENV, "--env-overrides", "upright_weight=[1,2]"], ["override upright_weight=[1, 2] must be a number"]),
+        (["train", "ppo", ENV, "--env-overrides", "solver=pgs"], ["physics option solver='pgs'"]),
+        (["demo", "--num-envs", "0"], ["--num-envs must be >= 1, got 0"]),
+        (["plan", "mppi", ENV, "--seconds", "-1"], ["--seconds must be > 0"]),
+        (["eval", "no/such/run"], ["no/such/run: no such run directory"]),
+        (["train", "ppo", ENV, "--resume", "no/such/run"], ["--resume no/such/run: no such run directory"]),
+    ],
+)
+def test_a_mistake_is_one_line_and_status_2(capsys, tmp_path, monkeypatch, argv, words):
+    monkeypatch.chdir(tmp_path)
+    assert_usage_error(capsys, argv, *words)
+    assert list(tmp_path.iterdir()) == []  # nothing written (no runs/ directory either)
+
+
+def test_an_unknown_algorithm_is_tyros_short_usage_error(capsys):
+    code, _, err = run_cli(capsys, "train", "ppx", ENV)
+    assert code == 2 and "Traceback" not in err
+    assert "invalid choice 'ppx'" in err and "'ppo'" in err and "mjzoo train --help" in err
+    assert len(err.strip().splitlines()) <= 8
+
+
+@pytest.mark.parametrize("command", ["eval", "train"])
+def test_an_incomplete_run_directory_is_named(capsys, tmp_path, command):
+    def argv(run: Path) -> list[str]:
+        return ["eval", str(run)] if command == "eval" else ["train", "ppo", ENV, "--resume", str(run)]
+
+    flag = "--resume " if command == "train" else ""
+    (tmp_path / "empty").mkdir()
+    assert_usage_error(capsys, argv(tmp_path / "empty"), f"{flag}{tmp_path / 'empty'}: not a complete run", "no task.json")
+    run = write_run(tmp_path / "run")
+    (run / "config.json").unlink()
+    assert_usage_error(capsys, argv(run), "no config.json")
+    (run / "config.json").write_text("{not json")
+    assert_usage_error(capsys, argv(run), "config.json is not valid JSON")
+    write_run(run)
+    before = snapshot(run)
+    assert_usage_error(capsys, argv(run), "not a complete run", f"no checkpoint in {run / 'checkpoints'}")
+    assert snapshot(run) == before
+    (tmp_path / "notes.txt").write_text("x")
+    assert_usage_error(capsys, argv(tmp_path / "notes.txt"), "not a directory")
+
+
+def test_resume_must_match_the_run_it_continues(capsys, tmp_path):
+    run = write_run(tmp_path / "run")
+    checkpoints.save(run / "checkpoints", 64, {"x": jnp.zeros(1)})
+    before = snapshot(run)
+    assert_usage_error(capsys, ["train", "ppo", "cartpole_balance", "--resume", str(run)],
+                       f"that run's env is {ENV}, not cartpole_balance")  # fmt: skip
+    assert_usage_error(capsys, ["train", "ppo", ENV, "--resume", str(run), "--env-overrides", "episode_steps=9"],
+                       "--env-overrides: a resumed run keeps")  # fmt: skip
+    assert_usage_error(capsys, ["train", "ppo", ENV, "--resume", str(run), "--out", str(tmp_path / "b")], "give one")
+    assert snapshot(run) == before
+
+
+@pytest.mark.parametrize("marker", ["config.json", "metrics.jsonl", "checkpoints"])
+def test_train_refuses_an_out_that_holds_a_run_and_touches_nothing(capsys, tmp_path, monkeypatch, marker):
+    out = tmp_path / "runs" / f"{ENV}-ppo"  # also the default --out
+    out.mkdir(parents=True)
+    if marker == "checkpoints":
+        checkpoints.save(out / "checkpoints", 64, {"x": jnp.zeros(1)})
+    else:
+        (out / marker).write_text('{"step": 64}\n')
+    (out / "curves.png").write_bytes(b"\x89PNG")
+    before = snapshot(tmp_path)
+    monkeypatch.chdir(tmp_path)
+    for extra, where in ((["--out", str(out)], out), ([], Path("runs") / f"{ENV}-ppo")):
+        line = assert_usage_error(capsys, ["train", "ppo", ENV, *extra], f"--out {where} already holds a run", marker)
+        assert line.endswith(f"continue it with --resume {where}, or choose a new --out")
+    assert snapshot(tmp_path) == before
+
+
+def test_plan_refuses_an_out_that_holds_a_plan_run(capsys, tmp_path):
+    (tmp_path / "run").mkdir()
+    (tmp_path / "run" / "summary.json").write_text("{}")
+    (tmp_path / "file").write_text("")
+    before = snapshot(tmp_path)
+    assert_usage_error(capsys, ["plan", "mppi", ENV, "--out", str(tmp_path / "run")], "already holds a run (summary.json)")
+    assert_usage_error(capsys, ["plan", "mppi", ENV, "--out", str(tmp_path / "file")], "is a file, not a directory")
+    assert snapshot(tmp_path) == before
+
+
+@pytest.fixture(scope="module")
+def ppo_state():
+    """PPO's initial train state for TINY on the env (one compile for the module)."""
+    return ppo.init(ppo.Config(**TINY), mjzoo.envs.make(ENV), jax.random.key(0))
+
+
+def test_eval_falls_back_past_a_damaged_checkpoint(capsys, tmp_path, monkeypatch, ppo_state):
+    """The warning is one line and the older state is the one evaluated (evaluation
+    itself is faked: it reports the restored update count as the return)."""
+    run = write_run(tmp_path / "run")
+    for step, updates in ((64, 1), (128, 2)):
+        checkpoints.save(run / "checkpoints", step, dataclasses.replace(ppo_state, updates=ppo_state.updates + updates))
+    damage(run / "checkpoints", 128)
+
+    def evaluate(config, task, state, key, episodes, steps):
+        return state.updates.astype(jnp.float32), jnp.zeros(episodes), None
+
+    monkeypatch.setattr(ppo, "evaluate", evaluate)
+    monkeypatch.setattr(training, "write_video", lambda task, trajectory, path: None)
+    cli.main(["eval", str(run), "--episodes", "2"])
+    out, err = capsys.readouterr()
+    assert f"{ENV}: mean return 1.00" in out
+    lines = err.splitlines()
+    assert len(lines) == 1 and "Traceback" not in err, err
+    assert lines[0].startswith(f"mjzoo eval: warning: {run / 'checkpoints'}: checkpoint 128 is damaged (")
+    assert lines[0].endswith("restored checkpoint 64, the newest intact one")
+    assert checkpoints.all_steps(run / "checkpoints") == [64, 128]  # eval leaves the run as it was
+
+
+@pytest.mark.parametrize("command", ["eval", "train"])
+def test_only_damaged_checkpoints_is_status_2_and_touches_nothing(capsys, tmp_path, command, ppo_state):
+    run = write_run(tmp_path / "run")
+    for step in (64, 128):
+        checkpoints.save(run / "checkpoints", step, ppo_state)
+        damage(run / "checkpoints", step)
+    before = snapshot(run)
+    argv = ["eval", str(run)] if command == "eval" else ["train", "ppo", ENV, "--resume", str(run)]
+    line = assert_usage_error(capsys, argv, f"no intact checkpoint in {run / 'checkpoints'}: checkpoint 128 is damaged (")
+    assert "; checkpoint 64 is damaged (" in line
+    assert snapshot(run) == before
+
+
+def test_resuming_a_checkpoint_of_another_state_is_status_2(capsys, tmp_path, ppo_state):
+    """A mismatch is not damage: every checkpoint would mismatch alike, none is skipped."""
+    run = write_run(tmp_path / "run")
+    checkpoints.save(run / "checkpoints", 64, ppo_state)
+    checkpoints.save(run / "checkpoints", 128, {"params": jnp.zeros(3)})
+    before = snapshot(run)
+    assert_usage_error(capsys, ["train", "ppo", ENV, "--resume", str(run)],
+                       f"checkpoint 128 in {run / 'checkpoints'} does not match the template")  # fmt: skip
+    assert snapshot(run) == before
+
+
+@jax.tree_util.register_dataclass
+@dataclasses.dataclass(frozen=True)
+class Count:
+    updates: jax.Array
+    total: jax.Array
+
+
+@dataclasses.dataclass(frozen=True)
+class CountConfig:
+    num_updates: int
+    steps_per_update: int = 10
+    num_envs: int = 1
+
+
+COUNTER = types.ModuleType("counter")  # an algorithm whose state counts its updates
+COUNTER.init = lambda config, task, key: Count(jnp.zeros((), jnp.int32), jnp.zeros(()))
+COUNTER.update = lambda config, task, s: (Count(s.updates + 1, s.total + 1.0), {"loss/total": s.total})
+COUNTER.evaluate = lambda config, task, s, key, n, steps: (s.total, jnp.zeros(n), None)
+
+
+def test_training_resumes_from_the_newest_intact_checkpoint(tmp_path):
+    """A resume skips a damaged newest checkpoint (warning), sets it aside, cuts
+    metrics.jsonl back and trains on to the same end, saving that step anew."""
+    settings = training.Settings(out_dir=tmp_path, updates_per_chunk=1, video=False, progress=False)
+    training.run(COUNTER, CountConfig(num_updates=3), {}, settings)
+    damage(tmp_path / "checkpoints", 30)
+    with pytest.warns(checkpoints.DamagedCheckpointWarning, match="checkpoint 30 is damaged .*restored checkpoint 20"):
+        state, last = training.run(COUNTER, CountConfig(num_updates=4), {}, dataclasses.replace(settings, resume=True))
+    assert int(state.updates) == 4 and last["eval/return"] == 4.0
+    assert checkpoints.all_steps(tmp_path / "checkpoints") == [20, 30, 40]
+    assert (tmp_path / "checkpoints" / "30.damaged").is_dir()
+    steps = [json.loads(line)["step"] for line in (tmp_path / "metrics.jsonl").read_text().splitlines()]
+    assert steps == [10, 20, 30, 40]
+
+
+def test_a_bug_past_the_checks_keeps_its_exception(tmp_path, monkeypatch):
+    """Only the checks' errors are the user's: a ValueError from inside training is a bug."""
+
+    def broken(config, task, settings):
+        raise ValueError("a bug deep inside")
+
+    monkeypatch.setattr(ppo, "train", broken)
+    with pytest.raises(ValueError, match="a bug deep inside"):
+        cli.main(["train", "ppo", ENV, "--out", str(tmp_path / "run")])
+
+
+def test_subprocess_errors_have_no_traceback(tmp_path):
+    result = subprocess.run([sys.executable, "-m", "mjzoo", "train", "ppo", ENV, "--config", "num_envs=-3"],
+                            cwd=tmp_path, capture_output=True, text=True, timeout=120)  # fmt: skip
+    assert result.returncode == 2 and result.stdout == ""
+    assert result.stderr.splitlines() == ["mjzoo train: ppo.Config: num_envs=-3 is invalid; expected an integer >= 1"]
+    assert list(tmp_path.iterdir()) == []
+
+
+def test_only_damaged_checkpoints_in_a_fresh_process_is_one_line(tmp_path, ppo_state):
+    """Outside pytest (which takes them over) orbax's abandoned reads would print
+    "Event loop is closed" tracebacks after the error: they must not reach stderr."""
+    run = write_run(tmp_path / "run")
+    for step in (64, 128):
+        checkpoints.save(run / "checkpoints", step, ppo_state)
+        damage(run / "checkpoints", step)
+    result = subprocess.run([sys.executable, "-m", "mjzoo", "eval", "run"], cwd=tmp_path, capture_output=True,
+                            text=True, timeout=300)  # fmt: skip
+    assert result.returncode == 2 and result.stdout == ""
+    (line,) = result.stderr.splitlines()
+    assert line.startswith("mjzoo eval: no intact checkpoint in run/checkpoints: checkpoint 128 is damaged (ValueError: ")
+
+
+def test_a_closed_stdout_ends_quietly():
+    """`mjzoo envs | head -1`: the reader is gone before anything is written."""
+    with subprocess.Popen([sys.executable, "-m", "mjzoo", "envs"], stdout=subprocess.PIPE, stderr=subprocess.PIPE) as process:
+        process.stdout.close()
+        err = process.stderr.read().decode()
+        assert process.wait(timeout=120) == 1
+    assert err == "", err  # no BrokenPipeError, at the print or at the exit's flush
