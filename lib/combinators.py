@@ -21,7 +21,7 @@ import jax
 import jax.numpy as jnp
 from mujoco import mjx
 
-from mjzoo import tree
+from mjzoo import checks, tree
 from mjzoo.running import OUTCOME, complete, reset, reward_terms, transition_with_terms
 from mjzoo.types import State, Task, bind
 
@@ -81,8 +81,7 @@ def with_time_limit(task: Task, max_steps: int) -> Task:
     Keeps ``info["time_limit"]``: int32 steps taken in this episode. An episode that
     terminates on its last step is reported terminated, not truncated.
     """
-    if isinstance(max_steps, bool) or not isinstance(max_steps, int) or max_steps < 1:
-        raise ValueError(f"with_time_limit: max_steps={max_steps!r} must be an integer >= 1")
+    max_steps = checks.integer("with_time_limit", "max_steps", max_steps)
     return task.replace(
         start=bind(_time_limit_reset, task.start),
         step=bind(_time_limit_step, task.step),
@@ -198,8 +197,7 @@ def with_action_repeat(task: Task, repeats: int) -> Task:
     remaining repeats leave the state unchanged and add no reward. Keeps nothing in
     `info`.
     """
-    if isinstance(repeats, bool) or not isinstance(repeats, int) or repeats < 1:
-        raise ValueError(f"with_action_repeat: repeats={repeats!r} must be an integer >= 1")
+    repeats = checks.integer("with_action_repeat", "repeats", repeats)
     return runs_transitions(task, _repeat_step, tree.Static(repeats))
 
 

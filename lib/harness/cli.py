@@ -43,6 +43,7 @@ ALGORITHMS = ("ppo",)
 PLANNERS = ("predictive_sampling", "cem", "mppi")
 RUN_FILES = ("config.json", "metrics.jsonl", "checkpoints", "task.json")  # what `train` writes
 PLAN_FILES = ("summary.json",)
+RUN_DEFAULTS = {"seed": 0, "eval_envs": 16, "updates_per_chunk": 10}  # how `train` drives a new run
 _MISMATCH = object()  # what _as_type returns for a value of another type
 
 
@@ -201,9 +202,9 @@ def train(
     env_overrides: tuple[str, ...] = (),
     total_steps: int | None = None,
     resume: Path | None = None,
-    seed: int = 0,
-    eval_envs: int = 16,
-    updates_per_chunk: int = 10,
+    seed: int | None = None,
+    eval_envs: int | None = None,
+    updates_per_chunk: int | None = None,
     video: bool = True,
 ) -> None:
     """Train ALGORITHM on ENV, writing config.json, metrics.jsonl, TensorBoard events,
@@ -212,7 +213,9 @@ def train(
 
     --config takes NAME=VALUE fields of the algorithm's Config (defaults: the env's);
     --env-overrides NAME=VALUE overrides of the env (see `mjzoo envs`); --resume DIR
-    continues the run in DIR from its newest intact checkpoint with its saved settings.
+    continues the run in DIR from its newest intact checkpoint with its saved settings
+    (--seed, --eval-envs and --updates-per-chunk too, unless given again, for the same
+    result as an uninterrupted run). A new run's: --seed 0 --eval-envs 16 --updates-per-chunk 10.
     """
     from mjzoo.harness import checkpoints, training
 
@@ -229,9 +232,13 @@ def train(
                     raise UsageError(f"--resume {resume}: that run's {what} is {theirs}, not {ours}")
             out, env_values = resume, saved["overrides"]
             config_values = {**info["config"], **_parse_assignments(config, "--config")}
+            run_settings = {**RUN_DEFAULTS, **{k: v for k, v in info.get("settings", {}).items() if k in RUN_DEFAULTS}}
         else:
             env_values = _parse_assignments(env_overrides, "--env-overrides")
             config_values = _parse_assignments(config, "--config")
+            run_settings = dict(RUN_DEFAULTS)
+        given = {"seed": seed, "eval_envs": eval_envs, "updates_per_chunk": updates_per_chunk}
+        run_settings.update({k: v for k, v in given.items() if v is not None})
         if total_steps is not None:
             config_values["total_steps"] = total_steps
         cfg = _config(module, env, config_values)
@@ -239,8 +246,8 @@ def train(
         if resume is None:
             out = out or Path("runs") / f"{env}-{algorithm}"
             _refuse_existing(out, RUN_FILES, f"continue it with --resume {out}, or choose a new --out")
-        settings = training.Settings(out_dir=out, seed=seed, updates_per_chunk=updates_per_chunk, eval_envs=eval_envs,
-                                     eval_steps=_episode_steps(env, env_values), video=video, resume=resume is not None)  # fmt: skip
+        settings = training.Settings(out_dir=out, eval_steps=_episode_steps(env, env_values), video=video,
+                                     resume=resume is not None, **run_settings)  # fmt: skip
     if resume is None:
         out.mkdir(parents=True, exist_ok=True)
         (out / "task.json").write_text(json.dumps({"env": env, "overrides": env_values}, indent=2))

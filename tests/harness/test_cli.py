@@ -293,3 +293,19 @@ def test_a_closed_stdout_ends_quietly():
         err = process.stderr.read().decode()
         assert process.wait(timeout=120) == 1
     assert err == "", err  # no BrokenPipeError, at the print or at the exit's flush
+
+
+def test_resume_keeps_the_runs_own_settings(capsys, tmp_path, monkeypatch, ppo_state):
+    """--seed, --eval-envs and --updates-per-chunk come back from config.json, so a resume
+    continues the run it was (its chunk size decides where training stops)."""
+    run = write_run(tmp_path / "run")
+    info = json.loads((run / "config.json").read_text())
+    info["settings"] = {"seed": 3, "eval_envs": 2, "updates_per_chunk": 1, "video": False}
+    (run / "config.json").write_text(json.dumps(info))
+    checkpoints.save(run / "checkpoints", 64, ppo_state)
+    seen = []
+    monkeypatch.setattr(ppo, "train", lambda config, task, settings: (seen.append(settings), (None, {}))[1])
+    cli.main(["train", "ppo", ENV, "--resume", str(run), "--no-video"])
+    cli.main(["train", "ppo", ENV, "--resume", str(run), "--seed", "5"])
+    assert [(s.seed, s.eval_envs, s.updates_per_chunk, s.resume) for s in seen] == [(3, 2, 1, True), (5, 2, 1, True)]
+    assert not seen[0].video and seen[1].video
