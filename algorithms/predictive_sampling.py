@@ -27,7 +27,7 @@ from mjzoo.types import State, Task
 __all__ = ["Config", "init", "plan"]
 
 
-@dataclasses.dataclass(frozen=True)
+@dataclasses.dataclass(frozen=True, kw_only=True)
 class Config(planning.SamplingConfig):
     """Predictive sampling has only the shared sampling settings (`planning.SamplingConfig`)."""
 

@@ -141,7 +141,7 @@ def run_task(name: str, total_steps: int | None, out: Path, eval_envs: int, smok
     print(f"{name}: raw stepping {raw:,.0f} steps/s at {config.num_envs} envs", flush=True)
     settings = training.Settings(out_dir=out / name, updates_per_chunk=1 if smoke else 10,
                                  eval_envs=16 if smoke else 128, eval_steps=episode, checkpoint_every=0,
-                                 video=video)  # fmt: skip
+                                 video=video, overwrite=True)  # fmt: skip  # a new measurement replaces the last
     start = time.perf_counter()
     train_state, _ = ppo.train(config, train_task, settings)
     total = time.perf_counter() - start

@@ -35,13 +35,11 @@ import numpy as np
 import tyro
 
 import mjzoo
-import mjzoo.envs
 
 __all__ = ["main", "demo", "envs", "train", "evaluate", "plan", "UsageError"]
 
 ALGORITHMS = ("ppo",)
 PLANNERS = ("predictive_sampling", "cem", "mppi")
-RUN_FILES = ("config.json", "metrics.jsonl", "checkpoints", "task.json")  # what `train` writes
 PLAN_FILES = ("summary.json",)
 RUN_DEFAULTS = {"seed": 0, "eval_envs": 16, "updates_per_chunk": 10}  # how `train` drives a new run
 _MISMATCH = object()  # what _as_type returns for a value of another type
@@ -245,7 +243,7 @@ def train(
         task = mjzoo.envs.make(env, **env_values)
         if resume is None:
             out = out or Path("runs") / f"{env}-{algorithm}"
-            _refuse_existing(out, RUN_FILES, f"continue it with --resume {out}, or choose a new --out")
+            _refuse_existing(out, (*training.RUN_FILES, "task.json"), f"continue it with --resume {out}, or choose a new --out")
         settings = training.Settings(out_dir=out, eval_steps=_episode_steps(env, env_values), video=video,
                                      resume=resume is not None, **run_settings)  # fmt: skip
     if resume is None:
@@ -285,7 +283,9 @@ def _refuse_existing(out: Path, markers: tuple[str, ...], hint: str) -> None:
     """Refuses an --out that is a file or holds a run, before anything is written to it."""
     if out.exists() and not out.is_dir():
         raise UsageError(f"--out {out}: is a file, not a directory")
-    found = [m + "/" * (out / m).is_dir() for m in markers if (out / m).exists()]
+    from mjzoo.harness import training
+
+    found = training.existing(out, markers)
     if found:
         raise UsageError(f"--out {out} already holds a run ({', '.join(found)}): {hint}")
 

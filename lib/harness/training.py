@@ -17,6 +17,7 @@ from __future__ import annotations
 import dataclasses
 import functools
 import json
+import shutil
 import time
 from pathlib import Path
 from types import ModuleType
@@ -30,9 +31,10 @@ from jax.sharding import NamedSharding, PartitionSpec
 from mjzoo.harness import checkpoints, metrics as metrics_lib, plotting, rendering
 from mjzoo.types import Task
 
-__all__ = ["Settings", "run", "shard_envs", "replicate", "config_dict"]
+__all__ = ["Settings", "run", "shard_envs", "replicate", "config_dict", "existing", "RUN_FILES"]
 
 PER_ENV_FIELDS = ("env_state", "carry", "episode_return", "episode_length")
+RUN_FILES = ("config.json", "metrics.jsonl", "checkpoints", "tensorboard", "curves.png", "eval.mp4")  # what `run` writes
 
 
 @dataclasses.dataclass(frozen=True, kw_only=True)
@@ -46,7 +48,8 @@ class Settings:
     eval_steps: int = 1000
     video: bool = True
     checkpoint_every: int = 1  # chunks between checkpoints; 0: never
-    resume: bool = False
+    resume: bool = False  # continue the run in out_dir from its newest intact checkpoint
+    overwrite: bool = False  # replace a run already in out_dir: its files are deleted first
     progress: bool = True
 
     def __post_init__(self):
@@ -55,6 +58,23 @@ class Settings:
                 raise ValueError(f"training.Settings: {field}={getattr(self, field)!r} must be >= 1")
         if self.checkpoint_every < 0:
             raise ValueError(f"training.Settings: checkpoint_every={self.checkpoint_every!r} must be >= 0")
+
+
+def existing(out: Path, names: tuple[str, ...] = RUN_FILES) -> list[str]:
+    """Which of `names` already exist in `out` (folders with a trailing slash)."""
+    return [n + "/" * (out / n).is_dir() for n in names if (out / n).exists()]
+
+
+def _claim(out: Path, settings: Settings) -> None:
+    """Refuses an out_dir that holds another run, unless told to resume or replace it:
+    a user's files are never overwritten without asking."""
+    found = [] if settings.resume else existing(out)
+    if found and not settings.overwrite:
+        raise FileExistsError(f"training: {out} already holds a run ({', '.join(found)}); resume it "
+                              "(Settings(resume=True)), choose another out_dir, or replace it (overwrite=True)")  # fmt: skip
+    for name in found:
+        path = out / name.rstrip("/")
+        shutil.rmtree(path) if path.is_dir() else path.unlink()
 
 
 def config_dict(config: Any) -> dict[str, Any]:
@@ -133,6 +153,8 @@ def _resume(out_dir: Path, state: Any) -> Any:
 def run(algorithm: ModuleType, config: Any, task: Task, settings: Settings) -> tuple[Any, dict[str, float]]:
     """Trains `task` with `algorithm` under `config`; returns the final state and metrics."""
     out = Path(settings.out_dir) if settings.out_dir else None
+    if out is not None:
+        _claim(out, settings)
     key = jax.random.key(settings.seed)
     state = algorithm.init(config, task, key)
     if out is not None:

@@ -32,7 +32,7 @@ __all__ = [
 Array = jax.Array
 
 
-@dataclasses.dataclass(frozen=True)
+@dataclasses.dataclass(frozen=True, kw_only=True)
 class SamplingConfig:
     """What every sampling planner shares (each algorithm's `Config` extends it).
 

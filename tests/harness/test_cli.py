@@ -309,3 +309,17 @@ def test_resume_keeps_the_runs_own_settings(capsys, tmp_path, monkeypatch, ppo_s
     cli.main(["train", "ppo", ENV, "--resume", str(run), "--seed", "5"])
     assert [(s.seed, s.eval_envs, s.updates_per_chunk, s.resume) for s in seen] == [(3, 2, 1, True), (5, 2, 1, True)]
     assert not seen[0].video and seen[1].video
+
+
+def test_training_refuses_a_directory_that_holds_a_run_unless_told(tmp_path):
+    """From Python too: no file of an earlier run is touched without resume or overwrite."""
+    settings = training.Settings(out_dir=tmp_path, updates_per_chunk=1, video=False, progress=False)
+    training.run(COUNTER, CountConfig(num_updates=2), {}, settings)
+    before = snapshot(tmp_path)
+    with pytest.raises(FileExistsError, match=r"already holds a run \(config.json, metrics.jsonl, checkpoints/"):
+        training.run(COUNTER, CountConfig(num_updates=1), {}, settings)
+    assert snapshot(tmp_path) == before
+    state, _ = training.run(COUNTER, CountConfig(num_updates=1), {}, dataclasses.replace(settings, overwrite=True))
+    assert int(state.updates) == 1 and checkpoints.all_steps(tmp_path / "checkpoints") == [10]
+    steps = [json.loads(line)["step"] for line in (tmp_path / "metrics.jsonl").read_text().splitlines()]
+    assert steps == [10]
