@@ -1,4 +1,4 @@
-"""Conformance (tests/test_conformance.py) of the envs on Brax's models, bare, with the
+"""Conformance (tests/conformance/test_conformance.py) of the envs on Brax's models, bare, with the
 same checks, in a module (and so a process under xdist) of its own; the stacked cases
 are in test_conformance_locomotion_stacked.py, so that xdist runs the two side by side."""
 
