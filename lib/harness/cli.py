@@ -2,15 +2,14 @@
 
     mjzoo envs                    # list the registered tasks and their overrides
     mjzoo demo --steps 200        # random policy on every env, batched, prints returns
-    mjzoo train ppo cartpole_balance --out runs/cb --config num_envs=128 learning_rate=3e-4
-    mjzoo train ppo cartpole_balance --resume runs/cb
+    mjzoo train ppo cartpole_balance --out runs/cb --config num_envs=128  # --resume runs/cb goes on
     mjzoo eval runs/cb            # reload the checkpoint, evaluate, write a video
+    mjzoo plan mppi pendulum_swingup --offline  # a sampling planner, closed loop
 
 A user's mistake (an unknown env, a bad --config or --env-overrides value, a missing or
-incomplete run directory, an --out that already holds a run, only damaged checkpoints)
-ends the command with one line, ``mjzoo COMMAND: what is wrong``, on stderr and exit
-status 2, found before anything is written (and, but for damaged checkpoints, before
-anything is compiled). Any other exception is a bug and keeps its traceback.
+incomplete run, an --out that holds a run, only damaged checkpoints) ends the command with
+one line on stderr, ``mjzoo COMMAND: what is wrong``, and exit status 2, before anything is
+written or (but for checkpoints) compiled. Other exceptions are bugs, with tracebacks.
 """
 
 from __future__ import annotations
@@ -220,17 +219,7 @@ def train(
     with _checking():
         module = _algorithm(algorithm)
         if resume is not None:
-            if out is not None and out != resume:
-                raise UsageError(f"--out {out} and --resume {resume}: a resumed run stays in its directory; give one")
-            if env_overrides:
-                raise UsageError("--env-overrides: a resumed run keeps the env overrides it started with")
-            saved, info = _read_run(resume, "--resume ")
-            for what, ours, theirs in (("env", env, saved["env"]), ("algorithm", algorithm, info["algorithm"])):
-                if ours != theirs:
-                    raise UsageError(f"--resume {resume}: that run's {what} is {theirs}, not {ours}")
-            out, env_values = resume, saved["overrides"]
-            config_values = {**info["config"], **_parse_assignments(config, "--config")}
-            run_settings = {**RUN_DEFAULTS, **{k: v for k, v in info.get("settings", {}).items() if k in RUN_DEFAULTS}}
+            out, env_values, config_values, run_settings = _resumed(resume, out, env, algorithm, env_overrides, config)
         else:
             env_values = _parse_assignments(env_overrides, "--env-overrides")
             config_values = _parse_assignments(config, "--config")
@@ -254,6 +243,23 @@ def train(
     print(f"final eval/return {last.get('eval/return', float('nan')):.2f}")
     print(f"curves: {out / 'curves.png'}")
     print(f"video:  {out / 'eval.mp4'}" if (out / "eval.mp4").exists() else "video:  (not written)")
+
+
+def _resumed(resume: Path, out: Path | None, env: str, algorithm: str, env_overrides: tuple[str, ...],
+             config: tuple[str, ...]) -> tuple[Path, dict, dict, dict]:  # fmt: skip
+    """(out, env overrides, config values, run settings) of the run `--resume` continues,
+    checked against what the command line says of it."""
+    if out is not None and out != resume:
+        raise UsageError(f"--out {out} and --resume {resume}: a resumed run stays in its directory; give one")
+    if env_overrides:
+        raise UsageError("--env-overrides: a resumed run keeps the env overrides it started with")
+    saved, info = _read_run(resume, "--resume ")
+    for what, ours, theirs in (("env", env, saved["env"]), ("algorithm", algorithm, info["algorithm"])):
+        if ours != theirs:
+            raise UsageError(f"--resume {resume}: that run's {what} is {theirs}, not {ours}")
+    config_values = {**info["config"], **_parse_assignments(config, "--config")}
+    run_settings = {**RUN_DEFAULTS, **{k: v for k, v in info.get("settings", {}).items() if k in RUN_DEFAULTS}}
+    return resume, saved["overrides"], config_values, run_settings
 
 
 def _read_run(run: Path, flag: str) -> tuple[dict, dict]:
@@ -392,6 +398,3 @@ def _one_line_warnings(command: str) -> Iterator[None]:
     finally:
         warnings.showwarning = shown
 
-
-if __name__ == "__main__":
-    main()
