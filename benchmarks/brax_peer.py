@@ -24,7 +24,7 @@ import jax
 
 import mjzoo
 import mjzoo.envs
-from mjzoo.interop import brax
+from mjzoo.interop import brax as adapter
 
 __all__ = ["train_brax_ppo"]
 
@@ -73,8 +73,8 @@ def train_brax_ppo(
         raise ValueError(f"train_brax_ppo: num_evals={num_evals} must be >= 3 to time training past the first compile")
     from brax.training.agents.ppo import train as ppo  # after the patch is in place
 
-    brax_adapter.patch_brax_for_current_jax()
-    env = brax_adapter.to_brax_env(task)
+    adapter.patch_brax_for_current_jax()
+    env = adapter.to_brax_env(task)
     reports: list[tuple[int, float, dict]] = []
     start = time.perf_counter()
 
@@ -98,7 +98,7 @@ def train_brax_ppo(
         num_evals=num_evals,
         num_eval_envs=num_eval_envs,
         seed=seed,
-        wrap_env_fn=brax_adapter.wrap_for_training,  # keeps the task's truncation flags
+        wrap_env_fn=adapter.wrap_for_training,  # keeps the task's truncation flags
         progress_fn=progress,
     )
 

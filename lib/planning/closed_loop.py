@@ -27,7 +27,6 @@ from types import ModuleType
 from typing import Callable
 
 import jax
-import jax.numpy as jnp
 
 from mjzoo.planning import sampling
 from mjzoo.planning.rollouts import Ensemble
