@@ -66,8 +66,7 @@ def reward_terms(state: State) -> dict[str, Array]:
 def reset(task: Task, key: Array) -> State:
     """Starts an episode of `task`: ``task.reset(task.model, key)``, a state `complete`
     for it."""
-    checks.key("mjzoo.reset", key)
-    return complete(task, task.start(task.model, key))
+    return task.reset(task.model, key)
 
 
 def complete(task: Task, state: State) -> State:

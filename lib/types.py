@@ -19,6 +19,8 @@ import jax.numpy as jnp
 import mujoco
 from mujoco import mjx
 
+from mjzoo import checks
+
 __all__ = ["Task", "State", "Trajectory", "StartFn", "StepFn", "RewardFn", "TerminateFn"]
 
 Array = jax.Array
@@ -130,6 +132,7 @@ class Task:
         transition of this task writes added as zeros (`mjzoo.complete`)."""
         from mjzoo.running import complete  # running is built on this module
 
+        checks.key("mjzoo.reset", key)
         return complete(self.replace(model=model), self.start(model, key))
 
     @property
