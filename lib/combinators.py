@@ -83,6 +83,7 @@ def with_time_limit(task: Task, max_steps: int) -> Task:
     """
     max_steps = checks.integer("with_time_limit", "max_steps", max_steps)
     return task.replace(
+        time_limit=jnp.int32(max_steps) if task.time_limit is None else jnp.minimum(task.time_limit, max_steps),
         start=bind(_time_limit_reset, task.start),
         step=bind(_time_limit_step, task.step),
         terminate=bind(_time_limit_terminate, task.terminate, jnp.int32(max_steps)),
@@ -195,10 +196,11 @@ def with_action_repeat(task: Task, repeats: int) -> Task:
 
     Terminated / truncated if any inner step was; after an inner episode end the
     remaining repeats leave the state unchanged and add no reward. Keeps nothing in
-    `info`.
+    `info`. A time limit of L inner steps becomes ceil(L / repeats) steps.
     """
     repeats = checks.integer("with_action_repeat", "repeats", repeats)
-    return runs_transitions(task, _repeat_step, tree.Static(repeats))
+    limit = None if task.time_limit is None else (task.time_limit + repeats - 1) // repeats
+    return runs_transitions(task, _repeat_step, tree.Static(repeats)).replace(time_limit=limit)
 
 
 def _repeat_step(repeats: tree.Static, inner: Task, model, state: State, action: Array, key: Array) -> State:

@@ -114,6 +114,11 @@ class Task:
         rendering). Never traced; treat it as read-only.
       action_dim: static length of an action where it is not one control per actuator
         (PD position and velocity targets take 2 nu); None: nu. Read `action_size`.
+      time_limit: int32 scalar, the number of this task's steps after which an episode
+        is truncated, set by `with_time_limit` (and kept in step units by
+        `with_action_repeat`); None: episodes have no limit. A leaf, so tasks with
+        other limits share a trace; read it on the host (`int(task.time_limit)`) for a
+        static length, e.g. how long evaluation runs.
     """
 
     model: mjx.Model
@@ -123,6 +128,7 @@ class Task:
     terminate: TerminateFn
     mj_model: mujoco.MjModel = dataclasses.field(metadata=dict(static=True))
     action_dim: int | None = dataclasses.field(default=None, metadata=dict(static=True))
+    time_limit: Array | None = None
 
     def replace(self, **changes: Any) -> "Task":
         return dataclasses.replace(self, **changes)

@@ -180,6 +180,14 @@ def test_time_limit_is_a_leaf():
     np.testing.assert_array_equal(states.truncated, [False, False, True])
 
 
+def test_time_limit_is_readable_from_the_task():
+    # The innermost limit binds; action repeat counts it in its own (longer) steps.
+    assert make_task().time_limit is None
+    assert int(mjzoo.with_time_limit(mjzoo.with_time_limit(make_task(), 7), 9).time_limit) == 7
+    assert int(mjzoo.with_action_repeat(mjzoo.with_time_limit(make_task(), 7), 3).time_limit) == 3  # ceil(7 / 3)
+    assert int(mjzoo.with_auto_reset(mjzoo.with_time_limit(make_task(), 7)).time_limit) == 7
+
+
 @pytest.mark.parametrize("max_steps", [0, -1, 2.5, True, "10", None])
 def test_time_limit_invalid_max_steps(max_steps):
     with pytest.raises(ValueError, match="max_steps"):
