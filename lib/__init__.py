@@ -35,6 +35,9 @@ from mjzoo.combinators import (
     with_reward_clip,
     with_time_limit,
 )
+from mjzoo.checks import RetraceHazardWarning
+from mjzoo.kit import task
+from mjzoo.parameters import params, with_params
 from mjzoo.perturbations import with_action_noise, with_domain_randomization, with_observation_noise
 from mjzoo.running import (
     Policy,
@@ -65,6 +68,10 @@ __all__ = [
     "rollout",
     "reward_terms",
     "control_dt",
+    "task",
+    "params",
+    "with_params",
+    "RetraceHazardWarning",
     "with_observation",
     "with_time_limit",
     "with_auto_reset",

@@ -7,14 +7,18 @@ wrong and what it must be: ``"{who}: {name}={value!r} must be ..."``.
 
 from __future__ import annotations
 
+import functools
 import math
 import numbers as _numbers
+import os
+import sys
+import warnings
 
 import jax
 import jax.numpy as jnp
 import numpy as np
 
-__all__ = ["number", "integer", "interval", "numbers", "key"]
+__all__ = ["number", "integer", "interval", "numbers", "key", "RetraceHazardWarning", "retrace_hazard"]
 
 Array = jax.Array
 
@@ -75,3 +79,55 @@ def key(who: str, value) -> None:
     if not (typed or (dtype == np.uint32 and shape == (2,))):
         got = f"{type(value).__name__} {value!r}" if dtype is None else f"an array of {dtype} {shape}"
         raise TypeError(f"{who}: key must be one JAX PRNG key such as jax.random.key(0); got {got}")
+
+
+class RetraceHazardWarning(UserWarning):
+    """A function given to a task is not one fixed module-level function, so `jax.jit`
+    sees a new task structure each time the task is built: every rebuilt task (another
+    weight, another seed) compiles again, and numbers it captures are trace constants."""
+
+
+def retrace_hazard(who: str, what: str, fn) -> None:
+    """Warns (`RetraceHazardWarning`) when `fn`, or the function a `jax.tree_util.Partial`
+    wraps, is a lambda, a nested function or a `functools.partial`: each is a new object
+    whenever the code that makes it runs, and a Partial's function is part of its
+    pytree structure, compared by identity."""
+    func = getattr(fn, "func", fn) if isinstance(fn, jax.tree_util.Partial) else fn
+    qualname = getattr(func, "__qualname__", "")
+    if isinstance(func, functools.partial):
+        why = "a functools.partial (compared by identity)"
+    elif qualname.endswith("<lambda>"):
+        why = "a lambda"
+    elif "<locals>" in qualname:
+        why = f"a nested function ({qualname})"
+    else:
+        return
+    captured = [c.cell_contents for c in getattr(func, "__closure__", None) or () if _is_numeric(c)]
+    numbers = f", and the numbers it captures ({_preview(captured)}) are constants of the trace" if captured else ""
+    warnings.warn(
+        f"{who}: {what} is {why}: a rebuilt task holds a new function object, so jax.jit retraces it{numbers}. "
+        "Use a module-level function and pass its numbers as leaves (mjzoo.bind(fn, weight), or a named "
+        "parameter of mjzoo.task).",
+        RetraceHazardWarning,
+        stacklevel=_first_caller_outside(),
+    )
+
+
+def _first_caller_outside() -> int:
+    """The warning's stack level of the first frame outside the core package: the user's line."""
+    frame, level, here = sys._getframe(1), 1, os.path.dirname(__file__)
+    while frame is not None and frame.f_code.co_filename.startswith(here + os.sep):
+        frame, level = frame.f_back, level + 1
+    return level
+
+
+def _is_numeric(cell) -> bool:
+    try:
+        value = cell.cell_contents
+    except ValueError:  # an empty cell
+        return False
+    return _is_real(value) or hasattr(value, "dtype")
+
+
+def _preview(values: list) -> str:
+    return ", ".join(repr(v) if _is_real(v) else f"an array {getattr(v, 'shape', ())}" for v in values[:3])

@@ -54,6 +54,7 @@ def with_observation(task: Task, fn: Callable) -> Task:
     """
     if not callable(fn):
         raise TypeError(f"with_observation: fn must be callable, got {type(fn).__name__}")
+    checks.retrace_hazard("with_observation", "fn", fn)
     if not isinstance(fn, jax.tree_util.Partial):
         fn = jax.tree_util.Partial(fn)
     return task.replace(start=bind(_observed_reset, task.start, fn), step=bind(_observed_step, task.step, fn))
@@ -234,7 +235,9 @@ def with_reward(task: Task, name: str, fn: Callable, weight: float = 1.0) -> Tas
     """Adds the term ``name: weight * fn(model, state, action, next_state)``.
 
     `fn` returns a scalar; it may be a `jax.tree_util.Partial` carrying its own numeric
-    parameters (leaves), or a plain module-level function. Keeps nothing in `info`.
+    parameters (leaves), or a plain module-level function. A lambda or nested function
+    is a new object each time the task is built, so jit would retrace every rebuilt
+    task: it gets a `checks.RetraceHazardWarning`. Keeps nothing in `info`.
     """
     return with_rewards(task, {name: (fn, weight)})
 
@@ -249,6 +252,7 @@ def with_rewards(task: Task, terms: Mapping[str, tuple[Callable, float]]) -> Tas
             raise ValueError(f"with_reward: name must be a non-empty string, got {name!r}")
         if not callable(fn):
             raise TypeError(f"with_reward: fn for term {name!r} must be callable, got {type(fn).__name__}")
+        checks.retrace_hazard("with_reward", f"the function of term {name!r}", fn)
         fn = fn if isinstance(fn, jax.tree_util.Partial) else jax.tree_util.Partial(fn)
         reward = bind(_extra_reward, reward, tree.Static(name), fn, jnp.float32(weight))
     _refuse_taken_names(task, terms, "with_reward")

@@ -43,8 +43,8 @@ def transition_with_terms(
         raise ValueError(f"transition: the action has shape {jnp.shape(action)}, but the task takes "
                          f"({task.action_size},): one number per actuator of its model")  # fmt: skip
     next_state = task.step(task.model, state, action, key)
-    terms = {k: jnp.asarray(v, jnp.float32) for k, v in task.reward(task.model, state, action, next_state).items()}
-    terminated, truncated = task.terminate(task.model, next_state)
+    terms = _scalar_terms(task.reward(task.model, state, action, next_state))
+    terminated, truncated = _two_flags(task.terminate(task.model, next_state))
     reward = sum(terms.values(), jnp.zeros((), jnp.float32))
     next_state = next_state.replace(
         info={k: v for k, v in next_state.info.items() if k != OUTCOME},
@@ -54,6 +54,27 @@ def transition_with_terms(
         metrics={**next_state.metrics, **{f"reward/{k}": v for k, v in terms.items()}},
     )
     return next_state, terms
+
+
+def _scalar_terms(terms: dict) -> dict[str, Array]:
+    """The reward terms as float32 scalars; a term of another shape is named (summing it
+    would broadcast the reward, found only later as a `lax.scan` carry mismatch)."""
+    if not isinstance(terms, dict):
+        raise TypeError(f"transition: the task's reward must return a dict of named terms, got {type(terms).__name__}")
+    for name, value in terms.items():
+        if jnp.shape(value) != ():
+            raise ValueError(f"transition: reward term {name!r} has shape {jnp.shape(value)}; each term must be "
+                             "a scalar (reduce it, e.g. jnp.sum or jnp.mean)")  # fmt: skip
+    return {k: jnp.asarray(v, jnp.float32) for k, v in terms.items()}
+
+
+def _two_flags(flags) -> tuple[Array, Array]:
+    """terminate's (terminated, truncated) as bool scalars, or a clear error."""
+    shapes = [jnp.shape(f) for f in flags] if isinstance(flags, (tuple, list)) else None
+    if shapes is None or len(shapes) != 2 or any(s != () for s in shapes):
+        got = f"shapes {shapes}" if shapes is not None else type(flags).__name__
+        raise ValueError(f"transition: the task's terminate must return two scalars (terminated, truncated), got {got}")
+    return jnp.asarray(flags[0], bool), jnp.asarray(flags[1], bool)
 
 
 def reward_terms(state: State) -> dict[str, Array]:
@@ -79,10 +100,25 @@ def complete(task: Task, state: State) -> State:
     from `jax.eval_shape`.
     """
     shape = _transition_shape(task, state)
+    _check_observation(state.obs, shape.obs)
     return state.replace(
         info=tree.fill_missing(state.info, shape.info),
         metrics=tree.fill_missing(state.metrics, shape.metrics),
     )
+
+
+def _check_observation(reset_obs, step_obs) -> None:
+    """Raises unless a step observes what the episode's first state does (same pytree
+    structure, shapes and dtypes), naming the first leaf that differs."""
+    reset_leaves, reset_tree = jax.tree_util.tree_flatten_with_path(reset_obs)
+    step_leaves, step_tree = jax.tree_util.tree_flatten_with_path(step_obs)
+    if reset_tree != step_tree:
+        raise ValueError(f"the observation's structure differs between reset ({reset_tree}) and step ({step_tree})")
+    for (path, a), (_, b) in zip(reset_leaves, step_leaves):
+        (sa, da), (sb, db) = (jnp.shape(a), jnp.result_type(a)), (jnp.shape(b), jnp.result_type(b))
+        if (sa, da) != (sb, db):
+            raise ValueError(f"the observation{jax.tree_util.keystr(path)} differs between reset ({da}{list(sa)}) "
+                             f"and step ({db}{list(sb)}): a step must observe what the reset does")  # fmt: skip
 
 
 _SHAPES: dict = {}

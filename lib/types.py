@@ -141,6 +141,13 @@ class Task:
         checks.key("mjzoo.reset", key)
         return complete(self.replace(model=model), self.start(model, key))
 
+    def with_params(self, **values: Any) -> "Task":
+        """This task with its named numbers changed (`mjzoo.with_params`): same pytree
+        structure, so jitted functions of it do not recompile."""
+        from mjzoo.parameters import with_params  # built on this module
+
+        return with_params(self, **values)
+
     @property
     def action_size(self) -> int:
         """Length of the action vector: one control per actuator unless `action_dim` says."""

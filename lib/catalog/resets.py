@@ -1,7 +1,9 @@
 """Reset items: randomize the physics state an episode starts from.
 
 A reset item is ``(model: mjx.Model, data: mjx.Data, key) -> mjx.Data``; it edits the
-`qpos` / `qvel` the task's own reset chose. `with_resets(task, *items, observe=...)`
+`qpos` / `qvel` the task's own reset chose. An item that draws something the episode
+must remember (a goal, a target) returns ``(data, {name: value})``: the entries are
+merged into `state.info`. `with_resets(task, *items, observe=...)`
 applies items in order after that reset, then recomputes what derives from the state
 (body poses, sensors) with `mjx.forward`, then the observation with `observe`.
 
@@ -66,16 +68,19 @@ def with_resets(task: Task, *items: ResetItem, observe: Callable[[mjx.Model, Sta
     """Applies reset `items` in order after `task`'s reset, then `mjx.forward`, then
     ``state.obs = observe(model, state)``.
 
-    Each item gets its own key, derived from the reset key. Keeps nothing in `info`.
-    Raises ValueError when no item is given, an item does not return an `mjx.Data`, or
-    `observe` gives another shape than the task's observation.
+    Each item gets its own key, derived from the reset key. Keeps in `info` what the
+    items return next to their data (``(data, {name: value})``), after the entries
+    of the task's reset. Raises ValueError when no item is given, an item does not
+    return an `mjx.Data` (or one with a dict), or `observe` gives another shape than
+    the task's observation.
     """
     if not items:
         raise ValueError("with_resets: give at least one reset item")
     for i, fn in enumerate((*items, observe)):
+        what = "observe" if i == len(items) else f"item {i}"
         if not callable(fn):
-            what = "observe" if i == len(items) else f"item {i}"
             raise TypeError(f"with_resets: {what} must be callable, got {type(fn).__name__}")
+        checks.retrace_hazard("with_resets", what, fn)
     items = tuple(fn if isinstance(fn, jax.tree_util.Partial) else jax.tree_util.Partial(fn) for fn in items)
     if not isinstance(observe, jax.tree_util.Partial):
         observe = jax.tree_util.Partial(observe)
@@ -85,11 +90,17 @@ def with_resets(task: Task, *items: ResetItem, observe: Callable[[mjx.Model, Sta
 
 def _reset(reset_fn, items, observe, model: mjx.Model, key: Array) -> State:
     state = reset_fn(model, key)
-    data = state.data
+    data, info = state.data, dict(state.info)
     for item, item_key in zip(items, jax.random.split(jax.random.fold_in(key, RESETS_STREAM), len(items))):
-        data = item(model, data, item_key)
-    state = state.replace(data=mjx.forward(model, data))
+        data, written = _data_and_info(item(model, data, item_key))
+        info.update(written)
+    state = state.replace(data=mjx.forward(model, data), info=info)
     return state.replace(obs=observe(model, state))
+
+
+def _data_and_info(out) -> tuple[mjx.Data, dict]:
+    """An item's result as (data, info entries): it returns data or (data, {name: value})."""
+    return (out[0], out[1]) if isinstance(out, tuple) else (out, {})
 
 
 def _check(task: Task, items, observe) -> None:
@@ -97,8 +108,11 @@ def _check(task: Task, items, observe) -> None:
     state = jax.eval_shape(task.start, task.model, key)
     for i, item in enumerate(items):
         out = jax.eval_shape(item, task.model, state.data, key)
-        if jax.tree.structure(out) != jax.tree.structure(state.data):
-            raise ValueError(f"with_resets: item {i} must return an mjx.Data, got {type(out).__name__}")
+        data, info = out if isinstance(out, tuple) and len(out) == 2 else (out, {})
+        if jax.tree.structure(data) != jax.tree.structure(state.data) or not isinstance(info, dict):
+            raise ValueError(f"with_resets: item {i} must return an mjx.Data or (mjx.Data, dict of info entries), "
+                             f"got {type(out).__name__}")  # fmt: skip
+        state = state.replace(info={**state.info, **info})
     seen = _shapes(jax.eval_shape(lambda s: observe(task.model, s), state))
     if seen != _shapes(state.obs):
         raise ValueError(
