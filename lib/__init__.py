@@ -53,7 +53,7 @@ from mjzoo.types import State, Task, Trajectory, bind
 
 __version__ = "0.1.0"
 
-SUBPACKAGES = ("catalog", "learning", "planning", "harness", "interop", "algorithms", "envs")
+SUBPACKAGES = ("catalog", "learning", "planning", "harness", "interop", "algorithms", "envs", "testing")
 
 __all__ = [
     "Task",

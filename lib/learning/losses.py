@@ -1,5 +1,5 @@
-"""Policy-gradient and value losses of PPO (Schulman et al., 2017), and advantage
-normalization.
+"""Policy-gradient losses (vanilla, PPO's clipped surrogate and the KL-penalized one of
+Schulman et al., 2017), the value loss, and advantage normalization.
 
 Every function reduces over all elements of its inputs, so a [T, B] minibatch and a
 flattened [T * B] one give the same loss. Targets that come from data collection
@@ -14,9 +14,35 @@ import chex
 import jax
 import jax.numpy as jnp
 
-__all__ = ["clipped_surrogate_loss", "value_loss", "normalize_advantages"]
+__all__ = ["clipped_surrogate_loss", "kl_penalty_loss", "normalize_advantages", "policy_gradient_loss", "value_loss"]
 
 Array = jax.Array
+
+
+def policy_gradient_loss(log_prob: Array, advantages: Array) -> Array:
+    """The vanilla (REINFORCE / A2C) policy-gradient loss, to be minimized.
+
+      loss = -mean(log_prob * A)
+
+    Its gradient is the score-function estimate -mean(A * grad log pi(a|s)). It is only
+    unbiased on-policy: the actions must come from the current parameters (one step per
+    batch, as in A2C); reuse the batch with a ratio loss instead.
+
+    Args:
+      log_prob: [...] log pi(a|s) under the current parameters.
+      advantages: [...] advantage estimates (no gradient flows into them).
+
+    Returns:
+      Scalar loss.
+    """
+    chex.assert_equal_shape([log_prob, advantages])
+    return -jnp.mean(log_prob * jax.lax.stop_gradient(advantages))
+
+
+def _approx_kl(log_ratio: Array) -> Array:
+    """mean((r - 1) - log r), r = pi / pi_old: Schulman's "k3" estimate of KL(pi_old || pi)
+    from samples of pi_old; unbiased (E[r] = 1) and non-negative per sample."""
+    return jnp.mean(jnp.expm1(log_ratio) - log_ratio)
 
 
 def clipped_surrogate_loss(
@@ -57,12 +83,46 @@ def clipped_surrogate_loss(
     loss = -jnp.mean(jnp.minimum(ratio * advantages, clipped_ratio * advantages))
 
     stopped_ratio = jax.lax.stop_gradient(ratio)
-    stopped_log_ratio = jax.lax.stop_gradient(log_ratio)
     aux = {
         "clip_fraction": jnp.mean((jnp.abs(stopped_ratio - 1.0) > clip_epsilon).astype(loss.dtype)),
-        "approx_kl": jnp.mean((stopped_ratio - 1.0) - stopped_log_ratio),
+        "approx_kl": _approx_kl(jax.lax.stop_gradient(log_ratio)),
     }
     return loss, aux
+
+
+def kl_penalty_loss(
+    log_prob: Array,
+    old_log_prob: Array,
+    advantages: Array,
+    beta: float | Array,
+) -> tuple[Array, dict[str, Array]]:
+    """PPO's KL-penalized surrogate objective, negated to be minimized.
+
+      ratio = exp(log_prob - old_log_prob)
+      loss  = -mean(ratio * A) + beta * mean((ratio - 1) - log ratio)
+
+    The penalty is the "k3" estimate of KL(pi_old || pi) from the collected actions
+    (which pi_old sampled): unbiased, non-negative for every sample, and with gradient
+    beta * (ratio - 1) * grad log pi, zero where the policy has not moved. Where the
+    clipped surrogate stops the gradient past the clip range, this pulls back smoothly;
+    adapt `beta` to a target KL between updates (Schulman et al., 2017, section 4).
+
+    Args:
+      log_prob: [...] log pi(a|s) under the current parameters.
+      old_log_prob: [...] log pi_old(a|s) recorded when the action was taken.
+      advantages: [...] advantage estimates.
+      beta: scalar >= 0, the penalty's weight (a leaf: adapting it does not recompile).
+
+    Returns:
+      (loss, aux): loss a scalar; aux holds the scalar "approx_kl", the penalty's KL
+      estimate (without gradient).
+    """
+    chex.assert_equal_shape([log_prob, old_log_prob, advantages])
+    chex.assert_rank(beta, 0)
+    log_ratio = log_prob - jax.lax.stop_gradient(old_log_prob)
+    kl = _approx_kl(log_ratio)
+    loss = -jnp.mean(jnp.exp(log_ratio) * jax.lax.stop_gradient(advantages)) + beta * kl
+    return loss, {"approx_kl": jax.lax.stop_gradient(kl)}
 
 
 def value_loss(

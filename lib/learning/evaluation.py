@@ -1,0 +1,95 @@
+"""Evaluating a policy: deterministic first episodes of a batch of environments.
+
+    result = evaluate(task, policy, key, num_envs)      # episodes of the task's own length
+    result.returns.mean(), result.lengths, result.trajectory   # trajectory: env 0, for video
+
+The policy has `collection`'s signature, ``policy(carry, obs, start, key) -> (carry,
+action, extras)`` (extras are ignored); pass a deterministic one (the mean action)
+built from the policy's parameters alone, so evaluation needs nothing of training.
+"""
+
+from __future__ import annotations
+
+from typing import Any, NamedTuple
+
+import jax
+import jax.numpy as jnp
+from mjzoo import checks
+from mjzoo.learning.collection import Policy
+from mjzoo.running import reset, transition
+from mjzoo.types import Task, Trajectory
+
+__all__ = ["Evaluation", "episode_steps", "evaluate"]
+
+Array = jax.Array
+
+
+class Evaluation(NamedTuple):
+    """What `evaluate` returns.
+
+    Attributes:
+      returns: [num_envs] float32, each env's first-episode return (up to num_steps).
+      lengths: [num_envs] int32, the steps of that episode (num_steps if it did not end).
+      trajectory: env 0's `Trajectory`, [num_steps] leaves; it runs on past the
+        episode's end (the task is not reset), which a video shows as it is.
+    """
+
+    returns: Array
+    lengths: Array
+    trajectory: Trajectory
+
+
+def episode_steps(task: Task) -> int:
+    """The task's own episode length, ``int(task.time_limit)``, read on the host.
+
+    Raises ValueError if the task has no time limit, TypeError if it is traced (under
+    jit the limit is not a number yet: read it outside, pass it as a static argument).
+    """
+    if task.time_limit is None:
+        raise ValueError("episode_steps: the task has no time limit (mjzoo.with_time_limit); give num_steps")
+    if isinstance(task.time_limit, jax.core.Tracer):
+        raise TypeError("episode_steps: the task's time limit is traced (inside jit); read it outside "
+                        "with int(task.time_limit) and pass num_steps as a static argument")  # fmt: skip
+    return int(task.time_limit)
+
+
+def evaluate(
+    task: Task, policy: Policy, key: Array, num_envs: int, num_steps: int | None = None, carry: Any = ()
+) -> Evaluation:
+    """Runs `policy` from `num_envs` resets of `task` for `num_steps` (static) steps and
+    scores each env's first episode.
+
+    Args:
+      task: the task, as given (an auto-resetting one is scored to its first episode end).
+      policy: ``(carry, obs, start, key) -> (carry, action, extras)`` for one env.
+      key: PRNG key (resets, the task's own noise, and the policy's key).
+      num_envs: static batch size.
+      num_steps: static; None: the task's own episode length (`episode_steps`, so
+        then `task` must not be traced).
+      carry: one env's initial policy carry (``()`` for a feed-forward policy).
+
+    Returns:
+      `Evaluation`: returns [num_envs], lengths [num_envs], env 0's trajectory [num_steps].
+    """
+    num_envs = checks.integer("evaluate", "num_envs", num_envs)
+    num_steps = episode_steps(task) if num_steps is None else checks.integer("evaluate", "num_steps", num_steps)
+
+    def one(key: Array):
+        reset_key, key = jax.random.split(key)
+        state = reset(task, reset_key)
+
+        def body(inputs, key):
+            state, carry, start = inputs
+            act_key, step_key = jax.random.split(key)
+            carry, action, _ = policy(carry, state.obs, start, act_key)
+            next_state = transition(task, state, action, step_key)
+            return (next_state, carry, jnp.zeros((), bool)), Trajectory(state.obs, action, next_state)
+
+        inputs = (state, carry, jnp.ones((), bool))
+        _, trajectory = jax.lax.scan(body, inputs, jax.random.split(key, num_steps))
+        done = trajectory.next_state.terminated | trajectory.next_state.truncated
+        alive = (jnp.cumsum(done) - done) == 0  # up to and including the first episode end
+        return jnp.sum(trajectory.next_state.reward * alive), jnp.sum(alive, dtype=jnp.int32), trajectory
+
+    returns, lengths, trajectories = jax.vmap(one)(jax.random.split(key, num_envs))
+    return Evaluation(returns, lengths, jax.tree.map(lambda x: x[0], trajectories))
