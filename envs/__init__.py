@@ -1,7 +1,12 @@
-"""Concrete tasks, by name.
+"""Concrete tasks, by name or as a user's own factory.
 
     task = mjzoo.envs.make("cartpole_swingup", upright_weight=2.0, ctrl_dt=0.04)
     mjzoo.envs.names()  # ['cartpole_balance', 'cartpole_swingup', ...]
+    task = mjzoo.envs.make("my_pkg.my_module:make_task", mass=2.0)  # any function returning a Task
+
+Every function here takes a *task spec*: a registered name, or ``package.module:factory``
+naming a function whose keyword arguments are the overrides. Such a module may define
+``PLANNING`` (a `base.PlanningSetup`), as the envs here do, for `mjzoo plan`.
 
 Every task comes truncated after its episode length and guarded against diverging
 physics; overrides change weights, targets, episode length and physics options
@@ -12,6 +17,7 @@ from __future__ import annotations
 
 import difflib
 import functools
+import importlib
 import inspect
 import numbers
 from types import ModuleType
@@ -23,6 +29,7 @@ from mjzoo import physics
 from mjzoo.envs import base, cartpole, cylinder_push, joystick, locomotion, pendulum, point_mass
 from mjzoo.planning.realtime import Problem
 from mjzoo.planning.sampling import SamplingConfig
+from mjzoo.running import control_dt
 from mjzoo.types import Task
 
 __all__ = ["make", "names", "factory", "defaults", "register", "hyperparameters", "planning",
@@ -61,6 +68,9 @@ _PLANNING: dict[str, base.PlanningSetup] = {
     "point_mass": point_mass.PLANNING,
     "cylinder_push": cylinder_push.PLANNING,
 }
+# A user's factory without `PLANNING`: one episode (`closed_loop_problem` measures it),
+# replanning every step, the planners' own default configs, no success criterion.
+_ONE_EPISODE = base.PlanningSetup(seconds=None, replan_every=1, plan_overrides={}, configs={}, success=None)
 
 
 def names() -> list[str]:
@@ -84,60 +94,97 @@ def register(
         _PLANNING[name] = planning_setup
 
 
-def planning(name: str) -> base.PlanningSetup:
-    """How the sampling planners solve `name` closed loop (error if no setup exists)."""
-    factory(name)
-    if name not in _PLANNING:
-        raise KeyError(f"{name!r} has no planning setup; envs with one: {sorted(_PLANNING)}")
-    return _PLANNING[name]
+def planning(spec: str) -> base.PlanningSetup:
+    """How the sampling planners solve `spec` closed loop: a registered env's setup (error
+    if it has none), or a user module's ``PLANNING`` (default: one episode, replanning
+    every step, no success criterion)."""
+    factory(spec)
+    if _is_user(spec):
+        setup = getattr(importlib.import_module(spec.partition(":")[0]), "PLANNING", _ONE_EPISODE)
+        if not isinstance(setup, base.PlanningSetup):
+            raise TypeError(f"{spec}: its module's PLANNING is a {type(setup).__name__}, not a mjzoo.envs.base.PlanningSetup")
+        return setup
+    if spec not in _PLANNING:
+        raise KeyError(f"{spec!r} has no planning setup; envs with one: {sorted(_PLANNING)}")
+    return _PLANNING[spec]
 
 
 def closed_loop_problem(
-    name: str, planner: ModuleType, config: SamplingConfig, seconds: float | None = None
+    spec: str, planner: ModuleType, config: SamplingConfig, seconds: float | None = None, **overrides: Any
 ) -> Problem:
-    """The env `name`'s tested closed-loop problem (its `planning` setup): the env as the
-    world, its planning view as the planner's model, its hooks and success test, for
-    `seconds` (default: the setup's) of simulated time with no episode limit."""
-    setup = planning(name)
+    """The task's closed-loop problem (its `planning` setup): the task as the world, its
+    planning view as the planner's model, its hooks and success test, for `seconds`
+    (default: the setup's, else one episode) of simulated time. Registered envs run with
+    no episode limit; `overrides` go to both tasks."""
+    setup = planning(spec)
+    build = functools.partial(make, spec, **overrides)
+    unlimited = {} if _is_user(spec) else {"episode_steps": 10**9}  # a user's factory may not take it
+    sim_task = build(**unlimited)
+    if not (seconds or setup.seconds) and sim_task.time_limit is None:
+        raise ValueError(f"{spec}: the task has no time limit (mjzoo.with_time_limit) to set the run's length; give seconds")
     return Problem(
-        planner=planner, config=config, sim_task=make(name, episode_steps=10**9),
-        plan_task=setup.plan_task(functools.partial(make, name), episode_steps=10**9),
-        seconds=seconds or setup.seconds, replan_every=setup.replan_every, hooks=setup.hooks, success=setup.success,
+        planner=planner, config=config, sim_task=sim_task, plan_task=setup.plan_task(build, **unlimited),
+        seconds=seconds or setup.seconds or int(sim_task.time_limit) * control_dt(sim_task),
+        replan_every=setup.replan_every, hooks=setup.hooks, success=setup.success,
     )  # fmt: skip
 
 
-def hyperparameters(name: str, algorithm: str) -> dict[str, Any]:
-    """The env's default config fields for `algorithm` (empty if it has none)."""
-    factory(name)
-    return dict(_HYPERPARAMETERS.get(name, {}).get(algorithm, {}))
+def hyperparameters(spec: str, algorithm: str) -> dict[str, Any]:
+    """The task's default config fields for `algorithm` (empty if it has none; a user's
+    task: its ``PLANNING.configs``, so PPO keeps ppo.Config's defaults)."""
+    if _is_user(spec):
+        return dict(planning(spec).configs.get(algorithm, {}))
+    factory(spec)
+    return dict(_HYPERPARAMETERS.get(spec, {}).get(algorithm, {}))
 
 
-def defaults(name: str) -> dict[str, Any]:
+_KEYWORDS = (inspect.Parameter.POSITIONAL_OR_KEYWORD, inspect.Parameter.KEYWORD_ONLY)
+
+
+def defaults(spec: str) -> dict[str, Any]:
     """The overridable arguments of a task and their default values."""
-    signature = inspect.signature(factory(name))
-    return {
-        k: p.default for k, p in signature.parameters.items() if p.kind == inspect.Parameter.KEYWORD_ONLY
-    }
+    kinds = _KEYWORDS if _is_user(spec) else (inspect.Parameter.KEYWORD_ONLY,)
+    parameters = inspect.signature(factory(spec)).parameters.values()
+    return {p.name: p.default for p in parameters if p.kind in kinds and p.default is not p.empty}
 
 
-def make(name: str, **overrides: Any) -> Task:
-    """Builds the task `name`, with `overrides` of its defaults or of physics options.
+def make(spec: str, **overrides: Any) -> Task:
+    """Builds the task `spec` (a registered name or ``package.module:factory``), with
+    `overrides` of its defaults (registered envs: also of physics options).
 
     Each override is checked against its default's type first (physics options by
     `physics.load`): a wrong one, e.g. episode_steps="abc" from a command line or a
     config file, would otherwise fail deep inside tracing with a message naming neither."""
-    build = factory(name)
-    allowed = set(defaults(name)) | set(physics.OPTIONS)
-    unknown = sorted(set(overrides) - allowed)
-    if unknown:
-        raise TypeError(f"{name}: unknown override(s) {unknown}; allowed: {sorted(allowed)}")
+    build = factory(spec)
     parameters = inspect.signature(build).parameters
+    if _is_user(spec):
+        _check_arguments(spec, parameters, overrides)
+    else:
+        allowed = set(defaults(spec)) | set(physics.OPTIONS)
+        unknown = sorted(set(overrides) - allowed)
+        if unknown:
+            raise TypeError(f"{spec}: unknown override(s) {unknown}; allowed: {sorted(allowed)}")
     for key, value in overrides.items():
-        if key in parameters and parameters[key].kind == inspect.Parameter.KEYWORD_ONLY:
+        if key in parameters and parameters[key].kind in _KEYWORDS:
             expected = _expected_type(parameters[key], value)
             if expected:
-                raise TypeError(f"{name}: override {key}={value!r} must be {expected}")
-    return build(**overrides)
+                raise TypeError(f"{spec}: override {key}={value!r} must be {expected}")
+    task = build(**overrides)
+    if not isinstance(task, Task):
+        raise TypeError(f"{spec}: returned a {type(task).__name__}, not a mjzoo.Task")
+    return task
+
+
+def _check_arguments(spec: str, parameters: dict[str, inspect.Parameter], overrides: dict[str, Any]) -> None:
+    """A user's factory takes exactly its own keyword arguments (any, with ``**kwargs``)."""
+    named = [k for k, p in parameters.items() if p.kind in _KEYWORDS]
+    open_ended = any(p.kind == inspect.Parameter.VAR_KEYWORD for p in parameters.values())
+    unknown = [] if open_ended else sorted(set(overrides) - set(named))
+    if unknown:
+        raise TypeError(f"{spec}: unknown override(s) {unknown}; {spec.partition(':')[2]} takes {named}")
+    missing = [k for k in named if parameters[k].default is parameters[k].empty and k not in overrides]
+    if missing:
+        raise TypeError(f"{spec}: required argument(s) {missing} not given; {spec.partition(':')[2]} takes {named}")
 
 
 def _expected_type(parameter: inspect.Parameter, value: Any) -> str | None:
@@ -167,10 +214,38 @@ def _expected_type(parameter: inspect.Parameter, value: Any) -> str | None:
     return expected + (" or None" if optional else "")
 
 
-def factory(name: str) -> Callable[..., Task]:
-    """The function that builds `name` (KeyError naming the registered envs if unknown)."""
+def factory(spec: str) -> Callable[..., Task]:
+    """The function that builds `spec`: a registered env's (KeyError naming them if
+    unknown), or the function ``package.module:factory`` names (ValueError or TypeError
+    naming what is missing)."""
+    if _is_user(spec):
+        return _imported(spec)
+    name = spec
     if name not in _REGISTRY:
         close = difflib.get_close_matches(name, _REGISTRY, n=1)
         hint = f" (did you mean {close[0]!r}?)" if close else ""
         raise KeyError(f"unknown env {name!r}{hint}; registered envs: {names()}")
     return _REGISTRY[name]
+
+
+def _is_user(spec: str) -> bool:
+    return ":" in spec
+
+
+def _imported(spec: str) -> Callable[..., Task]:
+    """The function ``package.module:factory`` names, imported."""
+    module_name, _, attribute = spec.partition(":")
+    if not module_name or not attribute.isidentifier():
+        raise ValueError(f"task spec {spec!r}: expected a registered env or package.module:factory")
+    try:
+        module = importlib.import_module(module_name)
+    except ModuleNotFoundError as e:
+        if not e.name or not (module_name + ".").startswith(e.name + "."):
+            raise  # a module the user's module imports: their bug, with its traceback
+        raise ValueError(f"task spec {spec!r}: no module named {e.name!r} (from the current directory or sys.path)") from e
+    if not hasattr(module, attribute):
+        raise ValueError(f"task spec {spec!r}: module {module_name!r} has no attribute {attribute!r}")
+    found = getattr(module, attribute)
+    if not callable(found):
+        raise TypeError(f"task spec {spec!r}: {attribute} is a {type(found).__name__}, not a function returning a Task")
+    return found

@@ -112,7 +112,7 @@ def test_an_incomplete_run_directory_is_named(capsys, tmp_path, command):
 
     flag = "--resume " if command == "train" else ""
     (tmp_path / "empty").mkdir()
-    assert_usage_error(capsys, argv(tmp_path / "empty"), f"{flag}{tmp_path / 'empty'}: not a complete run", "no task.json")
+    assert_usage_error(capsys, argv(tmp_path / "empty"), f"{flag}{tmp_path / 'empty'}: not a complete run", "no config.json")
     run = write_run(tmp_path / "run")
     (run / "config.json").unlink()
     assert_usage_error(capsys, argv(run), "no config.json")

@@ -1,0 +1,133 @@
+"""The command line's words as checked values: NAME=VALUE assignments, an algorithm's
+Config, counts and lengths; a mistake in them is a `UsageError`."""
+
+from __future__ import annotations
+
+import ast
+import contextlib
+import dataclasses
+import importlib
+import types
+import typing
+from collections.abc import Iterator
+from types import ModuleType
+from typing import Any, Literal
+
+import mjzoo
+
+__all__ = ["UsageError", "checking", "at_least_one", "parse_assignments", "algorithm_module", "build_config", "episode_steps",
+           "slug", "ALGORITHMS", "PLANNERS"]  # fmt: skip
+
+ALGORITHMS = ("ppo",)
+PLANNERS = ("predictive_sampling", "cem", "mppi")
+_MISMATCH = object()  # what _as_type returns for a value of another type
+_USERS_ERRORS = (ValueError, TypeError, KeyError, FileNotFoundError, FileExistsError, NotADirectoryError)
+
+
+class UsageError(Exception):
+    """A user's mistake: `main` prints it as one line and exits with status 2."""
+
+
+@contextlib.contextmanager
+def checking(*errors: type[Exception]) -> Iterator[None]:
+    """Marks a block that only checks the user's input and builds from it (configs, the
+    task): the ValueError, TypeError, KeyError and missing-file errors the library raises
+    there (or just `errors`) are the user's mistakes, and become a `UsageError`. Outside
+    such blocks they are bugs, and keep their tracebacks."""
+    try:
+        yield
+    except errors or _USERS_ERRORS as e:  # noqa: B030 (a tuple of exception classes either way)
+        raise UsageError(e.args[0] if isinstance(e, KeyError) and e.args else str(e)) from e
+
+
+def at_least_one(**flags: int) -> None:
+    for name, value in ((k, v) for k, v in flags.items() if v < 1):
+        raise UsageError(f"--{name.replace('_', '-')} must be >= 1, got {value}")
+
+
+def parse_assignments(pairs: tuple[str, ...], what: str) -> dict[str, Any]:
+    """["a=1", "b=(64, 64)", "c=swish"] -> {"a": 1, "b": (64, 64), "c": "swish"}."""
+    parsed = {}
+    for pair in pairs:
+        name, sep, text = pair.partition("=")
+        if not sep or not name:
+            raise UsageError(f"{what}: expected NAME=VALUE, got {pair!r}")
+        try:
+            parsed[name] = ast.literal_eval(text)
+        except (ValueError, SyntaxError):
+            parsed[name] = text  # a bare word: a string
+    return parsed
+
+
+def algorithm_module(name: str, choices: tuple[str, ...] = ALGORITHMS) -> ModuleType:
+    """The module `mjzoo.algorithms.NAME`, one of `choices`."""
+    if name not in choices:
+        raise UsageError(f"unknown algorithm {name!r}; choices: {', '.join(choices)}")
+    return importlib.import_module(f"mjzoo.algorithms.{name}")
+
+
+def build_config(module: ModuleType, spec: str, overrides: dict[str, Any], what: str = "--config") -> Any:
+    """The algorithm's Config: its defaults, then the task's, then `overrides` (from the
+    command line or a saved config.json, whose user-supplied pieces cannot be rebuilt),
+    each checked against its field's type first: ppo.Config compares, e.g., a string
+    learning rate with 0 and fails without naming it."""
+    hints = typing.get_type_hints(module.Config)
+    fields = [f.name for f in dataclasses.fields(module.Config)]
+    overrides = {k: v for k, v in overrides.items() if not str(v).startswith("<custom")}
+    values = {**mjzoo.envs.hyperparameters(spec, module.__name__.split(".")[-1]), **overrides}
+    unknown = sorted(set(values) - set(fields))
+    if unknown:
+        raise UsageError(f"{what}: unknown field(s) {unknown}; fields: {sorted(fields)}")
+    for name, value in values.items():
+        values[name] = _as_type(value, hints[name])
+        if values[name] is _MISMATCH:
+            raise UsageError(f"{what}: {name}={value!r} must be {_describe(hints[name])}")
+    return module.Config(**values)
+
+
+def _as_type(value: Any, hint: Any) -> Any:
+    """`value` as a field annotated `hint` holds it (JSON's lists as tuples, 1e6 as an
+    int), or _MISMATCH. Objects (networks, optimizers, functions) come only from Python."""
+    origin, args = typing.get_origin(hint), typing.get_args(hint)
+    if origin in (typing.Union, types.UnionType):
+        return next((v for v in (_as_type(value, arm) for arm in args) if v is not _MISMATCH), _MISMATCH)
+    if origin is Literal:
+        return value if value in args else _MISMATCH
+    if origin is tuple and isinstance(value, (tuple, list)):
+        arms = [args[0]] * len(value) if len(args) == 2 and args[1] is Ellipsis else list(args)
+        items = [_as_type(v, arm) for v, arm in zip(value, arms)]
+        return tuple(items) if len(arms) == len(value) and all(i is not _MISMATCH for i in items) else _MISMATCH
+    if hint is int and isinstance(value, float) and value.is_integer():
+        return int(value)
+    if hint is float and isinstance(value, int) and not isinstance(value, bool):
+        return float(value)
+    if hint in (bool, int, float, str, type(None)) and type(value) is hint:
+        return value
+    return _MISMATCH
+
+
+def _describe(hint: Any) -> str:
+    origin, args = typing.get_origin(hint), typing.get_args(hint)
+    if origin in (typing.Union, types.UnionType):
+        return " or ".join(_describe(arm) for arm in args)
+    if origin is Literal:
+        return "one of " + ", ".join(map(repr, args))
+    if origin is tuple:
+        return f"a tuple of {getattr(args[0], '__name__', args[0])}, e.g. (64, 64)"
+    simple = {bool: "True or False", int: "an int", float: "a number", str: "a string", type(None): "None"}
+    return simple.get(hint, f"a {getattr(hint, '__name__', hint)} (set in Python, not here)")
+
+
+def episode_steps(task: mjzoo.Task, spec: str, steps: int | None) -> int:
+    """--steps if given, else the task's own episode length (its time limit)."""
+    if steps is not None:
+        at_least_one(steps=steps)
+        return steps
+    if task.time_limit is None:
+        raise UsageError(f"{spec}: the task has no time limit (mjzoo.with_time_limit) to end its episodes; give --steps")
+    return int(task.time_limit)
+
+
+def slug(spec: str) -> str:
+    """A task spec as part of a directory name: my_pkg.tasks:reach -> my_pkg.tasks.reach."""
+    return spec.replace(":", ".")

@@ -1,0 +1,230 @@
+"""The commands that look at tasks, train, evaluate and plan (`mjzoo collect` is in
+trajectories.py). Each takes a task spec: a registered env, or ``package.module:factory``
+(a function returning a `mjzoo.Task`, its keyword arguments the --env-overrides)."""
+
+from __future__ import annotations
+
+import json
+import time
+from pathlib import Path
+from typing import Annotated, Literal
+
+import jax
+import jax.numpy as jnp
+import numpy as np
+import tyro
+
+import mjzoo
+from mjzoo.harness.cli import runs
+from mjzoo.harness.cli.arguments import (PLANNERS, UsageError, algorithm_module, at_least_one, build_config,
+                                         checking, episode_steps, parse_assignments, slug)  # fmt: skip
+
+__all__ = ["envs", "demo", "train", "evaluate", "plan"]
+
+PLAN_FILES = ("summary.json",)
+RUN_DEFAULTS = {"seed": 0, "eval_envs": 16, "updates_per_chunk": 10}  # how `train` drives a new run
+
+
+def envs() -> None:
+    """List the registered tasks with their overridable defaults."""
+    for name in mjzoo.envs.names():
+        overrides = ", ".join(f"{k}={v}" for k, v in mjzoo.envs.defaults(name).items())
+        print(f"{name}\n    {overrides}")
+
+
+def demo(env: tuple[str, ...] = (), num_envs: int = 32, steps: int = 250, seed: int = 0) -> None:
+    """Roll out a uniformly random policy on each env (all registered ones by default) in
+    a vmapped batch of `num_envs` and print the return of each first episode (up to
+    `steps` steps)."""
+    names = env or tuple(mjzoo.envs.names())
+    with checking():
+        at_least_one(num_envs=num_envs, steps=steps)
+        for name in names:
+            mjzoo.envs.factory(name)
+    print(f"{'env':<18} {'obs':>5} {'act':>4} {'return (mean ± std)':>22} {'env-steps/s':>12}")
+    for name in names:
+        task = mjzoo.envs.make(name)
+        run = jax.jit(_random_returns, static_argnums=(2, 3))
+        keys = jax.random.split(jax.random.key(seed), num_envs)
+        jax.block_until_ready(run(task, keys, steps, task.action_size))  # compile
+        start = time.perf_counter()
+        returns, obs_size = jax.block_until_ready(run(task, keys, steps, task.action_size))
+        rate = num_envs * steps / (time.perf_counter() - start)
+        returns = np.asarray(returns)
+        print(
+            f"{name:<18} {int(obs_size[0]):>5} {task.action_size:>4} "
+            f"{returns.mean():>13.2f} ± {returns.std():<7.2f} {rate:>12,.0f}"
+        )
+
+
+def _random_returns(task: mjzoo.Task, keys: jax.Array, steps: int, nu: int):
+    """Per env: the return of the first episode under uniform random controls."""
+    low, high = task.model.actuator_ctrlrange[:, 0], task.model.actuator_ctrlrange[:, 1]
+
+    def policy(obs, key):
+        return jax.random.uniform(key, (nu,), minval=low, maxval=high)
+
+    def one(key):
+        reset_key, run_key = jax.random.split(key)
+        state = mjzoo.reset(task, reset_key)
+        _, trajectory = mjzoo.rollout(task, policy, state, run_key, steps)
+        done = trajectory.next_state.terminated | trajectory.next_state.truncated
+        alive = jnp.cumsum(done) - done == 0  # up to and including the first episode end
+        obs_size = jnp.size(jax.tree.leaves(state.obs)[0])
+        return jnp.sum(trajectory.next_state.reward * alive), obs_size
+
+    return jax.vmap(one)(keys)
+
+
+def train(
+    algorithm: Annotated[Literal["ppo"], tyro.conf.Positional],
+    env: Annotated[str, tyro.conf.Positional],
+    out: Path | None = None,
+    config: tuple[str, ...] = (),
+    env_overrides: tuple[str, ...] = (),
+    total_steps: int | None = None,
+    resume: Path | None = None,
+    seed: int | None = None,
+    eval_envs: int | None = None,
+    updates_per_chunk: int | None = None,
+    video: bool = True,
+) -> None:
+    """Train ALGORITHM on ENV (a registered env or package.module:factory), writing
+    task.json, config.json, metrics.jsonl, TensorBoard events, checkpoints, curves.png
+    and eval.mp4 to --out (default runs/ENV-ALGORITHM), which must not hold a run.
+
+    --config takes NAME=VALUE fields of the algorithm's Config (defaults: the env's; for
+    a factory, the Config's own); --env-overrides NAME=VALUE overrides of the env (see
+    `mjzoo envs`) or a factory's keyword arguments. Evaluation runs the task's episode
+    length. --resume DIR continues the run in DIR from its newest intact checkpoint with
+    its saved settings (--seed, --eval-envs and --updates-per-chunk too, unless given
+    again, for the same result as an uninterrupted run). A new run's: --seed 0
+    --eval-envs 16 --updates-per-chunk 10.
+    """
+    from mjzoo.harness import checkpoints, training
+
+    with checking():
+        module = algorithm_module(algorithm)
+        if resume is not None:
+            out, env_values, config_values, run_settings = _resumed(resume, out, env, algorithm, env_overrides,
+                                                                    config)  # fmt: skip
+        else:
+            env_values = parse_assignments(env_overrides, "--env-overrides")
+            config_values = parse_assignments(config, "--config")
+            run_settings = dict(RUN_DEFAULTS)
+        given = {"seed": seed, "eval_envs": eval_envs, "updates_per_chunk": updates_per_chunk}
+        run_settings.update({k: v for k, v in given.items() if v is not None})
+        if total_steps is not None:
+            config_values["total_steps"] = total_steps
+        cfg = build_config(module, env, config_values)
+        task = mjzoo.envs.make(env, **env_values)
+        if resume is None:
+            out = out or Path("runs") / f"{slug(env)}-{algorithm}"
+            runs.refuse_existing(out, (*training.RUN_FILES, "task.json"), f"continue it with --resume {out}, or choose a new --out")  # fmt: skip
+        settings = training.Settings(out_dir=out, video=video, resume=resume is not None, **run_settings)
+    if resume is None:
+        out.mkdir(parents=True, exist_ok=True)
+        (out / "task.json").write_text(json.dumps({"env": env, "overrides": env_values}, indent=2))
+    with checking(checkpoints.CheckpointError):  # resuming: only damaged ones, or another network's
+        _, last = module.train(cfg, task, settings)
+    print(f"final eval/return {last.get('eval/return', float('nan')):.2f}")
+    print(f"curves: {out / 'curves.png'}")
+    print(f"video:  {out / 'eval.mp4'}" if (out / "eval.mp4").exists() else "video:  (not written)")
+
+
+def _resumed(resume: Path, out: Path | None, env: str, algorithm: str, env_overrides: tuple[str, ...],
+             config: tuple[str, ...]) -> tuple[Path, dict, dict, dict]:  # fmt: skip
+    """(out, env overrides, config values, run settings) of the run `--resume` continues,
+    checked against what the command line says of it."""
+    if out is not None and out != resume:
+        raise UsageError(f"--out {out} and --resume {resume}: a resumed run stays in its directory; give one")
+    if env_overrides:
+        raise UsageError("--env-overrides: a resumed run keeps the env overrides it started with")
+    saved, info = runs.read_run(resume, "--resume ")
+    if saved is None:
+        raise UsageError(f"--resume {resume}: not a complete run, it has no task.json (`mjzoo train` writes one)")
+    for what, ours, theirs in (("env", env, saved["env"]), ("algorithm", algorithm, info["algorithm"])):
+        if ours != theirs:
+            raise UsageError(f"--resume {resume}: that run's {what} is {theirs}, not {ours}")
+    config_values = {**info["config"], **parse_assignments(config, "--config")}
+    run_settings = {**RUN_DEFAULTS, **{k: v for k, v in info.get("settings", {}).items() if k in RUN_DEFAULTS}}
+    return resume, saved["overrides"], config_values, run_settings
+
+
+def evaluate(
+    run: Annotated[Path, tyro.conf.Positional],
+    task: str | None = None,
+    env_overrides: tuple[str, ...] = (),
+    episodes: int = 16,
+    steps: int | None = None,
+    seed: int = 1,
+    video: Path | None = None,
+) -> None:
+    """Reload RUN's newest intact checkpoint, run deterministic episodes of --steps
+    (default: the task's episode length), print the mean return and write a video
+    (default RUN/eval.mp4).
+
+    The task is the one RUN/task.json names with its overrides; --task ENV_OR_FACTORY
+    names another (and a run trained from Python, which has no task.json, needs it);
+    --env-overrides NAME=VALUE go on top, e.g. to evaluate under other physics.
+    """
+    from mjzoo.harness import training
+
+    with checking():
+        at_least_one(episodes=episodes)
+        trained = runs.load(run, task, env_overrides)
+        steps = episode_steps(trained.task, trained.spec, steps)
+    state = runs.restore(run, trained)
+    mean, returns, trajectory = jax.jit(trained.module.evaluate, static_argnums=(0, 4, 5))(
+        trained.cfg, trained.task, state, jax.random.key(seed), episodes, steps
+    )
+    print(f"{trained.spec}: mean return {float(mean):.2f} ± {float(jnp.std(returns)):.2f} over {episodes} episodes")
+    path = training.write_video(trained.task, trajectory, video or run / "eval.mp4")
+    if path is not None:
+        print(f"video: {path}")
+
+
+def plan(
+    algorithm: Annotated[Literal["predictive_sampling", "cem", "mppi"], tyro.conf.Positional],
+    env: Annotated[str, tyro.conf.Positional],
+    out: Path | None = None,
+    seconds: float | None = None,
+    offline: bool = False,
+    plan_hz: float | None = None,
+    config: tuple[str, ...] = (),
+    env_overrides: tuple[str, ...] = (),
+    seed: int = 0,
+    video: bool = True,
+) -> None:
+    """Solve ENV (a registered env or package.module:factory) closed loop with a sampling
+    planner and write summary.json (success, final_cost, plan_hz, plan_latency_ms),
+    plan.png and plan.mp4 to --out (default runs/ENV-ALGORITHM-plan).
+
+    By default the simulation runs in wall-clock time and the planner replans at
+    --plan-hz (default: the env's replanning period); --offline runs the whole episode
+    as one jitted scan instead. --config takes NAME=VALUE fields of the planner's Config
+    (defaults: the env's). The planning task, hooks, success test and --seconds default
+    are the env's (`mjzoo.envs.planning`): a factory's module's PLANNING, else one
+    episode replanning every step, with no success test (final_cost tells).
+    """
+    from mjzoo.harness import plan_report
+    from mjzoo.planning import realtime
+
+    with checking():
+        for flag, value in (("--seconds", seconds), ("--plan-hz", plan_hz)):
+            if value is not None and not value > 0:
+                raise UsageError(f"{flag} must be > 0, got {value}")
+        mjzoo.envs.planning(env)
+        module = algorithm_module(algorithm, PLANNERS)
+        cfg = build_config(module, env, parse_assignments(config, "--config"))
+        out = out or Path("runs") / f"{slug(env)}-{algorithm}-plan"
+        runs.refuse_existing(out, PLAN_FILES, "choose a new --out")
+        overrides = parse_assignments(env_overrides, "--env-overrides")
+        problem = mjzoo.envs.closed_loop_problem(env, module, cfg, seconds, **overrides)
+    key = jax.random.key(seed)
+    result, stats = realtime.offline(problem, key) if offline else realtime.realtime(problem, key, plan_hz)
+    summary = plan_report.write(out, problem, result, stats, video, env=env, algorithm=algorithm,
+                                mode="offline" if offline else "realtime")  # fmt: skip
+    print(json.dumps(summary, indent=2))
+    print(f"plot:  {out / 'plan.png'}")
+    print(f"video: {out / 'plan.mp4'}" if (out / "plan.mp4").exists() else "video: (not written)")

@@ -1,0 +1,91 @@
+"""Run directories on the command line: refusing an --out that holds a run, reading one
+back (config.json, task.json, a checkpoint) and restoring its trained state."""
+
+from __future__ import annotations
+
+import json
+from pathlib import Path
+from types import ModuleType
+from typing import Any, NamedTuple
+
+import jax
+
+import mjzoo
+from mjzoo.harness import checkpoints, training
+from mjzoo.harness.cli.arguments import UsageError, algorithm_module, build_config, checking, parse_assignments
+
+__all__ = ["Trained", "refuse_existing", "read_run", "load", "restore"]
+
+# What each file of a run must hold (config.json is `training.run`'s, task.json `mjzoo train`'s).
+_KEYS = {"config.json": ("algorithm", "config"), "task.json": ("env", "overrides")}
+
+
+def refuse_existing(out: Path, markers: tuple[str, ...], hint: str) -> None:
+    """Refuses an --out that is a file or holds a run, before anything is written to it."""
+    if out.exists() and not out.is_dir():
+        raise UsageError(f"--out {out}: is a file, not a directory")
+    found = training.existing(out, markers)
+    if found:
+        raise UsageError(f"--out {out} already holds a run ({', '.join(found)}): {hint}")
+
+
+def read_run(run: Path, flag: str = "") -> tuple[dict | None, dict]:
+    """(task.json or None, config.json) of a run directory, checked complete (a
+    checkpoint included) before anything is built from them. A run trained from Python
+    (`ppo.train(..., out_dir=...)`) has no task.json."""
+    where = f"{flag}{run}"
+    if not run.is_dir():
+        raise UsageError(f"{where}: {'not a directory' if run.exists() else 'no such run directory'}")
+    if not (run / "config.json").is_file():
+        raise UsageError(f"{where}: not a complete run, it has no config.json (training writes one)")
+    info = _read_json(run / "config.json", where)
+    saved = _read_json(run / "task.json", where) if (run / "task.json").is_file() else None
+    if checkpoints.latest_step(run / "checkpoints") is None:
+        raise UsageError(f"{where}: not a complete run, it has no checkpoint in {run / 'checkpoints'}")
+    return saved, info
+
+
+def _read_json(path: Path, where: str) -> dict:
+    try:
+        loaded = json.loads(path.read_text())
+    except (json.JSONDecodeError, UnicodeDecodeError) as e:
+        raise UsageError(f"{where}: {path.name} is not valid JSON ({e})") from None
+    keys = _KEYS[path.name]
+    if not isinstance(loaded, dict) or not all(isinstance(loaded.get(k), (str, dict)) for k in keys):
+        raise UsageError(f"{where}: {path.name} lacks {' or '.join(keys)} (not written by mjzoo?)")
+    return loaded
+
+
+class Trained(NamedTuple):
+    """A run read back for use: its algorithm module and config, and the task to run it on."""
+
+    module: ModuleType
+    cfg: Any
+    spec: str
+    overrides: dict[str, Any]
+    task: mjzoo.Task
+
+
+def load(run: Path, task: str | None, env_overrides: tuple[str, ...]) -> Trained:
+    """RUN's algorithm and config, on the task its task.json names, or --task's instead;
+    the saved overrides apply to the run's own task, --env-overrides on top. Raises a
+    `UsageError` (call inside `checking`)."""
+    saved, info = read_run(run)
+    if task is None and saved is None:
+        raise UsageError(f"{run}: has no task.json (trained from Python?): name its task with --task "
+                         "ENV_OR_MODULE:FACTORY, and its --env-overrides if it had any")  # fmt: skip
+    spec = task or saved["env"]
+    own = saved["overrides"] if saved is not None and saved["env"] == spec else {}
+    overrides = {**own, **parse_assignments(env_overrides, "--env-overrides")}
+    module = algorithm_module(info["algorithm"])
+    cfg = build_config(module, spec, info["config"], str(run / "config.json"))
+    return Trained(module, cfg, spec, overrides, mjzoo.envs.make(spec, **overrides))
+
+
+def restore(run: Path, trained: Trained) -> Any:
+    """The newest intact checkpoint's train state (a one-line warning for each damaged
+    newer one; a `UsageError` if none is intact or they hold another network)."""
+    template = trained.module.init(trained.cfg, trained.task, jax.random.key(0))
+    with checking(checkpoints.CheckpointError):
+        state, _, _ = checkpoints.restore_newest_intact(run / "checkpoints", like=template)
+    return state
