@@ -100,7 +100,8 @@ def task(
                 raise ValueError(f"mjzoo.task: the weight of reward term {name!r} names the parameter {weight!r}, "
                                  f"which params lacks; params: {', '.join(p) or 'none'}")  # fmt: skip
         else:
-            weight, p = f"{name}_weight", _add(p, f"{name}_weight", checks.number("mjzoo.task", f"{name} weight", weight))
+            value = checks.number("mjzoo.task", f"the weight of {name!r}", weight)
+            weight, p = f"{name}_weight", _add(p, f"{name}_weight", value)
         terms[name] = (_function(f"reward term {name!r}", fn), Static(weight))
     spec = Spec(
         observe=_function("observe", observe or joint_state),
@@ -156,12 +157,14 @@ def _start(spec: Spec, p: dict, model: mjx.Model, key: Array) -> State:
 
 
 def _step(spec: Spec, p: dict, model: mjx.Model, state: State, action: Array, key: Array) -> State:
-    next_state = state.replace(data=physics_lib.step(model, state.data, jnp.asarray(action, jnp.float32), spec.n_substeps))
+    data = physics_lib.step(model, state.data, jnp.asarray(action, jnp.float32), spec.n_substeps)
+    next_state = state.replace(data=data)
     return next_state.replace(obs=spec.observe(p, model, next_state))
 
 
 def _reward(spec: Spec, p: dict, model, state, action, next_state) -> dict[str, Array]:
-    return {name: p[weight.value] * fn(p, model, state, action, next_state) for name, (fn, weight) in spec.terms.items()}
+    terms = spec.terms.items()
+    return {name: p[weight.value] * fn(p, model, state, action, next_state) for name, (fn, weight) in terms}
 
 
 def _terminate(spec: Spec, p: dict, model: mjx.Model, state: State) -> tuple[Array, Array]:
@@ -228,4 +231,4 @@ def _physics(model, options: dict[str, Any]) -> physics_lib.Physics:
     n_substeps = round(float(ctrl_dt) / dt)
     if n_substeps < 1 or not math.isclose(n_substeps * dt, float(ctrl_dt), rel_tol=1e-6):
         raise ValueError(f"mjzoo.task: ctrl_dt={float(ctrl_dt)} must be a whole multiple of the model's dt={dt}")
-    return physics_lib.Physics(source="<MjModel>", mj_model=model, model=mjx.put_model(model), n_substeps=n_substeps)
+    return physics_lib.Physics("<MjModel>", mj_model=model, model=mjx.put_model(model), n_substeps=n_substeps)
