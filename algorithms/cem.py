@@ -24,7 +24,7 @@ import jax
 import jax.numpy as jnp
 
 from mjzoo import planning
-from mjzoo.planning import Ensemble, PlannerState
+from mjzoo.planning import Ensemble, PlannerState, TerminalValue
 from mjzoo.types import State, Task
 
 __all__ = ["Config", "init", "plan"]
@@ -54,16 +54,23 @@ init = planning.initial_state  # (config, task, knots=None): mean = a zero plan 
 
 
 def plan(
-    config: Config, task: Task | Ensemble, state: PlannerState, env_state: State, key: jax.Array
+    config: Config,
+    task: Task | Ensemble,
+    state: PlannerState,
+    env_state: State,
+    key: jax.Array,
+    terminal_value: TerminalValue | None = None,
 ) -> tuple[PlannerState, jax.Array]:
-    """One replan from `env_state`: returns the new planner state and the plan's [H, nu] controls."""
+    """One replan from `env_state`: returns the new planner state and the plan's [H, nu]
+    controls. `terminal_value` (model, state) -> [] values each rollout's final state
+    (`planning.as_terminal_value`: a Partial whose weights are leaves, not recompiled)."""
     half_range = planning.half_range(task)
     num_explore = int(config.explore_fraction * config.num_samples)
     stds = jnp.concatenate([
         jnp.broadcast_to(state.std, (config.num_samples - num_explore,) + state.std.shape),
         jnp.broadcast_to(config.sigma_max * half_range, (num_explore,) + state.std.shape),
     ])  # [N, K, nu]  # fmt: skip
-    state, samples, costs = planning.sample_around(config, task, state, env_state, key, stds)
+    state, samples, costs = planning.sample_around(config, task, state, env_state, key, stds, terminal_value)
     mean, std = planning.cem_update(
         samples, costs, config.num_elites, config.sigma_min * half_range, config.sigma_max * half_range
     )

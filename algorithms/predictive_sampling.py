@@ -21,7 +21,7 @@ import jax
 import jax.numpy as jnp
 
 from mjzoo import planning
-from mjzoo.planning import Ensemble, PlannerState
+from mjzoo.planning import Ensemble, PlannerState, TerminalValue
 from mjzoo.types import State, Task
 
 __all__ = ["Config", "init", "plan"]
@@ -36,10 +36,17 @@ init = planning.initial_state  # (config, task, knots=None): a zero plan, or war
 
 
 def plan(
-    config: Config, task: Task | Ensemble, state: PlannerState, env_state: State, key: jax.Array
+    config: Config,
+    task: Task | Ensemble,
+    state: PlannerState,
+    env_state: State,
+    key: jax.Array,
+    terminal_value: TerminalValue | None = None,
 ) -> tuple[PlannerState, jax.Array]:
-    """One replan from `env_state`: returns the new planner state and the plan's [H, nu] controls."""
-    state, samples, costs = planning.sample_around(config, task, state, env_state, key)
+    """One replan from `env_state`: returns the new planner state and the plan's [H, nu]
+    controls. `terminal_value` (model, state) -> [] values each rollout's final state
+    (`planning.as_terminal_value`: a Partial whose weights are leaves, not recompiled)."""
+    state, samples, costs = planning.sample_around(config, task, state, env_state, key, terminal_value=terminal_value)
     best = jnp.argmin(costs)
     state = state.replace(knots=samples[best], cost=costs[best])
     return state, planning.controls(config, state.knots, *planning.control_limits(task))

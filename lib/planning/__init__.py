@@ -5,16 +5,19 @@
                   start, the MPPI weights and the CEM update
     rollouts      batched rollouts of a task's own `transition` and their costs, model
                   ensembles and risk measures
+    learned       learned pieces planners call at run time (a terminal value), as
+                  pytrees whose weights are leaves, and committed host-loop arguments
     closed_loop   simulate one task while planning with another, as one jit; Judo's hooks
     realtime      the same closed loop against the wall clock, or timed offline
 
 `mjzoo.algorithms.mppi`, `cem` and `predictive_sampling` are a few lines each on top
-of `sample_around`; a new planner reuses every piece here. The functions of `sampling`
-and `rollouts` are re-exported: ``mjzoo.planning.mppi_weights``.
+of `sample_around`; a new planner reuses every piece here. The functions of `sampling`,
+`rollouts` and `learned.as_terminal_value` are re-exported: ``mjzoo.planning.mppi_weights``.
 """
 
-from mjzoo.planning import closed_loop, realtime, rollouts, sampling, splines
-from mjzoo.planning.rollouts import RISKS, Ensemble, TerminalValue, aggregate, base_task, ensemble, rollout_costs
+from mjzoo.planning import closed_loop, learned, realtime, rollouts, sampling, splines
+from mjzoo.planning.learned import TerminalValue, as_terminal_value
+from mjzoo.planning.rollouts import RISKS, Ensemble, aggregate, base_task, ensemble, rollout_costs
 from mjzoo.planning.sampling import (
     PlannerState,
     SamplingConfig,
@@ -35,12 +38,14 @@ __all__ = [
     "splines",
     "sampling",
     "rollouts",
+    "learned",
     "closed_loop",
     "realtime",
     "SamplingConfig",
     "PlannerState",
     "Ensemble",
     "TerminalValue",
+    "as_terminal_value",
     "RISKS",
     "ensemble",
     "base_task",

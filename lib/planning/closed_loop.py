@@ -7,7 +7,9 @@ simulated state; in between, the simulation applies the plan's control at its ow
 (`sampling.control_at`), so a planning task with a different timestep still lines up.
 
 The whole run is one `jax.jit` of one `lax.scan` over replans (each an inner scan over
-simulation steps): an evaluation episode costs one compile.
+simulation steps): an evaluation episode costs one compile. A learned terminal value
+(`mjzoo.planning.learned`) is an argument of the run like the tasks: new critic weights
+run without compiling again.
 
 Judo's task hooks, as pure functions in `Hooks`:
   to_planner(sim_state) -> State            what the planner sees of the simulation
@@ -29,6 +31,7 @@ from typing import Callable
 import jax
 
 from mjzoo.planning import sampling
+from mjzoo.planning.learned import TerminalValue
 from mjzoo.planning.rollouts import Ensemble
 from mjzoo.planning.sampling import PlannerState, SamplingConfig
 from mjzoo.running import complete, transition
@@ -92,11 +95,13 @@ def replan(
     sim_state: State,
     key: Array,
     hooks: Hooks = Hooks(),
+    terminal_value: TerminalValue | None = None,
 ) -> PlannerState:
-    """One replan from the simulated state, through the hooks."""
+    """One replan from the simulated state, through the hooks, valuing final states by
+    `terminal_value` if given."""
     start = hooks.to_planner(sim_state) if hooks.to_planner else sim_state
     view = hooks.pre_rollout(plan_task, start) if hooks.pre_rollout else plan_task
-    return planner.plan(config, view, planner_state, start, key)[0]
+    return planner.plan(config, view, planner_state, start, key, terminal_value=terminal_value)[0]
 
 
 def first_plan(
@@ -132,18 +137,20 @@ def run(
     num_replans: int,
     replan_every: int = 1,
     hooks: Hooks = Hooks(),
+    terminal_value: TerminalValue | None = None,
 ) -> Result:
     """Simulates `sim_task` from `sim_state` for `num_replans x replan_every` control
     steps, replanning with `planner` (a module: `predictive_sampling`, `cem`, `mppi`)
     on `plan_task` every `replan_every` steps. One jit; `planner`, `config` and the
-    counts are static."""
+    counts are static. `terminal_value`: None or a `jax.tree_util.Partial`
+    (`mjzoo.planning.as_terminal_value`), whose weights are arguments, not constants."""
     sim_state = complete(sim_task, sim_state)
     planner_state = first_plan(planner, config, plan_task, sim_state, hooks)
 
     def period(carry, key):
         sim_state, planner_state = carry
         plan_key, sim_key = jax.random.split(key)
-        planner_state = replan(planner, config, plan_task, planner_state, sim_state, plan_key, hooks)
+        planner_state = replan(planner, config, plan_task, planner_state, sim_state, plan_key, hooks, terminal_value)
         def step(state: State, key: Array):
             next_state, control = sim_step(config, sim_task, planner_state, state, key, hooks)
             return next_state, (next_state, control)

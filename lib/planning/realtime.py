@@ -6,6 +6,8 @@ while a replan computes run under the previous plan, as on a robot; then the new
 takes over until the next replan tick. Reported: the achieved planning rate, the
 latency of each replan, and the real-time factor (simulated / wall seconds). Offline:
 the same problem as one jitted `lax.scan` (`closed_loop.run`), timed without its compile.
+A problem's `terminal_value` (a critic, `mjzoo.planning.learned`) reaches every replan
+as an argument of the jitted functions, its weights never baked in as constants.
 
     problem = Problem(mppi, config, sim_task, plan_task, seconds=6.0)
     result, stats = realtime(problem, key)        # stats: plan_hz, plan_latency_ms, ...
@@ -29,6 +31,7 @@ import numpy as np
 
 from mjzoo.planning import closed_loop
 from mjzoo.planning.closed_loop import Hooks, Result
+from mjzoo.planning.learned import TerminalValue, as_terminal_value, committed
 from mjzoo.planning.rollouts import Ensemble
 from mjzoo.planning.sampling import SamplingConfig
 from mjzoo.running import control_dt, reset
@@ -50,6 +53,8 @@ class Problem:
       replan_every: simulation control steps per replan.
       hooks: the task's planner hooks (`closed_loop.Hooks`).
       success: optional ``states -> (solved, score)`` over the run's states [T].
+      terminal_value: optional ``(model, state) -> value`` of each rollout's final
+        state (a plain function is wrapped: `mjzoo.planning.as_terminal_value`).
     """
 
     planner: ModuleType
@@ -60,6 +65,10 @@ class Problem:
     replan_every: int = 1
     hooks: Hooks = Hooks()
     success: Callable[[Any], tuple[bool, float]] | None = None
+    terminal_value: TerminalValue | None = None
+
+    def __post_init__(self) -> None:
+        object.__setattr__(self, "terminal_value", as_terminal_value(self.terminal_value))
 
     @functools.cached_property
     def sim_dt(self) -> float:
@@ -80,13 +89,15 @@ def offline(
     ``--xla_backend_optimization_level=0`` for a long run)."""
     reset_key, run_key = jax.random.split(key)
     sim_state = reset(problem.sim_task, reset_key)
-    args = (problem.planner, problem.config, problem.sim_task, problem.plan_task, sim_state, run_key,
-            problem.num_replans, problem.replan_every, problem.hooks)  # fmt: skip
+    static = (problem.planner, problem.config)
+    counts = (problem.num_replans, problem.replan_every)
+    dynamic = (problem.sim_task, problem.plan_task, sim_state, run_key)
+    functions = (problem.hooks, problem.terminal_value)
     start = time.perf_counter()
-    compiled = closed_loop.run.lower(*args).compile(compiler_options)
+    compiled = closed_loop.run.lower(*static, *dynamic, *counts, *functions).compile(compiler_options)
     compile_s = time.perf_counter() - start
     start = time.perf_counter()
-    result = jax.block_until_ready(compiled(*args[2:6], args[8]))
+    result = jax.block_until_ready(compiled(*dynamic, *functions))
     wall = time.perf_counter() - start
     return result, {"plan_hz": problem.num_replans / wall, "plan_latency_ms": 1e3 * wall / problem.num_replans,
                     "realtime_factor": problem.seconds / wall, "compile_s": compile_s}  # fmt: skip
@@ -95,22 +106,22 @@ def offline(
 def realtime(problem: Problem, key: jax.Array, plan_hz: float | None = None) -> tuple[Result, dict[str, float]]:
     """Simulates `problem.seconds` of wall-clock time, replanning at `plan_hz` (default:
     every `replan_every` simulation steps' worth of time) or as fast as planning allows."""
-    planner, config, hooks = problem.planner, problem.config, problem.hooks
+    planner, config, hooks, value = problem.planner, problem.config, problem.hooks, problem.terminal_value
     sim_dt = problem.sim_dt
     period = 1.0 / plan_hz if plan_hz else sim_dt * problem.replan_every
     total_steps = round(problem.seconds / sim_dt)
     reset_key, plan_key, key = jax.random.split(key, 3)
     # Committed to the device like every jit output, so the loop's calls match the warm-up compile.
-    sim_state = jax.device_put(reset(problem.sim_task, reset_key), jax.devices()[0])
+    sim_state = committed(reset(problem.sim_task, reset_key))
     first = jax.jit(lambda s: closed_loop.first_plan(planner, config, problem.plan_task, s, hooks))
-    replan = jax.jit(lambda p, s, k: closed_loop.replan(planner, config, problem.plan_task, p, s, k, hooks))
+    replan = jax.jit(lambda p, s, k, v: closed_loop.replan(planner, config, problem.plan_task, p, s, k, hooks, v))
     step = jax.jit(lambda p, s, k: closed_loop.sim_step(config, problem.sim_task, p, s, k, hooks))
     planner_state = first(sim_state)
     # Compile before the clock starts, for the first state and for states the loop makes
     # (their leaves can differ in weak type from a reset's, which would recompile mid-run).
-    later_plan = replan(planner_state, sim_state, key)
+    later_plan = replan(planner_state, sim_state, key, value)
     later_state, _ = step(later_plan, sim_state, key)
-    jax.block_until_ready((replan(later_plan, later_state, key), step(later_plan, later_state, key)))
+    jax.block_until_ready((replan(later_plan, later_state, key, value), step(later_plan, later_state, key)))
 
     states, controls, plan_costs, latencies = [], [], [], []
     begin = time.perf_counter()
@@ -125,7 +136,8 @@ def realtime(problem: Problem, key: jax.Array, plan_hz: float | None = None) -> 
 
     while len(states) < total_steps:
         tick = time.perf_counter()
-        new_plan = jax.block_until_ready(replan(planner_state, sim_state, jax.random.fold_in(plan_key, len(latencies))))
+        replan_key = jax.random.fold_in(plan_key, len(latencies))
+        new_plan = jax.block_until_ready(replan(planner_state, sim_state, replan_key, value))
         latencies.append(time.perf_counter() - tick)
         advance_until(time.perf_counter(), planner_state)  # the world did not wait
         planner_state = new_plan

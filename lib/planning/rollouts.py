@@ -15,14 +15,14 @@ from typing import Callable
 import jax
 import jax.numpy as jnp
 
+from mjzoo.planning.learned import TerminalValue, as_terminal_value
 from mjzoo.running import complete, transition
 from mjzoo.types import State, Task
 
-__all__ = ["Ensemble", "ensemble", "base_task", "rollout_costs", "aggregate", "RISKS", "TerminalValue"]
+__all__ = ["Ensemble", "ensemble", "base_task", "rollout_costs", "aggregate", "RISKS"]
 
 Array = jax.Array
 RISKS = ("mean", "worst", "cvar")
-TerminalValue = Callable[[object, State], Array]  # (model, state) -> value to go, float32 scalar
 
 
 @jax.tree_util.register_dataclass
@@ -60,10 +60,14 @@ def rollout_costs(
       state: the start state (one environment).
       controls: [N, H, nu].
       key: step keys are drawn from it and shared by all samples (common random numbers).
+      terminal_value: optional `(model, state) -> []` value of a rollout's final state,
+        added to its return (`mjzoo.planning.learned`; a TypeError if not callable).
+      unroll: `lax.scan` unroll of the horizon loop.
 
     Returns:
       ([M, N] costs, M = 1 for a plain task; [] control step dt of the planning task, s).
     """
+    terminal_value = as_terminal_value(terminal_value)
     variants = task if isinstance(task, Ensemble) else Ensemble(task, {})
     base = variants.task
     start = complete(base, state)

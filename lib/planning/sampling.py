@@ -21,7 +21,8 @@ import jax.numpy as jnp
 import numpy as np
 
 from mjzoo.planning import splines
-from mjzoo.planning.rollouts import RISKS, Ensemble, TerminalValue, aggregate, base_task, rollout_costs
+from mjzoo.planning.learned import TerminalValue, committed
+from mjzoo.planning.rollouts import RISKS, Ensemble, aggregate, base_task, rollout_costs
 from mjzoo.types import State, Task
 
 __all__ = [
@@ -44,7 +45,6 @@ class SamplingConfig:
       noise_scale: sampling std as a fraction of each actuator's half control range.
       risk: how costs over an `Ensemble` of models become one: "mean", "worst" or "cvar".
       cvar_alpha: the worst fraction of models CVaR averages over.
-      terminal_value: optional `(model, state) -> value` added to a rollout's return.
       unroll: `lax.scan` unroll of the rollout loop (a GPU latency knob).
     """
 
@@ -55,7 +55,6 @@ class SamplingConfig:
     noise_scale: float = 0.3
     risk: str = "mean"
     cvar_alpha: float = 0.25
-    terminal_value: TerminalValue | None = None
     unroll: int = 1
 
     def __post_init__(self) -> None:
@@ -65,7 +64,6 @@ class SamplingConfig:
             "num_knots": 1 <= self.num_knots <= self.horizon_steps, "noise_scale": self.noise_scale >= 0,
             "interpolation": self.interpolation in splines.METHODS, "risk": self.risk in RISKS,
             "cvar_alpha": 0 < self.cvar_alpha <= 1, "unroll": self.unroll >= 1,
-            "terminal_value": self.terminal_value is None or callable(self.terminal_value),
         }  # fmt: skip
         for field, ok in checks.items():
             if not ok:
@@ -112,7 +110,10 @@ def half_range(task: Task | Ensemble) -> np.ndarray:
 
 def initial_state(config: SamplingConfig, task: Task | Ensemble, knots: Array | None = None) -> PlannerState:
     """A plan of `knots` ([K, nu]; default: zero controls, clipped into the limits) with
-    std = noise_scale x half the control range (x 1 for unlimited actuators)."""
+    std = noise_scale x half the control range (x 1 for unlimited actuators).
+
+    Committed to the device (unless traced), like the states `plan` returns: a host loop
+    of ``jax.jit(planner.plan, static_argnums=0)`` then compiles once."""
     low, high = control_limits(task)
     shape = (config.num_knots, low.shape[0])
     if knots is None:
@@ -120,8 +121,8 @@ def initial_state(config: SamplingConfig, task: Task | Ensemble, knots: Array | 
     elif jnp.shape(knots) != shape:
         raise ValueError(f"warm-start knots must have shape {shape} (num_knots, nu), got {jnp.shape(knots)}")
     std = jnp.broadcast_to(jnp.float32(config.noise_scale) * half_range(task), shape)
-    zero = jnp.zeros((), jnp.float32)
-    return PlannerState(jnp.asarray(knots, jnp.float32), std, zero, zero, jnp.full((), jnp.inf, jnp.float32))
+    zero, inf = jnp.zeros((), jnp.float32), jnp.full((), jnp.inf, jnp.float32)
+    return committed(PlannerState(jnp.asarray(knots, jnp.float32), std, zero, zero, inf))
 
 
 def shift(config: SamplingConfig, state: PlannerState, now: Array) -> PlannerState:
@@ -161,15 +162,22 @@ def control_at(
     """[nu] the plan's control at environment time `time` (s), clipped to [low, high]."""
     step = jnp.where(state.dt > 0, (time - state.time) / jnp.maximum(state.dt, 1e-9), 0.0)
     positions = splines.knot_positions(config.num_knots, config.horizon_steps)
-    return jnp.clip(splines.evaluate(state.knots, positions, jnp.reshape(step, (1,)), config.interpolation)[0], low, high)
+    control = splines.evaluate(state.knots, positions, jnp.reshape(step, (1,)), config.interpolation)[0]
+    return jnp.clip(control, low, high)
 
 
 def sample_costs(
-    config: SamplingConfig, task: Task | Ensemble, state: State, samples: Array, key: Array
+    config: SamplingConfig,
+    task: Task | Ensemble,
+    state: State,
+    samples: Array,
+    key: Array,
+    terminal_value: TerminalValue | None = None,
 ) -> tuple[Array, Array]:
-    """([N] risk-aggregated costs of knot samples [N, K, nu] from `state`, [] dt)."""
+    """([N] risk-aggregated costs of knot samples [N, K, nu] from `state`, [] dt), each
+    less the `terminal_value` of its final state if one is given."""
     sequences = controls(config, samples, *control_limits(task))
-    costs, dt = rollout_costs(task, state, sequences, key, config.terminal_value, config.unroll)
+    costs, dt = rollout_costs(task, state, sequences, key, terminal_value, config.unroll)
     costs = aggregate(costs, config.risk, config.cvar_alpha)
     # A sample whose physics blew up must never win.
     return jnp.where(jnp.isfinite(costs), costs, jnp.inf), dt
@@ -182,10 +190,12 @@ def sample_around(
     env_state: State,
     key: Array,
     std: Array | None = None,
+    terminal_value: TerminalValue | None = None,
 ) -> tuple[PlannerState, Array, Array]:
     """The step every sampling planner starts with: shift the plan to `env_state`'s time,
     sample knots around it (sample 0 = the nominal) with `std` ([K, nu] or [N, K, nu];
-    default `state.std`), and cost them.
+    default `state.std`), and cost them, with the final states valued by
+    `terminal_value` (a `(model, state) -> []` `jax.tree_util.Partial`, or None).
 
     Returns (the shifted state with the measured dt, [N, K, nu] samples, [N] costs).
     """
@@ -194,7 +204,7 @@ def sample_around(
     low, high = control_limits(task)
     std = state.std if std is None else std
     samples = sample_knots(sample_key, state.knots, std, config.num_samples, low, high)
-    costs, dt = sample_costs(config, task, env_state, samples, rollout_key)
+    costs, dt = sample_costs(config, task, env_state, samples, rollout_key, terminal_value)
     return state.replace(dt=dt), samples, costs
 
 

@@ -381,8 +381,7 @@ def test_initial_state_rejects_warm_start_knots_of_the_wrong_shape():
      (predictive_sampling, dict(num_samples=1), "num_samples"),
      (predictive_sampling, dict(horizon_steps=0), "horizon_steps"),
      (mppi, dict(horizon_steps=5, num_knots=6), "num_knots"), (cem, dict(num_knots=0), "num_knots"),
-     (mppi, dict(noise_scale=-0.1), "noise_scale"), (predictive_sampling, dict(unroll=0), "unroll"),
-     (predictive_sampling, dict(terminal_value=1.0), "terminal_value")],
+     (mppi, dict(noise_scale=-0.1), "noise_scale"), (predictive_sampling, dict(unroll=0), "unroll")],
 )  # fmt: skip
 def test_config_rejects_out_of_range_values_naming_the_field(module, kwargs, field):
     name = module.__name__.rsplit(".", 1)[-1]
