@@ -72,7 +72,7 @@ def _two_flags(flags) -> tuple[Array, Array]:
     """terminate's (terminated, truncated) as bool scalars, or a clear error."""
     shapes = [jnp.shape(f) for f in flags] if isinstance(flags, (tuple, list)) else None
     if shapes is None or len(shapes) != 2 or any(s != () for s in shapes):
-        got = f"shapes {shapes}" if shapes is not None else type(flags).__name__
+        got = f"shapes {shapes}" if shapes is not None else f"one value of shape {jnp.shape(flags)}"
         raise ValueError(f"transition: the task's terminate must return two scalars (terminated, truncated), got {got}")
     return jnp.asarray(flags[0], bool), jnp.asarray(flags[1], bool)
 
