@@ -1,9 +1,9 @@
 """The training harness shared by the RL algorithms: a host loop over jitted chunks of
 updates, with evaluation, metrics, checkpoints, a progress bar, curves and a video.
 
-An algorithm module provides `init(config, task, key)`, `update(config, task, state)`
-and `evaluate(config, task, state, key, num_envs, num_steps)`, and its config has
-`num_updates`, `steps_per_update` and `num_envs`; `run` does the rest:
+An algorithm is any module that satisfies `Algorithm` (`init`, `update`, `evaluate`
+and `PER_ENV_FIELDS`), run with a config that satisfies `AlgorithmConfig`
+(`num_updates`, `steps_per_update`); `run` checks both and does the rest:
 
     out/config.json       the algorithm config and the run settings
     out/metrics.jsonl     one JSON object per chunk: step, eval/return, losses, reward terms, steps/s
@@ -19,22 +19,92 @@ import functools
 import json
 import shutil
 import time
+from collections.abc import Sequence
 from pathlib import Path
 from types import ModuleType
-from typing import Any
+from typing import Any, Protocol
 
 import jax
 import jax.numpy as jnp
 import numpy as np
 from jax.sharding import NamedSharding, PartitionSpec
-
-from mjzoo.harness import checkpoints, metrics as metrics_lib, plotting, rendering
+from mjzoo.harness import checkpoints, plotting, rendering
+from mjzoo.harness import metrics as metrics_lib
 from mjzoo.types import Task
 
-__all__ = ["Settings", "run", "shard_envs", "replicate", "config_dict", "existing", "RUN_FILES"]
+__all__ = [
+    "RUN_FILES",
+    "Algorithm",
+    "AlgorithmConfig",
+    "Settings",
+    "check_algorithm",
+    "config_dict",
+    "existing",
+    "replicate",
+    "run",
+    "shard_envs",
+]  # fmt: skip
 
-PER_ENV_FIELDS = ("env_state", "carry", "episode_return", "episode_length")
 RUN_FILES = ("config.json", "metrics.jsonl", "checkpoints", "tensorboard", "curves.png", "eval.mp4")  # what `run` writes
+
+
+class AlgorithmConfig(Protocol):
+    """What `run` reads of an algorithm's config (a frozen dataclass, static under jit)."""
+
+    @property
+    def num_updates(self) -> int: ...  # updates in the whole run
+
+    @property
+    def steps_per_update(self) -> int: ...  # env steps one update collects (for the step axis)
+
+
+class Algorithm(Protocol):
+    """The contract of an algorithm module, which `run` trains.
+
+    The state `init` returns is a dataclass pytree (a checkpoint saves it whole) with
+    an int32 scalar field `updates`, the number of updates done. `run` jits `init` and
+    `evaluate` (config static; `num_envs` and `num_steps` static too), and a whole
+    chunk of `update`s as one `lax.scan`.
+
+    Attributes:
+      PER_ENV_FIELDS: names of the state's fields whose leaves have a leading
+        [num_envs] axis (env states, recurrent carries); `run` shards them over the
+        devices, and replicates the rest. ``()``: all replicated.
+    """
+
+    PER_ENV_FIELDS: Sequence[str]
+
+    def init(self, config: Any, task: Task, key: jax.Array) -> Any:
+        """A fresh training state."""
+
+    def update(self, config: Any, task: Task, state: Any) -> tuple[Any, dict[str, jax.Array]]:
+        """One update; metrics are scalars (NaN: nothing to report this update)."""
+
+    def evaluate(self, config: Any, task: Task, state: Any, key: jax.Array, num_envs: int, num_steps: int) -> tuple:
+        """(mean return, per-env returns [num_envs], env 0's `mjzoo.Trajectory` or None)."""
+
+
+def check_algorithm(algorithm: Any, config: Any) -> None:
+    """Raises one TypeError naming everything `algorithm` or `config` lacks of the
+    `Algorithm` / `AlgorithmConfig` contract."""
+    missing = [f"{name}()" for name in ("init", "update", "evaluate") if not callable(getattr(algorithm, name, None))]
+    fields = getattr(algorithm, "PER_ENV_FIELDS", None)
+    if not (isinstance(fields, (tuple, list)) and all(isinstance(f, str) for f in fields)):
+        missing.append("PER_ENV_FIELDS (a tuple of the state's per-env field names; () if none)")
+    missing += [f"config.{name}" for name in ("num_updates", "steps_per_update") if not hasattr(config, name)]
+    if missing:
+        name = getattr(algorithm, "__name__", type(algorithm).__name__)
+        raise TypeError(f"training.run: {name} is not an algorithm of the training.Algorithm contract; "
+                        f"it lacks {', '.join(missing)}")  # fmt: skip
+
+
+def _check_state(algorithm: Algorithm, state: Any) -> None:
+    """The state `init` made has the fields the harness and PER_ENV_FIELDS name."""
+    names = {f.name for f in dataclasses.fields(state)} if dataclasses.is_dataclass(state) else set()
+    wrong = [n for n in ("updates", *algorithm.PER_ENV_FIELDS) if n not in names]
+    if wrong:
+        raise TypeError(f"training.run: the state {algorithm.__name__}.init returns ({type(state).__name__}) must be "
+                        f"a dataclass with the fields {wrong} (updates, and each of PER_ENV_FIELDS)")  # fmt: skip
 
 
 @dataclasses.dataclass(frozen=True, kw_only=True)
@@ -45,7 +115,7 @@ class Settings:
     seed: int = 0
     updates_per_chunk: int = 10
     eval_envs: int = 16
-    eval_steps: int = 1000
+    eval_steps: int | None = None  # None: the task's own episode length, int(task.time_limit)
     video: bool = True
     checkpoint_every: int = 1  # chunks between checkpoints; 0: never
     resume: bool = False  # continue the run in out_dir from its newest intact checkpoint
@@ -54,6 +124,8 @@ class Settings:
 
     def __post_init__(self):
         for field in ("updates_per_chunk", "eval_envs", "eval_steps"):
+            if field == "eval_steps" and self.eval_steps is None:
+                continue
             if getattr(self, field) < 1:
                 raise ValueError(f"training.Settings: {field}={getattr(self, field)!r} must be >= 1")
         if self.checkpoint_every < 0:
@@ -90,9 +162,10 @@ def config_dict(config: Any) -> dict[str, Any]:
     return {f.name: plain(getattr(config, f.name)) for f in dataclasses.fields(config)}
 
 
-def shard_envs(train_state: Any, devices: list | None = None) -> Any:
-    """Places the per-env leaves of a train state across devices (leading axis), the
-    rest replicated. Under jit, XLA then splits the env batch and averages gradients.
+def shard_envs(train_state: Any, per_env_fields: Sequence[str], devices: list | None = None) -> Any:
+    """Places the leaves of a train state's `per_env_fields` (an algorithm's
+    `PER_ENV_FIELDS`) across devices (leading axis), the rest replicated. Under jit,
+    XLA then splits the env batch and averages gradients.
 
     On one device this commits the state to it: jit compiles separately for
     uncommitted inputs and for its own (committed) outputs, which would cost a second
@@ -105,7 +178,7 @@ def shard_envs(train_state: Any, devices: list | None = None) -> Any:
     placed = {}
     for field in dataclasses.fields(train_state):
         value = getattr(train_state, field.name)
-        if field.name in PER_ENV_FIELDS:
+        if field.name in per_env_fields:
             placed[field.name] = jax.tree.map(lambda x: jax.device_put(x, split if jnp.ndim(x) else whole), value)
         else:
             placed[field.name] = jax.device_put(value, whole)
@@ -150,13 +223,30 @@ def _resume(out_dir: Path, state: Any) -> Any:
     return restored
 
 
-def run(algorithm: ModuleType, config: Any, task: Task, settings: Settings) -> tuple[Any, dict[str, float]]:
+def _eval_steps(task: Task, settings: Settings) -> int:
+    if settings.eval_steps is not None:
+        return settings.eval_steps
+    if getattr(task, "time_limit", None) is None:
+        raise ValueError("training.Settings: eval_steps=None evaluates the task's own episode length, but the task "
+                         "has no time limit (mjzoo.with_time_limit); give eval_steps")  # fmt: skip
+    return int(task.time_limit)
+
+
+@functools.lru_cache(maxsize=8)
+def _init_fn(algorithm: ModuleType):
+    return jax.jit(algorithm.init, static_argnums=0)
+
+
+def run(algorithm: Algorithm, config: AlgorithmConfig, task: Task, settings: Settings) -> tuple[Any, dict[str, float]]:
     """Trains `task` with `algorithm` under `config`; returns the final state and metrics."""
+    check_algorithm(algorithm, config)
+    eval_steps = _eval_steps(task, settings)
     out = Path(settings.out_dir) if settings.out_dir else None
     if out is not None:
         _claim(out, settings)
     key = jax.random.key(settings.seed)
-    state = algorithm.init(config, task, key)
+    state = _init_fn(algorithm)(config, task, key)
+    _check_state(algorithm, state)
     if out is not None:
         # Restore before writing anything: a run that cannot resume is left as it was.
         if settings.resume and checkpoints.latest_step(out / "checkpoints") is not None:
@@ -167,7 +257,7 @@ def run(algorithm: ModuleType, config: Any, task: Task, settings: Settings) -> t
         (out / "config.json").write_text(json.dumps(run_info, indent=2))
     # Own every buffer once: the chunk donates the state, and XLA may hand out one buffer
     # for equal constants (two zero arrays), which cannot be donated twice.
-    state, task = shard_envs(jax.tree.map(jnp.copy, state)), replicate(task)
+    state, task = shard_envs(jax.tree.map(jnp.copy, state), algorithm.PER_ENV_FIELDS), replicate(task)
     chunk = _chunk_fn(algorithm, config, settings.updates_per_chunk)
     evaluate = _evaluate_fn(algorithm)
     total_chunks = -(-config.num_updates // settings.updates_per_chunk)
@@ -183,7 +273,7 @@ def run(algorithm: ModuleType, config: Any, task: Task, settings: Settings) -> t
             jax.block_until_ready(state)
             seconds = time.perf_counter() - start
             eval_key = jax.random.fold_in(key, int(state.updates))
-            eval_return, _, trajectory = evaluate(config, task, state, eval_key, settings.eval_envs, settings.eval_steps)
+            eval_return, _, trajectory = evaluate(config, task, state, eval_key, settings.eval_envs, eval_steps)
             step = int(state.updates) * config.steps_per_update
             last = {"eval/return": float(eval_return), "perf/steps_per_s": settings.updates_per_chunk * config.steps_per_update / seconds,
                     "perf/elapsed_s": time.perf_counter() - started,

@@ -67,7 +67,7 @@ def test_update_is_one_jit_that_does_not_retrace(pendulum, small_update):
     assert int(state.updates) == 2
     for name in ("loss/policy", "loss/value", "loss/entropy", "loss/approx_kl", "env/reward/upright"):
         assert np.isfinite(metrics[name]), name
-    chex.assert_shape(state.episode_return, (SMALL.num_envs,))
+    chex.assert_shape(state.collector.episode_return, (SMALL.num_envs,))
 
 
 def test_update_changes_parameters_and_normalizer(pendulum, small_update):
@@ -147,7 +147,7 @@ def test_a_crashed_run_resumes_to_the_same_result(tmp_path, monkeypatch):
     resumed, _ = _train(tmp_path, "crashed", resume=True)  # continues from update 2
     assert int(resumed.updates) == int(whole.updates) == 4
     chex.assert_trees_all_equal(resumed.params, whole.params)
-    chex.assert_trees_all_equal(resumed.env_state.obs, whole.env_state.obs)
+    chex.assert_trees_all_equal(resumed.collector.env_state.obs, whole.collector.env_state.obs)
     lines = [json.loads(line) for line in (tmp_path / "crashed" / "metrics.jsonl").read_text().splitlines()]
     assert [line["step"] for line in lines] == [128, 256]  # the crashed chunk's line was cut back
     assert all("eval/return" in line for line in lines)
@@ -168,16 +168,16 @@ TWO_DEVICES = textwrap.dedent(
     update = jax.jit(lambda t, s: ppo.update(config, t, s))
     results = []
     for devices in (jax.devices()[:1], jax.devices()):
-        state = training.shard_envs(ppo.init(config, task, jax.random.key(0)), devices)
+        state = training.shard_envs(ppo.init(config, task, jax.random.key(0)), ppo.PER_ENV_FIELDS, devices)
         placed = training.replicate(task, devices)
         for _ in range(3):
             state, _ = update(placed, state)
         results.append(state)
-    assert len(results[1].env_state.obs.sharding.device_set) == 2
+    assert len(results[1].collector.env_state.obs.sharding.device_set) == 2
     one, two = jax.device_get(results)
     diff = max(jax.tree.leaves(jax.tree.map(lambda a, b: float(np.max(np.abs(a - b))), one.params, two.params)))
     print("max param difference", diff)
-    np.testing.assert_allclose(one.env_state.obs, two.env_state.obs, atol=1e-4)
+    np.testing.assert_allclose(one.collector.env_state.obs, two.collector.env_state.obs, atol=1e-4)
     assert diff < 1e-4
     """
 )

@@ -36,7 +36,7 @@ def test_recurrent_gru_policy_learns_a_partially_observed_task():
     config = ppo.Config(num_envs=64, unroll_length=32, num_minibatches=4, num_epochs=4, learning_rate=1e-3,
                         entropy_coef=1e-3, recurrent=True, total_steps=163_840)  # fmt: skip
     state, last = ppo.train(config, task, training.Settings(updates_per_chunk=20, eval_envs=16, eval_steps=500, progress=False))
-    assert jax.tree.leaves(state.carry)[0].shape == (64, config.gru_hidden_size)
+    assert jax.tree.leaves(state.collector.carry)[0].shape == (64, config.gru_hidden_size)
     assert last["eval/return"] > 450
 
 

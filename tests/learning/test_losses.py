@@ -1,5 +1,6 @@
 """`mjzoo.learning.losses` against hand-computed numbers, including which elements the clipping
-cuts off from the gradient, and jit / vmap agreement."""
+cuts off from the gradient, the vanilla and KL-penalized policy gradients, and jit / vmap
+agreement."""
 
 from __future__ import annotations
 
@@ -11,7 +12,13 @@ import jax.numpy as jnp
 import numpy as np
 import pytest
 
-from mjzoo.learning.losses import clipped_surrogate_loss, normalize_advantages, value_loss
+from mjzoo.learning.losses import (
+    clipped_surrogate_loss,
+    kl_penalty_loss,
+    normalize_advantages,
+    policy_gradient_loss,
+    value_loss,
+)
 
 EPS = 0.2
 # ratios r = [0.5, 0.9, 1.1, 1.5], advantages A = [1, -1, 2, -2], eps = 0.2:
@@ -73,6 +80,40 @@ def test_surrogate_at_ratio_one_is_policy_gradient():
     assert aux["clip_fraction"] == 0.0 and aux["approx_kl"] == 0.0
 
 
+def test_policy_gradient_hand_computed():
+    # log pi = [-1, -0.5], A = [2, -4]: loss = -(-2 + 2) / 2 = 0; d/d log pi = -A / 2 = [-1, 2].
+    log_prob, adv = jnp.array([-1.0, -0.5]), jnp.array([2.0, -4.0])
+    loss, (d_lp, d_adv) = jax.value_and_grad(policy_gradient_loss, argnums=(0, 1))(log_prob, adv)
+    np.testing.assert_allclose(loss, 0.0, atol=1e-7)
+    np.testing.assert_allclose(d_lp, [-1.0, 2.0])
+    np.testing.assert_array_equal(d_adv, 0.0)
+
+
+# The KL-penalized surrogate on the ratios above, beta = 0.5:
+#   -mean(r * A) = -(0.5 - 0.9 + 2.2 - 3.0) / 4 = 0.3
+#   k3 = (r - 1) - ln r = [0.193147, 0.005361, 0.004690, 0.094535], mean 0.0744332
+#   loss = 0.3 + 0.5 * 0.0744332 = 0.3372166
+#   d loss / d log_prob_i = (-A_i r_i + beta (r_i - 1)) / 4
+#     = [(-0.5 - 0.25), (0.9 - 0.05), (-2.2 + 0.05), (3.0 + 0.25)] / 4
+#     = [-0.1875, 0.2125, -0.5375, 0.8125]
+def test_kl_penalty_hand_computed():
+    grad_fn = jax.value_and_grad(kl_penalty_loss, argnums=(0, 1, 2), has_aux=True)
+    (loss, aux), (d_lp, d_olp, d_adv) = grad_fn(jnp.asarray(LOG_PROB), jnp.asarray(OLD_LOG_PROB), jnp.asarray(ADV), 0.5)
+    kl = np.mean((RATIOS - 1) - np.log(RATIOS))
+    np.testing.assert_allclose(kl, 0.0744332, rtol=1e-5)
+    np.testing.assert_allclose(loss, 0.3 + 0.5 * kl, rtol=1e-5)
+    np.testing.assert_allclose(aux["approx_kl"], kl, rtol=1e-4)
+    np.testing.assert_allclose(d_lp, [-0.1875, 0.2125, -0.5375, 0.8125], rtol=1e-4)
+    np.testing.assert_array_equal(d_olp, 0.0)
+    np.testing.assert_array_equal(d_adv, 0.0)
+    # beta = 0 is the unclipped surrogate; at ratio 1 the penalty and its gradient vanish.
+    np.testing.assert_allclose(kl_penalty_loss(jnp.asarray(LOG_PROB), jnp.asarray(OLD_LOG_PROB), jnp.asarray(ADV), 0.0)[0],
+                               0.3, rtol=1e-5)  # fmt: skip
+    same = jnp.asarray(OLD_LOG_PROB)
+    d_same = jax.grad(lambda lp: kl_penalty_loss(lp, same, jnp.asarray(ADV), 10.0)[0])(same)
+    np.testing.assert_allclose(d_same, -ADV / 4, rtol=1e-6)
+
+
 # values v = [1, 2, 3], returns R = [2, 2, 0]:
 #   (v - R)^2 = [1, 0, 9], loss = 0.5 * 10 / 3 = 5/3
 # clipped with old values [0.5, 2.5, 1.0], eps = 0.2:
@@ -125,7 +166,8 @@ def test_jit_and_vmap():
 
     def all_losses(lp, olp, adv, v, ret, ov):
         surrogate, aux = clipped_surrogate_loss(lp, olp, normalize_advantages(adv), 0.2)
-        return surrogate, aux, value_loss(v, ret), value_loss(v, ret, ov, 0.5)
+        penalized = kl_penalty_loss(lp, olp, adv, 0.5)
+        return surrogate, aux, penalized, policy_gradient_loss(lp, adv), value_loss(v, ret), value_loss(v, ret, ov, 0.5)
 
     # vmap over the leading axis: each row is its own minibatch.
     batched = jax.jit(jax.vmap(all_losses))(lp, olp, adv, v, ret, ov)
