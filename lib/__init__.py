@@ -13,6 +13,7 @@ rest is grouped by concern, each subpackage importing only what sits below it:
     mjzoo.interop       other ecosystems (Brax)
     mjzoo.algorithms    PPO, MPPI, CEM, predictive sampling
     mjzoo.envs          concrete tasks and their registry
+    mjzoo.testing       check_task: the Task contract's properties, checked on any task
 
 The subpackages load on first use (``mjzoo.learning.gae`` works after ``import mjzoo``),
 so importing the core does not pay for the harness's or Brax's imports. See

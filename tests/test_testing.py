@@ -112,7 +112,7 @@ def _reward_nan_from_step_4(p, model, state, action, next_state):
 def test_nan_reward_is_not_finite():
     failures = failures_of(make(reward=_reward_nan_from_step_4))
     assert list(failures) == ["finite"]
-    assert "transition .reward at (env, step) (0, 3)" in failures["finite"]
+    assert "transition ['reward'] at (env, step) (0, 3)" in failures["finite"]
 
 
 def _static_weight_reward(p, model, state, action, next_state):

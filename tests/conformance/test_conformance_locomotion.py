@@ -6,7 +6,7 @@ from __future__ import annotations
 
 import pytest
 
-from test_conformance import LOCOMOTION, check_conformance, check_new_numbers_do_not_retrace, check_time_limit
+from test_conformance import LOCOMOTION, check_conformance, check_new_numbers_do_not_retrace
 
 
 @pytest.mark.parametrize("env", LOCOMOTION)
@@ -17,8 +17,3 @@ def test_conformance(env):
 @pytest.mark.parametrize("env", LOCOMOTION)
 def test_new_numbers_do_not_retrace(env):
     check_new_numbers_do_not_retrace(env, "bare")
-
-
-@pytest.mark.parametrize("env", LOCOMOTION)
-def test_time_limit_truncates_and_never_terminates(env):
-    check_time_limit(env)
