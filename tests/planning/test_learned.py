@@ -164,5 +164,20 @@ def test_closed_loop_runs_with_a_terminal_value_as_an_argument():
     start = sim_state.data.qpos
     for sign in (1.0, -1.0):
         result = run(terminal_value=_critic(start + sign * jnp.array([0.0, 0.3])))
-        moved = result.states.data.qpos[-1] - start
-        assert sign * float(moved[1]) > 0.05 and abs(float(moved[0])) < abs(float(moved[1])), moved
+        _assert_moved_along_y(result.states.data.qpos[-1] - start, sign)
+
+
+def test_a_problems_terminal_value_reaches_the_offline_run():
+    # `offline` resets with the first half of its key: the start, to place the target.
+    key = jax.random.key(4)
+    start = mjzoo.reset(_task(), jax.random.split(key)[0]).data.qpos
+    value = functools.partial(_quadratic, WEIGHT, start - jnp.array([0.0, 0.3]))  # a plain function: wrapped
+    problem = realtime.Problem(mppi, CONFIG, _task(), _task(), seconds=0.4, replan_every=2, terminal_value=value)
+    assert isinstance(problem.terminal_value, jax.tree_util.Partial) and problem.num_replans == 4
+    result, _ = realtime.offline(problem, key)
+    _assert_moved_along_y(result.states.data.qpos[-1] - start, -1.0)
+
+
+def _assert_moved_along_y(moved, sign):
+    """Pushed 0.3 m along y by the value: at least 5 cm that way in 0.4 s, less along x."""
+    assert sign * float(moved[1]) > 0.05 and abs(float(moved[0])) < abs(float(moved[1])), moved

@@ -51,7 +51,7 @@ def _env_state(seed: int):
 
 def _committed(*trees):
     """Arguments placed on the device: jit compiles again when an argument changes from
-    uncommitted (fresh from `init` or an eager op) to committed (a jit output)."""
+    uncommitted (fresh from an eager op) to committed (a jit output)."""
     return jax.device_put(trees, jax.devices()[0])
 
 
