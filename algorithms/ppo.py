@@ -271,6 +271,7 @@ def update(config: Config, task: Task, train_state: TrainState) -> tuple[TrainSt
     """One PPO update: collect an unroll from every env, then learn from it. Jit it with
     `config` static; `task` and `train_state` are ordinary arguments."""
     ts = train_state
+    policy_net, value_net = _networks(config, task)
     key, collect_key, learn_key = jax.random.split(ts.key, 3)
     act = _acting(config, task, policy_params(ts), deterministic=False)
     collector, data, collect_metrics = learning.collect(task, act, ts.collector, collect_key, config.unroll_length)
@@ -278,9 +279,11 @@ def update(config: Config, task: Task, train_state: TrainState) -> tuple[TrainSt
     stats = ts.obs_stats
     if config.normalize_observations:
         stats = normalization.update_stats(stats, data.obs, num_batch_dims=2)
-    _, value_net = _networks(config, task)
-    normalized = (lambda obs: normalization.normalize(stats, obs)) if config.normalize_observations else (lambda o: o)
-    value_of = lambda obs: value_net.apply(ts.params["value"], normalized(obs))[..., 0]
+
+    def value_of(obs):
+        obs = normalization.normalize(stats, obs) if config.normalize_observations else obs
+        return value_net.apply(ts.params["value"], obs)[..., 0]
+
     values = value_of(data.obs)
     adv, returns = learning.gae(data.reward * config.reward_scaling, values, value_of(data.next_obs),
                                 data.terminated, data.truncated, config.discount, config.gae_lambda)  # fmt: skip
@@ -298,7 +301,7 @@ def update(config: Config, task: Task, train_state: TrainState) -> tuple[TrainSt
 
     (params, opt_state), learn_metrics = learning.learn(
         sgd_step, (ts.params, ts.opt_state), batch, learn_key, num_epochs=config.num_epochs,
-        num_minibatches=config.num_minibatches, sequences=_is_recurrent(_networks(config, task)[0]),
+        num_minibatches=config.num_minibatches, sequences=_is_recurrent(policy_net),
     )  # fmt: skip
     ts = ts.replace(params=params, opt_state=opt_state, obs_stats=stats, collector=collector, key=key,
                     updates=ts.updates + 1)  # fmt: skip

@@ -10,10 +10,9 @@ import types
 from pathlib import Path
 
 import jax
+import mjzoo.envs
 import numpy as np
 import pytest
-
-import mjzoo.envs
 from mjzoo.harness import training
 
 DOC = Path(__file__).resolve().parents[2] / "docs" / "own-algorithm.md"
@@ -23,7 +22,7 @@ DOC = Path(__file__).resolve().parents[2] / "docs" / "own-algorithm.md"
 def a2c() -> types.ModuleType:
     """The page's first python block, executed as the module `a2c`."""
     text = DOC.read_text()
-    match = re.search(r"^```python\n(.*?)^```", text, re.S | re.M)
+    match = re.search(r"^```python\n(.*?)^```", text, re.DOTALL | re.MULTILINE)
     source = "\n" * text.count("\n", 0, match.start(1)) + match.group(1)  # tracebacks: the page's lines
     module = types.ModuleType("a2c")
     sys.modules["a2c"] = module  # as if imported: dataclasses look their module up
@@ -35,7 +34,7 @@ def a2c() -> types.ModuleType:
 
 
 def test_the_code_is_under_60_lines():
-    code = re.search(r"^```python\n(.*?)^```", DOC.read_text(), re.S | re.M).group(1)
+    code = re.search(r"^```python\n(.*?)^```", DOC.read_text(), re.DOTALL | re.MULTILINE).group(1)
     assert len([line for line in code.splitlines() if line.strip()]) < 60
 
 

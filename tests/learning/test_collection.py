@@ -8,10 +8,9 @@ from __future__ import annotations
 import chex
 import jax
 import jax.numpy as jnp
+import mjzoo
 import numpy as np
 import pytest
-
-import mjzoo
 from mjzoo import learning
 
 XML = """
@@ -106,7 +105,7 @@ def test_vmapped_collections_equal_separate_ones(collected):
 
 def test_feed_forward_keeps_an_empty_carry():
     policy = learning.feed_forward(lambda obs, key: (obs, {"seen": obs}))
-    carry, action, extras = policy((), jnp.ones(2), jnp.bool_(True), jax.random.key(0))
+    carry, _, extras = policy((), jnp.ones(2), jnp.bool_(True), jax.random.key(0))
     assert carry == () and extras["seen"].shape == (2,)
 
 
