@@ -102,7 +102,7 @@ def planning(spec: str) -> base.PlanningSetup:
     if _is_user(spec):
         setup = getattr(importlib.import_module(spec.partition(":")[0]), "PLANNING", _ONE_EPISODE)
         if not isinstance(setup, base.PlanningSetup):
-            raise TypeError(f"{spec}: its module's PLANNING is a {type(setup).__name__}, not a mjzoo.envs.base.PlanningSetup")
+            raise TypeError(f"{spec}: its module's PLANNING (type {type(setup).__name__}) is not a mjzoo.envs.base.PlanningSetup")
         return setup
     if spec not in _PLANNING:
         raise KeyError(f"{spec!r} has no planning setup; envs with one: {sorted(_PLANNING)}")
@@ -171,7 +171,7 @@ def make(spec: str, **overrides: Any) -> Task:
                 raise TypeError(f"{spec}: override {key}={value!r} must be {expected}")
     task = build(**overrides)
     if not isinstance(task, Task):
-        raise TypeError(f"{spec}: returned a {type(task).__name__}, not a mjzoo.Task")
+        raise TypeError(f"{spec}: returned a value of type {type(task).__name__}, not a mjzoo.Task")
     return task
 
 
@@ -247,5 +247,5 @@ def _imported(spec: str) -> Callable[..., Task]:
         raise ValueError(f"task spec {spec!r}: module {module_name!r} has no attribute {attribute!r}")
     found = getattr(module, attribute)
     if not callable(found):
-        raise TypeError(f"task spec {spec!r}: {attribute} is a {type(found).__name__}, not a function returning a Task")
+        raise TypeError(f"task spec {spec!r}: {attribute} is not callable (type {type(found).__name__}); expected a function returning a Task")
     return found

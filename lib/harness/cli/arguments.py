@@ -34,9 +34,10 @@ def checking(*errors: type[Exception]) -> Iterator[None]:
     task): the ValueError, TypeError, KeyError and missing-file errors the library raises
     there (or just `errors`) are the user's mistakes, and become a `UsageError`. Outside
     such blocks they are bugs, and keep their tracebacks."""
+    caught = errors or _USERS_ERRORS
     try:
         yield
-    except errors or _USERS_ERRORS as e:  # noqa: B030 (a tuple of exception classes either way)
+    except caught as e:
         raise UsageError(e.args[0] if isinstance(e, KeyError) and e.args else str(e)) from e
 
 

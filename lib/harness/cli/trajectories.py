@@ -4,7 +4,9 @@
 from __future__ import annotations
 
 import dataclasses
+import functools
 from pathlib import Path
+from types import ModuleType
 from typing import Annotated, Any
 
 import jax
@@ -54,63 +56,66 @@ def collect(
         if out.exists() and not overwrite:
             raise UsageError(f"--out {out} exists: give --overwrite to replace it, or choose a new --out")
         if source in PLANNERS:
-            spec, run_episodes = _planner(source, task, env_overrides, config, steps)
+            spec, problem = task, _problem(source, task, env_overrides, config, steps)
         elif config:
             raise UsageError("--config: only for a planner; a run keeps its own config")
         else:
             trained = runs.load(Path(source), task, env_overrides)
             spec, steps = trained.spec, episode_steps(trained.task, trained.spec, steps)
-    if source not in PLANNERS:  # past the checks: restoring compiles PPO's init, whose errors are bugs
-        run_episodes = _policy(trained, runs.restore(Path(source), trained), steps)
     keys = jax.random.split(jax.random.key(seed), episodes)
-    arrays = as_arrays(*jax.device_get(run_episodes(keys)))
+    if source in PLANNERS:
+        p = problem
+        episodes_run = _planned(p.planner, p.config, p.sim_task, p.plan_task, p.hooks, keys, p.num_replans, p.replan_every)
+    else:  # past the checks: restoring compiles PPO's init, whose errors are bugs
+        params = trained.module.policy_params(runs.restore(Path(source), trained))
+        episodes_run = _acted(trained.module, trained.cfg, trained.task, params, keys, steps)
+    arrays = as_arrays(*jax.device_get(episodes_run))
     out.parent.mkdir(parents=True, exist_ok=True)
     np.savez(out, **arrays)
     print(f"{out}: {episodes} episodes of {arrays['action'].shape[1]} steps on {spec}")
 
 
-def _planner(name: str, spec: str | None, env_overrides: tuple[str, ...], config: tuple[str, ...],
-             steps: int | None):  # fmt: skip
-    """(spec, episodes fn) of a planner, closed loop as `mjzoo plan --offline` runs it."""
+def _problem(name: str, spec: str | None, env_overrides: tuple[str, ...], config: tuple[str, ...],
+             steps: int | None) -> Problem:  # fmt: skip
+    """The planner's closed-loop problem on `spec`, as `mjzoo plan` builds it."""
     if spec is None:
         raise UsageError(f"--task: a planner needs the task to plan on, e.g. {name} --task pendulum_swingup")
     module = algorithm_module(name, PLANNERS)
     cfg = build_config(module, spec, parse_assignments(config, "--config"))
-    overrides = parse_assignments(env_overrides, "--env-overrides")
-    problem = mjzoo.envs.closed_loop_problem(spec, module, cfg, **overrides)
-    if steps is not None:
-        at_least_one(steps=steps)
-        problem = dataclasses.replace(problem, seconds=steps * problem.sim_dt)  # in whole replans
-    return spec, _planned(problem)
+    problem = mjzoo.envs.closed_loop_problem(spec, module, cfg, **parse_assignments(env_overrides, "--env-overrides"))
+    if steps is None:
+        return problem
+    at_least_one(steps=steps)
+    return dataclasses.replace(problem, seconds=steps * problem.sim_dt)  # in whole replans
 
 
-def _planned(problem: Problem):
+@functools.partial(jax.jit, static_argnums=(0, 1, 6, 7))
+def _planned(planner: ModuleType, config: Any, sim_task: mjzoo.Task, plan_task: Any, hooks: closed_loop.Hooks,
+             keys: jax.Array, num_replans: int, replan_every: int):  # fmt: skip
     """keys [N] -> (first states [N], states after each step [N, T], controls [N, T, nu])."""
 
-    def one(sim_task, plan_task, key):
+    def one(key):
         reset_key, run_key = jax.random.split(key)
         first = mjzoo.reset(sim_task, reset_key)
-        result = closed_loop.run(problem.planner, problem.config, sim_task, plan_task, first, run_key,
-                                 problem.num_replans, problem.replan_every, problem.hooks)  # fmt: skip
+        result = closed_loop.run(planner, config, sim_task, plan_task, first, run_key, num_replans, replan_every, hooks)
         return first, result.states, result.controls
 
-    batched = jax.jit(jax.vmap(one, in_axes=(None, None, 0)))
-    return lambda keys: batched(problem.sim_task, problem.plan_task, keys)
+    return jax.vmap(one)(keys)
 
 
-def _policy(trained: runs.Trained, state: Any, steps: int):
+@functools.partial(jax.jit, static_argnums=(0, 1, 5))
+def _acted(algorithm: ModuleType, config: Any, task: mjzoo.Task, params: Any, keys: jax.Array, steps: int):
     """keys [N] -> (first states [N], states after each step [N, T], actions [N, T, nu])
-    of the run's deterministic policy."""
-    act = trained.module.policy(trained.cfg, trained.task, deterministic=True)
+    of a trained deterministic policy (`algorithm.policy`)."""
+    act = algorithm.policy(config, task, deterministic=True)
 
-    def one(task, params, key):
+    def one(key):
         reset_key, run_key = jax.random.split(key)
         first = mjzoo.reset(task, reset_key)
         _, trajectory = mjzoo.rollout(task, lambda obs, k: act(params, obs, k), first, run_key, steps)
         return first, trajectory.next_state, trajectory.action
 
-    batched = jax.jit(jax.vmap(one, in_axes=(None, None, 0)))
-    return lambda keys: batched(trained.task, trained.module.policy_params(state), keys)
+    return jax.vmap(one)(keys)
 
 
 def as_arrays(first: mjzoo.State, after: mjzoo.State, actions: np.ndarray) -> dict[str, np.ndarray]:
