@@ -1,13 +1,13 @@
-"""The README's Python examples run as written.
+"""The documentation's Python examples run as written: README.md and docs/own-task.md.
 
-Each ```python block of README.md is one test. The blocks share one namespace and run in
-the order the README reads (the PPO block trains the task the first block composed), so
-a test first runs any earlier block that has not run yet: `-k` may pick any one of them.
-They run in a temporary working directory, so nothing they write lands in the
-repository. Tracebacks point at README.md's own lines.
+Each ```python block is one test. A document's blocks share one namespace and run in
+the order the document reads (the README's PPO block trains the task its first block
+composed), so a test first runs any earlier block of its document that has not run yet:
+`-k` may pick any one of them. They run in a temporary working directory, so nothing
+they write lands in the repository. Tracebacks point at the document's own lines.
 
-One line is not run, for time alone: see NOT_RUN. It shows as a skipped test with its
-reason (pytest -ra), and the test fails if the README no longer has that line.
+A few lines are not run, for time alone: see NOT_RUN. Each shows as a skipped test with
+its reason (pytest -ra), and the test fails if its document no longer has that line.
 """
 
 from __future__ import annotations
@@ -18,80 +18,99 @@ from pathlib import Path
 
 import pytest
 
-README = Path(__file__).resolve().parents[1] / "README.md"
+ROOT = Path(__file__).resolve().parents[1]
+DOCS = ("README.md", "docs/own-task.md")
 _FENCE = re.compile(r"^```python\n(.*?)^```", re.S | re.M)
 
 
-def _blocks() -> list[tuple[int, str]]:
-    """(first line number in README.md, source) of each ```python block."""
-    text = README.read_text()
+def _blocks(doc: str) -> list[tuple[int, str]]:
+    """(first line number in `doc`, source) of each ```python block."""
+    text = (ROOT / doc).read_text()
     return [(text.count("\n", 0, m.start(1)) + 1, m.group(1)) for m in _FENCE.finditer(text)]
 
 
-BLOCKS = _blocks()
+BLOCKS = {doc: _blocks(doc) for doc in DOCS}
 
-# README lines the block tests leave out (matched by what the line contains), and why.
+_PPO_TRAIN = ("ppo.train compiles two more programs (a chunk of updates and the evaluation) and runs them: "
+              "minutes on a 2-core CPU. The harness it calls is tested in tests/algorithms/test_ppo.py.")  # fmt: skip
+# Lines the block tests leave out, by document (matched by what the line contains), and why.
 NOT_RUN = {
-    "ppo.train(": "ppo.train compiles two more programs (a chunk of updates and the evaluation) and runs "
-    "them: about 2.5 minutes on a 2-core CPU, as long as all the other README examples together. The harness "
-    "it calls is tested in tests/algorithms/test_ppo.py.",
+    "README.md": {"ppo.train(": _PPO_TRAIN},
+    "docs/own-task.md": {"ppo.train(": _PPO_TRAIN},
 }
 
 
-def _source(line: int, source: str) -> str:
+def _source(doc: str, line: int, source: str) -> str:
     """`source` with each NOT_RUN line replaced by `pass` (same indentation, same line count)."""
     lines = source.splitlines()
     for i, text in enumerate(lines):
-        if any(marker in text for marker in NOT_RUN):
+        if any(marker in text for marker in NOT_RUN[doc]):
             lines[i] = text[: len(text) - len(text.lstrip())] + "pass  # not run here: see NOT_RUN"
-    return "\n" * (line - 1) + "\n".join(lines) + "\n"  # line numbers as in README.md
+    return "\n" * (line - 1) + "\n".join(lines) + "\n"  # line numbers as in the document
 
 
 @pytest.fixture(scope="module")
-def readme(tmp_path_factory):
-    """The shared namespace and the indices of the blocks already run, in a temp cwd."""
+def docs(tmp_path_factory):
+    """Per document: the shared namespace and the indices of the blocks already run, in a temp cwd."""
     cwd = os.getcwd()
-    os.chdir(tmp_path_factory.mktemp("readme"))
+    os.chdir(tmp_path_factory.mktemp("docs"))
     try:
-        yield {"namespace": {"__name__": "readme"}, "done": set(), "failed": set()}
+        yield {doc: {"namespace": {"__name__": Path(doc).stem.replace("-", "_")}, "done": set(), "failed": set()}
+               for doc in DOCS}  # fmt: skip
     finally:
         os.chdir(cwd)
 
 
-def _run(readme: dict, index: int) -> None:
+def _run(docs: dict, doc: str, index: int) -> dict:
+    """Runs block `index` of `doc` (and the earlier ones first); returns the document's namespace."""
+    state = docs[doc]
     for earlier in range(index):
-        if earlier in readme["failed"]:
-            pytest.fail(f"README block {earlier + 1} (line {BLOCKS[earlier][0]}) failed; block {index + 1} needs it")
-        if earlier not in readme["done"]:
-            _run(readme, earlier)
-    line, source = BLOCKS[index]
-    code = compile(_source(line, source), str(README), "exec")
-    try:
-        exec(code, readme["namespace"])
-    except BaseException:
-        readme["failed"].add(index)
-        raise
-    readme["done"].add(index)
+        if earlier in state["failed"]:
+            line = BLOCKS[doc][earlier][0]
+            pytest.fail(f"{doc} block {earlier + 1} (line {line}) failed; block {index + 1} needs it")
+        if earlier not in state["done"]:
+            _run(docs, doc, earlier)
+    if index not in state["done"]:
+        line, source = BLOCKS[doc][index]
+        code = compile(_source(doc, line, source), str(ROOT / doc), "exec")
+        try:
+            exec(code, state["namespace"])
+        except BaseException:
+            state["failed"].add(index)
+            raise
+        state["done"].add(index)
+    return state["namespace"]
 
 
-def test_readme_has_python_examples():
-    assert len(BLOCKS) >= 3, f"expected the README's Python examples, found {len(BLOCKS)} blocks"
+@pytest.mark.parametrize("doc", DOCS)
+def test_docs_have_python_examples(doc):
+    assert len(BLOCKS[doc]) >= 3, f"expected {doc}'s Python examples, found {len(BLOCKS[doc])} blocks"
 
 
-@pytest.mark.parametrize("index", range(len(BLOCKS)), ids=[f"line{line}" for line, _ in BLOCKS])
-def test_readme_block(readme, index):
-    _run(readme, index)
+@pytest.mark.parametrize(
+    "doc, index",
+    [(doc, i) for doc in DOCS for i in range(len(BLOCKS[doc]))],
+    ids=[f"{doc}:line{line}" for doc in DOCS for line, _ in BLOCKS[doc]],
+)
+def test_doc_block(docs, doc, index):
+    _run(docs, doc, index)
 
 
-def test_readme_example_changes_a_mass_without_recompiling(readme):
-    if 0 not in readme["done"]:
-        _run(readme, 0)
-    run = readme["namespace"]["run"]  # the first block's jitted rollout, called with two tasks
+def test_readme_example_changes_a_mass_without_recompiling(docs):
+    run = _run(docs, "README.md", 0)["run"]  # the first block's jitted rollout, called with two tasks
     assert run._cache_size() == 1, "the heavier task recompiled the README's first example"
 
 
-@pytest.mark.parametrize("marker", sorted(NOT_RUN))
-def test_readme_line_not_run(marker):
-    found = [line for _, source in BLOCKS for line in source.splitlines() if marker in line]
-    assert len(found) == 1, f"NOT_RUN names {marker!r}, which README.md's Python blocks have {len(found)} times"
-    pytest.skip(f"README line {found[0].strip()!r} not run: {NOT_RUN[marker]}")
+def test_own_task_reacher_is_reached_by_mppi(docs):
+    """The MPPI loop of docs/own-task.md brings the fingertip to the goal it drew."""
+    index = next(i for i, (_, source) in enumerate(BLOCKS["docs/own-task.md"]) if "mppi.plan" in source)
+    namespace = _run(docs, "docs/own-task.md", index)
+    start, final = namespace["start_distance"], namespace["final_distance"]
+    assert final < 0.03 and final < start / 3, f"MPPI left the fingertip {final:.3f} m from the goal ({start:.3f} m)"
+
+
+@pytest.mark.parametrize("doc, marker", [(doc, marker) for doc in DOCS for marker in sorted(NOT_RUN[doc])])
+def test_doc_line_not_run(doc, marker):
+    found = [line for _, source in BLOCKS[doc] for line in source.splitlines() if marker in line]
+    assert len(found) == 1, f"NOT_RUN names {marker!r}, which {doc}'s Python blocks have {len(found)} times"
+    pytest.skip(f"{doc} line {found[0].strip()!r} not run: {NOT_RUN[doc][marker]}")
