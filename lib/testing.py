@@ -61,7 +61,8 @@ class TaskCheckError(AssertionError):
         self.failures, self.skipped = failures, skipped
         lines = [f"check_task: {len(failures)} propert{'y' if len(failures) == 1 else 'ies'} failed:"]
         lines += [f"  {name} ({PROPERTIES[name]}): {why}" for name, why in failures.items()]
-        lines += [f"  not checked: {name} ({why})" for name, why in skipped.items()]
+        for why in dict.fromkeys(skipped.values()):  # one line per reason
+            lines.append(f"  not checked ({why}): {', '.join(p for p in skipped if skipped[p] == why)}")
         super().__init__("\n".join(lines))
 
 
@@ -185,8 +186,8 @@ def _scalar_problems(states: State, num_envs: int, num_steps: int) -> str | None
                 for p, d in expected.items() if leaves[p].shape != batch or leaves[p].dtype != d]  # fmt: skip
     problems += [f"{p} has shape {leaves[p].shape[2:]}, not a scalar"
                  for p in leaves if p.startswith(".metrics") and leaves[p].shape != batch]  # fmt: skip
-    problems += [f"{p} is {_type(leaves[p], 2)}, not floating"
-                 for p in leaves if p.startswith(".obs") and not jnp.issubdtype(leaves[p].dtype, jnp.floating)]  # fmt: skip
+    floating = {p: jnp.issubdtype(leaves[p].dtype, jnp.floating) for p in leaves if p.startswith(".obs")}
+    problems += [f"{p} is {_type(leaves[p], 2)}, not floating" for p, ok in floating.items() if not ok]
     return _listed(problems)
 
 
@@ -197,7 +198,8 @@ def _reward_terms_problem(states: State) -> str | None:
     wrong = ~np.isclose(total, reward, rtol=1e-5, atol=1e-5, equal_nan=True)
     if wrong.any():
         env, step = np.argwhere(wrong)[0]
-        return f"at (env, step) ({env}, {step}): reward {reward[env, step]}, terms {sorted(terms)} sum to {total[env, step]}"
+        at = f"at (env, step) ({env}, {step})"
+        return f"{at}: reward {reward[env, step]}, but its terms {sorted(terms)} sum to {total[env, step]}"
     return None
 
 
@@ -316,7 +318,7 @@ def _blame(task: Task, key: jax.Array) -> tuple[str, str | None]:
                   if x.shape != ()]  # fmt: skip
     if not_scalar:  # first: a non-scalar reward also makes the reset's differ from a transition's
         return "scalars", _listed(not_scalar)
-    mismatch = _differences(first, after) if traced else _differences(first.obs, after.obs)
+    mismatch = _differences(first, after) if traced else _differences({"obs": first.obs}, {"obs": after.obs})
     if mismatch:
         return "reset_matches_transition", mismatch
     return ("jit_vmap", None) if traced else ("traces", None)

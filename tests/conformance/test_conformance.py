@@ -155,8 +155,13 @@ CASES = [(env, comb) for env in ENVS for comb in ("bare", "all")]
 CASES += [("pendulum_swingup", comb) for comb in COMBINATORS if comb not in ("bare", "all")]
 
 
-def task_for(env: str, comb: str) -> mjzoo.Task:
-    return COMBINATORS[comb](mjzoo.envs.make(env, episode_steps=LIMIT))
+def task_for(env: str, comb: str, mass_scale: float = 1.0, **numbers) -> mjzoo.Task:
+    """The case's task, its bodies `mass_scale` times as heavy. The stack keeps its env's
+    long default limit: the curriculum's limit of 5 steps inside it comes first. (Nested
+    limits share `info["time_limit"]`: one inside `with_action_repeat` inside another
+    does not count its own steps.)"""
+    base = mjzoo.envs.make(env, **({} if comb == "all" else dict(episode_steps=LIMIT)), **numbers)
+    return COMBINATORS[comb](base.replace(model=base.model.replace(body_mass=base.model.body_mass * mass_scale)))
 
 
 @functools.cache
@@ -186,6 +191,5 @@ def check_new_numbers_do_not_retrace(env: str, comb: str) -> None:
     the case's trace: check_task's own no-retrace check nudges the leaves of one task, and
     would miss a factory argument that ends up static."""
     report_for(env, comb)  # the one trace (cached if already run)
-    base = mjzoo.envs.make(env, episode_steps=LIMIT, effort_weight=0.5)
-    base = base.replace(model=base.model.replace(body_mass=base.model.body_mass * 1.5))
-    assert check_task(COMBINATORS[comb](base), num_steps=STEPS).traces == 0
+    changed = task_for(env, comb, mass_scale=1.5, effort_weight=0.5)
+    assert check_task(changed, num_steps=STEPS).traces == 0
