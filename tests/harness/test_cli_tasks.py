@@ -30,6 +30,9 @@ def make_pendulum(*, episode_steps: int = 20, upright_weight: float = 1.0) -> mj
 def make_heavy(mass: float, episode_steps: int = 20):
     return make_pendulum(episode_steps=episode_steps)
 
+def make_endless():
+    return make_pendulum().replace(time_limit=None)  # as if built without mjzoo.with_time_limit
+
 def not_a_task():
     return 3
 
@@ -103,6 +106,8 @@ def test_a_factory_without_planning_plans_one_episode(user_dir, monkeypatch):
         (["train", "ppo", SPEC, "--env-overrides", "episode_steps=abc"], [f"{SPEC}: override episode_steps='abc' must be an int"]),
         (["train", "ppo", f"{MODULE}:make_heavy"], ["required argument(s) ['mass'] not given; make_heavy takes ['mass', 'episode_steps']"]),
         (["train", "ppo", SPEC, "--config", "num_envs=-3"], ["num_envs=-3", "integer >= 1"]),
+        (["train", "ppo", f"{MODULE}:make_endless"], ["make_endless: the task has no time limit"]),
+        (["plan", "mppi", f"{MODULE}:make_endless"], ["make_endless: the task has no time limit", "give seconds"]),
         (["plan", "mppi", f"{MODULE}:nothing"], ["has no attribute 'nothing'"]),
         (["plan", "mppi", SPEC, "--env-overrides", "mass=2"], ["unknown override(s) ['mass']"]),
         (["collect", "mppi", "--out", "x.npz"], ["--task: a planner needs the task to plan on"]),
@@ -158,9 +163,8 @@ def test_eval_of_a_run_trained_from_python_needs_task(capsys, in_user_dir, monke
     --env-overrides set it up as it was trained."""
     monkeypatch.syspath_prepend(str(in_user_dir))
     run = in_user_dir / "runs" / "python"
-    ppo.train(ppo.Config(**TINY), mjzoo.envs.make(SPEC, episode_steps=10), out_dir=run, eval_envs=2, video=False,
-              updates_per_chunk=2,
-              progress=False)  # fmt: skip
+    ppo.train(ppo.Config(**TINY), mjzoo.envs.make(SPEC, episode_steps=10), out_dir=run, eval_envs=2,
+              updates_per_chunk=2, video=False, progress=False)  # fmt: skip (the CLI run's compiles serve)
     assert not (run / "task.json").exists()
     assert_usage_error(capsys, ["eval", str(run)], f"{run}: has no task.json (trained from Python?)", "--task")
     seen = []
@@ -189,6 +193,8 @@ def test_collect_writes_a_runs_deterministic_episodes(capsys, cli_run, in_user_d
     before = snapshot(out.parent)
     assert_usage_error(capsys, ["collect", str(cli_run), "--out", str(out)], f"--out {out} exists: give --overwrite")
     assert snapshot(out.parent) == before
+    assert_usage_error(capsys, ["collect", str(cli_run), "--out", str(out), "--overwrite", "--task", f"{MODULE}:make_endless"],
+                       "make_endless: the task has no time limit", "give --steps")  # fmt: skip
     cli.main(["collect", str(cli_run), "--out", str(out), "--episodes", "3", "--overwrite"])
     again = np.load(out)
     assert all(np.array_equal(data[k], again[k]) for k in data)  # deterministic policy, same seed

@@ -118,6 +118,8 @@ def train(
             config_values["total_steps"] = total_steps
         cfg = build_config(module, env, config_values)
         task = mjzoo.envs.make(env, **env_values)
+        if task.time_limit is None:  # evaluation runs one episode
+            raise UsageError(f"{env}: the task has no time limit (mjzoo.with_time_limit) to end its evaluation episodes")
         if resume is None:
             out = out or Path("runs") / f"{slug(env)}-{algorithm}"
             runs.refuse_existing(out, (*training.RUN_FILES, "task.json"), f"continue it with --resume {out}, or choose a new --out")  # fmt: skip
