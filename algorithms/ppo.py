@@ -26,6 +26,7 @@ from typing import Any, Literal
 import jax
 import jax.numpy as jnp
 import optax
+
 from mjzoo import learning
 from mjzoo.harness import training
 from mjzoo.learning import distributions, losses, networks, normalization

@@ -28,8 +28,8 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 from jax.sharding import NamedSharding, PartitionSpec
-from mjzoo.harness import checkpoints, plotting, rendering
-from mjzoo.harness import metrics as metrics_lib
+
+from mjzoo.harness import checkpoints, metrics as metrics_lib, plotting, rendering
 from mjzoo.types import Task
 
 __all__ = [

@@ -10,6 +10,7 @@ from __future__ import annotations
 import jax
 import jax.numpy as jnp
 import numpy as np
+
 from mjzoo.types import Task
 
 __all__ = ["to_controls"]

@@ -27,6 +27,7 @@ from typing import Any
 
 import jax
 import jax.numpy as jnp
+
 from mjzoo import checks
 from mjzoo.combinators import with_auto_reset
 from mjzoo.running import reset, transition

@@ -14,6 +14,7 @@ from typing import Any, NamedTuple
 
 import jax
 import jax.numpy as jnp
+
 from mjzoo import checks
 from mjzoo.learning.collection import Policy
 from mjzoo.running import reset, transition

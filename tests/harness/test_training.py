@@ -9,8 +9,9 @@ import types
 
 import jax
 import jax.numpy as jnp
-import mjzoo
 import pytest
+
+import mjzoo
 from mjzoo.harness import training
 
 XML = """

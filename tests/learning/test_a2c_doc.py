@@ -10,9 +10,10 @@ import types
 from pathlib import Path
 
 import jax
-import mjzoo.envs
 import numpy as np
 import pytest
+
+import mjzoo.envs
 from mjzoo.harness import training
 
 DOC = Path(__file__).resolve().parents[2] / "docs" / "own-algorithm.md"

@@ -8,9 +8,10 @@ from __future__ import annotations
 import chex
 import jax
 import jax.numpy as jnp
-import mjzoo
 import numpy as np
 import pytest
+
+import mjzoo
 from mjzoo import learning
 
 XML = """
