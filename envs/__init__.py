@@ -102,7 +102,8 @@ def planning(spec: str) -> base.PlanningSetup:
     if _is_user(spec):
         setup = getattr(importlib.import_module(spec.partition(":")[0]), "PLANNING", _ONE_EPISODE)
         if not isinstance(setup, base.PlanningSetup):
-            raise TypeError(f"{spec}: its module's PLANNING (type {type(setup).__name__}) is not a mjzoo.envs.base.PlanningSetup")
+            raise TypeError(f"{spec}: its module's PLANNING (type {type(setup).__name__}) "
+                            "is not a mjzoo.envs.base.PlanningSetup")
         return setup
     if spec not in _PLANNING:
         raise KeyError(f"{spec!r} has no planning setup; envs with one: {sorted(_PLANNING)}")
@@ -121,7 +122,8 @@ def closed_loop_problem(
     unlimited = {} if _is_user(spec) else {"episode_steps": 10**9}  # a user's factory may not take it
     sim_task = build(**unlimited)
     if not (seconds or setup.seconds) and sim_task.time_limit is None:
-        raise ValueError(f"{spec}: the task has no time limit (mjzoo.with_time_limit) to set the run's length; give seconds")
+        raise ValueError(f"{spec}: the task has no time limit (mjzoo.with_time_limit) to set the run's length; "
+                         "give seconds")
     return Problem(
         planner=planner, config=config, sim_task=sim_task, plan_task=setup.plan_task(build, **unlimited),
         seconds=seconds or setup.seconds or int(sim_task.time_limit) * control_dt(sim_task),
@@ -242,10 +244,12 @@ def _imported(spec: str) -> Callable[..., Task]:
     except ModuleNotFoundError as e:
         if not e.name or not (module_name + ".").startswith(e.name + "."):
             raise  # a module the user's module imports: their bug, with its traceback
-        raise ValueError(f"task spec {spec!r}: no module named {e.name!r} (from the current directory or sys.path)") from e
+        raise ValueError(f"task spec {spec!r}: no module named {e.name!r} (from the current directory or "
+                         "sys.path)") from e
     if not hasattr(module, attribute):
         raise ValueError(f"task spec {spec!r}: module {module_name!r} has no attribute {attribute!r}")
     found = getattr(module, attribute)
     if not callable(found):
-        raise TypeError(f"task spec {spec!r}: {attribute} is not callable (type {type(found).__name__}); expected a function returning a Task")
+        raise TypeError(f"task spec {spec!r}: {attribute} is not callable (type {type(found).__name__}); "
+                        "expected a function returning a Task")
     return found

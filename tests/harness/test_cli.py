@@ -236,12 +236,13 @@ COUNTER = types.ModuleType("counter")  # an algorithm whose state counts its upd
 COUNTER.init = lambda config, task, key: Count(jnp.zeros((), jnp.int32), jnp.zeros(()))
 COUNTER.update = lambda config, task, s: (Count(s.updates + 1, s.total + 1.0), {"loss/total": s.total})
 COUNTER.evaluate = lambda config, task, s, key, n, steps: (s.total, jnp.zeros(n), None)
+COUNTER.PER_ENV_FIELDS = ()
 
 
 def test_training_resumes_from_the_newest_intact_checkpoint(tmp_path):
     """A resume skips a damaged newest checkpoint (warning), sets it aside, cuts
     metrics.jsonl back and trains on to the same end, saving that step anew."""
-    settings = training.Settings(out_dir=tmp_path, updates_per_chunk=1, video=False, progress=False)
+    settings = training.Settings(out_dir=tmp_path, updates_per_chunk=1, eval_steps=1, video=False, progress=False)
     training.run(COUNTER, CountConfig(num_updates=3), {}, settings)
     damage(tmp_path / "checkpoints", 30)
     with pytest.warns(checkpoints.DamagedCheckpointWarning, match="checkpoint 30 is damaged .*restored checkpoint 20"):
@@ -313,7 +314,7 @@ def test_resume_keeps_the_runs_own_settings(capsys, tmp_path, monkeypatch, ppo_s
 
 def test_training_refuses_a_directory_that_holds_a_run_unless_told(tmp_path):
     """From Python too: no file of an earlier run is touched without resume or overwrite."""
-    settings = training.Settings(out_dir=tmp_path, updates_per_chunk=1, video=False, progress=False)
+    settings = training.Settings(out_dir=tmp_path, updates_per_chunk=1, eval_steps=1, video=False, progress=False)
     training.run(COUNTER, CountConfig(num_updates=2), {}, settings)
     before = snapshot(tmp_path)
     with pytest.raises(FileExistsError, match=r"already holds a run \(config.json, metrics.jsonl, checkpoints/"):

@@ -16,6 +16,7 @@ import pytest
 import mjzoo.envs
 from mjzoo.algorithms import ppo, predictive_sampling
 from mjzoo.harness import cli, training
+
 from test_cli import TINY, assert_usage_error, snapshot  # the command's shared test helpers
 
 MODULE = "mjzoo_cli_user_tasks"  # unique: imported modules stay in sys.modules

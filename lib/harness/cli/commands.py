@@ -33,9 +33,9 @@ def envs() -> None:
 
 
 def demo(env: tuple[str, ...] = (), num_envs: int = 32, steps: int = 250, seed: int = 0) -> None:
-    """Roll out a uniformly random policy on each env (all registered ones by default) in
-    a vmapped batch of `num_envs` and print the return of each first episode (up to
-    `steps` steps)."""
+    """Roll out a uniformly random policy on each env (all registered ones by default)
+    in a vmapped batch of --num-envs envs and print the return of each first episode,
+    up to --steps steps."""
     names = env or tuple(mjzoo.envs.names())
     with checking():
         at_least_one(num_envs=num_envs, steps=steps)
@@ -93,13 +93,15 @@ def train(
     task.json, config.json, metrics.jsonl, TensorBoard events, checkpoints, curves.png
     and eval.mp4 to --out (default runs/ENV-ALGORITHM), which must not hold a run.
 
-    --config takes NAME=VALUE fields of the algorithm's Config (defaults: the env's; for
-    a factory, the Config's own); --env-overrides NAME=VALUE overrides of the env (see
-    `mjzoo envs`) or a factory's keyword arguments. Evaluation runs the task's episode
-    length. --resume DIR continues the run in DIR from its newest intact checkpoint with
-    its saved settings (--seed, --eval-envs and --updates-per-chunk too, unless given
-    again, for the same result as an uninterrupted run). A new run's: --seed 0
-    --eval-envs 16 --updates-per-chunk 10.
+    --config takes NAME=VALUE fields of the algorithm's Config, over the env's defaults;
+    a factory has none, so the Config's own apply. --env-overrides takes NAME=VALUE
+    overrides of the env, as `mjzoo envs` lists them, or a factory's keyword arguments.
+    Evaluation runs the task's episode length.
+
+    --resume DIR continues the run in DIR from its newest intact checkpoint with its
+    saved settings, --seed, --eval-envs and --updates-per-chunk included unless given
+    again, for the same result as an uninterrupted run. A new run's defaults: seed 0,
+    eval envs 16, updates per chunk 10.
     """
     from mjzoo.harness import checkpoints, training
 
@@ -122,7 +124,8 @@ def train(
             raise UsageError(f"{env}: the task has no time limit (mjzoo.with_time_limit) to end its evaluation episodes")
         if resume is None:
             out = out or Path("runs") / f"{slug(env)}-{algorithm}"
-            runs.refuse_existing(out, (*training.RUN_FILES, "task.json"), f"continue it with --resume {out}, or choose a new --out")  # fmt: skip
+            hint = f"continue it with --resume {out}, or choose a new --out"
+            runs.refuse_existing(out, (*training.RUN_FILES, "task.json"), hint)
         settings = training.Settings(out_dir=out, video=video, resume=resume is not None, **run_settings)
     if resume is None:
         out.mkdir(parents=True, exist_ok=True)
@@ -163,12 +166,13 @@ def evaluate(
     video: Path | None = None,
 ) -> None:
     """Reload RUN's newest intact checkpoint, run deterministic episodes of --steps
-    (default: the task's episode length), print the mean return and write a video
-    (default RUN/eval.mp4).
+    steps, by default the task's episode length, print the mean return and write a
+    video, by default RUN/eval.mp4.
 
-    The task is the one RUN/task.json names with its overrides; --task ENV_OR_FACTORY
-    names another (and a run trained from Python, which has no task.json, needs it);
-    --env-overrides NAME=VALUE go on top, e.g. to evaluate under other physics.
+    The task is the one RUN/task.json names, with its overrides. --task names another,
+    a registered env or package.module:factory; a run trained from Python has no
+    task.json and needs it. --env-overrides NAME=VALUE go on top, e.g. to evaluate
+    under other physics.
     """
     from mjzoo.harness import training
 
@@ -202,12 +206,13 @@ def plan(
     planner and write summary.json (success, final_cost, plan_hz, plan_latency_ms),
     plan.png and plan.mp4 to --out (default runs/ENV-ALGORITHM-plan).
 
-    By default the simulation runs in wall-clock time and the planner replans at
-    --plan-hz (default: the env's replanning period); --offline runs the whole episode
-    as one jitted scan instead. --config takes NAME=VALUE fields of the planner's Config
-    (defaults: the env's). The planning task, hooks, success test and --seconds default
-    are the env's (`mjzoo.envs.planning`): a factory's module's PLANNING, else one
-    episode replanning every step, with no success test (final_cost tells).
+    By default the simulation runs in wall-clock time and the planner replans at the
+    rate --plan-hz, by default the env's replanning period; --offline runs the whole
+    episode as one jitted scan instead. --config takes NAME=VALUE fields of the
+    planner's Config, over the env's defaults; --env-overrides NAME=VALUE change the
+    env. The planning task, hooks, success test and length (--seconds) are the env's,
+    from mjzoo.envs.planning: for a factory its module's PLANNING, else one episode,
+    replanning every step, with no success test (final_cost tells).
     """
     from mjzoo.harness import plan_report
     from mjzoo.planning import realtime

@@ -34,20 +34,21 @@ def collect(
     seed: int = 0,
     overwrite: bool = False,
 ) -> None:
-    """Roll out SOURCE for --episodes episodes and write them to --out, an .npz file
-    (refused if it exists, unless --overwrite).
+    """Roll out SOURCE for --episodes episodes and write them to --out, an .npz file,
+    which must not exist unless --overwrite.
 
-    SOURCE is a run directory (its policy, deterministic, on its task.json's task or
-    --task's, as `mjzoo eval`) or a planner: predictive_sampling, cem or mppi, closed
-    loop on --task ENV_OR_FACTORY (--config NAME=VALUE fields of its Config, as `mjzoo
-    plan`). --env-overrides NAME=VALUE change the task. Each episode lasts --steps
-    control steps (default: the task's episode length; a planner: `mjzoo plan`'s run)
-    and goes on past an early end: cut each at its first terminated or truncated step.
+    SOURCE is a run directory: its policy, deterministic, on the task of its task.json
+    or of --task, as in `mjzoo eval`. Or a planner, predictive_sampling, cem or mppi,
+    closed loop on the task --task names, with --config NAME=VALUE fields of its Config,
+    as in `mjzoo plan`. --env-overrides NAME=VALUE change the task. Each episode runs
+    for --steps control steps, by default the task's episode length (a planner: the
+    length of `mjzoo plan`'s run), and goes on past an early end: cut each at its
+    first terminated or truncated step.
 
-    The file holds, for N episodes of T steps: the states' qpos [N, T+1, nq], qvel
-    [N, T+1, nv], time [N, T+1] and obs [N, T+1, ...] (a dict observation: obs/KEY),
-    the first state included; each step's action [N, T, nu] (the controls applied),
-    reward, terminated and truncated [N, T].
+    For N episodes of T steps the file holds the states' qpos [N, T+1, nq], qvel [N,
+    T+1, nv], time [N, T+1] and obs [N, T+1, ...], the first state included (a dict
+    observation: obs/KEY for each entry), and each step's action [N, T, nu] (the
+    controls applied), reward, terminated and truncated [N, T].
     """
     with checking():
         at_least_one(episodes=episodes)
@@ -64,12 +65,12 @@ def collect(
             spec, steps = trained.spec, episode_steps(trained.task, trained.spec, steps)
     keys = jax.random.split(jax.random.key(seed), episodes)
     if source in PLANNERS:
-        p = problem
-        episodes_run = _planned(p.planner, p.config, p.sim_task, p.plan_task, p.hooks, keys, p.num_replans, p.replan_every)
+        rolled = _planned(problem.planner, problem.config, problem.sim_task, problem.plan_task, problem.hooks,
+                                keys, problem.num_replans, problem.replan_every)  # fmt: skip
     else:  # past the checks: restoring compiles PPO's init, whose errors are bugs
         params = trained.module.policy_params(runs.restore(Path(source), trained))
-        episodes_run = _acted(trained.module, trained.cfg, trained.task, params, keys, steps)
-    arrays = as_arrays(*jax.device_get(episodes_run))
+        rolled = _acted(trained.module, trained.cfg, trained.task, params, keys, steps)
+    arrays = as_arrays(*jax.device_get(rolled))
     out.parent.mkdir(parents=True, exist_ok=True)
     np.savez(out, **arrays)
     print(f"{out}: {episodes} episodes of {arrays['action'].shape[1]} steps on {spec}")
