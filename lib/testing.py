@@ -39,7 +39,8 @@ PROPERTIES = {
     "deterministic": "the same key gives the same trajectory",
     "keys_differ": "different keys (and so different actions) give different observations",
     "no_retrace": "new numbers (every floating leaf nudged) run under the same trace; no float is static",
-    "time_limit": "an episode is truncated exactly at task.time_limit unless it terminated first, never both",
+    "time_limit": "an episode (each, when the task resets itself) is truncated exactly at task.time_limit unless "
+    "it terminated first; never both",
 }
 NUDGE = 1e-3  # relative change of every floating leaf in the no-retrace run
 
