@@ -80,23 +80,24 @@ class PlanningSetup:
     """How the sampling planners solve a task closed loop (`mjzoo plan`, the tests).
 
     Attributes:
-      seconds: length of the closed-loop run.
+      seconds: length of the closed-loop run; None: one episode (the task's time limit).
       replan_every: simulation control steps per replan.
       plan_overrides: the planning task is ``plan_view(make(name, **plan_overrides))``
         (e.g. a coarser control step); the simulation is ``make(name)``.
       configs: config fields per planner module name ("mppi", "cem", ...).
       success: ``states -> (solved, score)`` over the run's simulated states [T]
-        (numpy leaves), with the score the criterion thresholds.
+        (numpy leaves), with the score the criterion thresholds; None: no criterion
+        (a user's task without one: the report gives the final cost).
       hooks: the task's planner hooks (`mjzoo.planning.closed_loop.Hooks`).
       plan_view: ``Task -> Task`` applied to the planning task, e.g. a sharper reward
         term: a planner only sees the cost differences its samples can resolve.
     """
 
-    seconds: float
+    seconds: float | None
     replan_every: int
     plan_overrides: dict[str, Any]
     configs: dict[str, dict[str, Any]]
-    success: Callable[[Any], tuple[bool, float]]
+    success: Callable[[Any], tuple[bool, float]] | None
     hooks: Hooks = Hooks()
     plan_view: Callable[[Task], Task] | None = None
 
