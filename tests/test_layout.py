@@ -101,3 +101,14 @@ def test_exported_names_exist(package):
     assert module.__doc__, f"{package} has no docstring"
     missing = [name for name in exported if getattr(module, name, None) is None]
     assert not missing, f"{package}.__all__ names what it lacks: {missing}"
+
+
+def test_every_package_is_installed():
+    """A non-editable install ships only the packages pyproject.toml lists: each folder
+    with an __init__.py must be there (mjzoo.harness.cli once was not)."""
+    import tomllib
+
+    listed = set(tomllib.loads((ROOT / "pyproject.toml").read_text())["tool"]["setuptools"]["packages"])
+    packages = {m for m, p in modules().items() if p.name == "__init__.py"}
+    assert packages <= listed, f"pyproject.toml [tool.setuptools] packages lacks {sorted(packages - listed)}"
+
