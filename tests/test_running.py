@@ -70,7 +70,7 @@ def test_a_reward_term_that_is_not_a_scalar_is_named_with_its_shape():
         reset_shape(make(reward=vector_reward))
 
 
-@pytest.mark.parametrize("terminate, got", [(one_flag, r"one value of shape \(\)"), (per_joint, r"\[\(1,\), \(\)\]")])
+@pytest.mark.parametrize("terminate, got", [(one_flag, r"one value of shape \(\)"), (per_joint, r"shapes \[\(1,\), \(\)\]")])
 def test_a_terminate_that_is_not_two_scalars_is_named(terminate, got):
     with pytest.raises(ValueError, match=f"terminate must return two scalars \\(terminated, truncated\\), got {got}"):
         reset_shape(make(terminate=terminate))

@@ -155,13 +155,16 @@ def test_an_override_of_a_compatible_type_is_accepted(monkeypatch):
     back), None where the annotation allows it; a default of None judges only callables."""
     from typing import Callable
 
+    task, received = mjzoo.envs.make("cartpole_balance"), []
+
     def typed(*, steps: int = 5, weight: float = 1.0, height: float | None = 1.0, sizes: tuple = (64,),
               flag: bool = False, hook: Callable | None = None, extra=None, **physics_options):  # fmt: skip
-        return dict(steps=steps, weight=weight, height=height, sizes=sizes, flag=flag, hook=hook, extra=extra)
+        received.append(dict(steps=steps, weight=weight, height=height, sizes=sizes, flag=flag, hook=hook, extra=extra))
+        return task  # a factory returns a Task: make refuses anything else
 
     monkeypatch.setitem(mjzoo.envs._REGISTRY, "typed", typed)
     accepted = dict(steps=np.int64(7), weight=2, height=None, sizes=[32, 32], flag=np.bool_(True), hook=print, extra="x")
-    assert mjzoo.envs.make("typed", **accepted) == accepted
+    assert mjzoo.envs.make("typed", **accepted) is task and received == [accepted]
     mjzoo.envs.make("typed", weight=np.float32(0.5))
     mjzoo.envs.make("typed", weight=jnp.asarray(0.02))
     for overrides, message in [(dict(sizes=64), "sizes=64 must be a tuple or list"),
