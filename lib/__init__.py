@@ -14,6 +14,7 @@ rest is grouped by concern, each subpackage importing only what sits below it:
     mjzoo.algorithms    PPO, MPPI, CEM, predictive sampling
     mjzoo.envs          concrete tasks and their registry
     mjzoo.testing       check_task: the Task contract's properties, checked on any task
+    mjzoo.motion        motion references: clips, their file format, reference-state starts
 
 The subpackages load on first use (``mjzoo.learning.gae`` works after ``import mjzoo``),
 so importing the core does not pay for the harness's or Brax's imports. See
@@ -54,7 +55,7 @@ from mjzoo.types import State, Task, Trajectory, bind
 
 __version__ = "0.1.0"
 
-SUBPACKAGES = ("catalog", "learning", "planning", "harness", "interop", "algorithms", "envs", "testing")
+SUBPACKAGES = ("catalog", "learning", "planning", "harness", "interop", "algorithms", "envs", "testing", "motion")
 
 __all__ = [
     "Task",

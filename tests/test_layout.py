@@ -31,7 +31,7 @@ ALLOWED = {
 # everything: it alone reaches up.
 EXCEPTIONS = {"mjzoo.harness.cli": {"algorithms", "envs"}, "mjzoo.__main__": {"harness"}}
 MAX_LINES = 400
-LAZY_CORE = ("testing",)  # core modules `import mjzoo` loads on first use (chex, test-time only)
+LAZY_CORE = ("testing", "motion")  # core modules `import mjzoo` loads on first use
 
 
 def modules() -> dict[str, Path]:
