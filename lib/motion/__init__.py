@@ -1,8 +1,47 @@
 """Motion references: recorded trajectories a policy should move like.
 
+Clips are host data (numpy) checked against the MuJoCo model they were recorded for;
+a `Reference` is the JAX pytree a task holds (`Task.motion`): every clip resampled to
+the task's control step. AMP's discriminator, reference-state initialization
+(`mjzoo.catalog.resets.reference_state`) and style measures read it.
+
     clips        the `Clip` type and its .npz file format (`save`, `load_file`)
+    checking     `check` a clip against a model, `load` a checked clip, velocities from positions
+    resampling   `resample` to another frame rate (linear, slerp for quaternions)
+    references   the `Reference` pytree, `reference`, `sample_frame`, `frames`, `with_reference`
+    formats      public formats: IsaacLab humanoid-AMP .npz (`isaaclab_npz`)
+    measures     style measures: `nearest_window_error`
 """
 
+from mjzoo.motion import checking, clips, formats, measures, references, resampling
+from mjzoo.motion.checking import check, load, velocities_from_positions
 from mjzoo.motion.clips import Clip, load_file, save
+from mjzoo.motion.formats import isaaclab_npz
+from mjzoo.motion.measures import nearest_window_error
+from mjzoo.motion.references import Reference, frame_index, frames, reference, sample_frame, with_reference
+from mjzoo.motion.resampling import resample, slerp
 
-__all__ = ["Clip", "load_file", "save"]
+__all__ = [
+    "Clip",
+    "Reference",
+    "check",
+    "checking",
+    "clips",
+    "formats",
+    "frame_index",
+    "frames",
+    "isaaclab_npz",
+    "load",
+    "load_file",
+    "measures",
+    "nearest_window_error",
+    "reference",
+    "references",
+    "resample",
+    "resampling",
+    "sample_frame",
+    "save",
+    "slerp",
+    "velocities_from_positions",
+    "with_reference",
+]
