@@ -27,6 +27,9 @@ commands), and below `with_auto_reset` so that every episode is randomized. Cost
 auto-reset computes a fresh reset at every step (and keeps it where an episode ended),
 so the `mjx.forward` runs every step too, about one physics step's worth of work.
 
+Reference-state initialization (`reference_state`) starts episodes at frames of a
+`mjzoo.motion.Reference`: the whole qpos and qvel of a recorded frame.
+
 Items use the free joint of the base `body` (None: the model's first free joint, see
 `mjzoo.names`) or hinge and slide joints (`joints=None`: all of them). The free joint's `qvel` is MuJoCo's: linear
 velocity in the world frame, angular velocity in the body frame.
@@ -42,7 +45,7 @@ import mujoco
 import numpy as np
 from mujoco import mjx
 
-from mjzoo import checks, names
+from mjzoo import checks, motion, names
 from mjzoo.types import State, Task, bind
 
 __all__ = [
@@ -54,6 +57,7 @@ __all__ = [
     "base_height",
     "base_tilt",
     "base_velocity",
+    "reference_state",
 ]
 
 Array = jax.Array
@@ -263,3 +267,39 @@ def base_velocity(mj_model: mujoco.MjModel, linear=(0.0, 0.0, 0.0), angular=(0.0
 def _base_velocity(qvel_idx, limits, model, data, key):
     kick = jax.random.uniform(key, (6,), minval=-limits, maxval=limits)
     return data.replace(qvel=data.qvel.at[qvel_idx].add(kick))
+
+
+# --- reference-state initialization --------------------------------------------------
+
+
+def reference_state(reference: motion.Reference, probability: float = 1.0) -> ResetItem:
+    """With `probability`, the episode starts at a frame of `reference` drawn by
+    `motion.sample_frame` (clip by weight, frame uniform in the clip): its qpos and
+    qvel replace the whole state. Otherwise the task's own reset state is kept.
+
+    Writes ``info["reference_clip"]`` and ``info["reference_frame"]`` (int32 []): the
+    clip and frame started from, -1 and -1 when the task's own reset was kept (a
+    tracker can follow the reference from there). A looping clip sampled mid-way
+    keeps its root position as recorded. The reference and `probability` in [0, 1]
+    are leaves: other clips or probabilities of the same shapes do not recompile.
+    """
+    who = "resets.reference_state"
+    if not isinstance(reference, motion.Reference):
+        raise TypeError(f"{who}: reference must be a motion.Reference (motion.reference(...)), "
+                        f"got {type(reference).__name__}")  # fmt: skip
+    return bind(_reference_state, reference, checks.number(who, "probability", probability, 0.0, 1.0))
+
+
+def _reference_state(reference, probability, model, data, key):
+    if reference.qpos.shape[1:] != data.qpos.shape or reference.qvel.shape[1:] != data.qvel.shape:
+        raise ValueError(f"resets.reference_state: the reference has nq={reference.qpos.shape[1]}, "
+                         f"nv={reference.qvel.shape[1]} but the task's model nq={data.qpos.shape[0]}, "
+                         f"nv={data.qvel.shape[0]}")  # fmt: skip
+    use_key, frame_key = jax.random.split(key)
+    clip, t = motion.sample_frame(reference, frame_key)
+    index = motion.frame_index(reference, clip, t)
+    use = jax.random.uniform(use_key) < probability
+    qpos = jnp.where(use, reference.qpos[index].astype(data.qpos.dtype), data.qpos)
+    qvel = jnp.where(use, reference.qvel[index].astype(data.qvel.dtype), data.qvel)
+    info = {"reference_clip": jnp.where(use, clip, -1), "reference_frame": jnp.where(use, t, -1)}
+    return data.replace(qpos=qpos, qvel=qvel), info
