@@ -9,8 +9,8 @@ reference window:
 
 Host numpy, vectorized: the per-frame distances between every simulated and every
 reference frame are computed once (in row chunks), then summed along diagonals, so a
-window costs one add per frame pair. T = M = 1000, J = 20, window = 10 takes well under
-a second on one CPU core.
+window costs one add per frame pair. T = M = 1000, J = 20, window = 10 or 50 took 0.8 s
+on a busy 2-core machine.
 """
 
 from __future__ import annotations
