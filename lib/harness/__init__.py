@@ -7,6 +7,8 @@
     plotting      learning curves from metrics.jsonl
     rendering     MuJoCo frames and MP4 videos of trajectories
     plan_report   summary.json, plan.png and plan.mp4 of a planning run
+    datasets      a policy's or a planner's recorded episodes on disk, with one
+                  motion clip per episode (the references AMP imitates)
     cli           the `mjzoo` command: the application on top, the one module of the
                   package that reaches up to `mjzoo.envs` and `mjzoo.algorithms`
 
@@ -16,7 +18,7 @@ TensorBoard and matplotlib, which a planner on a robot does not need.
 
 from mjzoo import lazy
 
-MODULES = ("training", "metrics", "checkpoints", "plotting", "rendering", "plan_report", "cli")
+MODULES = ("training", "metrics", "checkpoints", "plotting", "rendering", "plan_report", "datasets", "cli")
 
 __all__ = list(MODULES)
 
