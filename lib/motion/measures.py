@@ -43,9 +43,9 @@ def nearest_window_error(reference_qpos, qpos, qpos_index, window: int) -> float
         raise ValueError(f"{who}: reference_qpos {ref.shape} and qpos {sim.shape} must be [M, nq] and [T, nq]")
     if index.size == 0 or index.min() < 0 or index.max() >= ref.shape[1]:
         raise ValueError(f"{who}: qpos_index={qpos_index!r} must be column indices in [0, {ref.shape[1]})")
-    if isinstance(window, bool) or not isinstance(window, (int, np.integer)) or not 1 <= window <= min(sim.shape[0], ref.shape[0]):  # fmt: skip
-        raise ValueError(f"{who}: window={window!r} must be an integer in [1, min(T, M) = "
-                         f"{min(sim.shape[0], ref.shape[0])}]")  # fmt: skip
+    shortest = min(sim.shape[0], ref.shape[0])
+    if isinstance(window, bool) or not isinstance(window, (int, np.integer)) or not 1 <= window <= shortest:
+        raise ValueError(f"{who}: window={window!r} must be an integer in [1, min(T, M) = {shortest}]")
     distance = _frame_distances(sim[:, index], ref[:, index])  # [T, M] summed |error| over J
     num_sim, num_ref = sim.shape[0] - window + 1, ref.shape[0] - window + 1
     total = np.zeros((num_sim, num_ref))

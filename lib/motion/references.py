@@ -139,5 +139,6 @@ def with_reference(task: Task, ref: Reference) -> Task:
     step = control_dt(task)
     if abs(float(ref.dt) - step) > 1e-6:
         raise ValueError(f"{who}: the reference has a frame every {float(ref.dt):.6g} s but the task's control "
-                         f"step is {step:.6g} s; build it with motion.reference(clips, mj_model, dt={step:.6g})")  # fmt: skip
+                         f"step is {step:.6g} s; build it with motion.reference(clips, mj_model, "
+                         f"dt={step:.6g})")  # fmt: skip
     return task.replace(motion=ref)

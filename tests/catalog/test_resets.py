@@ -9,6 +9,7 @@ from __future__ import annotations
 
 import chex
 import jax
+import mujoco
 import numpy as np
 import pytest
 from catalog_tasks import BASE_AND_ARM as PHYSICS
@@ -17,6 +18,7 @@ from mujoco import mjx
 
 import mjzoo
 import mjzoo.envs
+from mjzoo import motion
 from mjzoo import physics as physics_lib
 from mjzoo.catalog import resets
 from mjzoo.types import State, Task
@@ -210,3 +212,63 @@ def test_with_resets_checks_items_and_observe():
         resets.with_resets(make_task(), item, lambda model, data, key: data.qpos, observe=observe)
     with pytest.raises(TypeError, match="observe must be callable"):
         resets.with_resets(make_task(), item, observe=None)
+
+
+# --- reference-state initialization ---------------------------------------------------
+
+
+def arm_reference():
+    """Two clips of the base-and-arm model at the task's 50 Hz: "glide" (20 frames: the
+    base moving along x, the hip swinging) and "spin" (10 frames: the wheel turning), and
+    a reference of another model (one hinge)."""
+    t = np.arange(20) / 50.0
+    glide = np.tile(QPOS0.astype(np.float64), (20, 1))
+    glide[:, 0], glide[:, 7] = 0.4 * t, 0.3 * np.sin(3 * t)
+    spin = np.tile(QPOS0.astype(np.float64), (10, 1))
+    spin[:, 9] = 2.0 * t[:10]
+    clips = [motion.Clip(name=name, fps=50.0, qpos=q, qvel=motion.velocities_from_positions(q, 50.0, MJ),
+                         joint_names=("root", "hip", "wrist", "spin"))
+             for name, q in (("glide", glide), ("spin", spin))]  # fmt: skip
+    hinge = mujoco.MjModel.from_xml_string(
+        '<mujoco><worldbody><body><joint name="j"/><geom size="0.1"/></body></worldbody></mujoco>')
+    other = motion.Clip(name="other", fps=50.0, qpos=np.zeros((3, 1)), qvel=np.zeros((3, 1)), joint_names=("j",))
+    return motion.reference(clips, MJ, dt=0.02), motion.reference(other, hinge, dt=0.02)
+
+
+@jax.jit
+@chex.assert_max_traces(n=1)  # probabilities are leaves
+def reference_resets(task: Task, keys: jax.Array) -> State:
+    return jax.vmap(lambda key: mjzoo.reset(task, key))(keys)
+
+
+def test_reference_state_starts_exactly_at_a_reference_frame_or_keeps_the_default():
+    ref, _ = arm_reference()
+
+    def stack(probability):
+        return resets.with_resets(make_task(), resets.reference_state(ref, probability), observe=observe)
+
+    s = reference_resets(stack(1.0), KEYS)
+    clip, frame = np.asarray(s.info["reference_clip"]), np.asarray(s.info["reference_frame"])
+    assert set(clip.tolist()) == {0, 1} and frame.min() == 0 and frame[clip == 0].max() == 19
+    index = np.asarray(motion.frame_index(ref, clip, frame))
+    np.testing.assert_array_equal(s.data.qpos, np.asarray(ref.qpos)[index])
+    np.testing.assert_array_equal(s.data.qvel, np.asarray(ref.qvel)[index])
+    np.testing.assert_array_equal(s.obs, np.concatenate([s.data.qpos, s.data.qvel], axis=1))
+    # Probability 0 (a leaf: same trace) keeps the task's own reset; 0.5 starts half the episodes there.
+    s = reference_resets(stack(0.0), KEYS)
+    np.testing.assert_array_equal(s.data.qpos, np.broadcast_to(QPOS0, (N, 10)))
+    np.testing.assert_array_equal(s.data.qvel, 0.0)
+    np.testing.assert_array_equal(s.info["reference_clip"], -1)
+    np.testing.assert_array_equal(s.info["reference_frame"], -1)
+    s = reference_resets(stack(0.5), KEYS)
+    assert 0.42 < np.mean(np.asarray(s.info["reference_clip"]) >= 0) < 0.58
+
+
+def test_reference_state_errors():
+    ref, other = arm_reference()
+    with pytest.raises(TypeError, match="reference must be a motion.Reference"):
+        resets.reference_state(ref.qpos)
+    with pytest.raises(ValueError, match="probability=1.5 must be"):
+        resets.reference_state(ref, 1.5)
+    with pytest.raises(ValueError, match="the reference has nq=1, nv=1 but the task's model nq=10, nv=9"):
+        resets.with_resets(make_task(), resets.reference_state(other), observe=observe)

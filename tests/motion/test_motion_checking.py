@@ -22,7 +22,8 @@ def test_a_smooth_recorded_clip_passes():
 
 def test_a_simulated_clip_passes_and_matches_the_semi_implicit_alignment_exactly():
     # Euler: qpos[t+1] = qpos[t] (+) dt qvel[t+1]; the difference d[t] equals qvel[t+1].
-    m = mujoco.MjModel.from_xml_string(TORSO_XML.replace("<worldbody>", '<option timestep="0.01" integrator="Euler"/><worldbody>'))  # fmt: skip
+    euler = '<option timestep="0.01" integrator="Euler"/><worldbody>'
+    m = mujoco.MjModel.from_xml_string(TORSO_XML.replace("<worldbody>", euler))
     d = mujoco.MjData(m)
     d.qvel[:] = [0.3, 0, 1.0, 0.5, -2.0, 1.0, 3.0, -1.0]
     qpos, qvel = [], []

@@ -55,7 +55,7 @@ def test_missing_and_extra_dofs_are_named_and_joint_map_renames(tmp_path):
 
 def test_the_root_body_is_named_or_found(tmp_path):
     path = write(tmp_path / "pelvis.npz", body_names=("shin", "pelvis"))
-    with pytest.raises(ValueError, match=r"no body 'torso' in the file \(root_body\); its bodies: \['shin', 'pelvis'\]"):
+    with pytest.raises(ValueError, match=r"no body 'torso' in the file \(root_body\); its bodies: \['shin', 'pel"):
         motion.isaaclab_npz(path, TORSO)
     clip = motion.isaaclab_npz(path, TORSO, root_body="pelvis")
     np.testing.assert_allclose(clip.qpos, TRUTH.qpos, atol=1e-12)
