@@ -33,7 +33,8 @@ of reference to policy samples changes a term's weight.
 from __future__ import annotations
 
 import math
-from typing import Any, Callable, Literal
+from collections.abc import Callable
+from typing import Any, Literal
 
 import chex
 import jax

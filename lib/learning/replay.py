@@ -56,7 +56,7 @@ class Replay:
         """The number of slots (static); for a vmapped batch of buffers, use it inside vmap."""
         return jax.tree.leaves(self.data)[0].shape[0]
 
-    def replace(self, **changes: Any) -> "Replay":
+    def replace(self, **changes: Any) -> Replay:
         return dataclasses.replace(self, **changes)
 
 
