@@ -202,8 +202,9 @@ def gradient_penalty(apply_fn: ApplyFn, params: PyTree, inputs: PyTree) -> Array
 
       penalty = mean_i || grad_x d(x_i) ||^2
 
-    The gradient is taken per sample (`jax.vmap` of `jax.grad`), so it is exact, not
-    the gradient of a batch sum, whatever the network. AMP penalizes it on
+    The gradient is taken per sample (`jax.vmap` of `jax.grad`), so each norm is exact
+    whatever the network (the gradient of a batch sum would mix samples wherever the
+    network couples them, e.g. through batch statistics). AMP penalizes it on
     reference samples; its equation writes the weight as w_gp / 2 with w_gp = 10, which
     is a weight of 5 on this function (no factor 1/2 here).
 
@@ -222,7 +223,7 @@ def gradient_penalty(apply_fn: ApplyFn, params: PyTree, inputs: PyTree) -> Array
 def logit_l2(logit_layer_weights: PyTree) -> Array:
     """Sum of squares of the logit (last) layer's weights, as AMP's code penalizes them.
 
-    A SUM, not a mean: the AMP authors' code weighs this sum by 0.05 (others use 0.01).
+    A SUM, not a mean, as AMP implementations penalize it (with weights 0.01 to 0.05).
     Pass the kernel only (see `last_kernel`); biases are not penalized.
 
     Args:
