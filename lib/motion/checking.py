@@ -29,7 +29,7 @@ import numpy as np
 from mjzoo import names
 from mjzoo.motion.clips import Clip, load_file
 
-__all__ = ["check", "load", "velocities_from_positions", "quaternion_addresses", "VELOCITY_TOLERANCE"]
+__all__ = ["check", "load", "velocities_from_positions", "differences", "quaternion_addresses", "VELOCITY_TOLERANCE"]
 
 VELOCITY_TOLERANCE = 0.25  # relative; a factor 1.5 in fps gives 1/3
 QUAT_TOLERANCE = 1e-3  # | |q| - 1 |

@@ -77,7 +77,7 @@ def reference(clips: Sequence[Clip] | Clip, mj_model: mujoco.MjModel, dt: float,
     clips = [clips] if isinstance(clips, Clip) else list(clips)
     if not clips or not all(isinstance(c, Clip) for c in clips):
         raise TypeError(f"{who}: clips must be a Clip or a non-empty sequence of Clips")
-    if not (isinstance(dt, (int, float)) and np.isfinite(dt) and dt > 0):
+    if isinstance(dt, bool) or not (isinstance(dt, (int, float, np.floating)) and np.isfinite(dt) and dt > 0):
         raise ValueError(f"{who}: dt={dt!r} must be a finite number of seconds > 0")
     weight = np.ones(len(clips)) if weights is None else np.asarray(weights, np.float64)
     if weight.shape != (len(clips),) or not (np.isfinite(weight).all() and (weight >= 0).all() and weight.sum() > 0):
@@ -128,7 +128,7 @@ def frames(ref: Reference, clip: Array, t: Array, num_frames: int) -> tuple[Arra
 def with_reference(task: Task, ref: Reference) -> Task:
     """`task` with ``motion=ref``, once `ref` has a frame per control step of the task
     (``ref.dt`` == `mjzoo.running.control_dt(task)`, to 1e-6 s) and the widths of its
-    model (nq, nv)."""
+    model (nq, nv). Host code: measuring the control step compiles one step of the task."""
     who = "motion.with_reference"
     if not isinstance(ref, Reference):
         raise TypeError(f"{who}: ref must be a motion.Reference (motion.reference(...)), got {type(ref).__name__}")

@@ -32,6 +32,8 @@ def resample(clip: Clip, fps: float, mj_model: mujoco.MjModel) -> Clip:
     rest interpolated linearly. Host numpy; the clip should be `check`ed first."""
     if not (np.isfinite(fps) and fps > 0):
         raise ValueError(f"motion.resample: fps={fps!r} must be a finite number > 0")
+    if clip.num_frames < 2:
+        raise ValueError(f"motion.resample: clip {clip.name!r} has {clip.num_frames} frame; give at least 2")
     i0, blend = frame_times(clip.num_frames, clip.fps, float(fps))
     quats = quaternion_addresses(mj_model)
     qpos = _lerp(clip.qpos, i0, blend)
