@@ -1,7 +1,7 @@
 """A user's own task on the command line: `package.module:factory` wherever a task is
 named (train, eval, plan, collect), found from the current directory as `python -m`
-finds modules; a run trained from Python evaluated with --task; `collect`'s trajectory
-file. The user's module is written to a temporary directory; its factory is the
+finds modules; a run trained from Python evaluated with --task; `collect`'s dataset
+directory. The user's module is written to a temporary directory; its factory is the
 pendulum with 20-step episodes, so compiles stay small."""
 
 from __future__ import annotations
@@ -15,7 +15,7 @@ import pytest
 
 import mjzoo.envs
 from mjzoo.algorithms import ppo, predictive_sampling
-from mjzoo.harness import cli, training
+from mjzoo.harness import cli, datasets, training
 
 from test_cli import TINY, assert_usage_error, snapshot  # the command's shared test helpers
 
@@ -111,11 +111,14 @@ def test_a_factory_without_planning_plans_one_episode(user_dir, monkeypatch):
         (["plan", "mppi", f"{MODULE}:make_endless"], ["make_endless: the task has no time limit", "give seconds"]),
         (["plan", "mppi", f"{MODULE}:nothing"], ["has no attribute 'nothing'"]),
         (["plan", "mppi", SPEC, "--env-overrides", "mass=2"], ["unknown override(s) ['mass']"]),
-        (["collect", "mppi", "--out", "x.npz"], ["--task: a planner needs the task to plan on"]),
-        (["collect", "mppi", "--task", SPEC, "--out", "x.txt"], ["--out x.txt: expected a file name ending in .npz"]),
-        (["collect", "no/such/run", "--out", "x.npz"], ["no/such/run: no such run directory"]),
-        (["collect", "no/such/run", "--out", "x.npz", "--config", "num_envs=2"], ["--config: only for a planner"]),
-        (["collect", "mppi", "--task", SPEC, "--out", "x.npz", "--episodes", "0"], ["--episodes must be >= 1, got 0"]),
+        (["collect", "mppi", "--out", "data"], ["--task: a planner needs the task to plan on"]),
+        (["collect", "mppi", "--task", SPEC, "--out", "x.npz"], ["--out x.npz: names a directory", "e.g. --out x"]),
+        (["collect", "mppi", "--task", SPEC, "--out", f"{MODULE}.py"], [f"--out {MODULE}.py: is a file, not a directory"]),
+        (["collect", "mppi", "--task", SPEC, "--out", "data", "--sampled"], ["--sampled: only for a run's policy"]),
+        (["collect", "no/such/run", "--out", "data"], ["no/such/run: no such run directory"]),
+        (["collect", "no/such/run", "--out", "data", "--config", "num_envs=2"], ["--config: only for a planner"]),
+        (["collect", "mppi", "--task", SPEC, "--out", "data", "--episodes", "0"], ["--episodes must be >= 1, got 0"]),
+        (["collect", "mppi", "--task", SPEC, "--out", "data", "--steps", "0"], ["--steps must be >= 1, got 0"]),
     ],
 )  # fmt: skip
 def test_a_mistake_in_a_users_task_is_one_line_and_status_2(capsys, in_user_dir, argv, words):
@@ -176,29 +179,47 @@ def test_eval_of_a_run_trained_from_python_needs_task(capsys, in_user_dir, monke
     assert seen == [10]
 
 
+def _collected(capsys, argv: list[str]) -> tuple[datasets.Dataset, list[str]]:
+    """`mjzoo collect ...`'s dataset read back, and the lines it printed."""
+    cli.main(argv)
+    return datasets.load(argv[argv.index("--out") + 1]), capsys.readouterr().out.splitlines()
+
+
 def test_collect_writes_a_runs_deterministic_episodes(capsys, cli_run, in_user_dir):
-    out = in_user_dir / "data" / "pendulum.npz"
-    cli.main(["collect", str(cli_run), "--out", str(out), "--episodes", "3"])
-    assert capsys.readouterr().out.strip() == f"{out}: 3 episodes of 20 steps on {SPEC}"
-    data = dict(np.load(out))
-    shapes = {k: v.shape for k, v in data.items()}
-    assert shapes == {"qpos": (3, 21, 1), "qvel": (3, 21, 1), "time": (3, 21), "obs": (3, 21, 3), "action": (3, 20, 1),
-                      "reward": (3, 20), "terminated": (3, 20), "truncated": (3, 20)}  # fmt: skip
-    angle, speed = data["qpos"][..., 0], data["qvel"][..., 0]
-    np.testing.assert_allclose(data["obs"], np.stack([np.cos(angle), np.sin(angle), speed], -1), atol=1e-5)
-    np.testing.assert_allclose(np.diff(data["time"], axis=1), 0.02, atol=1e-6)  # the control step
+    out = in_user_dir / "data" / "pendulum"
+    data, lines = _collected(capsys, ["collect", str(cli_run), "--out", str(out), "--episodes", "3"])
+    files = ["dataset.npz", "meta.json", *(f"motions/episode_{i:03d}.npz" for i in range(3))]
+    assert sorted(lines[:-1]) == sorted(str(out / f) for f in files)  # one line per file written
+    assert lines[-1] == (f"{out}: 3 episodes of 20 steps on {SPEC}, mean length 20.0, "
+                         f"mean return {data.returns().mean():.2f}")  # fmt: skip
+    assert (data.qpos.shape, data.action.shape, data.obs.shape, data.xpos.shape) == ((3, 21, 1), (3, 20, 1),
+                                                                                    (3, 21, 3), (3, 21, 2, 3))
+    assert data.deterministic is True and data.seed == 0 and set(data.reward_terms) == {"upright", "velocity", "effort"}
+    assert data.source == {"run": str(cli_run), "algorithm": "ppo", "task": SPEC, "env_overrides": {"upright_weight": 2.0}}
+    angle, speed = data.qpos[..., 0], data.qvel[..., 0]
+    np.testing.assert_allclose(data.obs, np.stack([np.cos(angle), np.sin(angle), speed], -1), atol=1e-5)
+    np.testing.assert_allclose(np.diff(data.time, axis=1), 0.02, atol=1e-6)  # the control step
+    assert data.dt == pytest.approx(0.02)
     assert np.all(np.abs(np.abs(angle[:, 0]) - np.pi) <= 0.1 + 1e-6)  # reset: hanging, +-0.1 rad of noise
-    assert not data["terminated"].any()  # the pendulum only ends by its time limit:
-    assert data["truncated"][:, -1].all() and not data["truncated"][:, :-1].any()
-    assert np.all(np.abs(data["action"]) <= 1.0 + 1e-6)  # the actuator's ctrlrange
+    assert not data.terminated.any() and (data.length == 20).all()  # the pendulum only ends by its time limit:
+    assert data.truncated[:, -1].all() and not data.truncated[:, :-1].any()
+    np.testing.assert_allclose(data.ctrl, data.action, atol=1e-6)  # PPO's actions are within the ctrlrange
+    assert np.all(np.abs(data.action) <= 1.0 + 1e-6)
+    clip = mjzoo.motion.load_file(out / "motions" / "episode_002.npz")
+    assert clip.num_frames == 21 and clip.joint_names == data.joint_names and clip.fps == pytest.approx(50.0)
     before = snapshot(out.parent)
-    assert_usage_error(capsys, ["collect", str(cli_run), "--out", str(out)], f"--out {out} exists: give --overwrite")
+    assert_usage_error(capsys, ["collect", str(cli_run), "--out", str(out)], f"--out {out} already holds a dataset",
+                       "give --overwrite")  # fmt: skip
     assert snapshot(out.parent) == before
     assert_usage_error(capsys, ["collect", str(cli_run), "--out", str(out), "--overwrite", "--task", f"{MODULE}:make_endless"],
                        "make_endless: the task has no time limit", "give --steps")  # fmt: skip
-    cli.main(["collect", str(cli_run), "--out", str(out), "--episodes", "3", "--overwrite"])
-    again = np.load(out)
-    assert all(np.array_equal(data[k], again[k]) for k in data)  # deterministic policy, same seed
+    again, _ = _collected(capsys, ["collect", str(cli_run), "--out", str(out), "--episodes", "3", "--overwrite"])
+    assert all(np.array_equal(a, b) for a, b in zip(data.arrays().values(), again.arrays().values()))  # same seed
+    sampled, _ = _collected(capsys, ["collect", str(cli_run), "--out", str(out.parent / "sampled"), "--episodes", "3",
+                                     "--sampled"])  # fmt: skip
+    assert sampled.deterministic is False and sampled.action.shape == data.action.shape
+    assert not np.allclose(sampled.action, data.action)  # sampled actions differ from the mean's
+    np.testing.assert_array_equal(sampled.qpos[:, 0], data.qpos[:, 0])  # from the same resets
 
 
 def test_plan_and_collect_with_a_planner_on_a_users_task(capsys, in_user_dir):
@@ -209,11 +230,14 @@ def test_plan_and_collect_with_a_planner_on_a_users_task(capsys, in_user_dir):
     summary = json.loads((out / "summary.json").read_text())
     assert summary["success"] is None and summary["env"] == SPEC and np.isfinite(summary["final_cost"])
     capsys.readouterr()
-    data_path = in_user_dir / "planned.npz"
-    cli.main(["collect", "predictive_sampling", "--task", SPEC, "--env-overrides", "episode_steps=10",
-              "--out", str(data_path), "--episodes", "2", *PLAN_CONFIG])  # fmt: skip
-    data = np.load(data_path)
-    assert data["qpos"].shape == (2, 11, 1) and data["action"].shape == (2, 10, 1)
-    assert not np.array_equal(data["qpos"][0], data["qpos"][1])  # episodes from their own resets
-    np.testing.assert_allclose(data["obs"][..., 2], data["qvel"][..., 0], atol=1e-6)
-    assert data["truncated"][:, -1].all()
+    data, lines = _collected(capsys, ["collect", "predictive_sampling", "--task", SPEC, "--env-overrides",
+                                      "episode_steps=10", "--out", str(in_user_dir / "planned"), "--episodes", "2",
+                                      "--steps", "9", *PLAN_CONFIG])  # fmt: skip
+    assert len(lines) == 5 and lines[-1].startswith(f"{in_user_dir / 'planned'}: 2 episodes of 9 steps on {SPEC}")
+    assert data.qpos.shape == (2, 10, 1) and data.action.shape == (2, 9, 1) and (data.length == 9).all()
+    assert not np.array_equal(data.qpos[0], data.qpos[1])  # episodes from their own resets
+    np.testing.assert_allclose(data.obs[..., 2], data.qvel[..., 0], atol=1e-6)
+    np.testing.assert_allclose(data.ctrl, np.clip(data.action, -1.0, 1.0), atol=1e-6)
+    assert data.deterministic is None and data.source["planner"] == "predictive_sampling"
+    assert data.source["task"] == SPEC and data.source["config"]["num_samples"] == 4
+    assert data.source["env_overrides"] == {"episode_steps": 10}

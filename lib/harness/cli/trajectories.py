@@ -1,26 +1,28 @@
-"""`mjzoo collect`: a trained policy's or a sampling planner's episodes, written as one
-.npz of motion data (e.g. reference motions for imitation)."""
+"""`mjzoo collect`: a trained policy's or a sampling planner's episodes, written as a
+dataset directory (`mjzoo.harness.datasets`): the arrays, their meta.json and one
+motion clip per episode, the reference motions imitation (AMP) reads."""
 
 from __future__ import annotations
 
 import dataclasses
-import functools
+import json
 from pathlib import Path
-from types import ModuleType
 from typing import Annotated, Any
 
-import jax
-import numpy as np
 import tyro
 
 import mjzoo
+from mjzoo.harness import datasets
 from mjzoo.harness.cli import runs
 from mjzoo.harness.cli.arguments import (PLANNERS, UsageError, algorithm_module, at_least_one, build_config,
                                          checking, episode_steps, parse_assignments)  # fmt: skip
-from mjzoo.planning import closed_loop
 from mjzoo.planning.realtime import Problem
 
-__all__ = ["collect", "as_arrays"]
+__all__ = ["collect"]
+
+# Deployable policies by (algorithm, config, deterministic, task spec, overrides): the
+# same policy function keeps `datasets.record_policy`'s compile within a process.
+_POLICIES: dict[tuple, Any] = {}
 
 
 def collect(
@@ -32,103 +34,95 @@ def collect(
     steps: int | None = None,
     config: tuple[str, ...] = (),
     seed: int = 0,
+    sampled: bool = False,
     overwrite: bool = False,
 ) -> None:
-    """Roll out SOURCE for --episodes episodes and write them to --out, an .npz file,
-    which must not exist unless --overwrite.
+    """Roll out SOURCE for --episodes episodes and write them as a dataset to the
+    directory --out, which must not hold one unless --overwrite (other files stay).
 
-    SOURCE is a run directory: its policy, deterministic, on the task of its task.json
-    or of --task, as in `mjzoo eval`. Or a planner, predictive_sampling, cem or mppi,
-    closed loop on the task --task names, with --config NAME=VALUE fields of its Config,
-    as in `mjzoo plan`. --env-overrides NAME=VALUE change the task. Each episode runs
-    for --steps control steps, by default the task's episode length (a planner: the
-    length of `mjzoo plan`'s run), and goes on past an early end: cut each at its
-    first terminated or truncated step.
+    SOURCE is a run directory: its policy on the task of its task.json or of --task, as
+    in `mjzoo eval`, with deterministic actions (the mean), or sampled ones with
+    --sampled. Or a planner, predictive_sampling, cem or mppi, closed loop on the task
+    --task names, with --config NAME=VALUE fields of its Config, as in `mjzoo plan`.
+    --env-overrides NAME=VALUE change the task. Each episode runs for --steps control
+    steps, by default the task's episode length (a planner: the length of `mjzoo
+    plan`'s run), and goes on past an early end; its length is recorded.
 
-    For N episodes of T steps the file holds the states' qpos [N, T+1, nq], qvel [N,
-    T+1, nv], time [N, T+1] and obs [N, T+1, ...], the first state included (a dict
-    observation: obs/KEY for each entry), and each step's action [N, T, nu] (the
-    controls applied), reward, terminated and truncated [N, T].
+    --out gets dataset.npz (for N episodes of T steps: qpos, qvel, time, body poses
+    xpos and xquat, obs [N, T+1, ...]; action, ctrl, reward, reward/TERM, terminated,
+    truncated [N, T]; length [N]), meta.json (names, shapes, dt, the source, the seed)
+    and motions/episode_NNN.npz, one mjzoo.motion clip per episode, cut at its length.
     """
     with checking():
         at_least_one(episodes=episodes)
-        if out.suffix != ".npz":
-            raise UsageError(f"--out {out}: expected a file name ending in .npz")
-        if out.exists() and not overwrite:
-            raise UsageError(f"--out {out} exists: give --overwrite to replace it, or choose a new --out")
+        _check_out(out, overwrite)
         if source in PLANNERS:
-            spec, problem = task, _problem(source, task, env_overrides, config, steps)
+            if sampled:
+                raise UsageError("--sampled: only for a run's policy; a planner's controls are sampled anyway")
+            problem, about = _problem(source, task, env_overrides, config, steps)
         elif config:
             raise UsageError("--config: only for a planner; a run keeps its own config")
         else:
             trained = runs.load(Path(source), task, env_overrides)
-            spec, steps = trained.spec, episode_steps(trained.task, trained.spec, steps)
-    keys = jax.random.split(jax.random.key(seed), episodes)
+            steps = episode_steps(trained.task, trained.spec, steps)
+            about = {"run": source, "algorithm": trained.module.__name__.split(".")[-1], "task": trained.spec,
+                     "env_overrides": trained.overrides}  # fmt: skip
     if source in PLANNERS:
-        rolled = _planned(problem.planner, problem.config, problem.sim_task, problem.plan_task, problem.hooks,
-                                keys, problem.num_replans, problem.replan_every)  # fmt: skip
+        dataset = datasets.record_planner(problem, seed, episodes, steps, source=about)
     else:  # past the checks: restoring compiles PPO's init, whose errors are bugs
         params = trained.module.policy_params(runs.restore(Path(source), trained))
-        rolled = _acted(trained.module, trained.cfg, trained.task, params, keys, steps)
-    arrays = as_arrays(*jax.device_get(rolled))
-    out.parent.mkdir(parents=True, exist_ok=True)
-    np.savez(out, **arrays)
-    print(f"{out}: {episodes} episodes of {arrays['action'].shape[1]} steps on {spec}")
+        act = _policy(trained, not sampled)
+        dataset = datasets.record_policy(trained.task, act, params, seed, episodes, steps, deterministic=not sampled,
+                                         source=about)  # fmt: skip
+    for path in datasets.save(out, dataset, overwrite=overwrite):
+        print(path)
+    print(f"{out}: {episodes} episodes of {dataset.num_steps} steps on {about['task']}, mean length "
+          f"{dataset.length.mean():.1f}, mean return {dataset.returns().mean():.2f}")  # fmt: skip
+
+
+def _check_out(out: Path, overwrite: bool) -> None:
+    """Refuses an --out that is not a dataset directory, or holds one (unless --overwrite)."""
+    if out.suffix == ".npz":
+        raise UsageError(f"--out {out}: names a directory (dataset.npz, meta.json and motions/ go in it), not an "
+                         f".npz file; e.g. --out {out.with_suffix('')}")  # fmt: skip
+    if out.exists() and not out.is_dir():
+        raise UsageError(f"--out {out}: is a file, not a directory")
+    found = datasets.existing(out)
+    if found and not overwrite:
+        raise UsageError(f"--out {out} already holds a dataset ({found[0]}, ...): give --overwrite to replace it, "
+                         "or choose a new --out")  # fmt: skip
 
 
 def _problem(name: str, spec: str | None, env_overrides: tuple[str, ...], config: tuple[str, ...],
-             steps: int | None) -> Problem:  # fmt: skip
-    """The planner's closed-loop problem on `spec`, as `mjzoo plan` builds it."""
+             steps: int | None) -> tuple[Problem, dict[str, Any]]:  # fmt: skip
+    """The planner's closed-loop problem on `spec`, as `mjzoo plan` builds it, and its
+    description for meta.json."""
     if spec is None:
         raise UsageError(f"--task: a planner needs the task to plan on, e.g. {name} --task pendulum_swingup")
     module = algorithm_module(name, PLANNERS)
-    cfg = build_config(module, spec, parse_assignments(config, "--config"))
-    problem = mjzoo.envs.closed_loop_problem(spec, module, cfg, **parse_assignments(env_overrides, "--env-overrides"))
-    if steps is None:
-        return problem
-    at_least_one(steps=steps)
-    return dataclasses.replace(problem, seconds=steps * problem.sim_dt)  # in whole replans
+    fields = parse_assignments(config, "--config")
+    cfg = build_config(module, spec, fields)
+    overrides = parse_assignments(env_overrides, "--env-overrides")
+    problem = mjzoo.envs.closed_loop_problem(spec, module, cfg, **overrides)
+    if steps is not None:
+        at_least_one(steps=steps)
+    about = {"planner": name, "task": spec, "env_overrides": overrides, "config": _json(_fields(cfg))}
+    return problem, about
 
 
-@functools.partial(jax.jit, static_argnums=(0, 1, 6, 7))
-def _planned(planner: ModuleType, config: Any, sim_task: mjzoo.Task, plan_task: Any, hooks: closed_loop.Hooks,
-             keys: jax.Array, num_replans: int, replan_every: int):  # fmt: skip
-    """keys [N] -> (first states [N], states after each step [N, T], controls [N, T, nu])."""
-
-    def one(key):
-        reset_key, run_key = jax.random.split(key)
-        first = mjzoo.reset(sim_task, reset_key)
-        result = closed_loop.run(planner, config, sim_task, plan_task, first, run_key, num_replans, replan_every, hooks)
-        return first, result.states, result.controls
-
-    return jax.vmap(one)(keys)
+def _policy(trained: runs.Trained, deterministic: bool) -> Any:
+    """The run's deployable policy (`module.policy`), one function per task and mode."""
+    overrides = json.dumps(trained.overrides, sort_keys=True, default=str)
+    key = (trained.module.__name__, trained.cfg, deterministic, trained.spec, overrides)
+    if key not in _POLICIES:
+        _POLICIES[key] = trained.module.policy(trained.cfg, trained.task, deterministic=deterministic)
+    return _POLICIES[key]
 
 
-@functools.partial(jax.jit, static_argnums=(0, 1, 5))
-def _acted(algorithm: ModuleType, config: Any, task: mjzoo.Task, params: Any, keys: jax.Array, steps: int):
-    """keys [N] -> (first states [N], states after each step [N, T], actions [N, T, nu])
-    of a trained deterministic policy (`algorithm.policy`)."""
-    act = algorithm.policy(config, task, deterministic=True)
-
-    def one(key):
-        reset_key, run_key = jax.random.split(key)
-        first = mjzoo.reset(task, reset_key)
-        _, trajectory = mjzoo.rollout(task, lambda obs, k: act(params, obs, k), first, run_key, steps)
-        return first, trajectory.next_state, trajectory.action
-
-    return jax.vmap(one)(keys)
+def _fields(cfg: Any) -> dict[str, Any]:
+    return {f.name: getattr(cfg, f.name) for f in dataclasses.fields(cfg)}
 
 
-def as_arrays(first: mjzoo.State, after: mjzoo.State, actions: np.ndarray) -> dict[str, np.ndarray]:
-    """The file's arrays from first states [N], the states after each step [N, T] and
-    the actions [N, T, nu] (see `collect`)."""
-
-    def states(first_leaf, after_leaf) -> np.ndarray:  # [N] and [N, T] -> [N, T+1]
-        return np.concatenate([np.asarray(first_leaf)[:, None], np.asarray(after_leaf)], axis=1)
-
-    arrays = {name: states(getattr(first.data, name), getattr(after.data, name)) for name in ("qpos", "qvel", "time")}
-    for (path, first_obs), after_obs in zip(jax.tree_util.tree_leaves_with_path(first.obs), jax.tree.leaves(after.obs)):
-        key = jax.tree_util.keystr(path, simple=True, separator="/")
-        arrays[f"obs/{key}" if key else "obs"] = states(first_obs, after_obs)
-    return {**arrays, "action": np.asarray(actions), "reward": np.asarray(after.reward),
-            "terminated": np.asarray(after.terminated), "truncated": np.asarray(after.truncated)}  # fmt: skip
+def _json(value: Any) -> Any:
+    """`value` with what JSON cannot hold (networks, functions) as its text."""
+    return json.loads(json.dumps(value, default=str))
