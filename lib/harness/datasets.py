@@ -152,7 +152,7 @@ def record_policy(task: Task, act: Act, params: Any, key: jax.Array | int, episo
     or an int seed. `deterministic` and `source` are recorded as given.
     Returns a `Dataset` of N = `episodes`, T = `steps`.
     """
-    episodes, steps = _count("episodes", episodes), _count("steps", steps)
+    episodes, steps = _count("record_policy", "episodes", episodes), _count("record_policy", "steps", steps)
     if not callable(act):
         raise TypeError(f"record_policy: act must be a function (params, obs, key) -> action, got {type(act).__name__}")
     key, seed = _key(key)
@@ -170,9 +170,9 @@ def record_planner(problem: Problem, key: jax.Array | int, episodes: int, steps:
     replan_every`). The run goes on in whole replans and is cut at `steps`. One jit,
     vmapped over episodes. The action is the control the planner commanded.
     """
-    episodes = _count("episodes", episodes)
+    episodes = _count("record_planner", "episodes", episodes)
     every = problem.replan_every
-    total = problem.num_replans * every if steps is None else _count("steps", steps)
+    total = problem.num_replans * every if steps is None else _count("record_planner", "steps", steps)
     key, seed = _key(key)
     limited = _ctrl_limited(problem.sim_task)
     raw = _planner_episodes(problem.planner, problem.config, math.ceil(total / every), every, total, problem.sim_task,
@@ -181,9 +181,9 @@ def record_planner(problem: Problem, key: jax.Array | int, episodes: int, steps:
     return _assemble(problem.sim_task, raw, seed, None, source)
 
 
-def _count(name: str, value: int) -> int:
+def _count(who: str, name: str, value: int) -> int:
     if isinstance(value, bool) or not isinstance(value, (int, np.integer)) or value < 1:
-        raise ValueError(f"{name} must be an int >= 1, got {value!r}")
+        raise ValueError(f"{who}: {name} must be an int >= 1, got {value!r}")
     return int(value)
 
 
@@ -271,7 +271,8 @@ def _assemble(task: Task, raw: dict[str, Any], seed: Any, deterministic: bool | 
 def _control_dt(time: np.ndarray) -> float:
     """The control step from the recorded times [N, T+1], as `mjzoo.control_dt` measures it
     (one transition from a reset) without compiling a step again."""
-    return float(np.max(time[:, 1] - time[:, 0]))  # max: an auto-reset in step 0 restarts its clock
+    # max: an auto-reset in step 0 restarts its clock; 7 digits: what float32 times hold.
+    return float(f"{np.max(time[:, 1] - time[:, 0]):.7g}")
 
 
 def _names(task: Task, kind: str) -> tuple[str, ...]:

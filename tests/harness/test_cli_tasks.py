@@ -113,7 +113,7 @@ def test_a_factory_without_planning_plans_one_episode(user_dir, monkeypatch):
         (["plan", "mppi", SPEC, "--env-overrides", "mass=2"], ["unknown override(s) ['mass']"]),
         (["collect", "mppi", "--out", "data"], ["--task: a planner needs the task to plan on"]),
         (["collect", "mppi", "--task", SPEC, "--out", "x.npz"], ["--out x.npz: names a directory", "e.g. --out x"]),
-        (["collect", "mppi", "--task", SPEC, "--out", f"{MODULE}.py"], [f"--out {MODULE}.py: is a file, not a directory"]),
+        (["collect", "mppi", "--task", SPEC, "--out", f"{MODULE}.py"], [f"--out {MODULE}.py: is a file, not a dir"]),
         (["collect", "mppi", "--task", SPEC, "--out", "data", "--sampled"], ["--sampled: only for a run's policy"]),
         (["collect", "no/such/run", "--out", "data"], ["no/such/run: no such run directory"]),
         (["collect", "no/such/run", "--out", "data", "--config", "num_envs=2"], ["--config: only for a planner"]),
@@ -195,7 +195,8 @@ def test_collect_writes_a_runs_deterministic_episodes(capsys, cli_run, in_user_d
     assert (data.qpos.shape, data.action.shape, data.obs.shape, data.xpos.shape) == ((3, 21, 1), (3, 20, 1),
                                                                                     (3, 21, 3), (3, 21, 2, 3))
     assert data.deterministic is True and data.seed == 0 and set(data.reward_terms) == {"upright", "velocity", "effort"}
-    assert data.source == {"run": str(cli_run), "algorithm": "ppo", "task": SPEC, "env_overrides": {"upright_weight": 2.0}}
+    assert data.source == {"run": str(cli_run), "algorithm": "ppo", "task": SPEC,
+                           "env_overrides": {"upright_weight": 2.0}}  # fmt: skip
     angle, speed = data.qpos[..., 0], data.qvel[..., 0]
     np.testing.assert_allclose(data.obs, np.stack([np.cos(angle), np.sin(angle), speed], -1), atol=1e-5)
     np.testing.assert_allclose(np.diff(data.time, axis=1), 0.02, atol=1e-6)  # the control step

@@ -78,7 +78,7 @@ def test_reward_terms_sum_to_the_reward_and_follow_the_formula(data):
 
 def test_ctrl_is_the_action_clamped_to_the_ctrlrange(data):
     assert np.any(np.abs(data.action) > 1.0)  # the clamp is exercised
-    np.testing.assert_allclose(data.ctrl, np.clip(data.action, -1.0, 1.0), rtol=1e-6)  # (XLA may round them an ulp apart)
+    np.testing.assert_allclose(data.ctrl, np.clip(data.action, -1.0, 1.0), rtol=1e-6)  # XLA may round an ulp apart
 
 
 def test_length_ends_at_the_first_fall_or_the_time_limit(data):

@@ -40,15 +40,16 @@ def collect(
     """Roll out SOURCE for --episodes episodes and write them as a dataset to the
     directory --out, which must not hold one unless --overwrite (other files stay).
 
-    SOURCE is a run directory: its policy on the task of its task.json or of --task, as
-    in `mjzoo eval`, with deterministic actions (the mean), or sampled ones with
-    --sampled. Or a planner, predictive_sampling, cem or mppi, closed loop on the task
-    --task names, with --config NAME=VALUE fields of its Config, as in `mjzoo plan`.
-    --env-overrides NAME=VALUE change the task. Each episode runs for --steps control
-    steps, by default the task's episode length (a planner: the length of `mjzoo
-    plan`'s run), and goes on past an early end; its length is recorded.
+    SOURCE is a run directory: its policy on the task of its task.json or of --task,
+    as in `mjzoo eval`, with deterministic actions (the mean), or with sampled ones
+    given --sampled. Or a planner, predictive_sampling, cem or mppi, closed loop on
+    the task that --task names, with --config NAME=VALUE fields of its Config, as
+    in `mjzoo plan`. Each of --env-overrides NAME=VALUE changes the task. Each
+    episode runs for --steps control steps, by default the task's episode length (a
+    planner: the length of `mjzoo plan`'s run), and goes on past an early end; its
+    length is recorded.
 
-    --out gets dataset.npz (for N episodes of T steps: qpos, qvel, time, body poses
+    The dataset: dataset.npz (for N episodes of T steps: qpos, qvel, time, body poses
     xpos and xquat, obs [N, T+1, ...]; action, ctrl, reward, reward/TERM, terminated,
     truncated [N, T]; length [N]), meta.json (names, shapes, dt, the source, the seed)
     and motions/episode_NNN.npz, one mjzoo.motion clip per episode, cut at its length.
