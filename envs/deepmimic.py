@@ -24,7 +24,7 @@ Only the floor collides with the body (no self-collisions: cheaper under MJX).
 
 | task | control step | observation | terminated when | reward terms (weight) |
 |---|---|---|---|---|
-| walk | 1/30 s (8 x 1/240 s) | base z, quat, joints, base velocities, joint vel (80) | root z < 0.5 m | alive 1 |
+| walk | 1/30 s (8 x 1/240 s) | base z, quat, joints, base velocities, joint vel (75) | root z < 0.5 m | alive 1 |
 """
 
 from __future__ import annotations
@@ -45,8 +45,8 @@ from mjzoo.envs import locomotion
 from mjzoo.motion import deepmimic as deepmimic_format
 from mjzoo.types import Task
 
-__all__ = ["data_path", "motion_path", "humanoid_xml", "humanoid_model", "character_joints", "walk", "walk_clips", "MAX_TORQUE",
-           "SCALE", "OPTIONS"]  # fmt: skip
+__all__ = ["MAX_TORQUE", "OPTIONS", "SCALE", "character_joints", "data_path", "humanoid_model", "humanoid_xml",
+           "motion_path", "walk", "walk_clips"]  # fmt: skip
 
 SCALE = 0.25  # pybullet loads the URDF with globalScaling=0.25; the clips are in those metres
 # Per-joint torque limits (N m) of pybullet's DeepMimic humanoid environment.
@@ -57,7 +57,7 @@ MAX_TORQUE = {"chest": 200.0, "neck": 50.0, "right_hip": 200.0, "right_knee": 15
 OPTIONS = dict(locomotion.MJX_OPTIONS, dt=1.0 / 240.0, ctrl_dt=1.0 / 30.0)
 _INSTALL = "pip install pybullet  (its wheel ships pybullet_data: the DeepMimic humanoid and clips)"
 _STANDING_HEIGHT = 0.885  # m: the root's height with straight legs, feet flat 4 mm above the floor
-Y_UP = deepmimic_format.Y_UP_TO_Z_UP
+_Y_UP = deepmimic_format.Y_UP_TO_Z_UP
 
 
 def data_path() -> Path:
@@ -66,7 +66,7 @@ def data_path() -> Path:
     if spec is None or not spec.submodule_search_locations:
         raise ModuleNotFoundError(f"the DeepMimic humanoid and clips come from the package pybullet_data, "
                                   f"which is not installed: {_INSTALL}")  # fmt: skip
-    return Path(list(spec.submodule_search_locations)[0])
+    return Path(next(iter(spec.submodule_search_locations)))
 
 
 def motion_path(clip: str) -> Path:
@@ -102,7 +102,7 @@ def humanoid_xml(armature: float = 0.01, damping: float = 1.0, friction: float =
 
 
 def humanoid_model() -> mujoco.MjModel:
-    """The DeepMimic humanoid compiled (nq 35, nv 34, nu 28); ModuleNotFoundError if
+    """The DeepMimic humanoid compiled (nq 43, nv 34, nu 28); ModuleNotFoundError if
     pybullet_data is not installed."""
     return mujoco.MjModel.from_xml_string(humanoid_xml())
 
@@ -126,8 +126,9 @@ def walk(*, episode_steps: int = 300, alive_weight: float = 1.0, min_height: flo
     """The DeepMimic humanoid free to move (module docstring's table), for AMP: no
     reward but "alive" (`alive_weight` per step not fallen), terminated when the root is
     below `min_height` (m), truncated after `episode_steps` control steps (10 s). Resets
-    stand it upright with uniform noise of `reset_noise` on the hinge joints' positions
-    and on every joint velocity. Physics options override `OPTIONS`."""
+    stand it upright (arms down), with uniform noise of `reset_noise` (rad, rad/s) on
+    the knees' and elbows' positions and velocities; start from the clips instead with
+    `mjzoo.catalog.resets.reference_state`. Physics options override `OPTIONS`."""
     physics = physics_lib.load(humanoid_xml(), **{**OPTIONS, **physics_options})
     m = physics.mj_model
     observe = locomotion.free_base_observation(m)
@@ -188,9 +189,9 @@ def _body(name: str, links: dict, children: dict, joint: ET.Element | None) -> E
         ET.SubElement(body, "freejoint", name="root")
     else:
         xyz, rpy = _origin(joint)
-        body.set("pos", _fmt(Y_UP @ xyz * SCALE))
+        body.set("pos", _fmt(_Y_UP @ xyz * SCALE))
         if np.any(rpy):
-            body.set("quat", _fmt(_quat(Y_UP @ _rpy_matrix(rpy) @ Y_UP.T)))
+            body.set("quat", _fmt(_quat(_Y_UP @ _rpy_matrix(rpy) @ _Y_UP.T)))
         _add_joint(body, joint)
     link = links[name]
     collisions = link.findall("collision")
@@ -210,7 +211,7 @@ def _add_joint(body: ET.Element, joint: ET.Element) -> None:
         ET.SubElement(body, "joint", name=name, type="ball")
     elif kind in ("revolute", "continuous"):
         axis = np.array([float(v) for v in joint.find("axis").get("xyz").split()])
-        element = ET.SubElement(body, "joint", name=name, type="hinge", axis=_fmt(Y_UP @ axis))
+        element = ET.SubElement(body, "joint", name=name, type="hinge", axis=_fmt(_Y_UP @ axis))
         limit = joint.find("limit")
         if kind == "revolute" and limit is not None:
             element.set("range", f"{float(limit.get('lower'))} {float(limit.get('upper'))}")
@@ -223,7 +224,7 @@ def _geom(collision: ET.Element, mass: float, link: str) -> ET.Element:
     """A geom for a URDF collision shape (sphere, capsule, box or cylinder) in the z-up
     basis; its mass gives the link its inertia."""
     xyz, rpy = _origin(collision)
-    centre, turn = Y_UP @ xyz * SCALE, Y_UP @ _rpy_matrix(rpy)  # turn: the shape's axes, z-up body frame
+    centre, turn = _Y_UP @ xyz * SCALE, _Y_UP @ _rpy_matrix(rpy)  # turn: the shape's axes, z-up body frame
     shape = next(iter(collision.find("geometry")))
     geom = ET.Element("geom", name=f"{link}_{shape.tag}", mass=f"{mass:.6g}")
     side = link.split("_")[0]
@@ -234,7 +235,8 @@ def _geom(collision: ET.Element, mass: float, link: str) -> ET.Element:
         geom.attrib.update(type="sphere", size=f"{size['radius']:.6g}", pos=_fmt(centre))
     elif shape.tag in ("capsule", "cylinder"):
         half = 0.5 * size["length"] * turn[:, 2]  # URDF capsules and cylinders lie along their z axis
-        geom.attrib.update(type=shape.tag, size=f"{size['radius']:.6g}", fromto=_fmt(np.r_[centre - half, centre + half]))
+        ends = _fmt(np.r_[centre - half, centre + half])
+        geom.attrib.update(type=shape.tag, size=f"{size['radius']:.6g}", fromto=ends)
     elif shape.tag == "box":
         half = 0.5 * SCALE * np.array([float(v) for v in shape.get("size").split()])
         geom.attrib.update(type="box", size=_fmt(half), pos=_fmt(centre), quat=_fmt(_quat(turn)))
@@ -255,9 +257,9 @@ def _add_motors(actuators: ET.Element, joint: ET.Element) -> None:
 
 
 def _origin(element: ET.Element) -> tuple[np.ndarray, np.ndarray]:
-    origin = element.find("origin")
-    read = lambda key: np.array([float(v) for v in (origin.get(key, "0 0 0") if origin is not None else "0 0 0").split()])  # noqa: E731
-    return read("xyz"), read("rpy")
+    """(xyz, rpy) of the element's <origin>, zeros where absent."""
+    attrib = {} if element.find("origin") is None else element.find("origin").attrib
+    return tuple(np.array([float(v) for v in attrib.get(key, "0 0 0").split()]) for key in ("xyz", "rpy"))
 
 
 def _rpy_matrix(rpy: np.ndarray) -> np.ndarray:

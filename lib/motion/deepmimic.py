@@ -10,9 +10,10 @@ numbers per frame:
 ``duration`` is the time (s) from this frame to the next (the last frame's is 0).
 Positions are metres, rotations local to the parent link, the world y axis up.
 
-`load` maps the frames onto a MuJoCo model whose joints are the character's in its
-order: a free joint first (the root), then one ball joint per spherical joint and one
-hinge per revolute joint. MuJoCo's world is z-up, so with ``up="y"`` every quantity is
+`load` maps the frames onto a MuJoCo model of the character: a free joint (the root),
+then one ball joint per spherical joint and one hinge per revolute joint, matched to
+the file's order by name (`joints`: MuJoCo numbers joints depth-first, a character
+file need not). MuJoCo's world is z-up, so with ``up="y"`` every quantity is
 expressed in the basis turned by +90 degrees about x (`to_z_up`: y becomes z, z becomes
 -y): positions ``(x, y, z) -> (x, -z, y)`` and every quaternion conjugated by that turn,
 which keeps its angle and turns its axis the same way, ``(w, x, y, z) -> (w, x, -z, y)``.
@@ -28,16 +29,18 @@ between frames 18 and 19) that they would spread over two frames, out of step wi
 the positions. Frames of unequal duration are first interpolated onto a uniform grid
 (linear for positions and angles, slerp for quaternions): a `Clip` has one frame rate.
 
-    import pybullet_data
-    path = f"{pybullet_data.getDataPath()}/data/motions/humanoid3d_walk.txt"
-    clip = motion.deepmimic.load(path, mj_model)  # qpos [39, 35], qvel [39, 34], fps 30
+    from mjzoo.motion import deepmimic
+    from mjzoo.envs import deepmimic as humanoid  # the model, built from pybullet_data
+    m = humanoid.humanoid_model()
+    clip = deepmimic.load(humanoid.motion_path("walk"), m, humanoid.character_joints())
+    clip.qpos.shape, clip.qvel.shape, clip.fps  # (39, 43), (39, 34), 30.0
 """
 
 from __future__ import annotations
 
 import json
+from collections.abc import Sequence
 from pathlib import Path
-from typing import Sequence
 
 import mujoco
 import numpy as np
@@ -47,7 +50,7 @@ from mjzoo.motion.checking import check, differences
 from mjzoo.motion.clips import Clip
 from mjzoo.motion.resampling import slerp
 
-__all__ = ["load", "read", "to_z_up", "Y_UP_TO_Z_UP"]
+__all__ = ["Y_UP_TO_Z_UP", "load", "read", "to_z_up"]
 
 _FREE, _BALL, _HINGE = (int(mujoco.mjtJoint.mjJNT_FREE), int(mujoco.mjtJoint.mjJNT_BALL),
                         int(mujoco.mjtJoint.mjJNT_HINGE))  # fmt: skip
