@@ -100,13 +100,12 @@ def _problem(name: str, spec: str | None, env_overrides: tuple[str, ...], config
     description for meta.json."""
     if spec is None:
         raise UsageError(f"--task: a planner needs the task to plan on, e.g. {name} --task pendulum_swingup")
-    module = algorithm_module(name, PLANNERS)
-    fields = parse_assignments(config, "--config")
-    cfg = build_config(module, spec, fields)
-    overrides = parse_assignments(env_overrides, "--env-overrides")
-    problem = mjzoo.envs.closed_loop_problem(spec, module, cfg, **overrides)
     if steps is not None:
         at_least_one(steps=steps)
+    module = algorithm_module(name, PLANNERS)
+    cfg = build_config(module, spec, parse_assignments(config, "--config"))
+    overrides = parse_assignments(env_overrides, "--env-overrides")
+    problem = mjzoo.envs.closed_loop_problem(spec, module, cfg, **overrides)
     about = {"planner": name, "task": spec, "env_overrides": overrides, "config": _json(_fields(cfg))}
     return problem, about
 
