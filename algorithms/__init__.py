@@ -2,6 +2,8 @@
 
     ppo                   proximal policy optimization (Config, init, update, train,
                           policy, evaluate)
+    amp                   adversarial motion priors: PPO with a discriminator's style
+                          reward for moving like a reference motion (the same contract)
     mppi                  model-predictive path integral control  (Config, init, plan)
     cem                   the cross-entropy method                  (Config, init, plan)
     predictive_sampling   keep the best of samples around the plan  (Config, init, plan)
@@ -12,7 +14,7 @@ gives the contract a new algorithm follows. Modules load on first use.
 
 from mjzoo import lazy
 
-MODULES = ("ppo", "mppi", "cem", "predictive_sampling")
+MODULES = ("ppo", "amp", "mppi", "cem", "predictive_sampling")
 
 __all__ = list(MODULES)
 

@@ -6,9 +6,11 @@
     act = ppo.policy(config, task)                 # deployable: act(params, obs, key)
     act(ppo.policy_params(state), obs, key)
 
-`update` is one jit: `learning.collect` runs `unroll_length` steps of `num_envs`
-auto-resetting envs, then `learning.learn` makes `num_epochs` x `num_minibatches`
-clipped-surrogate steps. Every piece is public in `mjzoo.learning` (collection, GAE,
+`update` is one jit: `rollout` (`learning.collect`) runs `unroll_length` steps of
+`num_envs` auto-resetting envs, then `improve` (`learning.learn`) makes `num_epochs` x
+`num_minibatches` clipped-surrogate steps; AMP runs the two with its own reward between
+them. A dict observation feeds each network its entry (`policy_obs_key`,
+`value_obs_key`: e.g. a critic on privileged state). Every piece is public in `mjzoo.learning` (collection, GAE,
 losses, the learner loop, normalization, networks, the squashed Gaussian, evaluation);
 this module only chooses and wires them. Actions are sampled in [-1, 1] (tanh) and
 mapped onto the actuators' ctrlrange (`learning.to_controls`); GAE bootstraps
@@ -37,9 +39,11 @@ __all__ = [
     "Config",
     "TrainState",
     "evaluate",
+    "improve",
     "init",
     "policy",
     "policy_params",
+    "rollout",
     "train",
     "update",
 ]  # fmt: skip
@@ -73,6 +77,10 @@ class Config:
     activation: Literal["swish", "tanh", "relu", "elu"] = "swish"
     recurrent: bool = False
     gru_hidden_size: int = 64
+    # A dict observation: the entry each network sees (Brax's names; e.g. the value
+    # function on privileged state). None: the whole observation, which must be an array.
+    policy_obs_key: str | None = None
+    value_obs_key: str | None = None
     total_steps: int = 1_000_000
     # Users' own pieces (any JAX library): (init, apply) pairs and an optax optimizer.
     policy_network: networks.Network | networks.RecurrentNetwork | None = None
@@ -164,6 +172,25 @@ def _optimizer(config: Config) -> optax.GradientTransformation:
     return optax.chain(optax.clip_by_global_norm(config.max_grad_norm), optax.adam(schedule))
 
 
+def _view(obs: Any, key: str | None, field: str) -> Any:
+    """The entry `key` of a dict observation (`policy_obs_key` / `value_obs_key`)."""
+    if key is None:
+        if isinstance(obs, dict):
+            raise ValueError(f"ppo.Config: the observation is a dict with entries {sorted(obs)}; set {field} to "
+                             "the entry the network sees")  # fmt: skip
+        return obs
+    if not isinstance(obs, dict) or key not in obs:
+        found = sorted(obs) if isinstance(obs, dict) else f"an array of shape {jnp.shape(obs)}"
+        raise ValueError(f"ppo.Config: {field}={key!r}, but the observation is {found}")
+    return obs[key]
+
+
+def _inputs(config: Config, stats: normalization.RunningStats, obs: Any) -> tuple[Any, Any]:
+    """(policy input, value input): the (normalized) observation's entries each network sees."""
+    obs = normalization.normalize(stats, obs) if config.normalize_observations else obs
+    return _view(obs, config.policy_obs_key, "policy_obs_key"), _view(obs, config.value_obs_key, "value_obs_key")
+
+
 def _is_recurrent(net) -> bool:
     return isinstance(net, networks.RecurrentNetwork)
 
@@ -182,11 +209,13 @@ def init(config: Config, task: Task, key: jax.Array) -> TrainState:
     env_key, policy_key, value_key, key = jax.random.split(key, 4)
     collector = learning.Collector.create(task, env_key, config.num_envs, _initial_carry(policy_net))
     example = jax.tree.map(lambda x: x[0], collector.env_state.obs)
-    params = {"policy": policy_net.init(policy_key, example), "value": value_net.init(value_key, example)}
+    stats = normalization.init_stats(example)
+    policy_example, value_example = _inputs(config, stats, example)
+    params = {"policy": policy_net.init(policy_key, policy_example), "value": value_net.init(value_key, value_example)}
     return TrainState(
         params=params,
         opt_state=_optimizer(config).init(params),
-        obs_stats=normalization.init_stats(example),
+        obs_stats=stats,
         collector=collector,
         key=key,
         updates=jnp.zeros((), jnp.int32),
@@ -203,8 +232,7 @@ def _acting(config: Config, task: Task, params: dict[str, Any], deterministic: b
     policy_net, _ = _networks(config, task)
 
     def act(carry, obs, start, key):
-        if config.normalize_observations:
-            obs = normalization.normalize(params["obs_stats"], obs)
+        obs, _ = _inputs(config, params["obs_stats"], obs)
         if _is_recurrent(policy_net):
             new_carry, out = policy_net.apply(params["policy"], carry, obs, start)
         else:
@@ -245,7 +273,7 @@ def policy(config: Config, task: Task, deterministic: bool = True) -> Callable[[
 def _loss(config: Config, task: Task, params, stats, batch) -> tuple[jax.Array, dict[str, jax.Array]]:
     """PPO loss on one minibatch: [T, n, ...] sequences (recurrent) or [n, ...] samples."""
     policy_net, value_net = _networks(config, task)
-    obs = normalization.normalize(stats, batch["obs"]) if config.normalize_observations else batch["obs"]
+    obs, value_obs = _inputs(config, stats, batch["obs"])
     if _is_recurrent(policy_net):
         def step(carry, inputs):  # over time, vmapped over the minibatch's envs
             return jax.vmap(lambda c, o, s: policy_net.apply(params["policy"], c, o, s))(carry, *inputs)
@@ -259,7 +287,7 @@ def _loss(config: Config, task: Task, params, stats, batch) -> tuple[jax.Array, 
     entropy = jnp.mean(distributions.entropy(loc, scale, batch["raw"]))
     adv = losses.normalize_advantages(batch["advantages"]) if config.normalize_advantages else batch["advantages"]
     policy_loss, aux = losses.clipped_surrogate_loss(log_prob, batch["log_prob"], adv, config.clip_epsilon)
-    values = value_net.apply(params["value"], obs)[..., 0]
+    values = value_net.apply(params["value"], value_obs)[..., 0]
     old_values = batch["values"] if config.value_clip_epsilon else None
     v_loss = losses.value_loss(values, batch["returns"], old_values, config.value_clip_epsilon)
     total = policy_loss + config.value_coef * v_loss - config.entropy_coef * entropy
@@ -268,22 +296,31 @@ def _loss(config: Config, task: Task, params, stats, batch) -> tuple[jax.Array, 
                    "loss/clip_fraction": aux["clip_fraction"]}  # fmt: skip
 
 
-def update(config: Config, task: Task, train_state: TrainState) -> tuple[TrainState, dict[str, jax.Array]]:
-    """One PPO update: collect an unroll from every env, then learn from it. Jit it with
-    `config` static; `task` and `train_state` are ordinary arguments."""
+def rollout(config: Config, task: Task, train_state: TrainState, key: jax.Array):
+    """Collects `unroll_length` steps of every env with the current sampling policy.
+
+    Returns (collector to continue from, `learning.Transitions` [unroll_length,
+    num_envs, ...], collection metrics). AMP rewrites the transitions' reward between
+    this and `improve`.
+    """
+    act = _acting(config, task, policy_params(train_state), deterministic=False)
+    return learning.collect(task, act, train_state.collector, key, config.unroll_length)
+
+
+def improve(config: Config, task: Task, train_state: TrainState, data: learning.Transitions,
+            key: jax.Array) -> tuple[TrainState, dict[str, jax.Array]]:  # fmt: skip
+    """Learns from `data` (from `rollout`, rewards as given): the observation statistics,
+    GAE from the value function, then `num_epochs` x `num_minibatches` clipped-surrogate
+    steps. Returns the state with new params, optimizer state and statistics (its
+    collector and key as given) and the learning metrics."""
     ts = train_state
     policy_net, value_net = _networks(config, task)
-    key, collect_key, learn_key = jax.random.split(ts.key, 3)
-    act = _acting(config, task, policy_params(ts), deterministic=False)
-    collector, data, collect_metrics = learning.collect(task, act, ts.collector, collect_key, config.unroll_length)
-
     stats = ts.obs_stats
     if config.normalize_observations:
         stats = normalization.update_stats(stats, data.obs, num_batch_dims=2)
 
     def value_of(obs):
-        obs = normalization.normalize(stats, obs) if config.normalize_observations else obs
-        return value_net.apply(ts.params["value"], obs)[..., 0]
+        return value_net.apply(ts.params["value"], _inputs(config, stats, obs)[1])[..., 0]
 
     values = value_of(data.obs)
     adv, returns = learning.gae(data.reward * config.reward_scaling, values, value_of(data.next_obs),
@@ -300,12 +337,20 @@ def update(config: Config, task: Task, train_state: TrainState) -> tuple[TrainSt
         updates, opt_state = optimizer.update(grads, opt_state, params)
         return (optax.apply_updates(params, updates), opt_state), metrics
 
-    (params, opt_state), learn_metrics = learning.learn(
-        sgd_step, (ts.params, ts.opt_state), batch, learn_key, num_epochs=config.num_epochs,
+    (params, opt_state), metrics = learning.learn(
+        sgd_step, (ts.params, ts.opt_state), batch, key, num_epochs=config.num_epochs,
         num_minibatches=config.num_minibatches, sequences=_is_recurrent(policy_net),
     )  # fmt: skip
-    ts = ts.replace(params=params, opt_state=opt_state, obs_stats=stats, collector=collector, key=key,
-                    updates=ts.updates + 1)  # fmt: skip
+    return ts.replace(params=params, opt_state=opt_state, obs_stats=stats), metrics
+
+
+def update(config: Config, task: Task, train_state: TrainState) -> tuple[TrainState, dict[str, jax.Array]]:
+    """One PPO update, `rollout` then `improve`. Jit it with `config` static; `task` and
+    `train_state` are ordinary arguments."""
+    key, collect_key, learn_key = jax.random.split(train_state.key, 3)
+    collector, data, collect_metrics = rollout(config, task, train_state, collect_key)
+    ts = train_state.replace(collector=collector, key=key, updates=train_state.updates + 1)
+    ts, learn_metrics = improve(config, task, ts, data, learn_key)
     return ts, {**collect_metrics, **learn_metrics}
 
 

@@ -19,6 +19,7 @@ import functools
 import json
 import shutil
 import time
+import warnings
 from collections.abc import Sequence
 from pathlib import Path
 from types import ModuleType
@@ -37,6 +38,7 @@ __all__ = [
     "Algorithm",
     "AlgorithmConfig",
     "Settings",
+    "TrainingWarning",
     "check_algorithm",
     "config_dict",
     "existing",
@@ -44,6 +46,10 @@ __all__ = [
     "run",
     "shard_envs",
 ]  # fmt: skip
+
+class TrainingWarning(UserWarning):
+    """Training has gone wrong in a way its metrics show (an algorithm's `diagnose`)."""
+
 
 RUN_FILES = ("config.json", "metrics.jsonl", "checkpoints", "tensorboard", "curves.png", "eval.mp4")  # what `run` writes
 
@@ -69,7 +75,12 @@ class Algorithm(Protocol):
     Attributes:
       PER_ENV_FIELDS: names of the state's fields whose leaves have a leading
         [num_envs] axis (env states, recurrent carries); `run` shards them over the
-        devices, and replicates the rest. ``()``: all replicated.
+        devices, and replicates the rest. ``()``: all replicated. A dotted name reaches
+        into a nested state (AMP's ``"ppo.collector"``).
+
+    Optionally ``diagnose(history) -> str | None``: given every chunk's metrics so far,
+    a warning `run` prints (once per new message) when training has gone wrong in a way
+    the numbers show (AMP: the discriminator has won).
     """
 
     PER_ENV_FIELDS: Sequence[str]
@@ -100,8 +111,15 @@ def check_algorithm(algorithm: Any, config: Any) -> None:
 
 def _check_state(algorithm: Algorithm, state: Any) -> None:
     """The state `init` made has the fields the harness and PER_ENV_FIELDS name."""
-    names = {f.name for f in dataclasses.fields(state)} if dataclasses.is_dataclass(state) else set()
-    wrong = [n for n in ("updates", *algorithm.PER_ENV_FIELDS) if n not in names]
+    def has(path: str) -> bool:
+        node = state
+        for name in path.split("."):
+            if not dataclasses.is_dataclass(node) or not hasattr(node, name):
+                return False
+            node = getattr(node, name)
+        return True
+
+    wrong = [n for n in ("updates", *algorithm.PER_ENV_FIELDS) if not has(n)]
     if wrong:
         raise TypeError(f"training.run: the state {algorithm.__name__}.init returns ({type(state).__name__}) must be "
                         f"a dataclass with the fields {wrong} (updates, and each of PER_ENV_FIELDS)")  # fmt: skip
@@ -175,14 +193,18 @@ def shard_envs(train_state: Any, per_env_fields: Sequence[str], devices: list | 
         return jax.device_put(train_state, devices[0])
     mesh = jax.sharding.Mesh(np.array(devices), ("envs",))
     split, whole = NamedSharding(mesh, PartitionSpec("envs")), NamedSharding(mesh, PartitionSpec())
-    placed = {}
-    for field in dataclasses.fields(train_state):
-        value = getattr(train_state, field.name)
-        if field.name in per_env_fields:
-            placed[field.name] = jax.tree.map(lambda x: jax.device_put(x, split if jnp.ndim(x) else whole), value)
-        else:
-            placed[field.name] = jax.device_put(value, whole)
-    return dataclasses.replace(train_state, **placed)
+
+    def place(node: Any, paths: list[list[str]]) -> Any:
+        if [] in paths:  # this node is per-env
+            return jax.tree.map(lambda x: jax.device_put(x, split if jnp.ndim(x) else whole), node)
+        if not paths or not dataclasses.is_dataclass(node):
+            return jax.device_put(node, whole)
+        return dataclasses.replace(node, **{
+            f.name: place(getattr(node, f.name), [p[1:] for p in paths if p[0] == f.name])
+            for f in dataclasses.fields(node)
+        })  # fmt: skip
+
+    return place(train_state, [path.split(".") for path in per_env_fields])
 
 
 def replicate(tree: Any, devices: list | None = None) -> Any:
@@ -264,6 +286,9 @@ def run(algorithm: Algorithm, config: AlgorithmConfig, task: Task, settings: Set
     writer = metrics_lib.MetricsWriter(out) if out is not None else None
     progress = metrics_lib.Progress(total_chunks * settings.updates_per_chunk * config.steps_per_update, "train")
     last: dict[str, float] = {}
+    history: list[dict[str, float]] = []
+    warned = None
+    diagnose = getattr(algorithm, "diagnose", None)
     trajectory = None
     started = time.perf_counter()
     try:
@@ -285,6 +310,10 @@ def run(algorithm: Algorithm, config: AlgorithmConfig, task: Task, settings: Set
                     checkpoints.save(out / "checkpoints", step, state)
             if settings.progress:
                 progress.update(step, ret=f"{last['eval/return']:.1f}", sps=f"{last['perf/steps_per_s']:,.0f}")
+            history.append(last)
+            if diagnose is not None and (message := diagnose(history)) and message != warned:
+                warnings.warn(message, TrainingWarning, stacklevel=2)
+                warned = message
     finally:
         progress.close()
         if writer is not None:

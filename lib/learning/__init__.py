@@ -14,18 +14,24 @@ writes an A2C from them).
     normalization   running observation statistics
     networks        MLP and GRU policies/critics as (init, apply) pairs
     distributions   the tanh-squashed Gaussian policy head
+    discriminators  AMP's least-squares and logistic losses, style rewards, gradient penalty
+    replay          a jit-able FIFO replay buffer of samples (`Replay`)
+    motion_features AMP's features of a frame, one function for simulation and reference
 """
 
 from mjzoo.learning import (
     actions,
     advantages,
     collection,
+    discriminators,
     distributions,
     evaluation,
     learner,
     losses,
+    motion_features,
     networks,
     normalization,
+    replay,
 )
 from mjzoo.learning.actions import to_controls
 from mjzoo.learning.advantages import gae
@@ -36,6 +42,15 @@ from mjzoo.learning.collection import (
     collect,
     feed_forward,
 )
+from mjzoo.learning.discriminators import (
+    discriminator_loss,
+    gradient_penalty,
+    least_squares_loss,
+    least_squares_reward,
+    logistic_loss,
+    logistic_reward,
+    style_reward,
+)
 from mjzoo.learning.evaluation import Evaluation, episode_steps, evaluate
 from mjzoo.learning.learner import learn
 from mjzoo.learning.losses import (
@@ -45,6 +60,7 @@ from mjzoo.learning.losses import (
     policy_gradient_loss,
     value_loss,
 )
+from mjzoo.learning.motion_features import feature_layout, feature_size, frames_features, with_feature_window
 from mjzoo.learning.networks import Network, RecurrentNetwork, gru_mlp, mlp
 from mjzoo.learning.normalization import (
     RunningStats,
@@ -52,6 +68,7 @@ from mjzoo.learning.normalization import (
     normalize,
     update_stats,
 )
+from mjzoo.learning.replay import Replay
 
 __all__ = [
     "Collector",
@@ -59,6 +76,7 @@ __all__ = [
     "Network",
     "Policy",
     "RecurrentNetwork",
+    "Replay",
     "RunningStats",
     "Transitions",
     "actions",
@@ -66,25 +84,39 @@ __all__ = [
     "clipped_surrogate_loss",
     "collect",
     "collection",
+    "discriminator_loss",
+    "discriminators",
     "distributions",
     "episode_steps",
     "evaluate",
     "evaluation",
+    "feature_layout",
+    "feature_size",
     "feed_forward",
+    "frames_features",
     "gae",
+    "gradient_penalty",
     "gru_mlp",
     "init_stats",
     "kl_penalty_loss",
     "learn",
     "learner",
+    "least_squares_loss",
+    "least_squares_reward",
+    "logistic_loss",
+    "logistic_reward",
     "losses",
     "mlp",
+    "motion_features",
     "networks",
     "normalization",
     "normalize",
     "normalize_advantages",
     "policy_gradient_loss",
+    "replay",
+    "style_reward",
     "to_controls",
     "update_stats",
     "value_loss",
+    "with_feature_window",
 ]

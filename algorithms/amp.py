@@ -1,0 +1,305 @@
+"""Adversarial Motion Priors (Peng et al., 2021): PPO whose reward adds a style term, the
+judgment of a discriminator trained to tell the policy's motion from a reference's.
+
+    task = mjzoo.motion.with_reference(task, mjzoo.motion.reference(clips, task.mj_model, dt))
+    config = amp.Config(num_envs=256, total_steps=5_000_000, task_weight=0.0)  # style only
+    state = amp.init(config, task, jax.random.key(0))
+    state, metrics = jax.jit(amp.update, static_argnums=0)(config, task, state)
+    act = amp.policy(config, task)            # deployable: act(amp.policy_params(state), obs, key)
+
+The task carries its reference (`Task.motion`, a `mjzoo.motion.Reference` at the task's
+control rate). Each `update`, one jit:
+
+1. `ppo.rollout` on the task observed through `learning.with_feature_window`: each
+   state's observation is ``{"policy": the task's own, "motion": [num_frames, F]}``,
+   the window of `learning.motion_features` of its last frames (the policy sees only
+   "policy").
+2. The discriminator scores each transition's window (the true final one where an
+   episode ended); the reward PPO learns from is
+   ``task_weight * task reward + style_weight * style reward``.
+3. `ppo.improve` on that reward (PPO's own code: GAE, clipped surrogate, minibatches).
+4. The discriminator learns, `disc_epochs` x `disc_minibatches` steps of
+   `learning.discriminator_loss`: reference windows (cut from the reference's frames,
+   featurized by the SAME function as the simulation's) against policy windows, half
+   fresh, half from a replay buffer of past policies' windows.
+
+Discriminator inputs are normalized with running statistics of both kinds of windows.
+Metrics: the discriminator's accuracy on each kind, mean logits, gradient penalty,
+the style reward's mean and std; `diagnose` warns when the discriminator has won.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import functools
+import sys
+from collections.abc import Callable, Sequence
+from typing import Any, Literal
+
+import jax
+import jax.numpy as jnp
+import optax
+
+from mjzoo import learning, motion
+from mjzoo.algorithms import ppo
+from mjzoo.harness import training
+from mjzoo.learning import discriminators, motion_features, networks, normalization, replay
+from mjzoo.types import Task
+
+__all__ = ["PER_ENV_FIELDS", "Config", "TrainState", "diagnose", "evaluate", "init", "policy", "policy_params",
+           "reference_windows", "style_task", "train", "update"]  # fmt: skip
+
+Array = jax.Array
+
+
+@dataclasses.dataclass(frozen=True, kw_only=True)
+class Config(ppo.Config):
+    """PPO's hyperparameters (all of `ppo.Config`) and AMP's (static under jit; hashable)."""
+
+    task_weight: float = 0.5  # on the task's own reward; 0: imitation by style alone
+    style_weight: float = 0.5
+    num_frames: int = 2  # frames per discriminator window (2: a transition)
+    key_bodies: tuple[str, ...] = ()  # bodies whose positions (root-relative) the discriminator sees
+    root_body: str | None = None  # None: the body of the model's first free joint, if any
+    disc_loss: Literal["least_squares", "logistic"] = "least_squares"
+    disc_hidden_sizes: tuple[int, ...] = (1024, 512)
+    disc_learning_rate: float = 1e-4
+    disc_weight_decay: float = 1e-4
+    disc_max_grad_norm: float | None = 1.0
+    disc_epochs: int = 2
+    disc_minibatches: int = 8
+    gradient_penalty_weight: float = 5.0  # the AMP paper's w_gp / 2
+    policy_gradient_penalty: bool = False
+    logit_l2_weight: float = 0.01
+    replay_size: int = 100_000  # windows of past policies
+    replay_keep_probability: float = 0.05
+
+    def __post_init__(self):
+        super().__post_init__()
+
+        def need(ok: bool, field: str, allowed: str):
+            if not ok:
+                raise ValueError(f"amp.Config: {field}={getattr(self, field)!r} is invalid; expected {allowed}")
+
+        for field in ("task_weight", "style_weight", "gradient_penalty_weight", "logit_l2_weight", "disc_weight_decay"):
+            need(getattr(self, field) >= 0, field, ">= 0")
+        need(self.task_weight + self.style_weight > 0, "style_weight", "> 0 where task_weight is 0")
+        for field in ("num_frames", "disc_epochs", "disc_minibatches", "replay_size"):
+            value = getattr(self, field)
+            need(isinstance(value, int) and not isinstance(value, bool) and value >= 1, field, "an integer >= 1")
+        need(self.num_frames >= 2, "num_frames", ">= 2 (a window holds a transition)")
+        need(self.steps_per_update % self.disc_minibatches == 0, "disc_minibatches",
+             f"a divisor of num_envs * unroll_length = {self.steps_per_update}")  # fmt: skip
+        need(self.disc_loss in ("least_squares", "logistic"), "disc_loss", "least_squares or logistic")
+        need(self.disc_learning_rate > 0, "disc_learning_rate", "> 0")
+        need(self.disc_max_grad_norm is None or self.disc_max_grad_norm > 0, "disc_max_grad_norm", "None or > 0")
+        need(0.0 <= self.replay_keep_probability <= 1.0, "replay_keep_probability", "in [0, 1]")
+        need(isinstance(self.key_bodies, tuple), "key_bodies", "a tuple of body names")
+        # AMP feeds PPO a dict observation {"policy", "motion"}; the keys are its own.
+        for field in ("policy_obs_key", "value_obs_key"):  # "policy": the task's own entry of AMP's observation
+            need(getattr(self, field) in (None, "policy"), field, "None: AMP's networks see the task's observation")
+
+
+@jax.tree_util.register_dataclass
+@dataclasses.dataclass(frozen=True)
+class TrainState:
+    """PPO's state (on the windowed task) and the discriminator's; a checkpoint saves it.
+
+    Attributes:
+      ppo: `ppo.TrainState`; its collector's observations hold the motion windows.
+      disc_params: the discriminator MLP's parameters.
+      disc_opt_state: its optimizer's state.
+      disc_stats: running statistics of discriminator inputs ([num_frames, F]).
+      replay: `learning.replay.Replay` of past policy windows [replay_size, num_frames, F].
+    """
+
+    ppo: ppo.TrainState
+    disc_params: Any
+    disc_opt_state: Any
+    disc_stats: normalization.RunningStats
+    replay: replay.Replay
+
+    @property
+    def updates(self) -> Array:
+        return self.ppo.updates
+
+    def replace(self, **changes) -> TrainState:
+        return dataclasses.replace(self, **changes)
+
+
+PER_ENV_FIELDS = ("ppo.collector",)  # the harness shards these over devices (training.Algorithm)
+
+
+# --- the pieces AMP wires -----------------------------------------------------------
+
+
+def _ppo(config: Config) -> Config:
+    """The config PPO's functions get: the networks see the "policy" entry."""
+    return dataclasses.replace(config, policy_obs_key="policy", value_obs_key="policy")
+
+
+def _features(config: Config, task: Task) -> jax.tree_util.Partial:
+    return motion_features.motion_features(task.mj_model, config.key_bodies, config.root_body)
+
+
+def style_task(config: Config, task: Task) -> Task:
+    """`task` observed with its motion window (`learning.with_feature_window`), as AMP
+    collects from it: observations ``{"policy": ..., "motion": [num_frames, F]}``."""
+    return motion_features.with_feature_window(task, _features(config, task), config.num_frames)
+
+
+def _reference(task: Task) -> motion.Reference:
+    if not isinstance(task.motion, motion.Reference):
+        raise ValueError("amp: the task has no motion reference to imitate; attach one with "
+                         "mjzoo.motion.with_reference(task, mjzoo.motion.reference(clips, task.mj_model, dt))")  # fmt: skip
+    return task.motion
+
+
+def _discriminator(config: Config) -> networks.Network:
+    return networks.mlp(1, config.disc_hidden_sizes, jax.nn.relu)
+
+
+def _disc_optimizer(config: Config) -> optax.GradientTransformation:
+    return discriminators.discriminator_optimizer(config.disc_learning_rate, config.disc_weight_decay,
+                                                  config.disc_max_grad_norm)  # fmt: skip
+
+
+def _logit(config: Config) -> Callable[[Any, Array], Array]:
+    """(params, normalized window [num_frames, F]) -> logit [1]. The gradient penalty is
+    taken with respect to this input: normalized, so that it does not grow with 1/std of
+    the features that barely vary."""
+    net = _discriminator(config)
+    return lambda params, window: net.apply(params, window.reshape(-1))
+
+
+def reference_windows(config: Config, task: Task, template: Any, key: Array, num: int) -> Array:
+    """`num` windows [num, num_frames, F] cut at random from the task's reference (clips
+    by weight, starts uniform), featurized by the function the simulation's are."""
+    ref = _reference(task)
+    frame_features = motion_features.frames_features(_features(config, task), task.model, template, ref.qpos, ref.qvel)
+    clip, start = jax.vmap(lambda k: motion.sample_frame(ref, k, config.num_frames))(jax.random.split(key, num))
+    index = jax.vmap(lambda c, t: motion.frame_index(ref, c, t + jnp.arange(config.num_frames)))(clip, start)
+    return frame_features[index]  # every frame featurized once, then gathered
+
+
+# --- init ---------------------------------------------------------------------------
+
+
+@functools.partial(jax.jit, static_argnums=0)
+def init(config: Config, task: Task, key: Array) -> TrainState:
+    """A fresh train state: PPO's (on `style_task`), the discriminator, an empty replay."""
+    ppo_key, disc_key = jax.random.split(key)
+    _reference(task)
+    ppo_state = ppo.init(_ppo(config), style_task(config, task), ppo_key)
+    window = jax.tree.map(lambda x: x[0], ppo_state.collector.env_state.obs["motion"])  # [num_frames, F]
+    disc_params = _discriminator(config).init(disc_key, window.reshape(-1))
+    return TrainState(
+        ppo=ppo_state,
+        disc_params=disc_params,
+        disc_opt_state=_disc_optimizer(config).init(disc_params),
+        disc_stats=normalization.init_stats(window),
+        replay=replay.create(config.replay_size, window),
+    )
+
+
+# --- update -------------------------------------------------------------------------
+
+
+def update(config: Config, task: Task, train_state: TrainState) -> tuple[TrainState, dict[str, Array]]:
+    """One AMP update (see the module docstring): collect, style reward, PPO, discriminator.
+    Jit it with `config` static; `task` and `train_state` are ordinary arguments."""
+    ts, pcfg, windowed = train_state, _ppo(config), style_task(config, task)
+    key, collect_key, learn_key, disc_key = jax.random.split(ts.ppo.key, 4)
+    collector, data, collect_metrics = ppo.rollout(pcfg, windowed, ts.ppo, collect_key)
+
+    windows = data.next_obs["motion"]  # [T, N, num_frames, F]: each transition's, ending at its next state
+    normalized = normalization.normalize(ts.disc_stats, windows)
+    logits = jax.vmap(jax.vmap(_logit(config), (None, 0)), (None, 0))(ts.disc_params, normalized)
+    style = discriminators.style_reward(config.disc_loss, logits[..., 0])
+    reward = config.task_weight * data.reward + config.style_weight * style
+    ppo_state = ts.ppo.replace(collector=collector, key=key, updates=ts.ppo.updates + 1)
+    ppo_state, learn_metrics = ppo.improve(pcfg, windowed, ppo_state, dataclasses.replace(data, reward=reward), learn_key)
+
+    template = jax.tree.map(lambda x: x[0], collector.env_state.data)
+    ts, disc_metrics = _learn_discriminator(config, task, ts.replace(ppo=ppo_state), windows, template, disc_key)
+    style_metrics = {"amp/style_reward": jnp.mean(style), "amp/style_reward_std": jnp.std(style),
+                     "amp/task_reward": jnp.mean(data.reward), "amp/replay_size": ts.replay.size.astype(jnp.float32)}  # fmt: skip
+    return ts, {**collect_metrics, **learn_metrics, **disc_metrics, **style_metrics}
+
+
+def _learn_discriminator(config: Config, task: Task, ts: TrainState, windows: Array, template: Any,
+                         key: Array) -> tuple[TrainState, dict[str, Array]]:  # fmt: skip
+    """`disc_epochs` x `disc_minibatches` steps on this update's windows [T, N, k, F],
+    as many replayed ones and as many reference ones."""
+    t, n = windows.shape[:2]
+    insert_key, replay_key, reference_key, learn_key = jax.random.split(key, 4)
+    buffer = replay.insert(ts.replay, windows.reshape((t * n,) + windows.shape[2:]), insert_key,
+                           config.replay_keep_probability)  # fmt: skip
+    replayed = replay.sample(buffer, replay_key, t * n).reshape(windows.shape)
+    reference = reference_windows(config, task, template, reference_key, t * n).reshape(windows.shape)
+    stats = normalization.update_stats(ts.disc_stats, windows, num_batch_dims=2)
+    stats = normalization.update_stats(stats, reference, num_batch_dims=2)
+    logit = _logit(config)
+    optimizer = _disc_optimizer(config)
+
+    def loss(params, batch):
+        policy = jnp.concatenate([batch["fresh"], batch["replayed"]])
+        return discriminators.discriminator_loss(
+            config.disc_loss, logit, params, batch["reference"], policy, config.gradient_penalty_weight,
+            config.policy_gradient_penalty, config.logit_l2_weight,
+        )  # fmt: skip
+
+    def step(carry, batch):
+        params, opt_state = carry
+        grads, metrics = jax.grad(loss, has_aux=True)(params, batch)
+        updates, opt_state = optimizer.update(grads, opt_state, params)
+        return (optax.apply_updates(params, updates), opt_state), metrics
+
+    data = jax.tree.map(lambda w: normalization.normalize(stats, w),
+                        {"fresh": windows, "replayed": replayed, "reference": reference})  # fmt: skip
+    (params, opt_state), metrics = learning.learn(step, (ts.disc_params, ts.disc_opt_state), data, learn_key,
+                                                  num_epochs=config.disc_epochs, num_minibatches=config.disc_minibatches)  # fmt: skip
+    return ts.replace(disc_params=params, disc_opt_state=opt_state, disc_stats=stats, replay=buffer), metrics
+
+
+# --- acting, evaluation, training -----------------------------------------------------
+
+
+def policy_params(train_state: TrainState) -> dict[str, Any]:
+    """What a deployed policy needs: the policy network and the statistics of the task's
+    own observation (not of the motion window)."""
+    stats = train_state.ppo.obs_stats
+    own = normalization.RunningStats(mean=stats.mean["policy"], var=stats.var["policy"], count=stats.count)
+    return {"policy": train_state.ppo.params["policy"], "obs_stats": own}
+
+
+def policy(config: Config, task: Task, deterministic: bool = True) -> Callable[[Any, Any, Array], Array]:
+    """A deployable policy ``(policy_params, obs, key) -> ctrl`` on the task's own
+    observation: PPO's, with no motion window (the discriminator is for training only)."""
+    return ppo.policy(dataclasses.replace(config, policy_obs_key=None, value_obs_key=None), task, deterministic)
+
+
+def evaluate(config: Config, task: Task, train_state: TrainState, key: Array, num_envs: int,
+             num_steps: int | None = None):  # fmt: skip
+    """Deterministic episodes scored by the task's own reward, as `ppo.evaluate`:
+    (mean return, per-env returns [num_envs], Trajectory of env 0 [num_steps])."""
+    return ppo.evaluate(_ppo(config), style_task(config, task), train_state.ppo, key, num_envs, num_steps)
+
+
+def diagnose(history: Sequence[dict[str, float]], chunks: int = 3) -> str | None:
+    """A warning when the discriminator has won: it classified more than 99% of the
+    reference windows right over the last `chunks` chunks of metrics (its reward no
+    longer tells the policy how to improve: raise the gradient penalty, lower its
+    learning rate, or shrink it)."""
+    recent = [m.get("disc/accuracy_reference") for m in history[-chunks:]]
+    if len(recent) == chunks and all(a is not None and a > 0.99 for a in recent):
+        return (f"amp: the discriminator has won: reference accuracy > 0.99 over the last {chunks} chunks "
+                f"({recent[-1]:.3f}); raise gradient_penalty_weight or lower disc_learning_rate")  # fmt: skip
+    return None
+
+
+def train(config: Config, task: Task, settings: training.Settings | None = None, **settings_kwargs):
+    """Trains with the shared harness (`mjzoo.harness.training.run`), as `ppo.train`.
+    Returns (final TrainState, last metrics)."""
+    settings = settings or training.Settings(**settings_kwargs)
+    return training.run(sys.modules[__name__], config, task, settings)
