@@ -10,10 +10,11 @@ the task's control step. AMP's discriminator, reference-state initialization
     resampling   `resample` to another frame rate (linear, slerp for quaternions)
     references   the `Reference` pytree, `reference`, `sample_frame`, `frames`, `with_reference`
     formats      public formats: IsaacLab humanoid-AMP .npz (`isaaclab_npz`)
+    deepmimic    DeepMimic's motion text files (`deepmimic.load`), y-up to z-up
     measures     style measures: `nearest_window_error`
 """
 
-from mjzoo.motion import checking, clips, formats, measures, references, resampling
+from mjzoo.motion import checking, clips, deepmimic, formats, measures, references, resampling
 from mjzoo.motion.checking import check, load, velocities_from_positions
 from mjzoo.motion.clips import Clip, load_file, save
 from mjzoo.motion.formats import isaaclab_npz
@@ -27,6 +28,7 @@ __all__ = [
     "check",
     "checking",
     "clips",
+    "deepmimic",
     "formats",
     "frame_index",
     "frames",

@@ -7,7 +7,8 @@
     mjzoo eval runs/cb            # reload the checkpoint, evaluate, write a video
     mjzoo eval runs/py --task my_pkg.tasks:make_reach    # a run trained from Python
     mjzoo plan mppi pendulum_swingup --offline  # a sampling planner, closed loop
-    mjzoo collect runs/cb --out cb.npz --episodes 32   # trajectories of the policy (or a planner)
+    mjzoo collect runs/cb --out data/cb --episodes 32  # a dataset of the policy's episodes (or a planner's)
+    mjzoo train amp humanoid_amp_walk             # adversarial motion priors: move like a reference
 
 Wherever a task is named, ``package.module:factory`` names a function returning a
 `mjzoo.Task` (importable from the current directory, as with ``python -m``), and

@@ -18,7 +18,7 @@ import mjzoo
 __all__ = ["UsageError", "checking", "at_least_one", "parse_assignments", "algorithm_module", "build_config", "episode_steps",
            "slug", "ALGORITHMS", "PLANNERS"]  # fmt: skip
 
-ALGORITHMS = ("ppo",)
+ALGORITHMS = ("ppo", "amp")
 PLANNERS = ("predictive_sampling", "cem", "mppi")
 _MISMATCH = object()  # what _as_type returns for a value of another type
 _USERS_ERRORS = (ValueError, TypeError, KeyError, FileNotFoundError, FileExistsError, NotADirectoryError)

@@ -77,7 +77,7 @@ def _random_returns(task: mjzoo.Task, keys: jax.Array, steps: int, nu: int):
 
 
 def train(
-    algorithm: Annotated[Literal["ppo"], tyro.conf.Positional],
+    algorithm: Annotated[Literal["ppo", "amp"], tyro.conf.Positional],
     env: Annotated[str, tyro.conf.Positional],
     out: Path | None = None,
     config: tuple[str, ...] = (),
