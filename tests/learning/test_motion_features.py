@@ -2,7 +2,9 @@
 (shoulder, elbow: pitch about the box's y axis) ending in a `hand`, and a tail on a ball
 joint (`hip`) ending in a `tip`. At rest, in the box's frame, the hand is at (0.8, 0, 0)
 and the tip at (-0.5, 0, 0). Features: 13 of the base, qpos 1 + 1 + 6, qvel 1 + 1 + 3,
-key bodies 3 + 3: 32. Hand-computed poses, yaw invariance, C MuJoCo replays, the window."""
+key bodies 3 + 3: 32. Hand-computed poses, yaw invariance, the fixed base, per-second
+velocities, a C MuJoCo trajectory replayed through mjx.forward, through reference frames
+and through a task that replays it under the window combinator (no MJX step to compile)."""
 
 from __future__ import annotations
 
@@ -16,7 +18,13 @@ import pytest
 from mujoco import mjx
 
 import mjzoo
-from mjzoo.learning import motion_features as mf
+from mjzoo.learning.motion_features import (  # the module: mjzoo.learning may export the function
+    feature_layout,
+    feature_size,
+    frames_features,
+    motion_features,
+    with_feature_window,
+)
 from mjzoo.types import State, Task, bind
 
 TOY = """
@@ -64,9 +72,9 @@ ARM = """
 TOY_MJ = mujoco.MjModel.from_xml_string(TOY)
 TOY_MODEL = mjx.put_model(TOY_MJ)
 TOY_DATA = mjx.make_data(TOY_MODEL)
-FEATURES = mf.motion_features(TOY_MJ, key_bodies=("hand", "tip"))
+FEATURES = motion_features(TOY_MJ, key_bodies=("hand", "tip"))
 compute = jax.jit(jax.vmap(lambda f, model, data: f(model, data), in_axes=(None, None, 0)))
-frames = jax.jit(mf.frames_features)
+frames = jax.jit(frames_features)
 
 
 def quat(axis: str, angle: float) -> np.ndarray:
@@ -105,12 +113,12 @@ def reference(qpos, qvel, features=FEATURES, model=TOY_MODEL, data=TOY_DATA) -> 
 def features_of(qpos, qvel, features=FEATURES, model=TOY_MODEL, data=TOY_DATA) -> dict[str, np.ndarray]:
     """`reference`, split by the layout."""
     out = reference(qpos, qvel, features, model, data)
-    return {name: out[:, s] for name, s in mf.feature_layout(features).items()}
+    return {name: out[:, s] for name, s in feature_layout(features).items()}
 
 
 def test_layout_names_every_slice():
-    layout = mf.feature_layout(FEATURES)
-    assert mf.feature_size(FEATURES) == 32
+    layout = feature_layout(FEATURES)
+    assert feature_size(FEATURES) == 32
     assert list(layout) == [
         "root_height", "root_tangent", "root_normal", "root_linear_velocity", "root_angular_velocity",
         "qpos/shoulder", "qpos/elbow", "qpos/hip", "qvel/shoulder", "qvel/elbow", "qvel/hip",
@@ -172,8 +180,8 @@ def test_invariant_to_yaw_and_horizontal_shift():
 def test_fixed_base_arm():
     mj_model = mujoco.MjModel.from_xml_string(ARM)
     model = mjx.put_model(mj_model)
-    features = mf.motion_features(mj_model, key_bodies="hand")
-    assert list(mf.feature_layout(features)) == ["qpos/shoulder", "qpos/wrist", "qvel/shoulder", "qvel/wrist",
+    features = motion_features(mj_model, key_bodies="hand")
+    assert list(feature_layout(features)) == ["qpos/shoulder", "qpos/wrist", "qvel/shoulder", "qvel/wrist",
                                                  "key_body/hand"]  # fmt: skip
     qpos = np.concatenate([[0.4], quat("y", 0.3)])
     qvel = np.array([0.5, 0.1, 0.2, 0.3])
@@ -187,7 +195,7 @@ def test_fixed_base_arm():
 
 def constant_motion(fps: float, seconds: float = 1.0) -> tuple[np.ndarray, np.ndarray]:
     """A clip of a motion with constant velocities; qvel by frame differences / dt."""
-    t = np.arange(int(round(seconds * fps)) + 1) / fps
+    t = np.arange(round(seconds * fps) + 1) / fps
     qpos = np.stack([toy_state([0.5 * s, 0.2 * s, 0.9], quat("z", 1.0 * s), shoulder=0.3 + 0.8 * s,
                                hip=quat("z", 0.6 * s))[0] for s in t])  # fmt: skip
     qvel = np.zeros((len(t) - 1, TOY_MJ.nv))
@@ -305,7 +313,7 @@ def reference_windows(features: np.ndarray, restart: np.ndarray) -> np.ndarray:
 
 
 def test_window_holds_the_features_of_the_last_states(recorded):
-    states = run(mf.with_feature_window(replay(recorded), FEATURES, NUM_FRAMES), num_envs=2)
+    states = run(with_feature_window(replay(recorded), FEATURES, NUM_FRAMES), num_envs=2)
     qpos, qvel = recorded[0][: NUM_STEPS + 1], recorded[1][: NUM_STEPS + 1]
     np.testing.assert_allclose(states.data.qpos[1], qpos, atol=1e-6)  # the replay replays
     expected = reference_windows(reference(qpos, qvel), np.arange(NUM_STEPS + 1) == 0)
@@ -317,7 +325,7 @@ def test_window_holds_the_features_of_the_last_states(recorded):
 
 def test_window_restarts_with_each_episode(recorded):
     task = mjzoo.with_auto_reset(mjzoo.with_time_limit(replay(recorded), 3))
-    states = run(mf.with_feature_window(task, FEATURES, NUM_FRAMES), num_envs=1)
+    states = run(with_feature_window(task, FEATURES, NUM_FRAMES), num_envs=1)
     ended = np.asarray(states.truncated[0])
     assert ended.tolist() == [False, False, False, True, False, False, True, False, False]
     frame = np.asarray(states.info["frame"][0])
@@ -332,23 +340,23 @@ def test_window_restarts_with_each_episode(recorded):
 
 def test_unknown_key_body_names_the_bodies():
     with pytest.raises(ValueError, match=r"no body named 'foot'.*'hand'"):
-        mf.motion_features(TOY_MJ, key_bodies=("hand", "foot"))
+        motion_features(TOY_MJ, key_bodies=("hand", "foot"))
 
 
 def test_bad_arguments(recorded):
     task = replay(recorded)
     with pytest.raises(ValueError, match="body 'upper' has no free joint"):
-        mf.motion_features(TOY_MJ, root_body="upper")
+        motion_features(TOY_MJ, root_body="upper")
     with pytest.raises(TypeError, match="mj_model must be a mujoco.MjModel"):
-        mf.motion_features(TOY_MODEL)
+        motion_features(TOY_MODEL)
     for bad in (1, 0, 2.5, True):
         with pytest.raises(ValueError, match=rf"num_frames={bad!r} must be an integer >= 2"):
-            mf.with_feature_window(task, FEATURES, bad)
+            with_feature_window(task, FEATURES, bad)
     with pytest.raises(ValueError, match="features were built for a model with"):
-        mf.with_feature_window(task, mf.motion_features(mujoco.MjModel.from_xml_string(ARM)), 2)
+        with_feature_window(task, motion_features(mujoco.MjModel.from_xml_string(ARM)), 2)
     with pytest.raises(TypeError, match="features must come from motion_features"):
-        mf.with_feature_window(task, jax.tree_util.Partial(len), 2)
+        with_feature_window(task, jax.tree_util.Partial(len), 2)
     with pytest.raises(ValueError, match="already keeps a motion window"):
-        mf.with_feature_window(mf.with_feature_window(task, FEATURES, 2), FEATURES, 2)
+        with_feature_window(with_feature_window(task, FEATURES, 2), FEATURES, 2)
     with pytest.raises(ValueError, match=r"qvel must have shape \[k, 11\]"):
-        mf.frames_features(FEATURES, TOY_MODEL, TOY_DATA, np.zeros((4, 13)), np.zeros((4, 12)))
+        frames_features(FEATURES, TOY_MODEL, TOY_DATA, np.zeros((4, 13)), np.zeros((4, 12)))
