@@ -1,0 +1,218 @@
+"""AMP on Brax's humanoid, on one GPU: does the humanoid learn to walk in the teacher's style, how fast, at what cost over PPO?
+
+In one process, at AMP's batch (`humanoid_amp.AMP`: 2048 envs, unrolls of 160):
+
+  (a) raw batched `mjx.step` of the humanoid's physics (the physical limit);
+  (b) PPO on `humanoid_walk`'s task reward (forward speed, alive, effort), its
+      registered hyperparameters: the walk a reward engineer gets;
+  (c) AMP on `humanoid_amp_walk` (alive and effort, no forward speed; the style reward
+      of the teacher's walk does the rest).
+
+Each trains through the shared harness (`training.run`, what `ppo.train` / `amp.train`
+call), which evaluates the deterministic policy after every chunk of updates; env 0's
+episode of each evaluation is kept (a host callback) and measured after training, off
+the clock: the style error of its steps 200-1000 (`humanoid_amp.style_error`: mean
+hinge-angle error to the nearest 10-frame reference window, rad; the reference was cut
+from step 200 of the teacher's episode, past its start from rest), its forward speed,
+whether it fell. It walks in the teacher's style (`humanoid_amp.walks_like_teacher`)
+when it lasts its 1000 steps, errs less than 0.15 rad and moves at >= 1 m/s. Reported:
+steps/s of each and AMP's overhead over PPO (time per step; goal <= 15%), wall-clock
+time (compile included) until AMP's episode first walks in style, the style error and
+speed of AMP, of PPO and of the teacher (its other 7 episodes, when
+``--teacher-episodes`` is given; else the numbers measured on them once, below), final
+returns (each on its own task's reward), and the final episodes as video (or .npz with
+``--no-video``; ``--render`` makes the videos elsewhere).
+
+    python benchmarks/amp.py --steps 60000000             # ~9 minutes on an H100
+    python benchmarks/amp.py --quick --no-video            # tiny, on a CPU: checks the script
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import os
+import sys
+import time
+import types
+from pathlib import Path
+
+if "--quick" in sys.argv:  # XLA's backend optimizations triple MJX compiles on a CPU
+    os.environ["XLA_FLAGS"] = " ".join(filter(None, [os.environ.get("XLA_FLAGS"), "--xla_backend_optimization_level=0"]))
+
+import jax  # noqa: E402
+import numpy as np  # noqa: E402
+
+sys.path.insert(0, str(Path(__file__).parent))
+from ppo_vs_brax import training_curve  # noqa: E402
+from task_overhead import inputs, raw_steps_per_s  # noqa: E402
+
+import mjzoo  # noqa: E402
+import mjzoo.envs  # noqa: E402
+from mjzoo.algorithms import amp, ppo  # noqa: E402
+from mjzoo.envs import humanoid_amp  # noqa: E402
+from mjzoo.harness import rendering, training  # noqa: E402
+
+STYLE_FROM = 200  # steps: the style is that of the steady walk (the reference starts there too)
+# The teacher's 7 episodes other than the reference's, measured as above (steps 200-1000).
+TEACHER = {"style_error": 0.0331, "style_error_range": [0.0310, 0.0345], "forward_speed_m_s": 1.948, "fell": False,
+           "source": "measured on the teacher's episodes 1-7 (walk_episodes.npz) when the reference was made"}  # fmt: skip
+QUICK = dict(num_envs=8, unroll_length=8, num_minibatches=4, num_epochs=1, disc_minibatches=2, replay_size=256)
+
+
+# --- keeping each evaluation's episode ----------------------------------------------------
+
+
+def recording(algorithm: types.ModuleType, episodes: list) -> types.ModuleType:
+    """`algorithm` whose `evaluate` also hands env 0's episode to the host: appends
+    ``(qpos [T, nq], terminated [T], truncated [T])`` to `episodes` once per evaluation
+    (`jax.debug.callback`: a copy of 100 kB, nothing computed on the host meanwhile)."""
+    wrapped = types.ModuleType(algorithm.__name__)
+    for name in ("PER_ENV_FIELDS", "init", "update", "diagnose"):
+        if hasattr(algorithm, name):
+            setattr(wrapped, name, getattr(algorithm, name))
+
+    def keep(qpos, terminated, truncated):
+        episodes.append((np.asarray(qpos), np.asarray(terminated), np.asarray(truncated)))
+
+    def evaluate(config, task, state, key, num_envs, num_steps):
+        mean, returns, trajectory = algorithm.evaluate(config, task, state, key, num_envs, num_steps)
+        after = trajectory.next_state
+        jax.debug.callback(keep, after.data.qpos, after.terminated, after.truncated)
+        return mean, returns, trajectory
+
+    wrapped.evaluate = evaluate
+    return wrapped
+
+
+def measure_episode(style_task: mjzoo.Task, qpos: np.ndarray, terminated: np.ndarray, truncated: np.ndarray) -> dict:
+    """Style error (steps `STYLE_FROM`.. of the first episode), forward speed, length,
+    fall and whether it walks in the teacher's style, of one recorded episode."""
+    done = np.flatnonzero(terminated | truncated)
+    length = int(done[0]) + 1 if done.size else len(qpos)
+    fell = bool(done.size and terminated[done[0]])
+    steady = qpos[min(STYLE_FROM, max(length - humanoid_amp.STYLE_WINDOW, 0)) : length]
+    error = humanoid_amp.style_error(style_task, steady, window=min(humanoid_amp.STYLE_WINDOW, len(steady)))
+    speed = humanoid_amp.forward_speed(steady, float(style_task.motion.dt)) if len(steady) > 1 else float("nan")
+    return {"style_error": error, "forward_speed_m_s": speed, "length": length, "fell": fell,
+            "walks_like_teacher": humanoid_amp.walks_like_teacher(error, speed, fell) and length == len(qpos)}  # fmt: skip
+
+
+# --- one trainer ------------------------------------------------------------------------
+
+
+def train(label: str, algorithm: types.ModuleType, config, task: mjzoo.Task, style_task: mjzoo.Task, out: Path,
+          quick: bool, video: bool) -> dict:  # fmt: skip
+    """Trains `algorithm` on `task` through the harness, evaluating every chunk; the row of
+    results, with the final episode saved under `out`/`label`/."""
+    episodes: list = []
+    settings = training.Settings(out_dir=out / label, updates_per_chunk=1 if quick else 5,
+                                 eval_envs=2 if quick else 16, eval_steps=50 if quick else 1000, checkpoint_every=0,
+                                 video=False, overwrite=True, progress=False)  # fmt: skip
+    start = time.perf_counter()
+    training.run(recording(algorithm, episodes), config, task, settings)
+    total = time.perf_counter() - start
+    curve, steps_per_s = training_curve(out / label / "metrics.jsonl", total)
+    measured = [measure_episode(style_task, *episode) for episode in episodes]  # one per chunk, in order
+    points = [{"step": step, "elapsed_s": seconds, "eval_return": ret, **m} for (step, seconds, ret), m in zip(curve, measured)]
+    first = next((p for p in points if p["walks_like_teacher"]), None)
+    qpos = episodes[-1][0]
+    np.savez_compressed(out / label / "final_policy.npz", qpos=qpos, dt=float(style_task.motion.dt))
+    if video:
+        render(style_task, qpos, out / label / "final_policy.mp4")
+    print(f"{label}: {steps_per_s:,.0f} steps/s, final return {curve[-1][2]:.1f}, style {measured[-1]['style_error']:.3f} "
+          f"rad, speed {measured[-1]['forward_speed_m_s']:.2f} m/s, trained {total:.0f} s", flush=True)  # fmt: skip
+    return {"config": training.config_dict(config), "steps_per_s": steps_per_s, "train_s": total,
+            "compile_s": curve[0][1] - settings.updates_per_chunk * config.steps_per_update / steps_per_s,
+            "time_to_style_s": first and first["elapsed_s"], "steps_to_style": first and first["step"],
+            "final": points[-1], "curve": points}  # fmt: skip
+
+
+def render(task: mjzoo.Task, qpos: np.ndarray, path: Path) -> None:
+    """The video of an episode's qpos [T, nq] at the task's control rate."""
+    rendering.render_video(task.mj_model, qpos, path, 1.0 / float(task.motion.dt), camera=0 if task.mj_model.ncam else None)
+    print(f"wrote {path}")
+
+
+def teacher(style_task: mjzoo.Task, path: Path | None) -> dict:
+    """The teacher's style measures: from its episodes file ([E, T, nq] qpos; the
+    reference was cut from episode 0, so 1.. are measured), else `TEACHER`."""
+    if path is None:
+        return TEACHER
+    qpos = np.load(path)["qpos"]
+    done = np.zeros(qpos.shape[1], bool)
+    rows = [measure_episode(style_task, q, done, done) for q in qpos[1:]]
+    errors = [r["style_error"] for r in rows]
+    return {"style_error": float(np.mean(errors)), "style_error_range": [min(errors), max(errors)],
+            "forward_speed_m_s": float(np.mean([r["forward_speed_m_s"] for r in rows])), "fell": False,
+            "source": str(path)}  # fmt: skip
+
+
+# --- the run --------------------------------------------------------------------------------
+
+
+def configs(steps: int, ppo_steps: int, quick: bool) -> tuple[ppo.Config, amp.Config]:
+    """PPO's registered humanoid_walk hyperparameters and AMP's `humanoid_amp.AMP`, at AMP's
+    number of envs (the same batch for both), each for its number of env steps."""
+    ppo_fields = dict(mjzoo.envs.hyperparameters("humanoid_walk", "ppo"), total_steps=ppo_steps)
+    amp_fields = dict(humanoid_amp.AMP, total_steps=steps)
+    ppo_fields["num_envs"] = amp_fields["num_envs"]
+    if quick:  # two updates of 8 envs
+        ppo_fields.update({k: v for k, v in QUICK.items() if k in ppo_fields}, total_steps=128)
+        amp_fields.update(QUICK, total_steps=128)
+    return ppo.Config(**ppo_fields), amp.Config(**amp_fields)
+
+
+def print_table(result: dict) -> None:
+    rows = [("PPO (task reward)", result["ppo"]), ("AMP (style)", result["amp"])]
+    print(f"\n{'trainer':<18} {'steps/s':>11} {'/raw':>6} {'to style (s)':>12} {'style (rad)':>11} {'speed':>6} "
+          f"{'length':>6} {'return':>8} {'compile s':>9}")  # fmt: skip
+    for name, r in rows:
+        f, ttt = r["final"], r["time_to_style_s"]
+        print(f"{name:<18} {r['steps_per_s']:>11,.0f} {r['steps_per_s'] / result['raw_steps_per_s']:>6.2f} "
+              f"{'never' if ttt is None else f'{ttt:.1f}':>12} {f['style_error']:>11.3f} {f['forward_speed_m_s']:>6.2f} "
+              f"{f['length']:>6} {f['eval_return']:>8.1f} {r['compile_s']:>9.1f}")  # fmt: skip
+    t = result["teacher"]
+    print(f"{'teacher':<18} {'':>11} {'':>6} {'':>12} {t['style_error']:>11.3f} {t['forward_speed_m_s']:>6.2f}")
+    print(f"raw {result['raw_steps_per_s']:,.0f} steps/s at {result['num_envs']} envs; AMP's overhead over PPO "
+          f"{100 * result['amp_overhead']:.1f}% (goal <= 15%); style threshold {humanoid_amp.STYLE_THRESHOLD} rad, "
+          f">= {humanoid_amp.MIN_SPEED} m/s, no fall")  # fmt: skip
+
+
+def main() -> None:
+    parser = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
+    parser.add_argument("--steps", type=int, default=humanoid_amp.AMP["total_steps"], help="AMP's env steps")
+    parser.add_argument("--ppo-steps", type=int, default=None, help="PPO's env steps (default: half of --steps)")
+    parser.add_argument("--teacher-episodes", type=Path, default=None, help="the teacher's episodes (.npz, qpos)")
+    parser.add_argument("--out", type=Path, default=Path(__file__).parent / "results" / "amp")
+    parser.add_argument("--quick", action="store_true", help="tiny sizes, to check the script on a CPU")
+    parser.add_argument("--no-video", action="store_true", help="save the final episodes, render them later")
+    parser.add_argument("--render", action="store_true", help="only render the saved final episodes under --out")
+    args = parser.parse_args()
+    style_task = humanoid_amp.humanoid_amp_walk()
+    if args.render:
+        for saved in sorted(args.out.glob("*/final_policy.npz")):
+            render(style_task, np.load(saved)["qpos"], saved.with_suffix(".mp4"))
+        return
+    device = jax.devices()[0].device_kind
+    print(f"device: {device}, jax {jax.__version__}", flush=True)
+    ppo_config, amp_config = configs(args.steps, args.ppo_steps or args.steps // 2, args.quick)
+    walk = mjzoo.envs.make("humanoid_walk")
+    raw = raw_steps_per_s(walk, "humanoid_walk", *inputs(walk, amp_config.num_envs, 20 if args.quick else 100), repeats=3)
+    print(f"raw stepping {raw:,.0f} steps/s at {amp_config.num_envs} envs", flush=True)
+    video = not args.no_video
+    result = {"device": device, "jax": jax.__version__, "num_envs": amp_config.num_envs, "raw_steps_per_s": raw,
+              "style_threshold_rad": humanoid_amp.STYLE_THRESHOLD, "min_speed_m_s": humanoid_amp.MIN_SPEED,
+              "style_from_step": STYLE_FROM, "teacher": teacher(style_task, args.teacher_episodes)}  # fmt: skip
+    result["ppo"] = train("ppo_walk", ppo, ppo_config, walk, style_task, args.out, args.quick, video)
+    result["amp"] = train("amp_walk", amp, amp_config, style_task, style_task, args.out, args.quick, video)
+    result["amp_overhead"] = result["ppo"]["steps_per_s"] / result["amp"]["steps_per_s"] - 1.0
+    print_table(result)
+    args.out.mkdir(parents=True, exist_ok=True)
+    path = args.out / f"amp_{jax.default_backend()}{'_quick' if args.quick else ''}.json"
+    path.write_text(json.dumps(result, indent=2))
+    print(f"wrote {path}")
+
+
+if __name__ == "__main__":
+    main()
