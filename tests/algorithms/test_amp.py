@@ -1,0 +1,204 @@
+"""AMP: config validation, the algorithm contract (one jit, no retracing, vmapped seeds,
+the harness), the style reward wiring, reference windows through the simulation's own
+feature function, the discriminator-has-won warning, and sharding over devices.
+
+The task throughout is the pendulum with a reference of a sustained swing (about 1.5 rad
+either side of hanging), recorded in C MuJoCo by an energy-pumping controller.
+"""
+
+from __future__ import annotations
+
+import json
+import os
+import subprocess
+import sys
+import textwrap
+
+import jax
+import mujoco
+import numpy as np
+import pytest
+
+import mjzoo
+import mjzoo.envs
+from mjzoo import motion, names
+from mjzoo.algorithms import amp
+from mjzoo.harness import training
+from mjzoo.learning import motion_features
+
+SMALL = amp.Config(num_envs=8, unroll_length=8, num_minibatches=2, num_epochs=1, disc_minibatches=2,
+                   disc_hidden_sizes=(16,), replay_size=64, total_steps=8 * 8 * 4, task_weight=0.0, style_weight=1.0)  # fmt: skip
+
+
+def swing_clip(task: mjzoo.Task, amplitude: float = 1.5, seconds: float = 6.0) -> motion.Clip:
+    """The pendulum swinging `amplitude` rad either side of hanging: released there, its
+    energy held at that swing's by a bang-bang pump (torque along the velocity while
+    short of it), recorded every control step."""
+    m = task.mj_model
+    data = mujoco.MjData(m)
+    dt = mjzoo.control_dt(task)
+    data.qpos[0] = np.pi - amplitude
+    target = 9.81 * 0.5 * np.cos(np.pi - amplitude)  # potential per kg at the turning points (0 = pivot height)
+    qpos, qvel = [], []
+    for _ in range(int(seconds / dt) + 1):
+        qpos.append(data.qpos.copy())
+        qvel.append(data.qvel.copy())
+        energy = 0.5 * 0.25 * data.qvel[0] ** 2 + 9.81 * 0.5 * np.cos(data.qpos[0])
+        data.ctrl[0] = np.clip(5.0 * (target - energy) * np.sign(data.qvel[0]), -1.0, 1.0)
+        for _ in range(round(dt / m.opt.timestep)):
+            mujoco.mj_step(m, data)
+    return motion.Clip(name="swing", fps=1.0 / dt, qpos=np.array(qpos), qvel=np.array(qvel),
+                       joint_names=tuple(names.all_names(m, "joint")))  # fmt: skip
+
+
+@pytest.fixture(scope="module")
+def swing():
+    """The pendulum task with the swing attached as its reference."""
+    task = mjzoo.envs.make("pendulum_swingup")
+    ref = motion.reference(swing_clip(task), task.mj_model, mjzoo.control_dt(task))
+    return motion.with_reference(task, ref)
+
+
+@pytest.mark.parametrize(
+    "fields,message",
+    [
+        (dict(num_frames=1), "num_frames=1 is invalid; expected >= 2"),
+        (dict(disc_minibatches=3), "disc_minibatches=3 is invalid; expected a divisor of num_envs \\* unroll_length"),
+        (dict(task_weight=0.0, style_weight=0.0), "style_weight=0.0 is invalid; expected > 0 where task_weight is 0"),
+        (dict(disc_loss="wasserstein"), "disc_loss='wasserstein' is invalid"),
+        (dict(replay_keep_probability=1.5), "replay_keep_probability=1.5 is invalid; expected in \\[0, 1\\]"),
+        (dict(policy_obs_key="state"), "policy_obs_key='state' is invalid"),
+        (dict(num_envs=0), "num_envs=0 is invalid"),  # PPO's own checks hold too
+    ],
+)
+def test_config_errors_name_the_field(fields, message):
+    with pytest.raises(ValueError, match=message):
+        amp.Config(**{**dict(num_envs=8, unroll_length=8, num_minibatches=2, disc_minibatches=2), **fields})
+
+
+def test_a_task_without_a_reference_is_refused():
+    task = mjzoo.envs.make("pendulum_swingup")
+    with pytest.raises(ValueError, match="the task has no motion reference to imitate; attach one with"):
+        amp.init(SMALL, task, jax.random.key(0))
+
+
+@pytest.fixture(scope="module")
+def started(swing):
+    return amp.init(SMALL, swing, jax.random.key(0))
+
+
+@pytest.fixture(scope="module")
+def small_update():
+    traces = []
+
+    def update(task, state):
+        traces.append(None)
+        return amp.update(SMALL, task, state)
+
+    return jax.jit(update), traces
+
+
+def test_update_is_one_jit_that_does_not_retrace(swing, started, small_update):
+    update, traces = small_update
+    state, metrics = update(swing, started)
+    state, metrics = update(swing, state)
+    other = swing.with_params(upright_weight=2.0)  # a changed number is a leaf: no retrace
+    state, metrics = update(other, state)
+    assert len(traces) == 1
+    assert int(state.updates) == 3
+    for name in ("disc/accuracy_reference", "disc/accuracy_policy", "disc/logit_reference", "disc/logit_policy",
+                 "disc/gradient_penalty", "disc/loss", "amp/style_reward", "amp/style_reward_std",
+                 "loss/policy", "loss/value"):  # fmt: skip
+        assert np.isfinite(float(metrics[name])), name
+    # 3 updates of 64 windows kept with probability 0.05, and the rest of the replay empty
+    assert 0 < float(metrics["amp/replay_size"]) <= 3 * 64
+
+
+def test_the_policy_sees_the_tasks_observation_and_the_discriminator_the_window(swing, started):
+    obs = started.ppo.collector.env_state.obs
+    assert set(obs) == {"policy", "motion"}
+    assert obs["policy"].shape == (8, 3)  # the pendulum's own observation
+    # fixed base, one hinge: its angle and velocity per frame, two frames
+    assert obs["motion"].shape == (8, 2, 2)
+    assert started.ppo.params["policy"][0]["kernel"].shape[0] == 3
+    assert started.disc_params[0]["kernel"].shape[0] == 4
+    act = amp.policy(SMALL, swing)  # deployable on the task's own observation
+    action = act(amp.policy_params(started), mjzoo.reset(swing, jax.random.key(1)).obs, jax.random.key(2))
+    assert action.shape == (1,) and -1.0 <= float(action[0]) <= 1.0
+
+
+def test_reference_windows_are_consecutive_frames_featurized_like_the_simulation(swing, started):
+    template = jax.tree.map(lambda x: x[0], started.ppo.collector.env_state.data)
+    windows = jax.jit(amp.reference_windows, static_argnums=(0, 4))(SMALL, swing, template, jax.random.key(3), 256)
+    ref = swing.motion
+    assert windows.shape == (256, 2, 2)
+    # every window is (angle, velocity) of two consecutive reference frames, velocity per second
+    frames = np.stack([np.asarray(ref.qpos[:, 0]), np.asarray(ref.qvel[:, 0])], axis=-1)
+    starts = [int(np.argmin(np.abs(frames[:-1] - w[0]).sum(-1))) for w in np.asarray(windows)]
+    np.testing.assert_allclose(np.asarray(windows), np.stack([frames[starts], frames[np.add(starts, 1)]], 1), atol=1e-5)
+    # and they match the features the simulation computes on the same states
+    features = motion_features.motion_features(swing.mj_model)
+    qpos, qvel = np.asarray(ref.qpos[5:7]), np.asarray(ref.qvel[5:7])
+    simulated = [features(swing.model, mjzoo.mjx.forward(swing.model, template.replace(qpos=q, qvel=v)))
+                 for q, v in zip(qpos, qvel)]  # fmt: skip
+    np.testing.assert_allclose(np.stack(simulated), frames[5:7], atol=1e-6)
+
+
+def test_seeds_vmap(swing):
+    """Several seeds train in one program: init and update vmapped over keys."""
+    keys = jax.random.split(jax.random.key(0), 2)
+    states = jax.vmap(lambda k: amp.init(SMALL, swing, k))(keys)
+    states, metrics = jax.jit(jax.vmap(lambda s: amp.update(SMALL, swing, s)))(states)
+    assert metrics["disc/loss"].shape == (2,)
+    assert not np.allclose(states.disc_params[0]["kernel"][0], states.disc_params[0]["kernel"][1])
+
+
+def test_diagnose_warns_when_the_discriminator_has_won():
+    won = [{"disc/accuracy_reference": 0.995}] * 3
+    assert amp.diagnose(won) is not None and "has won" in amp.diagnose(won)
+    assert amp.diagnose(won[:2]) is None  # not yet for long
+    assert amp.diagnose([*won[:2], {"disc/accuracy_reference": 0.9}]) is None
+
+
+def test_train_writes_the_discriminators_diagnostics_and_warns_once(swing, monkeypatch, tmp_path):
+    monkeypatch.setattr(amp, "diagnose", lambda history: "amp: the discriminator has won" if len(history) >= 1 else None)
+    with pytest.warns(training.TrainingWarning, match="the discriminator has won") as caught:
+        amp.train(SMALL, swing, out_dir=tmp_path / "run", updates_per_chunk=2, eval_envs=2, eval_steps=20, video=False,
+                  progress=False)  # fmt: skip
+    assert len([w for w in caught if issubclass(w.category, training.TrainingWarning)]) == 1  # not once per chunk
+    lines = [json.loads(line) for line in (tmp_path / "run" / "metrics.jsonl").read_text().splitlines()]
+    assert [line["step"] for line in lines] == [128, 256]
+    for name in ("disc/accuracy_reference", "disc/accuracy_policy", "disc/logit_reference", "disc/logit_policy",
+                 "disc/gradient_penalty", "amp/style_reward", "amp/style_reward_std", "eval/return"):  # fmt: skip
+        assert name in lines[-1], name
+    assert json.loads((tmp_path / "run" / "config.json").read_text())["algorithm"] == "amp"
+
+
+@pytest.mark.skipif(sys.platform != "linux", reason="forces host devices with XLA_FLAGS")
+def test_two_devices_give_one_devices_result():
+    """Sharded over 2 CPU devices (the env batch split, the rest replicated), an update
+    gives the parameters one device gives."""
+    code = textwrap.dedent(
+        """
+        import jax, numpy as np, mjzoo, mjzoo.envs
+        from mjzoo import motion
+        from mjzoo.algorithms import amp
+        from mjzoo.harness import training
+        from tests.algorithms.test_amp import SMALL, swing_clip
+        task = mjzoo.envs.make("pendulum_swingup")
+        task = motion.with_reference(task, motion.reference(swing_clip(task), task.mj_model, mjzoo.control_dt(task)))
+        state = amp.init(SMALL, task, jax.random.key(0))
+        one = jax.jit(amp.update, static_argnums=0)(SMALL, task, jax.device_put(state, jax.devices()[0]))[0]
+        sharded = training.shard_envs(state, amp.PER_ENV_FIELDS)
+        assert len(sharded.ppo.collector.start.sharding.device_set) == 2
+        assert len(sharded.disc_params[0]["kernel"].sharding.device_set) == 2  # replicated
+        two = jax.jit(amp.update, static_argnums=0)(SMALL, training.replicate(task), sharded)[0]
+        for a, b in zip(jax.tree.leaves((one.ppo.params, one.disc_params)), jax.tree.leaves((two.ppo.params, two.disc_params))):
+            np.testing.assert_allclose(np.asarray(a), np.asarray(b), rtol=2e-4, atol=2e-5)
+        print("ok")
+        """
+    )
+    env = {**os.environ, "XLA_FLAGS": "--xla_force_host_platform_device_count=2", "JAX_PLATFORMS": "cpu"}
+    root = os.path.dirname(os.path.dirname(os.path.dirname(os.path.abspath(__file__))))
+    out = subprocess.run([sys.executable, "-c", code], env=env, cwd=root, capture_output=True, text=True)
+    assert out.returncode == 0 and out.stdout.strip().endswith("ok"), out.stderr[-3000:]
