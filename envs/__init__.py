@@ -26,7 +26,7 @@ from typing import Any, Callable
 import numpy as np
 
 from mjzoo import physics
-from mjzoo.envs import base, cartpole, cylinder_push, joystick, locomotion, pendulum, point_mass
+from mjzoo.envs import base, cartpole, cylinder_push, humanoid_amp, joystick, locomotion, pendulum, point_mass
 from mjzoo.planning.realtime import Problem
 from mjzoo.planning.sampling import SamplingConfig
 from mjzoo.running import control_dt
@@ -50,6 +50,9 @@ _REGISTRY: dict[str, Callable[..., Task]] = {
     "humanoid_run": locomotion.humanoid_run,
     "humanoid_standup": locomotion.humanoid_standup,
     "ant_joystick": joystick.joystick,  # train with joystick.joystick_curriculum()
+    # AMP: move like a reference motion (envs/humanoid_amp.py)
+    "humanoid_amp_walk": humanoid_amp.humanoid_amp_walk,
+    "humanoid_amp_joystick": humanoid_amp.humanoid_amp_joystick,
 }
 # Per-env algorithm defaults, defined beside each env.
 _HYPERPARAMETERS: dict[str, dict[str, dict[str, Any]]] = {
@@ -60,6 +63,8 @@ _HYPERPARAMETERS: dict[str, dict[str, dict[str, Any]]] = {
     "cylinder_push": {"ppo": cylinder_push.PPO, **cylinder_push.PLANNING.configs},
     **{name: {"ppo": config} for name, config in locomotion.PPO.items()},
     "ant_joystick": {"ppo": joystick.PPO},
+    "humanoid_amp_walk": {"amp": humanoid_amp.AMP},
+    "humanoid_amp_joystick": {"amp": humanoid_amp.JOYSTICK_AMP},
 }
 # How the sampling planners solve each env closed loop.
 _PLANNING: dict[str, base.PlanningSetup] = {

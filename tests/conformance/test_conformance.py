@@ -149,7 +149,7 @@ COMBINATORS["all"] = lambda t: functools.reduce(lambda task, name: COMBINATORS[n
 # The envs on Brax's models run in test_conformance_locomotion(_stacked).py: one process compiling
 # every case crashed inside XLA's CPU compiler, and the suite frees compiled code per module.
 LOCOMOTION = [e for e in mjzoo.envs.names() if mjzoo.envs.factory(e).__module__ in ("mjzoo.envs.locomotion",
-                                                                                    "mjzoo.envs.joystick")]  # fmt: skip
+              "mjzoo.envs.joystick", "mjzoo.envs.humanoid_amp", "mjzoo.envs.deepmimic")]  # fmt: skip
 ENVS = [e for e in mjzoo.envs.names() if e not in LOCOMOTION]
 CASES = [(env, comb) for env in ENVS for comb in ("bare", "all")]
 CASES += [("pendulum_swingup", comb) for comb in COMBINATORS if comb not in ("bare", "all")]
