@@ -12,6 +12,7 @@ binary wheel, ~100 MB; nothing is compiled).
     clips = deepmimic.walk_clips()               # [walk, run] as mjzoo.motion.Clip
     task = deepmimic.walk()                      # alive reward only: AMP adds the style
     task = motion.with_reference(task, motion.reference(clips, task.mj_model, dt=...))
+    task = deepmimic.walk_amp()                  # that, with the walk clip and RSI: for `AMP`
 
 The model is the URDF in MuJoCo's z-up basis (`mjzoo.motion.deepmimic.to_z_up`):
 x forward, y left, z up; the root a free joint, each spherical joint a ball joint,
@@ -25,6 +26,12 @@ Only the floor collides with the body (no self-collisions: cheaper under MJX).
 | task | control step | observation | terminated when | reward terms (weight) |
 |---|---|---|---|---|
 | walk | 1/30 s (8 x 1/240 s) | base z, quat, joints, base velocities, joint vel (75) | root z < 0.5 m | alive 1 |
+
+`walk_amp` is the walk task imitating the walk clip (a loop, resampled to the control
+step) by AMP (`mjzoo.algorithms.amp`, hyperparameters `AMP`: the discriminator sees
+windows of 2 frames with the feet and hands as key bodies), starting at clip frames
+(reference-state initialization) with probability `reference_init`; `style_error`
+measures a run's knees and elbows against the clip.
 """
 
 from __future__ import annotations
@@ -45,8 +52,8 @@ from mjzoo.envs import locomotion
 from mjzoo.motion import deepmimic as deepmimic_format
 from mjzoo.types import Task
 
-__all__ = ["MAX_TORQUE", "OPTIONS", "SCALE", "character_joints", "data_path", "humanoid_model", "humanoid_xml",
-           "motion_path", "walk", "walk_clips"]  # fmt: skip
+__all__ = ["AMP", "KEY_BODIES", "MAX_TORQUE", "OPTIONS", "SCALE", "STYLE_JOINTS", "character_joints", "data_path",
+           "humanoid_model", "humanoid_xml", "motion_path", "style_error", "walk", "walk_amp", "walk_clips"]  # fmt: skip
 
 SCALE = 0.25  # pybullet loads the URDF with globalScaling=0.25; the clips are in those metres
 # Per-joint torque limits (N m) of pybullet's DeepMimic humanoid environment.
@@ -58,6 +65,16 @@ OPTIONS = dict(locomotion.MJX_OPTIONS, dt=1.0 / 240.0, ctrl_dt=1.0 / 30.0)
 _INSTALL = "pip install pybullet  (its wheel ships pybullet_data: the DeepMimic humanoid and clips)"
 _STANDING_HEIGHT = 0.885  # m: the root's height with straight legs, feet flat 4 mm above the floor
 _Y_UP = deepmimic_format.Y_UP_TO_Z_UP
+KEY_BODIES = ("right_ankle", "left_ankle", "right_wrist", "left_wrist")  # the feet and hands
+STYLE_JOINTS = ("right_knee", "left_knee", "right_elbow", "left_elbow")  # the hinges: angles compare directly
+# AMP on the walk clip by style alone (`mjzoo train amp mjzoo.envs.deepmimic:walk_amp`), for a GPU: AMP's
+# paper's 2-frame windows and gradient penalty (w_gp / 2 = 5), its discriminator (1024, 512).
+AMP = dict(
+    num_envs=4096, unroll_length=32, num_minibatches=32, num_epochs=5, learning_rate=2e-5, entropy_coef=0.0,
+    discount=0.95, total_steps=200_000_000, policy_hidden_sizes=(1024, 512), value_hidden_sizes=(1024, 512),
+    task_weight=0.0, style_weight=1.0, num_frames=2, key_bodies=KEY_BODIES, disc_hidden_sizes=(1024, 512),
+    disc_learning_rate=1e-5, gradient_penalty_weight=5.0, disc_minibatches=32,
+)  # fmt: skip
 
 
 def data_path() -> Path:
@@ -137,6 +154,38 @@ def walk(*, episode_steps: int = 300, alive_weight: float = 1.0, min_height: flo
     task = terminations.with_terminations(task, {"fallen": terminations.base_too_low(m, min_height)})
     task = rewards.terms(task, {"alive": (rewards.alive(task), alive_weight)})
     return with_time_limit(with_divergence_guard(task), episode_steps)
+
+
+def walk_amp(*, reference_init: float = 0.8, **overrides: Any) -> Task:
+    """`walk(**overrides)` with the walk clip attached as its reference (`Task.motion`,
+    looping, one frame per control step) and a fraction `reference_init` in [0, 1] of
+    its episodes starting at a clip frame (`resets.reference_state`), for `AMP`."""
+    task = walk(**overrides)
+    m = task.mj_model
+    # The control step from the options, not `motion.with_reference`'s measured one:
+    # that compiles a step of this humanoid, minutes on a CPU. `walk` has already
+    # checked that ctrl_dt is a whole number of physics steps.
+    dt = float({**OPTIONS, **overrides}["ctrl_dt"])
+    ref = motion.reference(walk_clips(("walk",)), m, dt=dt, loop=True)
+    if reference_init:
+        observe = locomotion.free_base_observation(m)
+        task = resets.with_resets(task, resets.reference_state(ref, reference_init), observe=observe)
+    return task.replace(motion=ref)
+
+
+def style_error(task: Task, qpos, window: int = 15) -> float:
+    """The mean knee and elbow angle error (rad) of a run's windows of `window` frames
+    (default 0.5 s) to their nearest windows of the task's looping reference (taken
+    twice over, so windows across its end exist): `motion.nearest_window_error`.
+    `qpos` [T, nq] of a run of `walk_amp`, T >= `window`."""
+    if not isinstance(task.motion, motion.Reference):
+        raise ValueError("deepmimic.style_error: the task has no motion reference; build it with walk_amp")
+    qpos, m = np.asarray(qpos), task.mj_model
+    if qpos.ndim != 2 or qpos.shape[1] != m.nq:
+        raise ValueError(f"deepmimic.style_error: qpos has shape {qpos.shape}; expected [T, {m.nq}]")
+    columns = [m.jnt_qposadr[m.joint(name).id] for name in STYLE_JOINTS]
+    reference = np.concatenate([np.asarray(task.motion.qpos)] * 2)
+    return motion.nearest_window_error(reference, qpos, columns, window)
 
 
 # --- URDF -> MJCF -------------------------------------------------------------------

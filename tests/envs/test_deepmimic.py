@@ -151,3 +151,41 @@ def test_walk_task_terminates_on_a_low_root_and_checks_its_arguments(traced):
         deepmimic.walk(min_height=float("nan"))
     with pytest.raises(ValueError, match="ctrl_dt"):
         deepmimic.walk(ctrl_dt=0.01)  # not a whole number of 1/240 s physics steps
+
+
+@pytest.fixture(scope="module")
+def amp_task(model):
+    return deepmimic.walk_amp()
+
+
+def test_walk_amp_carries_the_walk_clip_at_the_control_step(amp_task, clips):
+    ref, m = amp_task.motion, amp_task.mj_model
+    assert isinstance(ref, motion.Reference) and ref.names == ("walk",) and bool(ref.loop[0])
+    assert float(ref.dt) == pytest.approx(1 / 30) == pytest.approx(8 * m.opt.timestep)  # 8 physics steps
+    walk = clips["walk"]  # 39 frames at 30.0012 fps (1.2666 s): 38 at 30 fps
+    assert ref.qpos.shape == (int(walk.duration * 30) + 1, m.nq)
+    np.testing.assert_allclose(ref.qpos[0], walk.qpos[0], atol=1e-6)
+    assert float(deepmimic.walk_amp(ctrl_dt=1 / 60, reference_init=0.0).motion.dt) == pytest.approx(1 / 60)
+    for body in deepmimic.AMP["key_bodies"]:
+        m.body(body)  # KeyError if the model lacks one
+
+
+def test_walk_amp_resets_from_the_clip_and_traces(amp_task):
+    key = jax.random.PRNGKey(0)
+    state = jax.eval_shape(mjzoo.reset, amp_task, key)
+    assert state.info["reference_frame"].shape == () and state.obs.shape == (75,)
+    nxt = jax.eval_shape(mjzoo.transition, amp_task, state, jnp.zeros(amp_task.action_size), key)
+    assert nxt.obs.shape == (75,)
+    from mjzoo.algorithms import amp
+
+    assert amp.Config(**deepmimic.AMP).task_weight == 0.0
+
+
+def test_walk_amp_style_error(amp_task, clips):
+    walk = clips["walk"].qpos
+    assert deepmimic.style_error(amp_task, walk) < 1e-3  # the clip itself, against its resampled frames
+    assert deepmimic.style_error(amp_task, np.roll(walk, 10, axis=0)) < 1e-3  # a loop: any phase
+    still = np.tile(walk[:1], (30, 1))  # frozen in the first frame: the knees' and elbows' swing is missed
+    assert deepmimic.style_error(amp_task, still) > 0.05
+    with pytest.raises(ValueError, match="qpos has shape"):
+        deepmimic.style_error(amp_task, walk[:, :5])

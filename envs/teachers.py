@@ -1,0 +1,105 @@
+"""A sampling planner as a motion teacher: AMP learns the cart-pole swing-up from MPPI.
+
+A planner solves a task online, at a cost per control step (here 64 rollouts of 1.2 s
+every two steps). Its closed-loop runs are motion clips like any motion capture: a
+policy trained by adversarial motion priors (`mjzoo.algorithms.amp`) on them, with no
+task reward at all, learns to move like the planner and then acts at the price of one
+network evaluation.
+
+    task = teachers.cartpole_amp_swingup()          # cartpole_swingup + task.motion
+    state, _ = amp.train(amp.Config(**teachers.AMP), task, seed=0)
+    err = teachers.style_error(task, qpos)          # qpos [T, 2] of a run, from hanging
+
+The clip ``envs/assets/cartpole_swingup_mppi.npz`` (401 frames at 50 fps, 8 s) is
+episode 3 of MPPI's closed loop on ``cartpole_swingup`` with the env's own planning
+configuration (64 samples, 60-step horizon, 5 knots, temperature 0.05, replanning every
+2 steps), made by
+
+    mjzoo collect mppi --task cartpole_swingup --out /tmp/cp --episodes 4   # seed 0
+    cp /tmp/cp/motions/episode_003.npz envs/assets/cartpole_swingup_mppi.npz
+
+It starts hanging (hinge 3.15 rad), swings up in two pumps through +angle (upright
+first at 2.4 s, hinge 2 pi), and balances within 0.21 rad over its last 4 s (the best
+of the 4 episodes: the others leaned up to 0.22-0.50 rad while balancing).
+
+Reference-state initialization: episodes start hanging, as the task's own, because
+the policy must learn the swing-up from the bottom; with `reference_init` > 0 that
+fraction starts at a frame of the clip instead (mostly the balancing phase, which fills
+5 of its 8 s), so the discriminator's reward for being upright is seen early.
+"""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import jax
+import mujoco
+import numpy as np
+
+from mjzoo import motion
+from mjzoo.catalog import resets
+from mjzoo.envs import base, cartpole
+from mjzoo.running import control_dt
+from mjzoo.types import State, Task
+
+__all__ = ["AMP", "CARTPOLE_CLIP", "STYLE_WINDOW", "cartpole_amp_swingup", "cartpole_clip", "style_error"]
+
+CARTPOLE_CLIP: Path = base.ASSETS / "cartpole_swingup_mppi.npz"
+STYLE_WINDOW = 25  # frames (0.5 s) per compared window: about one pump of the swing-up
+
+# AMP on style alone (`mjzoo train amp teachers:cartpole_amp_swingup`), ~8 min on 2 CPU cores.
+AMP = dict(
+    num_envs=128, unroll_length=32, num_minibatches=8, num_epochs=4, learning_rate=1e-3, entropy_coef=1e-3,
+    discount=0.99, total_steps=2_000_000, task_weight=0.0, style_weight=1.0, num_frames=2,
+    disc_hidden_sizes=(256, 256), disc_learning_rate=1e-4, gradient_penalty_weight=5.0, disc_minibatches=8,
+)  # fmt: skip
+
+
+def cartpole_clip(mj_model: mujoco.MjModel) -> motion.Clip:
+    """The planner's swing-up (module docstring), checked against the cart-pole `mj_model`."""
+    return motion.load(CARTPOLE_CLIP, mj_model, name="cartpole_swingup_mppi")
+
+
+def cartpole_amp_swingup(*, reference_init: float = 0.0, **overrides) -> Task:
+    """`cartpole.swingup(**overrides)` with the planner's clip as its reference
+    (`Task.motion`, one frame per control step, not looping); a fraction
+    `reference_init` in [0, 1] of the episodes starts at a clip frame
+    (`resets.reference_state`), the others hanging."""
+    task = cartpole.swingup(**overrides)
+    ref = motion.reference(cartpole_clip(task.mj_model), task.mj_model, dt=control_dt(task), loop=False)
+    if reference_init:
+        task = resets.with_resets(task, resets.reference_state(ref, reference_init), observe=_observe)
+    return motion.with_reference(task, ref)
+
+
+def _observe(model, state: State) -> jax.Array:
+    return cartpole.observe(state.data)
+
+
+def style_error(task: Task, qpos, window: int = STYLE_WINDOW, both_ways: bool = True) -> float:
+    """How far a run moves from the task's reference, in m and rad averaged over the
+    slider and hinge: `motion.nearest_window_error` of the run's windows to their
+    nearest reference windows and, with `both_ways`, averaged with that of the
+    reference's windows to their nearest windows of the run.
+
+    One way alone scores a pole that hangs still as well as the clip's first second
+    (0.16); both ways, the clip's swing and balance must also appear in the run.
+
+    Args:
+      task: a task with a reference (`cartpole_amp_swingup`).
+      qpos: [T, 2] the run's cart position and hinge angle, T >= `window`; the angle
+        as simulated (continuous, not wrapped): a pole that spins over the top is
+        2 pi away from one that swung up once, as it should be.
+      window: frames per compared window.
+      both_ways: also measure the reference against the run.
+    """
+    if not isinstance(task.motion, motion.Reference):
+        raise ValueError("teachers.style_error: the task has no motion reference; build it with cartpole_amp_swingup")
+    qpos, ref = np.asarray(qpos), np.asarray(task.motion.qpos)
+    if qpos.ndim != 2 or qpos.shape[1] != task.mj_model.nq:
+        raise ValueError(f"teachers.style_error: qpos has shape {qpos.shape}; expected [T, {task.mj_model.nq}]")
+    columns = np.arange(task.mj_model.nq)
+    run_to_reference = motion.nearest_window_error(ref, qpos, columns, window)
+    if not both_ways:
+        return run_to_reference
+    return 0.5 * (run_to_reference + motion.nearest_window_error(qpos, ref, columns, window))
