@@ -39,7 +39,6 @@ import numpy as np
 from mjzoo import motion
 from mjzoo.catalog import resets
 from mjzoo.envs import base, cartpole
-from mjzoo.running import control_dt
 from mjzoo.types import State, Task
 
 __all__ = ["AMP", "CARTPOLE_CLIP", "STYLE_WINDOW", "cartpole_amp_swingup", "cartpole_clip", "style_error"]
@@ -47,7 +46,7 @@ __all__ = ["AMP", "CARTPOLE_CLIP", "STYLE_WINDOW", "cartpole_amp_swingup", "cart
 CARTPOLE_CLIP: Path = base.ASSETS / "cartpole_swingup_mppi.npz"
 STYLE_WINDOW = 25  # frames (0.5 s) per compared window: about one pump of the swing-up
 
-# AMP on style alone (`mjzoo train amp teachers:cartpole_amp_swingup`), ~8 min on 2 CPU cores.
+# AMP on style alone (`mjzoo train amp mjzoo.envs.teachers:cartpole_amp_swingup`), ~8 min on 2 CPU cores.
 AMP = dict(
     num_envs=128, unroll_length=32, num_minibatches=8, num_epochs=4, learning_rate=1e-3, entropy_coef=1e-3,
     discount=0.99, total_steps=2_000_000, task_weight=0.0, style_weight=1.0, num_frames=2,
@@ -60,13 +59,13 @@ def cartpole_clip(mj_model: mujoco.MjModel) -> motion.Clip:
     return motion.load(CARTPOLE_CLIP, mj_model, name="cartpole_swingup_mppi")
 
 
-def cartpole_amp_swingup(*, reference_init: float = 0.0, **overrides) -> Task:
-    """`cartpole.swingup(**overrides)` with the planner's clip as its reference
-    (`Task.motion`, one frame per control step, not looping); a fraction
-    `reference_init` in [0, 1] of the episodes starts at a clip frame
+def cartpole_amp_swingup(*, reference_init: float = 0.0, ctrl_dt: float = 0.02, **overrides) -> Task:
+    """`cartpole.swingup(ctrl_dt=ctrl_dt, **overrides)` with the planner's clip as its
+    reference (`Task.motion`, resampled to one frame per control step, not looping);
+    a fraction `reference_init` in [0, 1] of the episodes starts at a clip frame
     (`resets.reference_state`), the others hanging."""
-    task = cartpole.swingup(**overrides)
-    ref = motion.reference(cartpole_clip(task.mj_model), task.mj_model, dt=control_dt(task), loop=False)
+    task = cartpole.swingup(ctrl_dt=ctrl_dt, **overrides)
+    ref = motion.reference(cartpole_clip(task.mj_model), task.mj_model, dt=ctrl_dt, loop=False)
     if reference_init:
         task = resets.with_resets(task, resets.reference_state(ref, reference_init), observe=_observe)
     return motion.with_reference(task, ref)

@@ -11,7 +11,6 @@ import pytest
 import mjzoo
 from mjzoo import motion
 from mjzoo.envs import cartpole, teachers
-from mjzoo.running import control_dt
 
 
 @pytest.fixture(scope="module")
@@ -41,22 +40,21 @@ def test_clip_is_a_swing_up_that_balances(clip):
 def test_task_carries_the_clip_at_its_control_step(task, clip):
     ref = task.motion
     assert isinstance(ref, motion.Reference) and ref.names == ("cartpole_swingup_mppi",)
-    assert float(ref.dt) == pytest.approx(control_dt(task)) == pytest.approx(0.02)
+    assert float(ref.dt) == pytest.approx(0.02)  # motion.with_reference checked it is the control step
     assert not bool(ref.loop[0])
     np.testing.assert_allclose(ref.qpos, clip.qpos, atol=1e-6)  # 50 fps = one frame per 0.02 s step
-    plain = cartpole.swingup()
-    state, hanging = mjzoo.reset(task, jax.random.key(3)), mjzoo.reset(plain, jax.random.key(3))
-    np.testing.assert_allclose(state.data.qpos, hanging.data.qpos)  # the task's own reset: hanging
 
 
-def test_reference_init_starts_at_a_clip_frame(task):
-    rsi = teachers.cartpole_amp_swingup(reference_init=1.0)
-    states = jax.jit(jax.vmap(lambda k: mjzoo.reset(rsi, k)))(jax.random.split(jax.random.key(0), 8))
-    ref = np.asarray(task.motion.qpos)
-    frames = np.asarray(states.info["reference_frame"])
-    assert np.all(frames >= 0) and len(set(frames.tolist())) > 1
-    np.testing.assert_allclose(states.data.qpos, ref[frames], atol=1e-6)
-    np.testing.assert_allclose(states.obs[:, 1], np.cos(ref[frames, 1]), atol=1e-5)  # observed after the reset
+def test_resets_hang_or_start_at_a_clip_frame(task):
+    half = teachers.cartpole_amp_swingup(reference_init=0.5)
+    states = jax.jit(jax.vmap(lambda k: mjzoo.reset(half, k)))(jax.random.split(jax.random.key(0), 16))
+    ref, frames = np.asarray(task.motion.qpos), np.asarray(states.info["reference_frame"])
+    qpos, obs = np.asarray(states.data.qpos), np.asarray(states.obs)
+    from_clip = frames >= 0
+    assert 0 < from_clip.sum() < 16 and len(set(frames[from_clip].tolist())) > 1
+    np.testing.assert_allclose(qpos[from_clip], ref[frames[from_clip]], atol=1e-6)
+    np.testing.assert_allclose(obs[:, 1], np.cos(qpos[:, 1]), atol=1e-5)  # observed after the reset
+    assert np.all(np.cos(qpos[~from_clip, 1]) < -0.99)  # the others hang, as cartpole_swingup's own
     with pytest.raises(ValueError, match="probability"):
         teachers.cartpole_amp_swingup(reference_init=1.5)
 
