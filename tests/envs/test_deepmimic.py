@@ -184,8 +184,8 @@ def test_walk_amp_resets_from_the_clip_and_traces(amp_task):
 def test_walk_amp_style_error(amp_task, clips):
     walk = clips["walk"].qpos
     assert deepmimic.style_error(amp_task, walk) < 1e-3  # the clip itself, against its resampled frames
-    assert deepmimic.style_error(amp_task, np.roll(walk, 10, axis=0)) < 1e-3  # a loop: any phase
+    assert deepmimic.style_error(amp_task, np.roll(walk, 10, axis=0)) < 0.01  # a loop: any phase (0.006: the seam)
     still = np.tile(walk[:1], (30, 1))  # frozen in the first frame: the knees' and elbows' swing is missed
-    assert deepmimic.style_error(amp_task, still) > 0.05
+    assert deepmimic.style_error(amp_task, still) > 0.1  # 0.15 rad
     with pytest.raises(ValueError, match="qpos has shape"):
         deepmimic.style_error(amp_task, walk[:, :5])
