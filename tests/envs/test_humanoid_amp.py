@@ -52,8 +52,10 @@ def test_the_walk_carries_the_teachers_clip_at_its_control_step(walk, joystick):
     for task in (walk, joystick):
         ref = task.motion
         assert isinstance(ref, motion.Reference) and ref.names == ("walk",)
-        # 601 frames at 66.7 fps, already at the control step: resampling keeps them.
-        np.testing.assert_allclose(ref.qpos, clip["qpos"], atol=1e-6)
+        # 601 frames at the control step already: resampling keeps them, up to the file's fps
+        # (66.666664, float32) against 1 / 0.015 (a 4e-8 relative time shift).
+        assert ref.qpos.shape == (601, 24)
+        np.testing.assert_allclose(ref.qpos, clip["qpos"], atol=1e-4)
         assert float(ref.dt) == pytest.approx(0.015) and not bool(ref.loop[0])
         # The control step: 5 physics steps of 3 ms.
         assert float(ref.dt) == pytest.approx(5 * task.mj_model.opt.timestep)
@@ -68,9 +70,13 @@ def test_a_reset_with_probability_one_starts_exactly_at_a_reference_frame(walk, 
     np.testing.assert_allclose(always.data.qvel, walk.motion.qvel[frame], atol=1e-6)
     # The observation is recomputed from that state: base height first.
     assert always.obs[0] == pytest.approx(float(always.data.xpos[1, 2]), abs=1e-5)
-    # Probability 0: the default pose (hinges at 0) with U(+-0.01) noise, root as in the model.
+    # Probability 0: the default pose (hinges at 0, or the nearest end of a range that excludes
+    # 0: the knees') with U(+-0.01) noise clipped to the range; the root as in the model.
     assert int(never.info["reference_frame"]) == -1
-    assert np.all(np.abs(never.data.qpos[7:]) <= 0.01 + 1e-6) and np.any(never.data.qpos[7:] != 0)
+    m = walk.mj_model
+    hinge_range = m.jnt_range[1:]  # joint 0 is the root
+    default = np.clip(0.0, hinge_range[:, 0], hinge_range[:, 1])
+    assert np.all(np.abs(never.data.qpos[7:] - default) <= 0.01 + 1e-6) and np.any(never.data.qpos[7:] != default)
     np.testing.assert_allclose(never.data.qpos[:7], walk.mj_model.qpos0[:7], atol=1e-6)
 
 
@@ -103,9 +109,9 @@ def test_style_error_by_hand_on_a_small_reference():
     sim_hinges = np.array([[0.1, 0.3], [0.2, 0.4], [0.0, 0.0]])
     sim = np.concatenate([np.full((3, 7), 5.0), sim_hinges], axis=1)  # root far away: not compared
     # Windows of 2. Sim window 0 = [(0.1, 0.3), (0.2, 0.4)] vs ref window 1 = [(0.1, 0.2), (0.2, 0.4)]:
-    # |errors| 0, 0.1, 0, 0 -> mean 0.025 (ref windows 0 and 2 give 0.15 and 0.1).
-    # Sim window 1 = [(0.2, 0.4), (0, 0)]: vs ref 0 (0.2, 0.4, 0.1, 0.2) -> 0.225, ref 1 -> 0.2, ref 2 -> 0.375.
-    assert ha.style_error(ref, sim, window=2) == pytest.approx((0.025 + 0.2) / 2, abs=1e-6)
+    # |errors| 0, 0.1, 0, 0 -> mean 0.025 (ref windows 0 and 2: 0.7 / 4 and 0.5 / 4).
+    # Sim window 1 = [(0.2, 0.4), (0, 0)] is 0.9 / 4 = 0.225 from each of the three ref windows.
+    assert ha.style_error(ref, sim, window=2) == pytest.approx((0.025 + 0.225) / 2, abs=1e-6)
     # Window 1: each frame's nearest frame: 0.05 (to (0.1, 0.2)), 0, 0.
     assert ha.style_error(ref, sim, window=1) == pytest.approx(0.05 / 3, abs=1e-6)
 
