@@ -44,8 +44,8 @@ from typing import Any
 
 import mujoco
 import numpy as np
-
-from mjzoo import motion, physics as physics_lib
+from mjzoo import motion
+from mjzoo import physics as physics_lib
 from mjzoo.catalog import resets, rewards, terminations
 from mjzoo.combinators import with_divergence_guard, with_time_limit
 from mjzoo.envs import locomotion
@@ -53,7 +53,8 @@ from mjzoo.motion import deepmimic as deepmimic_format
 from mjzoo.types import Task
 
 __all__ = ["AMP", "KEY_BODIES", "MAX_TORQUE", "OPTIONS", "SCALE", "STYLE_JOINTS", "character_joints", "data_path",
-           "humanoid_model", "humanoid_xml", "motion_path", "style_error", "walk", "walk_amp", "walk_clips"]  # fmt: skip
+           "humanoid_model", "humanoid_xml", "motion_path", "style_error", "walk", "walk_amp",
+           "walk_clips"]  # fmt: skip
 
 SCALE = 0.25  # pybullet loads the URDF with globalScaling=0.25; the clips are in those metres
 # Per-joint torque limits (N m) of pybullet's DeepMimic humanoid environment.
@@ -179,7 +180,7 @@ def style_error(task: Task, qpos, window: int = 15) -> float:
     twice over, so windows across its end exist): `motion.nearest_window_error`.
     `qpos` [T, nq] of a run of `walk_amp`, T >= `window`."""
     if not isinstance(task.motion, motion.Reference):
-        raise ValueError("deepmimic.style_error: the task has no motion reference; build it with walk_amp")
+        raise TypeError("deepmimic.style_error: the task has no motion reference; build it with walk_amp")
     qpos, m = np.asarray(qpos), task.mj_model
     if qpos.ndim != 2 or qpos.shape[1] != m.nq:
         raise ValueError(f"deepmimic.style_error: qpos has shape {qpos.shape}; expected [T, {m.nq}]")

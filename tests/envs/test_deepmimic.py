@@ -12,11 +12,10 @@ import importlib.util
 
 import jax
 import jax.numpy as jnp
+import mjzoo
 import mujoco
 import numpy as np
 import pytest
-
-import mjzoo
 from mjzoo import motion
 from mjzoo.envs import deepmimic
 

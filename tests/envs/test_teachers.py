@@ -5,10 +5,9 @@ from __future__ import annotations
 
 import jax
 import jax.numpy as jnp
+import mjzoo
 import numpy as np
 import pytest
-
-import mjzoo
 from mjzoo import motion
 from mjzoo.envs import cartpole, teachers
 
@@ -91,7 +90,7 @@ def test_style_error_of_the_clip_and_of_hanging_still(task, clip):
 def test_style_error_rejects_bad_input(task):
     with pytest.raises(ValueError, match=r"qpos has shape \(10, 3\)"):
         teachers.style_error(task, np.zeros((10, 3)))
-    with pytest.raises(ValueError, match="no motion reference"):
+    with pytest.raises(TypeError, match="no motion reference"):
         teachers.style_error(cartpole.swingup(), np.zeros((30, 2)))
 
 
