@@ -26,7 +26,8 @@ from typing import Any, Callable
 import numpy as np
 
 from mjzoo import physics
-from mjzoo.envs import base, cartpole, cylinder_push, humanoid_amp, joystick, locomotion, pendulum, point_mass
+from mjzoo.envs import (base, cartpole, cylinder_push, humanoid_amp, joystick, locomotion, pendulum, point_mass,
+                        teachers)  # fmt: skip
 from mjzoo.planning.realtime import Problem
 from mjzoo.planning.sampling import SamplingConfig
 from mjzoo.running import control_dt
@@ -53,6 +54,7 @@ _REGISTRY: dict[str, Callable[..., Task]] = {
     # AMP: move like a reference motion (envs/humanoid_amp.py)
     "humanoid_amp_walk": humanoid_amp.humanoid_amp_walk,
     "humanoid_amp_joystick": humanoid_amp.humanoid_amp_joystick,
+    "cartpole_amp_swingup": teachers.cartpole_amp_swingup,  # MPPI's swing-up as the reference
 }
 # Per-env algorithm defaults, defined beside each env.
 _HYPERPARAMETERS: dict[str, dict[str, dict[str, Any]]] = {
@@ -65,6 +67,7 @@ _HYPERPARAMETERS: dict[str, dict[str, dict[str, Any]]] = {
     "ant_joystick": {"ppo": joystick.PPO},
     "humanoid_amp_walk": {"amp": humanoid_amp.AMP},
     "humanoid_amp_joystick": {"amp": humanoid_amp.JOYSTICK_AMP},
+    "cartpole_amp_swingup": {"amp": teachers.AMP},
 }
 # How the sampling planners solve each env closed loop.
 _PLANNING: dict[str, base.PlanningSetup] = {
