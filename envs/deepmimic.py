@@ -157,11 +157,11 @@ def walk(*, episode_steps: int = 300, alive_weight: float = 1.0, min_height: flo
     return with_time_limit(with_divergence_guard(task), episode_steps)
 
 
-def walk_amp(*, reference_init: float = 0.8, **overrides: Any) -> Task:
+def walk_amp(*, reference_init: float = 0.8, episode_steps: int = 300, **overrides: Any) -> Task:
     """`walk(**overrides)` with the walk clip attached as its reference (`Task.motion`,
     looping, one frame per control step) and a fraction `reference_init` in [0, 1] of
     its episodes starting at a clip frame (`resets.reference_state`), for `AMP`."""
-    task = walk(**overrides)
+    task = walk(episode_steps=episode_steps, **overrides)
     m = task.mj_model
     # The control step from the options, not `motion.with_reference`'s measured one:
     # that compiles a step of this humanoid, minutes on a CPU. `walk` has already
