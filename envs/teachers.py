@@ -67,13 +67,16 @@ def cartpole_clip(mj_model: mujoco.MjModel) -> motion.Clip:
     return motion.load(CARTPOLE_CLIP, mj_model, name="cartpole_swingup_mppi")
 
 
-def cartpole_amp_swingup(*, reference_init: float = 0.0, episode_steps: int = 500, ctrl_dt: float = 0.02,
-                         **overrides) -> Task:  # fmt: skip
-    """`cartpole.swingup(episode_steps=..., ctrl_dt=..., **overrides)` with the planner's clip as its
-    reference (`Task.motion`, resampled to one frame per control step, not looping);
-    a fraction `reference_init` in [0, 1] of the episodes starts at a clip frame
-    (`resets.reference_state`), the others hanging."""
-    task = cartpole.swingup(episode_steps=episode_steps, ctrl_dt=ctrl_dt, **overrides)
+def cartpole_amp_swingup(*, reference_init: float = 0.0, episode_steps: int = 500, upright_weight: float = 1.0,
+                         centered_weight: float = 0.1, velocity_weight: float = 0.1, effort_weight: float = 0.01,
+                         ctrl_dt: float = 0.02, **physics_options) -> Task:  # fmt: skip
+    """`cartpole.swingup(...)` (its reward weights, episode length and physics options)
+    with the planner's clip as its reference (`Task.motion`, resampled to one frame per
+    control step, not looping); a fraction `reference_init` in [0, 1] of the episodes
+    starts at a clip frame (`resets.reference_state`), the others hanging."""
+    task = cartpole.swingup(episode_steps=episode_steps, upright_weight=upright_weight, centered_weight=centered_weight,
+                            velocity_weight=velocity_weight, effort_weight=effort_weight, ctrl_dt=ctrl_dt,
+                            **physics_options)  # fmt: skip
     ref = motion.reference(cartpole_clip(task.mj_model), task.mj_model, dt=ctrl_dt, loop=False)
     if reference_init:
         task = resets.with_resets(task, resets.reference_state(ref, reference_init), observe=_observe)

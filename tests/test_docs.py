@@ -35,7 +35,8 @@ _PPO_TRAIN = ("ppo.train compiles two more programs (a chunk of updates and the 
               "minutes on a 2-core CPU. The harness it calls is tested in tests/algorithms/test_ppo.py.")  # fmt: skip
 # Lines the block tests leave out, by document (matched by what the line contains), and why.
 NOT_RUN = {
-    "README.md": {"ppo.train(": _PPO_TRAIN},
+    "README.md": {"ppo.train(": _PPO_TRAIN, "amp.train(": _PPO_TRAIN.replace("ppo.train", "amp.train")
+                  .replace("tests/algorithms/test_ppo.py", "tests/algorithms/test_amp.py")},
     "docs/own-task.md": {"ppo.train(": _PPO_TRAIN},
 }
 
