@@ -288,7 +288,6 @@ def run(algorithm: Algorithm, config: AlgorithmConfig, task: Task, settings: Set
     last: dict[str, float] = {}
     history: list[dict[str, float]] = []
     warned = None
-    diagnose = getattr(algorithm, "diagnose", None)
     trajectory = None
     started = time.perf_counter()
     try:
@@ -311,9 +310,7 @@ def run(algorithm: Algorithm, config: AlgorithmConfig, task: Task, settings: Set
             if settings.progress:
                 progress.update(step, ret=f"{last['eval/return']:.1f}", sps=f"{last['perf/steps_per_s']:,.0f}")
             history.append(last)
-            if diagnose is not None and (message := diagnose(history)) and message != warned:
-                warnings.warn(message, TrainingWarning, stacklevel=2)
-                warned = message
+            warned = _diagnose(algorithm, history, warned)
     finally:
         progress.close()
         if writer is not None:
@@ -321,6 +318,16 @@ def run(algorithm: Algorithm, config: AlgorithmConfig, task: Task, settings: Set
     if out is not None:
         _finish(out, task, trajectory, settings)
     return state, last
+
+
+def _diagnose(algorithm: Algorithm, history: list[dict[str, float]], warned: str | None) -> str | None:
+    """Warns with the algorithm's `diagnose` message when it is new; returns the last one warned."""
+    diagnose = getattr(algorithm, "diagnose", None)
+    message = diagnose(history) if diagnose is not None else None
+    if message and message != warned:
+        warnings.warn(message, TrainingWarning, stacklevel=3)
+        return message
+    return warned
 
 
 def _finish(out: Path, task: Task, trajectory, settings: Settings) -> None:
