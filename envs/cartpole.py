@@ -26,6 +26,7 @@ from mujoco import mjx
 
 from mjzoo.envs import base
 from mjzoo.catalog.rewards import tolerance
+from mjzoo import physics as physics_lib
 from mjzoo.types import State, Task
 
 __all__ = ["Params", "balance", "swingup"]
@@ -67,6 +68,7 @@ class Params:
     init_angle: Array  # pole angle at reset, rad (0 upright, pi hanging)
     init_noise: Array  # uniform half-width of the reset noise on every coordinate
     fall_angle: Array  # |angle| beyond which the episode terminates (inf: never)
+    data0: mjx.Data  # the reset template, `Physics.data0`
     n_substeps: int = dataclasses.field(metadata=dict(static=True))
 
 
@@ -77,7 +79,7 @@ def observe(data: mjx.Data) -> Array:
 
 def reset(p: Params, model: mjx.Model, key: Array) -> State:
     qpos_key, qvel_key = jax.random.split(key)
-    data = mjx.make_data(model)
+    data = p.data0
     qpos = jnp.array([0.0, 1.0]) * p.init_angle + jax.random.uniform(qpos_key, (2,), minval=-p.init_noise, maxval=p.init_noise)
     qvel = jax.random.uniform(qvel_key, (2,), minval=-p.init_noise, maxval=p.init_noise)
     data = data.replace(qpos=qpos.astype(data.qpos.dtype), qvel=qvel.astype(data.qvel.dtype))
@@ -115,6 +117,7 @@ def _make(
             effort_weight=effort_weight, centered_margin=centered_margin, velocity_margin=velocity_margin,
             init_angle=init_angle, init_noise=init_noise, fall_angle=fall_angle,
         ),
+        data0=physics.data0,
         n_substeps=physics.n_substeps,
     )  # fmt: skip
     return base.build(physics, params, reset, step, reward, terminate, episode_steps=episode_steps)

@@ -28,6 +28,7 @@ from mjzoo.combinators import with_reward
 from mjzoo.envs import base
 from mjzoo.catalog.rewards import tolerance
 from mjzoo.planning.closed_loop import Hooks
+from mjzoo import physics as physics_lib
 from mjzoo.types import State, Task, bind
 
 __all__ = ["Params", "push"]
@@ -87,6 +88,7 @@ class Params:
     effort_weight: Array
     margin: Array
     spawn_range: Array  # cylinder and goal uniform in [-r, r]^2, pusher in [-1.6 r, 1.6 r]^2
+    data0: mjx.Data  # the reset template, `Physics.data0`
     n_substeps: int = dataclasses.field(metadata=dict(static=True))
 
 
@@ -110,7 +112,7 @@ def reset(p: Params, model: mjx.Model, key: Array) -> State:
     gap = jnp.linalg.norm(offset)
     direction = jnp.where(gap > 1e-6, offset / jnp.maximum(gap, 1e-6), jnp.array([1.0, 0.0]))
     pusher = jnp.where(gap < 2 * CONTACT_DISTANCE, cylinder + 2 * CONTACT_DISTANCE * direction, pusher)
-    data = mjx.make_data(model)
+    data = p.data0
     data = data.replace(qpos=jnp.concatenate([pusher, cylinder]), mocap_pos=data.mocap_pos.at[0, :2].set(goal))
     return State.create(data, observe(data, goal), info={"goal": goal})
 
@@ -151,6 +153,7 @@ def push(
             goal_weight=goal_weight, approach_weight=approach_weight, effort_weight=effort_weight,
             margin=margin, spawn_range=spawn_range,
         ),
+        data0=physics.data0,
         n_substeps=physics.n_substeps,
     )  # fmt: skip
     return base.build(physics, params, reset, step, reward, base.never_terminate, episode_steps=episode_steps)

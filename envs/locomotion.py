@@ -64,6 +64,7 @@ class Params:
     qpos0: Array  # [nq] the reset pose
     observe: Callable  # observation item (model, state) -> [k]
     actuator: Callable | None  # catalog actuator (model, data, action, key) -> ctrl [nu]
+    data0: mjx.Data  # the reset template, `Physics.data0`
     n_substeps: int = dataclasses.field(metadata=dict(static=True))
 
 
@@ -76,7 +77,7 @@ def bare(physics: physics_lib.Physics, observe: Callable, actuator: Callable | N
     # again makes a treedef that compares by identity and retraces every new task.
     as_leaf = lambda fn: fn if fn is None or isinstance(fn, jax.tree_util.Partial) else jax.tree_util.Partial(fn)  # noqa: E731
     params = Params(jnp.asarray(reset_pose(physics.mj_model), jnp.float32), as_leaf(observe), as_leaf(actuator),
-                    physics.n_substeps)  # fmt: skip
+                    physics.data0, physics.n_substeps)  # fmt: skip
     return Task(model=physics.model, start=bind(_reset, params), step=bind(_step, params),
                 reward=bind(_no_terms), terminate=bind(base.never_terminate, ()), mj_model=physics.mj_model)  # fmt: skip
 
@@ -97,7 +98,7 @@ def actuated_pose(mj_model: mujoco.MjModel) -> np.ndarray:
 
 
 def _reset(p: Params, model: mjx.Model, key: Array) -> State:
-    data = mjx.forward(model, mjx.make_data(model).replace(qpos=p.qpos0))
+    data = mjx.forward(model, p.data0.replace(qpos=p.qpos0))
     state = State.create(data, jnp.zeros((0,), jnp.float32))
     return state.replace(obs=p.observe(model, state))
 

@@ -28,6 +28,7 @@ from mujoco import mjx
 from mjzoo.combinators import with_reward
 from mjzoo.envs import base
 from mjzoo.catalog.rewards import tolerance
+from mjzoo import physics as physics_lib
 from mjzoo.types import State, Task
 
 __all__ = ["Params", "swingup"]
@@ -82,6 +83,7 @@ class Params:
     velocity_bound: Array  # rad/s, free speed of the velocity term
     velocity_margin: Array  # rad/s beyond the bound at which the velocity term is full
     init_noise: Array  # rad and rad/s, uniform half-width around hanging still
+    data0: mjx.Data  # the reset template, `Physics.data0`
     n_substeps: int = dataclasses.field(metadata=dict(static=True))
 
 
@@ -92,7 +94,7 @@ def observe(data: mjx.Data) -> Array:
 
 def reset(p: Params, model: mjx.Model, key: Array) -> State:
     noise = jax.random.uniform(key, (2,), minval=-p.init_noise, maxval=p.init_noise)
-    data = mjx.make_data(model)
+    data = p.data0
     data = data.replace(qpos=data.qpos.at[0].set(jnp.pi + noise[0]), qvel=data.qvel.at[0].set(noise[1]))
     return State.create(data, observe(data))
 
@@ -136,6 +138,7 @@ def swingup(
             small_velocity_margin=small_velocity_margin, velocity_bound=velocity_bound,
             velocity_margin=velocity_margin, init_noise=init_noise,
         ),
+        data0=physics.data0,
         n_substeps=physics.n_substeps,
     )  # fmt: skip
     return base.build(physics, params, reset, step, reward, base.never_terminate, episode_steps=episode_steps)

@@ -21,6 +21,7 @@ from mujoco import mjx
 from mjzoo.planning.closed_loop import Hooks
 from mjzoo.envs import base
 from mjzoo.catalog.rewards import tolerance
+from mjzoo import physics as physics_lib
 from mjzoo.types import State, Task, bind
 
 __all__ = ["Params", "reach"]
@@ -80,6 +81,7 @@ class Params:
     target_radius: Array
     reach_margin: Array
     spawn_range: Array  # start and target are uniform in [-spawn_range, spawn_range]^2
+    data0: mjx.Data  # the reset template, `Physics.data0`
     n_substeps: int = dataclasses.field(metadata=dict(static=True))
 
 
@@ -91,7 +93,7 @@ def reset(p: Params, model: mjx.Model, key: Array) -> State:
     start_key, goal_key = jax.random.split(key)
     start = jax.random.uniform(start_key, (2,), minval=-p.spawn_range, maxval=p.spawn_range)
     goal = jax.random.uniform(goal_key, (2,), minval=-p.spawn_range, maxval=p.spawn_range)
-    data = mjx.make_data(model)
+    data = p.data0
     data = data.replace(qpos=start, mocap_pos=data.mocap_pos.at[0, :2].set(goal))
     return State.create(data, observe(data, goal), info={"goal": goal})
 
@@ -127,6 +129,7 @@ def reach(
             reach_weight=reach_weight, effort_weight=effort_weight, target_radius=target_radius,
             reach_margin=reach_margin, spawn_range=spawn_range,
         ),
+        data0=physics.data0,
         n_substeps=physics.n_substeps,
     )  # fmt: skip
     return base.build(physics, params, reset, step, reward, base.never_terminate, episode_steps=episode_steps)

@@ -21,7 +21,7 @@ import jax
 import jax.numpy as jnp
 from mujoco import mjx
 
-from mjzoo import checks, tree
+from mjzoo import checks, physics, tree
 from mjzoo.running import OUTCOME, complete, reset, reward_terms, transition_with_terms
 from mjzoo.types import State, Task, bind
 
@@ -118,9 +118,10 @@ def record(state: State, terms: dict[str, Array], terminated: Array, truncated: 
 
 
 def _select(cond: Array, on_true: State, on_false: State) -> State:
-    """`on_false` with data, obs and info taken from `on_true` where `cond` holds."""
+    """`on_false` (the running state) with data, obs and info taken from `on_true` where
+    `cond` holds."""
     return on_false.replace(
-        data=tree.where(cond, on_true.data, on_false.data),
+        data=physics.where(cond, on_true.data, on_false.data),
         obs=tree.where(cond, on_true.obs, on_false.obs),
         info=tree.where(cond, on_true.info, on_false.info),
     )
@@ -324,10 +325,22 @@ def _revert_physics(ok: Array, new: mjx.Data, old: mjx.Data) -> mjx.Data:
     Selecting the whole of `old` would keep every buffer of the previous step alive and
     force XLA to copy them all each step (measured: +25% per step on a cheap model).
     """
-    zeroed = jax.tree.map(lambda x: jnp.where(ok, x, jnp.zeros_like(x)), new)
+    zeroed = physics.where(~ok, jax.tree.map(jnp.zeros_like, new), new)
     names = {f.name for f in dataclasses.fields(new)}
     restored = {k: tree.where(ok, getattr(new, k), getattr(old, k)) for k in INTEGRATION_STATE if k in names}
     return zeroed.replace(**restored)
+
+
+def _overflow_metrics(data: mjx.Data) -> dict[str, Array]:
+    """On Warp: whether this step outgrew the contact / constraint capacities (its physics
+    dropped some) or stopped the solver at its iteration limit; nothing on JAX."""
+    if data.impl != mjx.Impl.WARP:
+        return {}
+    flags = physics.overflow(data)
+    return {
+        "physics/capacity_overflow": ((flags & physics.OVERFLOW_CAPACITY) != 0).astype(jnp.float32),
+        "physics/solver_limit": ((flags & physics.OVERFLOW_SOLVER) != 0).astype(jnp.float32),
+    }
 
 
 def _guard_step(max_qvel, inner: Task, model, state: State, action: Array, key: Array) -> State:
@@ -343,6 +356,7 @@ def _guard_step(max_qvel, inner: Task, model, state: State, action: Array, key: 
         info=tree.where(ok, next_state.info, state.info),
     )
     metrics = jax.tree.map(lambda v: jnp.where(jnp.isfinite(v), v, 0.0), next_state.metrics)
-    safe = safe.replace(metrics={**metrics, "diverged": (~ok).astype(jnp.float32)})
+    metrics = {**metrics, "diverged": (~ok).astype(jnp.float32), **_overflow_metrics(data)}
+    safe = safe.replace(metrics=metrics)
     terms = {k: jnp.where(ok, v, 0.0) for k, v in terms.items()}
     return record(safe, terms, next_state.terminated | ~ok, next_state.truncated & ok)

@@ -108,6 +108,7 @@ def task(
         terms=terms,
         terminate=None if terminate is None else _function("terminate", terminate),
         resets=tuple(_function(f"reset item {i}", fn) for i, fn in enumerate(resets)),
+        data0=physics.data0,
         n_substeps=physics.n_substeps,
     )
     built = Task(
@@ -134,6 +135,7 @@ class Spec:
     terms: dict[str, tuple[jax.tree_util.Partial, Static]]
     terminate: jax.tree_util.Partial | None
     resets: tuple[jax.tree_util.Partial, ...]
+    data0: mjx.Data  # the reset template, `Physics.data0`
     n_substeps: int = dataclasses.field(metadata=dict(static=True))
 
 
@@ -147,7 +149,7 @@ def joint_state(p: dict, model: mjx.Model, state: State) -> Array:
 
 
 def _start(spec: Spec, p: dict, model: mjx.Model, key: Array) -> State:
-    data, info = mjx.make_data(model), {}
+    data, info = spec.data0, {}
     for item, item_key in zip(spec.resets, jax.random.split(key, len(spec.resets))):
         out = item(p, model, data, item_key)
         data, written = out if isinstance(out, tuple) else (out, {})
@@ -224,11 +226,15 @@ def _physics(model, options: dict[str, Any]) -> physics_lib.Physics:
                         f"options: {', '.join(physics_lib.OPTIONS)}")  # fmt: skip
     if not isinstance(model, mujoco.MjModel):
         return physics_lib.load(model, **options)
-    if set(options) - {"ctrl_dt"}:
-        raise ValueError("mjzoo.task: for an MjModel, set physics options other than ctrl_dt on model.opt")
+    if set(options) - {"ctrl_dt", "impl", "max_contacts", "max_constraints"}:
+        raise ValueError("mjzoo.task: for an MjModel, set physics options other than ctrl_dt, impl and the "
+                         "capacities on model.opt")
     dt = float(model.opt.timestep)
     ctrl_dt = checks.number("mjzoo.task", "ctrl_dt", options.get("ctrl_dt", dt), 0.0, open_low=True)
     n_substeps = round(float(ctrl_dt) / dt)
     if n_substeps < 1 or not math.isclose(n_substeps * dt, float(ctrl_dt), rel_tol=1e-6):
         raise ValueError(f"mjzoo.task: ctrl_dt={float(ctrl_dt)} must be a whole multiple of the model's dt={dt}")
-    return physics_lib.Physics("<MjModel>", mj_model=model, model=mjx.put_model(model), n_substeps=n_substeps)
+    impl = options.get("impl") or physics_lib.default_impl()
+    if impl not in physics_lib.IMPLS:
+        raise ValueError(f"mjzoo.task: physics option impl={impl!r} is invalid; expected one of {list(physics_lib.IMPLS)}")
+    return physics_lib.of_model(model, n_substeps, impl, options.get("max_contacts"), options.get("max_constraints"))

@@ -2,28 +2,45 @@
 
     physics = mjzoo.physics.load("robot.xml", dt=0.005, ctrl_dt=0.02, solver="newton")
     physics.model          # mjx.Model (a pytree: masses, gains, timestep are leaves)
+    physics.data0          # the template every reset starts from
     physics.n_substeps     # 4 physics steps per control step
     physics.id("body", "torso")
 
 Every mistake is reported at load time with the model's source and what exists:
 a missing file, malformed XML, an option out of range, a name the model lacks.
+
+Two implementations run behind the same `mjx.Model` / `mjx.Data` (``impl=``): MJX's
+pure-JAX one, and MuJoCo Warp (CUDA kernels; the default where it is installed and a
+CUDA GPU is present). Warp keeps its contacts in one pool shared by every simulated
+world of a batch, sized ``max_contacts`` per world, and ``max_constraints`` constraint
+rows per world: both are measured by a probe rollout of C MuJoCo at load time unless
+given; `for_worlds` sizes the pool for a batch before it is vmapped. Code that must see
+Warp's private fields goes through this module: `where` to merge Data, `contacts` to
+read them, `overflow` for Warp's overflow flags.
 """
 
 from __future__ import annotations
 
 import dataclasses
 import functools
+import importlib.util
 import math
 import numbers
 import os
 from pathlib import Path
-from typing import Any
+from typing import Any, NamedTuple
 
 import jax
+import jax.numpy as jnp
 import mujoco
+import numpy as np
 from mujoco import mjx
 
-__all__ = ["Physics", "load", "step", "OPTIONS"]
+__all__ = [
+    "Physics", "load", "step", "substep", "OPTIONS", "IMPLS", "default_impl", "for_worlds", "per_world", "where",
+    "Contacts", "contacts", "overflow", "clear_overflow", "OVERFLOW_CAPACITY", "OVERFLOW_SOLVER",
+    "check_differentiable", "probe_capacity", "of_model",
+]  # fmt: skip
 
 SOLVERS = {"cg": mujoco.mjtSolver.mjSOL_CG, "newton": mujoco.mjtSolver.mjSOL_NEWTON}
 INTEGRATORS = {
@@ -33,8 +50,14 @@ INTEGRATORS = {
 }
 OPTIONS = (
     "dt", "ctrl_dt", "solver", "iterations", "ls_iterations", "integrator", "tolerance",
-    "disable_euler_damping",
+    "disable_euler_damping", "impl", "max_contacts", "max_constraints",
 )  # fmt: skip
+IMPLS = ("jax", "warp")
+# MuJoCo Warp's overflow bits (mujoco_warp OverflowType): capacities a run outgrew (its
+# physics then drops contacts or constraints) and solver iteration limits (it stops early).
+OVERFLOW_CAPACITY = 1 | 2 | 4 | 8 | 16 | 32 | 64 | 128 | 256 | 4096  # nefc, nnz, broad/narrowphase, ccd, ...
+OVERFLOW_SOLVER = 512 | 1024  # iterations, line-search iterations
+WARP_ON_CPU = "MJZOO_WARP_ON_CPU"  # =1: let impl="warp" run on Warp's CPU backend (slow; for debugging)
 _KINDS = {
     "body": mujoco.mjtObj.mjOBJ_BODY,
     "joint": mujoco.mjtObj.mjOBJ_JOINT,
@@ -60,6 +83,18 @@ class Physics:
     mj_model: mujoco.MjModel
     model: mjx.Model
     n_substeps: int
+    impl: str = "jax"
+    max_contacts: int | None = None
+    max_constraints: int | None = None
+
+    @functools.cached_property
+    def data0(self) -> mjx.Data:
+        """The template every reset starts from: ``qpos = qpos0``, zero velocity, nothing
+        computed; on Warp, with a contact pool for one world (`for_worlds` sizes it)."""
+        if self.impl == "jax":
+            return mjx.make_data(self.mj_model, impl="jax")
+        data = mjx.make_data(self.mj_model, impl="warp", naconmax=self.max_contacts, njmax=self.max_constraints)
+        return data.replace(_impl=data._impl.replace(nworld=1))  # nworld: the worlds the pool is sized for
 
     @property
     def dt(self) -> float:
@@ -110,6 +145,9 @@ def load(
     integrator: str | None = None,
     tolerance: float | None = None,
     disable_euler_damping: bool = False,
+    impl: str | None = None,
+    max_contacts: int | None = None,
+    max_constraints: int | None = None,
 ) -> Physics:
     """Compiles an MJCF file or XML string for MJX, applying validated physics options.
 
@@ -123,6 +161,13 @@ def load(
       integrator: "euler", "implicitfast" or "rk4".
       tolerance: solver tolerance (>= 0).
       disable_euler_damping: skip the implicit joint damping of the Euler integrator.
+      impl: "jax" (MJX in JAX: runs anywhere, differentiable) or "warp" (MuJoCo Warp:
+        CUDA kernels, several times faster on a GPU, no derivatives); default
+        `default_impl()`.
+      max_contacts: Warp only: contacts per simulated world the shared pool holds;
+        default: measured by a probe rollout (`probe_capacity`).
+      max_constraints: Warp only: constraint rows per world (MuJoCo Warp's njmax);
+        default: measured by the same probe.
 
     Identical calls return the same `Physics` (cached), so tasks built twice from the
     same model share one jit cache entry.
@@ -131,19 +176,217 @@ def load(
     options = dict(
         dt=dt, ctrl_dt=ctrl_dt, solver=solver, iterations=iterations,
         ls_iterations=ls_iterations, integrator=integrator, tolerance=tolerance,
-        disable_euler_damping=disable_euler_damping,
+        disable_euler_damping=disable_euler_damping, impl=impl, max_contacts=max_contacts,
+        max_constraints=max_constraints,
     )  # fmt: skip
     _validate(label, options)
+    options["impl"] = impl or default_impl()
     options = {k: v.item() if hasattr(v, "item") else v for k, v in options.items()}  # numpy scalars
     return _compile(text, label, mtime, tuple(sorted(options.items())))
 
 
 def step(model: mjx.Model, data: mjx.Data, ctrl: jax.Array, n_substeps: int) -> mjx.Data:
-    """Applies `ctrl` ([nu]) and advances `n_substeps` (static) physics steps."""
-    data = data.replace(ctrl=ctrl)
+    """Applies `ctrl` ([nu]) and advances `n_substeps` (static) physics steps.
+
+    On Warp, the overflow flags (`overflow`) are cleared first, so afterwards they
+    report this control step's substeps.
+    """
+    data = clear_overflow(data).replace(ctrl=ctrl)
     if n_substeps == 1:
-        return mjx.step(model, data)
-    return jax.lax.fori_loop(0, n_substeps, lambda _, d: mjx.step(model, d), data)
+        return substep(model, data)
+    return jax.lax.fori_loop(0, n_substeps, lambda _, d: substep(model, d), data)
+
+
+def substep(model: mjx.Model, data: mjx.Data) -> mjx.Data:
+    """One physics step, `mjx.step`; on Warp, differentiating through it raises a clear error."""
+    if data.impl == mjx.Impl.WARP:
+        return _warp_step(model, data)
+    return mjx.step(model, data)
+
+
+@jax.custom_jvp
+def _warp_step(model: mjx.Model, data: mjx.Data) -> mjx.Data:
+    return mjx.step(model, data)
+
+
+@_warp_step.defjvp
+def _warp_step_jvp(primals, tangents):
+    check_differentiable(primals[1], "jax.grad / jax.jvp through mjzoo.physics.step")
+    raise AssertionError  # unreachable
+
+
+def check_differentiable(data: mjx.Data, who: str) -> None:
+    """Raises a clear error when `data` comes from Warp physics, which has no derivatives."""
+    if data.impl == mjx.Impl.WARP:
+        raise NotImplementedError(
+            f"{who}: the physics runs on MuJoCo Warp (impl='warp'), which MJX cannot "
+            "differentiate; load the task with impl='jax' to take gradients through physics"
+        )
+
+
+def default_impl() -> str:
+    """"warp" where MuJoCo Warp is installed and JAX sees a CUDA GPU, else "jax"."""
+    return "warp" if _warp_installed() and _has_cuda() else "jax"
+
+
+def _warp_installed() -> bool:
+    return importlib.util.find_spec("warp") is not None
+
+
+def _has_cuda() -> bool:
+    try:
+        return bool(jax.devices("cuda"))
+    except RuntimeError:
+        return False
+
+
+def _require_warp(label: str) -> None:
+    if not _warp_installed():
+        raise ValueError(
+            f"{label}: physics option impl='warp' needs MuJoCo Warp, which is not installed: "
+            "pip install -e '.[warp]' (or pip install 'mujoco-mjx[warp]'); or use impl='jax'"
+        )
+    if not _has_cuda() and os.environ.get(WARP_ON_CPU) != "1":
+        platforms = sorted({d.platform for d in jax.devices()})
+        raise ValueError(
+            f"{label}: physics option impl='warp' needs a CUDA GPU, and JAX sees only "
+            f"{', '.join(platforms)}; use impl='jax' (or set {WARP_ON_CPU}=1 to debug on Warp's slow CPU backend)"
+        )
+    import warp  # a dependency of the 'warp' extra
+
+    warp.config.quiet = True  # no line per kernel module loaded
+
+
+# --- Warp's shared contact pool ------------------------------------------------------
+
+
+def for_worlds(tree: Any, worlds: int) -> Any:
+    """`tree` (a Task, a State, a Data, any pytree) with every Warp Data in it holding a
+    contact pool for `worlds` simulated worlds: what a batch of `worlds` needs before it
+    is vmapped (resets from the task's template, or one state broadcast over planner
+    samples). The pools' contents are dropped: the next step recomputes them. Warp
+    sizes its pool statically, so the caller who knows the batch sizes it; identity on
+    JAX."""
+    is_data = lambda x: isinstance(x, mjx.Data)  # noqa: E731
+    return jax.tree.map(lambda x: _sized(x, worlds) if is_data(x) else x, tree, is_leaf=is_data)
+
+
+def _sized(data: mjx.Data, worlds: int) -> mjx.Data:
+    impl = data._impl
+    if data.impl != mjx.Impl.WARP or impl.nworld == worlds:
+        return data
+    per_world = impl.naconmax // impl.nworld
+    pool = {}
+    for f in dataclasses.fields(impl):
+        value = getattr(impl, f.name)
+        if f.name.startswith("contact__") and np.shape(value)[0] == impl.naconmax:
+            pool[f.name] = jnp.zeros((per_world * worlds,) + value.shape[1:], value.dtype)
+    naccdmax = impl.naccdmax // impl.nworld * worlds if impl.naccdmax else impl.naccdmax
+    return data.replace(_impl=impl.replace(**pool, naconmax=per_world * worlds, naccdmax=naccdmax, nworld=worlds))
+
+
+def per_world(tree: Any) -> Any:
+    """`tree` without Warp's shared contact pool (its fields become None in every Data), so
+    that every leaf has the batch's axes: for indexing or comparing batched states."""
+    is_data = lambda x: isinstance(x, mjx.Data)  # noqa: E731
+    return jax.tree.map(lambda x: _own_fields(x) if is_data(x) else x, tree, is_leaf=is_data)
+
+
+def _own_fields(data: mjx.Data) -> mjx.Data:
+    if data.impl != mjx.Impl.WARP:
+        return data
+    from mujoco.mjx.warp.types import DATA_NON_VMAP
+
+    shared = {f.name: None for f in dataclasses.fields(data._impl)
+              if f.name in DATA_NON_VMAP and isinstance(getattr(data._impl, f.name), jax.Array)}  # fmt: skip
+    return data.replace(_impl=data._impl.replace(**shared))
+
+
+def where(cond: jax.Array, on_true: mjx.Data, on_false: mjx.Data) -> mjx.Data:
+    """`on_true` where `cond` (a scalar per world), else `on_false`, field by field.
+
+    Warp's contact pool is shared by all worlds, not one world's: it is taken from
+    `on_false`, which should be the running state (the one just stepped)."""
+    if on_false.impl != mjx.Impl.WARP:
+        return jax.tree.map(lambda a, b: jnp.where(cond, a, b), on_true, on_false)
+    from mujoco.mjx.warp.types import DATA_NON_VMAP  # present where Warp data exists
+
+    pick = lambda a, b: jnp.where(cond, a, b)  # noqa: E731
+    impl = {  # per-world fields only: the pool and its counters are shared
+        f.name: pick(getattr(on_true._impl, f.name), getattr(on_false._impl, f.name))
+        for f in dataclasses.fields(on_false._impl)
+        if f.name not in DATA_NON_VMAP and isinstance(getattr(on_false._impl, f.name), jax.Array)
+    }
+    public = {f.name: pick(getattr(on_true, f.name), getattr(on_false, f.name))
+              for f in dataclasses.fields(on_false) if f.name != "_impl"}  # fmt: skip
+    return on_false.replace(**public, _impl=on_false._impl.replace(**impl))
+
+
+# --- contacts and overflow: the one reader of Warp's private fields ---------------------
+
+
+class Contacts(NamedTuple):
+    """One world's contacts as slots [C] (MJX-JAX: one per candidate geom pair; Warp: one
+    per contact constraint row); inactive slots have ``active`` False and zero force."""
+
+    geom1: jax.Array  # [C] int32
+    geom2: jax.Array  # [C] int32
+    active: jax.Array  # [C] bool
+    normal_force: jax.Array | None  # [C] float32, N (a slot's share of its contact's); None without a model
+
+
+def contacts(data: mjx.Data, model: mjx.Model | None = None) -> Contacts:
+    """The contacts the last `mjx.step` / `mjx.forward` found, for ONE world; normal forces
+    need `model` (on MJX-JAX, its cone type says how a contact's rows add up)."""
+    if data.impl == mjx.Impl.WARP:
+        return _warp_contacts(data)
+    contact = data._impl.contact
+    active = contact.dist < contact.includemargin
+    address, dim = np.asarray(contact.efc_address), np.asarray(contact.dim)
+    if model is None or address.size == 0:
+        force = None if model is None else jnp.zeros(0, jnp.float32)
+        return Contacts(contact.geom1, contact.geom2, active, force)
+    # A contact's rows start at its (static) efc_address. Pyramidal cones: the normal force
+    # is the sum of its 2 (condim - 1) edge forces (1 row for condim 1); elliptic: row 0.
+    rows = np.where(dim == 1, 1, 2 * (dim - 1)) if model.opt.cone == mjx.ConeType.PYRAMIDAL else np.ones_like(dim)
+    offsets = np.arange(rows.max())
+    index = np.maximum(address, 0)[:, None] + np.minimum(offsets[None, :], rows[:, None] - 1)
+    used = (offsets[None, :] < rows[:, None]) & (address[:, None] >= 0)
+    force = jnp.sum(jnp.where(used, data._impl.efc_force[index], 0.0), axis=1).astype(jnp.float32)
+    return Contacts(contact.geom1, contact.geom2, active, jnp.where(active, force, 0.0))
+
+
+def _warp_contacts(data: mjx.Data) -> Contacts:
+    # This world's contact constraint rows point (efc__id) into the pool shared by all
+    # worlds. A pyramidal contact's normal force is the sum of its rows' forces; an
+    # elliptic one's is its first row's.
+    impl, kind = data._impl, mujoco.mjtConstraint
+    rows = jnp.arange(impl.efc__type.shape[-1])
+    valid = rows < impl.nefc.reshape(())
+    frictionless = valid & (impl.efc__type == int(kind.mjCNSTR_CONTACT_FRICTIONLESS))
+    pyramidal = valid & (impl.efc__type == int(kind.mjCNSTR_CONTACT_PYRAMIDAL))
+    elliptic = valid & (impl.efc__type == int(kind.mjCNSTR_CONTACT_ELLIPTIC))
+    cid = jnp.where(frictionless | pyramidal | elliptic, impl.efc__id, 0)
+    elliptic &= impl.contact__efc_address[cid, 0] == rows
+    active = frictionless | pyramidal | elliptic
+    geoms = impl.contact__geom[cid]
+    return Contacts(geoms[:, 0], geoms[:, 1], active, jnp.where(active, impl.efc__force, 0.0).astype(jnp.float32))
+
+
+def overflow(data: mjx.Data) -> jax.Array:
+    """[] int32 bitmask of what overflowed in this world since `step` began (0 on JAX):
+    `OVERFLOW_CAPACITY` bits mean ``max_contacts`` / ``max_constraints`` were too small,
+    `OVERFLOW_SOLVER` bits that the solver stopped at its iteration limit."""
+    if data.impl != mjx.Impl.WARP:
+        return jnp.zeros((), jnp.int32)
+    return jnp.asarray(data._impl.overflow).reshape(()).astype(jnp.int32)
+
+
+def clear_overflow(data: mjx.Data) -> mjx.Data:
+    """`data` with Warp's (sticky) overflow flags cleared; identity on JAX."""
+    if data.impl != mjx.Impl.WARP:
+        return data
+    return data.replace(_impl=data._impl.replace(overflow=jnp.zeros_like(data._impl.overflow)))
 
 
 def _read(source: str | os.PathLike) -> tuple[str, str, float]:
@@ -176,6 +419,9 @@ def _validate(label: str, o: dict[str, Any]) -> None:
         check(name, _is_number(o[name], 1, integer=True), "an integer >= 1")
     check("tolerance", _is_number(o["tolerance"], 0.0), "a finite number >= 0")
     check("disable_euler_damping", isinstance(o["disable_euler_damping"], bool), "True or False", optional=False)
+    check("impl", o["impl"] in IMPLS, f"one of {list(IMPLS)}")
+    for name in ("max_contacts", "max_constraints"):
+        check(name, _is_number(o[name], 1, integer=True), "an integer >= 1 (per simulated world)")
 
 
 @functools.lru_cache(maxsize=64)
@@ -210,8 +456,55 @@ def _compile(text: str, label: str, mtime: float, options: tuple[tuple[str, Any]
         mj_model.opt.tolerance = o["tolerance"]
     if o["disable_euler_damping"]:
         mj_model.opt.disableflags |= mujoco.mjtDisableBit.mjDSBL_EULERDAMP
+    return of_model(mj_model, n_substeps, o["impl"], o["max_contacts"], o["max_constraints"], source=label)
+
+
+def of_model(
+    mj_model: mujoco.MjModel,
+    n_substeps: int,
+    impl: str = "jax",
+    max_contacts: int | None = None,
+    max_constraints: int | None = None,
+    source: str = "<MjModel>",
+) -> Physics:
+    """The `Physics` of a compiled host model (whose options are set on ``mj_model.opt``)."""
+    if impl == "warp":
+        _require_warp(source)
     try:
-        model = mjx.put_model(mj_model)
+        model = mjx.put_model(mj_model, impl=impl)
     except NotImplementedError as e:
-        raise ValueError(f"{label}: MJX cannot simulate this model: {e}") from None
-    return Physics(source=label, mj_model=mj_model, model=model, n_substeps=n_substeps)
+        raise ValueError(f"{source}: MJX ({impl}) cannot simulate this model: {e}") from None
+    if impl != "warp":
+        return Physics(source=source, mj_model=mj_model, model=model, n_substeps=n_substeps)
+    # Overflows are counted in metrics (`overflow`) instead of printed per world and step.
+    model = model.replace(opt=model.opt.replace(_impl=model.opt._impl.replace(warn_overflow=0)))
+    contacts, constraints = probe_capacity(mj_model)
+    return Physics(
+        source=source, mj_model=mj_model, model=model, n_substeps=n_substeps, impl=impl,
+        max_contacts=max_contacts or contacts, max_constraints=max_constraints or constraints,
+    )  # fmt: skip
+
+
+def probe_capacity(mj_model: mujoco.MjModel, seconds: float = 3.0, seeds: int = 4) -> tuple[int, int]:
+    """(contacts, constraint rows) per world to allocate for Warp: twice the most that C
+    MuJoCo sees in `seeds` rollouts of `seconds` under uniformly random controls from
+    qpos0 with random velocities (a robot thrashing, falling and lying down), plus room
+    for Warp's own collision routines, which may report a few more contacts per pair."""
+    data = mujoco.MjData(mj_model)
+    steps = max(1, round(seconds / mj_model.opt.timestep))
+    low, high = mj_model.actuator_ctrlrange.T if mj_model.nu else (np.zeros(0), np.zeros(0))
+    limited = mj_model.actuator_ctrllimited.astype(bool)
+    low, high = np.where(limited, low, -1.0), np.where(limited, high, 1.0)
+    most_contacts, most_rows = 0, 0
+    for seed in range(seeds):
+        rng = np.random.default_rng(seed)
+        mujoco.mj_resetData(mj_model, data)
+        data.qvel[:] = rng.normal(0.0, 1.0, mj_model.nv)
+        for i in range(steps):
+            if i % 10 == 0:
+                data.ctrl[:] = rng.uniform(low, high)
+            mujoco.mj_step(mj_model, data)
+            if not np.all(np.isfinite(data.qacc)):
+                break
+            most_contacts, most_rows = max(most_contacts, data.ncon), max(most_rows, data.nefc)
+    return 2 * most_contacts + 8, 2 * most_rows + 8 * 6 + mj_model.neq * 6 + mj_model.njnt

@@ -1,10 +1,10 @@
-"""Contacts between named geoms, read from MJX's contact data, for ONE environment.
+"""Contacts between named geoms, read through `mjzoo.physics.contacts`, for ONE environment.
 
-MJX (its JAX implementation, ``data._impl.contact``) keeps a fixed set of contact slots,
-one per candidate geom pair, whether the geoms touch or not. A slot is active, a real
-contact, when its distance is below its ``includemargin`` (margin - gap): MuJoCo's test
-for adding a contact constraint. So every function here masks by that test, and the
-slots' geom ids (static) say which pairs they belong to.
+MJX's JAX implementation keeps a fixed set of contact slots, one per candidate geom
+pair, whether the geoms touch or not; MuJoCo Warp keeps the contacts of every world of a
+batch in one pool, which a world reaches through its contact constraint rows.
+`physics.contacts` gives both as slots with geom ids, an ``active`` mask (MuJoCo's test
+for adding a contact constraint: distance below ``includemargin``) and a normal force.
 
 Constructors check with `geom_sets` that the geoms they watch can collide at all
 (contype / conaffinity bits or an explicit <pair>), so a typo in a collision mask fails
@@ -23,7 +23,7 @@ import mujoco
 import numpy as np
 from mujoco import mjx
 
-from mjzoo import names
+from mjzoo import names, physics
 
 __all__ = ["can_touch", "geom_sets", "pairs", "touching", "normal_forces", "forces"]
 
@@ -58,38 +58,28 @@ def geom_sets(
 
 
 def pairs(data: mjx.Data, geoms: Array, others: Array) -> Array:
-    """[G, C] bool: contact slot c is between geom ``geoms[g]`` and one of `others`."""
-    contact = data._impl.contact
+    """[G, C] bool: contact slot c is active and between geom ``geoms[g]`` and one of `others`."""
+    return _pairs(physics.contacts(data), geoms, others)
+
+
+def _pairs(contact: physics.Contacts, geoms: Array, others: Array) -> Array:
     other1 = jnp.any(contact.geom1[None, :] == others[:, None], axis=0)
     other2 = jnp.any(contact.geom2[None, :] == others[:, None], axis=0)
-    return ((contact.geom1 == geoms[:, None]) & other2) | ((contact.geom2 == geoms[:, None]) & other1)
+    between = ((contact.geom1 == geoms[:, None]) & other2) | ((contact.geom2 == geoms[:, None]) & other1)
+    return between & contact.active
 
 
 def touching(data: mjx.Data, geoms: Array, others: Array) -> Array:
     """[G] bool: geom ``geoms[g]`` has an active contact with one of `others` ([O] int32)."""
-    contact = data._impl.contact
-    return jnp.any(pairs(data, geoms, others) & (contact.dist < contact.includemargin), axis=1)
+    return jnp.any(pairs(data, geoms, others), axis=1)
 
 
 def normal_forces(model: mjx.Model, data: mjx.Data) -> Array:
-    """[C] float32 normal force of every contact slot, N (0 when inactive).
-
-    A contact's constraint rows start at its ``efc_address`` (static in MJX). With a
-    pyramidal cone its normal force is the sum of its 2 (condim - 1) edge forces (1 row
-    for condim 1); with an elliptic cone it is the first row: what ``mj_contactForce``
-    decodes.
-    """
-    contact = data._impl.contact
-    address, dim = np.asarray(contact.efc_address), np.asarray(contact.dim)
-    if address.size == 0:
-        return jnp.zeros(0, jnp.float32)
-    rows = np.where(dim == 1, 1, 2 * (dim - 1)) if model.opt.cone == mjx.ConeType.PYRAMIDAL else np.ones_like(dim)
-    offsets = np.arange(rows.max())
-    index = np.maximum(address, 0)[:, None] + np.minimum(offsets[None, :], rows[:, None] - 1)
-    used = (offsets[None, :] < rows[:, None]) & (address[:, None] >= 0)
-    return jnp.sum(jnp.where(used, data._impl.efc_force[index], 0.0), axis=1).astype(jnp.float32)
+    """[C] float32 normal force of every contact slot, N (0 when inactive)."""
+    return physics.contacts(data, model).normal_force
 
 
 def forces(model: mjx.Model, data: mjx.Data, geoms: Array, others: Array) -> Array:
     """[G] float32 total normal force on geom ``geoms[g]`` from `others`, N (0 apart)."""
-    return jnp.sum(pairs(data, geoms, others) * normal_forces(model, data)[None, :], axis=1)
+    contact = physics.contacts(data, model)
+    return jnp.sum(_pairs(contact, geoms, others) * contact.normal_force[None, :], axis=1)

@@ -29,6 +29,7 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 from jax.sharding import NamedSharding, PartitionSpec
+from mujoco import mjx
 
 from mjzoo.harness import checkpoints, metrics as metrics_lib, plotting, rendering
 from mjzoo.types import Task
@@ -37,11 +38,13 @@ __all__ = [
     "RUN_FILES",
     "Algorithm",
     "AlgorithmConfig",
+    "PhysicsCapacityError",
     "Settings",
     "TrainingWarning",
     "check_algorithm",
     "config_dict",
     "existing",
+    "physics_info",
     "replicate",
     "run",
     "shard_envs",
@@ -259,6 +262,37 @@ def _init_fn(algorithm: ModuleType):
     return jax.jit(algorithm.init, static_argnums=0)
 
 
+def physics_info(task: Task) -> dict[str, Any]:
+    """The physics implementation a task runs on, and Warp's capacities, for config.json."""
+    info: dict[str, Any] = {"impl": task.model.impl.value}
+    template = _data0(task)
+    if template is not None and task.model.impl.value == "warp":
+        info.update(max_contacts=int(template._impl.naconmax), max_constraints=int(template._impl.njmax))
+    return info
+
+
+def _data0(task: Task):
+    """The first load-time template Data a task holds (None for tasks without one)."""
+    found = [x for x in jax.tree.leaves(task, is_leaf=lambda x: isinstance(x, mjx.Data)) if isinstance(x, mjx.Data)]
+    return found[0] if found else None
+
+
+def _check_capacity(task: Task, metrics: dict[str, float]) -> None:
+    """Stops a Warp run whose physics outgrew its contact or constraint capacity: from then
+    on it drops contacts, and learns from wrong physics."""
+    share = metrics.get("env/physics/capacity_overflow", 0.0)
+    if share > 0:
+        raise PhysicsCapacityError(
+            f"the physics overflowed its capacity in {share:.2%} of the env steps of the last chunk: MuJoCo Warp "
+            "dropped contacts or constraints. Raise the physics options max_contacts and max_constraints "
+            "(per world; e.g. --env-overrides max_contacts=64 max_constraints=256)"
+        )
+
+
+class PhysicsCapacityError(RuntimeError):
+    """A Warp run's contacts or constraints overflowed the capacities of its physics."""
+
+
 def run(algorithm: Algorithm, config: AlgorithmConfig, task: Task, settings: Settings) -> tuple[Any, dict[str, float]]:
     """Trains `task` with `algorithm` under `config`; returns the final state and metrics."""
     check_algorithm(algorithm, config)
@@ -275,6 +309,7 @@ def run(algorithm: Algorithm, config: AlgorithmConfig, task: Task, settings: Set
             state = _resume(out, state)
         out.mkdir(parents=True, exist_ok=True)
         run_info = {"algorithm": algorithm.__name__.split(".")[-1], "config": config_dict(config),
+                    "physics": physics_info(task),
                     "settings": {k: str(v) if isinstance(v, Path) else v for k, v in dataclasses.asdict(settings).items()}}  # fmt: skip
         (out / "config.json").write_text(json.dumps(run_info, indent=2))
     # Own every buffer once: the chunk donates the state, and XLA may hand out one buffer
@@ -308,8 +343,10 @@ def run(algorithm: Algorithm, config: AlgorithmConfig, task: Task, settings: Set
                 if settings.checkpoint_every and chunks_done % settings.checkpoint_every == 0:
                     checkpoints.save(out / "checkpoints", step, state)
             if settings.progress:
-                progress.update(step, ret=f"{last['eval/return']:.1f}", sps=f"{last['perf/steps_per_s']:,.0f}")
+                progress.update(step, physics=task.model.impl.value, ret=f"{last['eval/return']:.1f}",
+                                sps=f"{last['perf/steps_per_s']:,.0f}")  # fmt: skip
             history.append(last)
+            _check_capacity(task, last)
             warned = _diagnose(algorithm, history, warned)
     finally:
         progress.close()

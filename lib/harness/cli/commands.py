@@ -88,6 +88,7 @@ def train(
     eval_envs: int | None = None,
     updates_per_chunk: int | None = None,
     video: bool = True,
+    impl: Literal["jax", "warp"] | None = None,
 ) -> None:
     """Train ALGORITHM on ENV (a registered env or package.module:factory), writing
     task.json, config.json, metrics.jsonl, TensorBoard events, checkpoints, curves.png
@@ -96,7 +97,9 @@ def train(
     --config takes NAME=VALUE fields of the algorithm's Config, over the env's defaults;
     a factory has none, so the Config's own apply. --env-overrides takes NAME=VALUE
     overrides of the env, as `mjzoo envs` lists them, or a factory's keyword arguments.
-    Evaluation runs the task's episode length.
+    --impl picks the physics (MJX's JAX implementation or MuJoCo Warp; default Warp
+    where it is installed and a CUDA GPU is present). Evaluation runs the task's
+    episode length.
 
     --resume DIR continues the run in DIR from its newest intact checkpoint with its
     saved settings, --seed, --eval-envs and --updates-per-chunk included unless given
@@ -109,9 +112,10 @@ def train(
         module = algorithm_module(algorithm)
         if resume is not None:
             out, env_values, config_values, run_settings = _resumed(resume, out, env, algorithm, env_overrides,
-                                                                    config)  # fmt: skip
+                                                                    config, impl)  # fmt: skip
         else:
             env_values = parse_assignments(env_overrides, "--env-overrides")
+            env_values.update({"impl": impl} if impl else {})
             config_values = parse_assignments(config, "--config")
             run_settings = dict(RUN_DEFAULTS)
         given = {"seed": seed, "eval_envs": eval_envs, "updates_per_chunk": updates_per_chunk}
@@ -130,7 +134,8 @@ def train(
     if resume is None:
         out.mkdir(parents=True, exist_ok=True)
         (out / "task.json").write_text(json.dumps({"env": env, "overrides": env_values}, indent=2))
-    with checking(checkpoints.CheckpointError):  # resuming: only damaged ones, or another network's
+    # resuming: only damaged checkpoints, or another network's; Warp: capacities outgrown
+    with checking(checkpoints.CheckpointError, training.PhysicsCapacityError):
         _, last = module.train(cfg, task, settings)
     print(f"final eval/return {last.get('eval/return', float('nan')):.2f}")
     print(f"curves: {out / 'curves.png'}")
@@ -138,9 +143,10 @@ def train(
 
 
 def _resumed(resume: Path, out: Path | None, env: str, algorithm: str, env_overrides: tuple[str, ...],
-             config: tuple[str, ...]) -> tuple[Path, dict, dict, dict]:  # fmt: skip
+             config: tuple[str, ...], impl: str | None) -> tuple[Path, dict, dict, dict]:  # fmt: skip
     """(out, env overrides, config values, run settings) of the run `--resume` continues,
-    checked against what the command line says of it."""
+    checked against what the command line says of it. It keeps its physics
+    implementation (config.json), unless --impl names one."""
     if out is not None and out != resume:
         raise UsageError(f"--out {out} and --resume {resume}: a resumed run stays in its directory; give one")
     if env_overrides:
@@ -153,7 +159,8 @@ def _resumed(resume: Path, out: Path | None, env: str, algorithm: str, env_overr
             raise UsageError(f"--resume {resume}: that run's {what} is {theirs}, not {ours}")
     config_values = {**info["config"], **parse_assignments(config, "--config")}
     run_settings = {**RUN_DEFAULTS, **{k: v for k, v in info.get("settings", {}).items() if k in RUN_DEFAULTS}}
-    return resume, saved["overrides"], config_values, run_settings
+    physics_impl = impl or info.get("physics", {}).get("impl")
+    return resume, {**saved["overrides"], **({"impl": physics_impl} if physics_impl else {})}, config_values, run_settings
 
 
 def evaluate(
@@ -201,6 +208,7 @@ def plan(
     env_overrides: tuple[str, ...] = (),
     seed: int = 0,
     video: bool = True,
+    impl: Literal["jax", "warp"] | None = None,
 ) -> None:
     """Solve ENV (a registered env or package.module:factory) closed loop with a sampling
     planner and write summary.json (success, final_cost, plan_hz, plan_latency_ms),
@@ -210,7 +218,8 @@ def plan(
     rate --plan-hz, by default the env's replanning period; --offline runs the whole
     episode as one jitted scan instead. --config takes NAME=VALUE fields of the
     planner's Config, over the env's defaults; --env-overrides NAME=VALUE change the
-    env. The planning task, hooks, success test and length (--seconds) are the env's,
+    env; --impl picks its physics (as for train). The planning task, hooks, success
+    test and length (--seconds) are the env's,
     from mjzoo.envs.planning: for a factory its module's PLANNING, else one episode,
     replanning every step, with no success test (final_cost tells).
     """
@@ -226,7 +235,7 @@ def plan(
         cfg = build_config(module, env, parse_assignments(config, "--config"))
         out = out or Path("runs") / f"{slug(env)}-{algorithm}-plan"
         runs.refuse_existing(out, PLAN_FILES, "choose a new --out")
-        overrides = parse_assignments(env_overrides, "--env-overrides")
+        overrides = {**parse_assignments(env_overrides, "--env-overrides"), **({"impl": impl} if impl else {})}
         problem = mjzoo.envs.closed_loop_problem(env, module, cfg, seconds, **overrides)
     key = jax.random.key(seed)
     result, stats = realtime.offline(problem, key) if offline else realtime.realtime(problem, key, plan_hz)
