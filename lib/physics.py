@@ -57,6 +57,7 @@ IMPLS = ("jax", "warp")
 # physics then drops contacts or constraints) and solver iteration limits (it stops early).
 OVERFLOW_CAPACITY = 1 | 2 | 4 | 8 | 16 | 32 | 64 | 128 | 256 | 4096  # nefc, nnz, broad/narrowphase, ccd, ...
 OVERFLOW_SOLVER = 512 | 1024  # iterations, line-search iterations
+_WARP_SCRATCH = {"actuator_moment", "moment_colind", "moment_rowadr"}  # sparse, filled in atomic order
 WARP_ON_CPU = "MJZOO_WARP_ON_CPU"  # =1: let impl="warp" run on Warp's CPU backend (slow; for debugging)
 _KINDS = {
     "body": mujoco.mjtObj.mjOBJ_BODY,
@@ -286,8 +287,11 @@ def _sized(data: mjx.Data, worlds: int) -> mjx.Data:
 
 
 def per_world(tree: Any) -> Any:
-    """`tree` without Warp's shared contact pool (its fields become None in every Data), so
-    that every leaf has the batch's axes: for indexing or comparing batched states."""
+    """`tree` with only each world's own state in every Warp Data: without the contact
+    pool the batch shares, and without the sparse actuator layouts Warp's kernels fill in
+    a varying order (both recomputed by every step; their fields become None). Every
+    leaf then has the batch's axes and compares across runs: for indexing or comparing
+    batched states. Identity on JAX."""
     is_data = lambda x: isinstance(x, mjx.Data)  # noqa: E731
     return jax.tree.map(lambda x: _own_fields(x) if is_data(x) else x, tree, is_leaf=is_data)
 
@@ -297,8 +301,9 @@ def _own_fields(data: mjx.Data) -> mjx.Data:
         return data
     from mujoco.mjx.warp.types import DATA_NON_VMAP
 
+    dropped = DATA_NON_VMAP | _WARP_SCRATCH
     shared = {f.name: None for f in dataclasses.fields(data._impl)
-              if f.name in DATA_NON_VMAP and isinstance(getattr(data._impl, f.name), jax.Array)}  # fmt: skip
+              if f.name in dropped and isinstance(getattr(data._impl, f.name), jax.Array)}  # fmt: skip
     return data.replace(_impl=data._impl.replace(**shared))
 
 

@@ -3,6 +3,7 @@ graphs on the CPU and buy nothing for the few steps a test runs."""
 
 import os
 
+os.environ.setdefault("MJZOO_COMPILE_CACHE", "0")  # tests compile afresh: no cache shared between runs
 os.environ["XLA_FLAGS"] = " ".join(
     filter(None, [os.environ.get("XLA_FLAGS", ""), "--xla_backend_optimization_level=0"])
 )

@@ -35,7 +35,7 @@ import jax.numpy as jnp
 import numpy as np
 from mujoco import mjx
 
-from mjzoo import motion, names
+from mjzoo import motion, names, physics
 from mjzoo.planning import closed_loop
 from mjzoo.planning.realtime import Problem
 from mjzoo.running import reset, reward_terms, rollout
@@ -215,6 +215,7 @@ def _policy_episodes(act: Act, steps: int, task: Task, params: Any, keys: jax.Ar
         _, trajectory = rollout(task, lambda obs, k: act(params, obs, k), first, run_key, steps)
         return _record(task, first, trajectory.next_state, trajectory.action, limited)
 
+    task = physics.for_worlds(task, keys.shape[0])  # Warp: a contact pool for every episode
     return jax.vmap(one)(keys)
 
 
@@ -231,7 +232,20 @@ def _planner_episodes(planner: ModuleType, config: Any, num_replans: int, every:
         cut = jax.tree.map(lambda x: x[:steps], (result.states, result.controls))
         return _record(sim_task, first, *cut, limited)
 
+    if sim_task.model.impl == mjx.Impl.WARP:  # Warp pools are sized per call: each planner sizes its own
+        return jax.lax.map(one, keys)
     return jax.vmap(one)(keys)
+
+
+def _poses(task: Task, data: mjx.Data) -> mjx.Data:
+    """Body poses of the stacked states [T] by `mjx.kinematics`; on Warp through MJX-JAX
+    from the host model (kinematics needs only qpos and mocap; a Warp call would need
+    contact pools for the stack)."""
+    if data.impl != mjx.Impl.WARP:
+        return jax.vmap(lambda d: mjx.kinematics(task.model, d))(data)
+    model, template = mjx.put_model(task.mj_model, impl="jax"), mjx.make_data(task.mj_model, impl="jax")
+    pose = lambda q, p, r: mjx.kinematics(model, template.replace(qpos=q, mocap_pos=p, mocap_quat=r))  # noqa: E731
+    return jax.vmap(pose)(data.qpos, data.mocap_pos, data.mocap_quat)
 
 
 def _record(task: Task, first: State, after: State, actions: jax.Array, limited: jax.Array) -> dict[str, Any]:
@@ -241,10 +255,10 @@ def _record(task: Task, first: State, after: State, actions: jax.Array, limited:
     def stack(a, b):  # [] and [T] -> [T+1]
         return jnp.concatenate([a[None], b])
 
-    data = jax.tree.map(stack, first.data, after.data)
+    data = jax.tree.map(stack, physics.per_world(first.data), physics.per_world(after.data))
     # After mjx.step, a Data's poses belong to the qpos before the step's integration:
     # recompute them from each stored state.
-    posed = jax.vmap(lambda d: mjx.kinematics(task.model, d))(data)
+    posed = _poses(task, data)
     low, high = task.model.actuator_ctrlrange[:, 0], task.model.actuator_ctrlrange[:, 1]
     ctrl = jnp.where(limited, jnp.clip(after.data.ctrl, low, high), after.data.ctrl)
     obs = jax.tree.map(stack, first.obs, after.obs)

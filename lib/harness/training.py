@@ -194,6 +194,11 @@ def shard_envs(train_state: Any, per_env_fields: Sequence[str], devices: list | 
     devices = devices or jax.devices()
     if len(devices) == 1:
         return jax.device_put(train_state, devices[0])
+    if _data0(train_state) is not None and _data0(train_state).impl == mjx.Impl.WARP:
+        raise NotImplementedError(
+            f"training on {len(devices)} devices needs impl='jax' for now: MuJoCo Warp's contact pool "
+            "belongs to one call on one device, and splitting it is not supported yet"
+        )
     mesh = jax.sharding.Mesh(np.array(devices), ("envs",))
     split, whole = NamedSharding(mesh, PartitionSpec("envs")), NamedSharding(mesh, PartitionSpec())
 
@@ -271,8 +276,8 @@ def physics_info(task: Task) -> dict[str, Any]:
     return info
 
 
-def _data0(task: Task):
-    """The first load-time template Data a task holds (None for tasks without one)."""
+def _data0(task: Any):
+    """The first Data in a pytree (a task's load-time template; None if it holds none)."""
     found = [x for x in jax.tree.leaves(task, is_leaf=lambda x: isinstance(x, mjx.Data)) if isinstance(x, mjx.Data)]
     return found[0] if found else None
 
