@@ -1,0 +1,267 @@
+"""The physics implementations (`mjzoo.physics`, impl="jax" | "warp") on a machine
+without CUDA: MJX-JAX is the default and Warp's helpers are identities on it; asking
+for Warp fails with one clear message (at load, through the registry, on the command
+line); contacts, the capacity probe and gradients on JAX; training's physics record
+and capacity check. The Warp path itself runs in benchmarks/warp_conformance.py on a
+GPU (and in the last test here, with MJZOO_WARP_ON_CPU=1 on a machine with Warp)."""
+
+from __future__ import annotations
+
+import importlib.util
+import os
+import types
+
+import catalog_tasks
+import jax
+import jax.numpy as jnp
+import mjzoo
+import mjzoo.envs
+import mujoco
+import numpy as np
+import pytest
+from mjzoo import physics, running
+from mjzoo.catalog import contacts as catalog_contacts
+from mjzoo.harness import cli, training
+from mjzoo.testing import check_task
+from mujoco import mjx
+
+# A 2 kg box resting on the floor: four corner contacts carrying m g between them.
+BOX_MASS = 2.0
+BOX = f"""
+<mujoco model="box-on-floor">
+  <option timestep="0.005"/>
+  <worldbody>
+    <geom name="floor" type="plane" size="2 2 0.1"/>
+    <body name="box" pos="0 0 0.12">
+      <freejoint/>
+      <geom name="box" type="box" size="0.1 0.1 0.1" mass="{BOX_MASS}"/>
+    </body>
+  </worldbody>
+</mujoco>
+"""
+PENDULUM = """
+<mujoco model="pendulum">
+  <option timestep="0.01"/>
+  <worldbody>
+    <body name="pole">
+      <joint name="hinge" type="hinge" axis="0 1 0" damping="0.05"/>
+      <geom type="capsule" fromto="0 0 0 0 0 -0.5" size="0.02" mass="0.5" contype="0" conaffinity="0"/>
+    </body>
+  </worldbody>
+  <actuator><motor joint="hinge"/></actuator>
+</mujoco>
+"""
+
+
+@pytest.fixture
+def no_cuda(monkeypatch):
+    """A machine with Warp installed and no CUDA GPU, MJZOO_WARP_ON_CPU unset."""
+    monkeypatch.setattr(physics, "_has_cuda", lambda: False)
+    monkeypatch.setattr(physics, "_warp_installed", lambda: True)
+    monkeypatch.delenv(physics.WARP_ON_CPU, raising=False)
+
+
+@pytest.fixture
+def no_warp(monkeypatch):
+    """A machine without MuJoCo Warp (as CI)."""
+    monkeypatch.setattr(physics, "_warp_installed", lambda: False)
+
+
+# --- options and the default ----------------------------------------------------------
+
+
+def test_an_unknown_impl_is_a_value_error_naming_the_choices():
+    with pytest.raises(ValueError, match=r"impl='bogus'.*\['jax', 'warp'\]"):
+        physics.load(PENDULUM, impl="bogus")
+
+
+@pytest.mark.parametrize("name", ["max_contacts", "max_constraints"])
+def test_a_capacity_of_zero_is_a_value_error_naming_the_option(name):
+    with pytest.raises(ValueError, match=f"{name}=0"):
+        physics.load(PENDULUM, **{name: 0})
+
+
+def test_the_default_on_a_machine_without_cuda_is_jax():
+    assert not physics._has_cuda()
+    assert physics.default_impl() == "jax"
+    assert physics.load(PENDULUM).impl == "jax"
+
+
+# --- asking for Warp without it ---------------------------------------------------------
+
+
+def test_warp_without_cuda_says_so_and_names_impl_jax(no_cuda):
+    with pytest.raises(ValueError, match="CUDA") as error:
+        physics.load(PENDULUM, impl="warp")
+    assert "impl='jax'" in str(error.value) and physics.WARP_ON_CPU in str(error.value)
+
+
+def test_warp_not_installed_says_how_to_install_it(no_warp):
+    with pytest.raises(ValueError, match=r"pip install -e '\.\[warp\]'"):
+        physics.load(PENDULUM, impl="warp")
+
+
+@pytest.mark.parametrize("machine, words", [("no_cuda", ["CUDA", "impl='jax'"]),
+                                            ("no_warp", ["pip install -e '.[warp]'"])])  # fmt: skip
+def test_warp_through_the_registry_fails_the_same_way(request, machine, words):
+    request.getfixturevalue(machine)
+    with pytest.raises(ValueError) as error:
+        mjzoo.envs.make("cartpole_balance", impl="warp")
+    assert all(word in str(error.value) for word in words), error.value
+
+
+@pytest.mark.parametrize("machine, word", [("no_cuda", "CUDA"), ("no_warp", "pip install")])
+def test_warp_on_the_command_line_is_one_line_error(request, capsys, tmp_path, monkeypatch, machine, word):
+    request.getfixturevalue(machine)
+    monkeypatch.chdir(tmp_path)
+    with pytest.raises(SystemExit) as exit_info:
+        cli.main(["train", "ppo", "cartpole_balance", "--impl", "warp"])
+    err = capsys.readouterr().err
+    assert exit_info.value.code not in (0, None)
+    assert len(err.splitlines()) == 1 and "Traceback" not in err, err
+    assert err.startswith("mjzoo train: ") and word in err and "impl='warp'" in err, err
+    assert list(tmp_path.iterdir()) == []  # nothing written
+
+
+# --- Warp's helpers are identities on JAX ----------------------------------------------
+
+
+def _two_states() -> tuple[mjx.Data, mjx.Data]:
+    data0 = physics.load(PENDULUM).data0
+    return data0, data0.replace(qpos=data0.qpos + 1.0, qvel=data0.qvel - 2.0, time=jnp.float32(3.0))
+
+
+def test_for_worlds_and_per_world_leave_jax_data_alone():
+    data, _ = _two_states()
+    assert physics.for_worlds(data, 8) is data
+    assert physics.per_world(data) is data
+    task = mjzoo.envs.make("cartpole_balance")
+    for changed in (physics.for_worlds(task, 8), physics.per_world(task)):
+        assert all(a is b for a, b in zip(jax.tree.leaves(changed), jax.tree.leaves(task), strict=True))
+
+
+@pytest.mark.parametrize("cond", [True, False])
+def test_where_is_leafwise_jnp_where_on_jax(cond):
+    a, b = _two_states()
+    merged = physics.where(jnp.asarray(cond), a, b)
+    expected = jax.tree.map(lambda x, y: jnp.where(cond, x, y), a, b)
+    assert jax.tree.structure(merged) == jax.tree.structure(expected)
+    for x, y in zip(jax.tree.leaves(merged), jax.tree.leaves(expected), strict=True):
+        np.testing.assert_array_equal(x, y)
+
+
+def test_no_overflow_on_jax():
+    data, _ = _two_states()
+    assert physics.overflow(data).shape == () and int(physics.overflow(data)) == 0
+    assert physics.clear_overflow(data) is data
+
+
+def test_the_divergence_guard_adds_no_physics_metrics_on_jax():
+    task = mjzoo.with_divergence_guard(catalog_tasks.make_task())
+    key = jax.random.key(0)
+    action = jnp.zeros(task.action_size)
+    after = jax.eval_shape(lambda k: running.transition(task, running.reset(task, k), action, k), key)
+    assert "diverged" in after.metrics
+    assert not [name for name in after.metrics if name.startswith("physics/")], sorted(after.metrics)
+
+
+# --- contacts and capacities on JAX ----------------------------------------------------
+
+
+@pytest.fixture(scope="module")
+def settled_box():
+    """(physics, C MuJoCo data after 2 s of settling, the MJX Data forwarded from it)."""
+    box = physics.load(BOX)
+    mj_data = mujoco.MjData(box.mj_model)
+    for _ in range(400):
+        mujoco.mj_step(box.mj_model, mj_data)
+    data = jax.jit(mjx.forward)(box.model, mjx.put_data(box.mj_model, mj_data, impl="jax"))
+    return box, mj_data, data
+
+
+def test_contacts_of_a_resting_box_carry_its_weight(settled_box):
+    box, _, data = settled_box
+    found = physics.contacts(data, box.model)
+    floor, body = box.id("geom", "floor"), box.id("geom", "box")
+    between = ((found.geom1 == floor) & (found.geom2 == body)) | ((found.geom1 == body) & (found.geom2 == floor))
+    assert bool(jnp.any(found.active & between))
+    assert not bool(jnp.any(found.active & ~between))  # nothing else touches
+    assert float(jnp.sum(jnp.where(found.active, 0.0, jnp.abs(found.normal_force)))) == 0.0
+    weight = BOX_MASS * -float(box.mj_model.opt.gravity[2])
+    np.testing.assert_allclose(float(jnp.sum(found.normal_force)), weight, rtol=0.02)
+    assert physics.contacts(data).normal_force is None  # no model: no forces
+
+
+def test_catalog_contacts_read_what_they_read_before(settled_box):
+    """touching / forces through physics.contacts equal the direct read of MJX-JAX's
+    contact slots and constraint forces (the catalog's code before physics.contacts)."""
+    box, _, data = settled_box
+    geoms, others = catalog_contacts.geom_sets(box.mj_model, ["box"], ["floor"], "test")
+    contact = data._impl.contact
+    pairs = ((contact.geom1 == geoms[:, None]) & jnp.isin(contact.geom2, others)) | (
+        (contact.geom2 == geoms[:, None]) & jnp.isin(contact.geom1, others))  # fmt: skip
+    active = contact.dist < contact.includemargin
+    rows = 2 * (np.asarray(contact.dim) - 1)  # pyramidal cones (the default): the edge forces add up
+    address = np.asarray(contact.efc_address)
+    normal = jnp.stack([jnp.sum(data._impl.efc_force[a : a + r]) if a >= 0 else 0.0 for a, r in zip(address, rows)])
+    np.testing.assert_array_equal(catalog_contacts.touching(data, geoms, others), jnp.any(pairs & active, axis=1))
+    np.testing.assert_allclose(catalog_contacts.forces(box.model, data, geoms, others),
+                               jnp.sum(pairs * normal[None, :], axis=1), rtol=1e-6)  # fmt: skip
+    assert bool(catalog_contacts.touching(data, geoms, others)[0])
+
+
+def test_probe_capacity_leaves_room_for_twice_what_c_mujoco_sees(settled_box):
+    box, mj_data, _ = settled_box
+    assert mj_data.ncon >= 4  # the box's corners
+    most_contacts, most_rows = physics.probe_capacity(box.mj_model)
+    assert most_contacts >= max(2 * mj_data.ncon, 8)
+    assert most_rows >= 2 * mj_data.nefc
+
+
+# --- derivatives ------------------------------------------------------------------------
+
+
+def test_gradients_flow_through_physics_step_on_jax():
+    pendulum = physics.load(PENDULUM)
+    data = pendulum.data0.replace(qpos=jnp.array([0.3]))
+
+    def final_angle(ctrl: jax.Array) -> jax.Array:
+        return physics.step(pendulum.model, data, ctrl, 1).qpos[0]  # a substep: compiles in seconds
+
+    grad = jax.jit(jax.grad(final_angle))(jnp.array([0.5]))
+    assert bool(jnp.all(jnp.isfinite(grad))) and float(grad[0]) > 0.0  # pushing the hinge turns it
+
+
+def test_warp_data_is_reported_as_not_differentiable():
+    physics.check_differentiable(_two_states()[0], "a JAX gradient")  # no error
+    stand_in = types.SimpleNamespace(impl=mjx.Impl.WARP)
+    with pytest.raises(NotImplementedError, match="impl='jax'") as error:
+        physics.check_differentiable(stand_in, "my gradient")
+    assert str(error.value).startswith("my gradient: ") and "impl='warp'" in str(error.value)
+
+
+# --- training's record and capacity check ------------------------------------------------
+
+
+def test_training_records_the_jax_physics():
+    assert training.physics_info(mjzoo.envs.make("cartpole_balance", impl="jax")) == {"impl": "jax"}
+
+
+def test_training_stops_when_warp_outgrew_its_capacity():
+    task = mjzoo.envs.make("cartpole_balance")
+    training._check_capacity(task, {"env/physics/capacity_overflow": 0.0, "env/physics/solver_limit": 0.5})
+    with pytest.raises(training.PhysicsCapacityError, match="max_contacts"):
+        training._check_capacity(task, {"env/physics/capacity_overflow": 0.01})
+
+
+# --- Warp itself (developers: Warp installed, MJZOO_WARP_ON_CPU=1) ----------------------
+
+
+@pytest.mark.skipif(
+    importlib.util.find_spec("warp") is None or os.environ.get(physics.WARP_ON_CPU) != "1",
+    reason=f"needs MuJoCo Warp installed and {physics.WARP_ON_CPU}=1 (Warp's slow CPU backend; "
+    "benchmarks/warp_conformance.py checks every env on a GPU)",
+)
+def test_cartpole_conforms_on_warp():
+    report = check_task(mjzoo.envs.make("cartpole_balance", impl="warp", episode_steps=6), num_steps=10)
+    assert report.skipped == {}
