@@ -26,7 +26,6 @@ from mujoco import mjx
 
 from mjzoo.envs import base
 from mjzoo.catalog.rewards import tolerance
-from mjzoo import physics as physics_lib
 from mjzoo.types import State, Task
 
 __all__ = ["Params", "balance", "swingup"]

@@ -28,7 +28,6 @@ from mjzoo.combinators import with_reward
 from mjzoo.envs import base
 from mjzoo.catalog.rewards import tolerance
 from mjzoo.planning.closed_loop import Hooks
-from mjzoo import physics as physics_lib
 from mjzoo.types import State, Task, bind
 
 __all__ = ["Params", "push"]

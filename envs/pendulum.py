@@ -28,7 +28,6 @@ from mujoco import mjx
 from mjzoo.combinators import with_reward
 from mjzoo.envs import base
 from mjzoo.catalog.rewards import tolerance
-from mjzoo import physics as physics_lib
 from mjzoo.types import State, Task
 
 __all__ = ["Params", "swingup"]

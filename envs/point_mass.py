@@ -21,7 +21,6 @@ from mujoco import mjx
 from mjzoo.planning.closed_loop import Hooks
 from mjzoo.envs import base
 from mjzoo.catalog.rewards import tolerance
-from mjzoo import physics as physics_lib
 from mjzoo.types import State, Task, bind
 
 __all__ = ["Params", "reach"]

@@ -313,6 +313,10 @@ def with_divergence_guard(task: Task, max_qvel: float = 1e3) -> Task:
     next step integrates from); quantities derived from it in `data` (body poses,
     contacts, forces), which the next step recomputes, are zeroed. Keeps nothing in
     `info`.
+
+    On MuJoCo Warp it also counts what Warp would print: ``metrics["physics/capacity_overflow"]``
+    (1 when the step outgrew the contact or constraint capacity and dropped some) and
+    ``metrics["physics/solver_limit"]`` (1 when the solver stopped at its iteration limit).
     """
     if not max_qvel > 0:
         raise ValueError(f"with_divergence_guard: max_qvel={max_qvel!r} must be > 0")

@@ -27,7 +27,7 @@ import mujoco
 import numpy as np
 from mujoco import mjx
 
-from mjzoo import checks, names, tree
+from mjzoo import checks, names, physics, tree
 from mjzoo.types import State, Task, bind
 
 __all__ = [
@@ -256,9 +256,9 @@ def step(model: mjx.Model, data: mjx.Data, actuator: Actuator, action: Array, n_
 
     def substep(i, data: mjx.Data) -> mjx.Data:
         ctrl = actuator(model, data, action, jax.random.fold_in(key, i))
-        return mjx.step(model, data.replace(ctrl=jnp.asarray(ctrl, data.ctrl.dtype)))
+        return physics.substep(model, data.replace(ctrl=jnp.asarray(ctrl, data.ctrl.dtype)))
 
-    return jax.lax.fori_loop(0, n_substeps, substep, data)
+    return jax.lax.fori_loop(0, n_substeps, substep, physics.clear_overflow(data))
 
 
 # --- combinators on the action ------------------------------------------------------
