@@ -255,7 +255,8 @@ def _require_warp(label: str) -> None:
         )
     import warp  # a dependency of the 'warp' extra
 
-    warp.config.quiet = True  # no line per kernel module loaded
+    warp.config.quiet = True  # no banner,
+    warp.config.log_level = max(warp.config.log_level, warp.LOG_WARNING)  # nor a line per kernel module loaded
 
 
 # --- Warp's shared contact pool ------------------------------------------------------
