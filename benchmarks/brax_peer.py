@@ -1,7 +1,9 @@
 """The peer baseline: Brax's own PPO (`brax.training.agents.ppo.train`) on an mjzoo task.
 
 The task goes through `mjzoo.interop.brax`, so both trainers see the same physics,
-observations, rewards and episode ends. Import `train_brax_ppo` from a benchmark script
+observations, rewards and episode ends, on either physics (``impl="jax"`` or ``"warp"``:
+Brax vmaps the env itself, so a Warp task's shared contact pool is sized here for the
+larger of Brax's training and evaluation batches). Import `train_brax_ppo` from a benchmark script
 (this folder is not a package):
 
     sys.path.insert(0, str(Path(__file__).parent)); from brax_peer import train_brax_ppo
@@ -17,6 +19,7 @@ from __future__ import annotations
 import argparse
 import json
 import math
+import os
 import time
 from pathlib import Path
 
@@ -74,7 +77,8 @@ def train_brax_ppo(
     from brax.training.agents.ppo import train as ppo  # after the patch is in place
 
     adapter.patch_brax_for_current_jax()
-    env = adapter.to_brax_env(task)
+    # Warp: one contact pool for every world Brax vmaps (training envs, or eval envs).
+    env = adapter.to_brax_env(mjzoo.physics.for_worlds(task, max(num_envs, num_eval_envs)))
     reports: list[tuple[int, float, dict]] = []
     start = time.perf_counter()
 
@@ -127,10 +131,11 @@ def main() -> None:
     parser.add_argument("--num-evals", type=int, default=4)
     parser.add_argument("--num-eval-envs", type=int, default=128)
     parser.add_argument("--seed", type=int, default=0)
+    parser.add_argument("--impl", choices=mjzoo.physics.IMPLS, default=None, help="physics (default: the default)")
     parser.add_argument("--out", type=Path, help="write the result as JSON here")
     args = parser.parse_args()
 
-    task = mjzoo.envs.make(args.env)
+    task = mjzoo.envs.make(args.env, impl=args.impl or mjzoo.physics.default_impl())
     episode_length = mjzoo.envs.defaults(args.env)["episode_steps"]
     print(f"device: {jax.devices()[0].device_kind} ({jax.default_backend()}), jax {jax.__version__}")
     result = train_brax_ppo(
@@ -148,8 +153,9 @@ def main() -> None:
     if args.out:
         settings = {k: v for k, v in vars(args).items() if k != "out"}
         args.out.write_text(json.dumps({**settings, "device": jax.devices()[0].device_kind, **result}, indent=2))
-        print(f"wrote {args.out}")
+        print(f"wrote {args.out}", flush=True)
 
 
 if __name__ == "__main__":
     main()
+    os._exit(0)  # Warp on a CPU may hang at interpreter exit

@@ -21,12 +21,25 @@ evaluation of 256 envs over one full episode, with the task's own measure:
                  (standing still earns about 250).
 
 Time to the stated return is wall-clock from the start of training (compile included).
+
+Each task runs on every physics implementation of ``--impl`` (MJX-JAX, MuJoCo Warp), one
+after the other in this process; a run's files go under ``--out/<task>/`` on JAX (as
+before) and ``--out/<task>_warp/`` on Warp. JSON: ``rows`` holds one row per (task,
+impl), its ``"impl"`` naming the physics, with the old keys' meanings (old files,
+without ``"impl"``, are JAX) plus ``fraction_of_raw`` (PPO's steps/s over raw
+stepping's), ``first_update_s`` (wall-clock from the start of training to its first
+metrics record: setup, compile, one chunk of updates and its evaluation) and, for the
+process's first run only, ``launch_to_first_update_s`` (from the process's start,
+imports included; later runs find JAX and Warp warm). ``warp_vs_jax`` holds, per task
+run on both, Warp's figure over JAX's for raw and PPO steps/s, time to the stated
+return and train time.
 Where the machine has no video encoder (the GPU image lacks ffmpeg), `--no-video` saves
 each final episode as .npz and `--render` makes the videos elsewhere.
 
     python benchmarks/locomotion.py --tasks ant --steps 100000000
     python benchmarks/locomotion.py --tasks humanoid_walk --steps 45000000
     python benchmarks/locomotion.py --tasks ant_joystick --steps 40000000
+    python benchmarks/locomotion.py --tasks humanoid_walk --steps 36000000 --impl warp jax --no-final-eval
 """
 
 from __future__ import annotations
@@ -35,6 +48,7 @@ import argparse
 import dataclasses
 import functools
 import json
+import os
 import sys
 import time
 from pathlib import Path
@@ -46,7 +60,7 @@ import numpy as np
 
 sys.path.insert(0, str(Path(__file__).parent))
 from ppo_vs_brax import time_to, training_curve  # noqa: E402
-from task_overhead import inputs, raw_steps_per_s  # noqa: E402
+from task_overhead import add_impl_argument, impls, inputs, ratio, raw_steps_per_s  # noqa: E402
 
 import mjzoo  # noqa: E402
 import mjzoo.envs  # noqa: E402
@@ -58,15 +72,17 @@ from mjzoo.envs import joystick  # noqa: E402
 
 @dataclasses.dataclass(frozen=True)
 class Spec:
-    train_task: Callable[[], mjzoo.Task]
-    eval_task: Callable[[], mjzoo.Task]
+    train_task: Callable[[str], mjzoo.Task]  # impl -> task
+    eval_task: Callable[[str], mjzoo.Task]
     threshold: float  # the stated return
 
 
 SPECS = {
-    "ant": Spec(lambda: mjzoo.envs.make("ant"), lambda: mjzoo.envs.make("ant"), 3000.0),
-    "humanoid_walk": Spec(lambda: mjzoo.envs.make("humanoid_walk"), lambda: mjzoo.envs.make("humanoid_walk"), 6000.0),
-    "ant_joystick": Spec(joystick.joystick_curriculum, lambda: mjzoo.envs.make("ant_joystick", level=1.0), 1000.0),
+    "ant": Spec(lambda impl: mjzoo.envs.make("ant", impl=impl), lambda impl: mjzoo.envs.make("ant", impl=impl), 3000.0),
+    "humanoid_walk": Spec(lambda impl: mjzoo.envs.make("humanoid_walk", impl=impl),
+                          lambda impl: mjzoo.envs.make("humanoid_walk", impl=impl), 6000.0),  # fmt: skip
+    "ant_joystick": Spec(lambda impl: joystick.joystick_curriculum(impl=impl),
+                         lambda impl: mjzoo.envs.make("ant_joystick", level=1.0, impl=impl), 1000.0),  # fmt: skip
 }
 
 
@@ -78,6 +94,7 @@ def episode_measures(config: ppo.Config, task: mjzoo.Task, train_state, key, num
     (for the video). One compile per task structure."""
     act, params = ppo.policy(config, task), ppo.policy_params(train_state)
     velocity = observations.base_linear_velocity(task.mj_model)
+    task = mjzoo.physics.for_worlds(task, num_envs)  # Warp: a contact pool for every env
 
     def one(key):
         state = mjzoo.reset(task, key)
@@ -123,11 +140,21 @@ def render(task: mjzoo.Task, qpos: np.ndarray, path: Path) -> None:
 def render_saved(out: Path) -> None:
     """Videos of the final episodes saved under `out`/<task>/final_policy.npz."""
     for saved in sorted(out.glob("*/final_policy.npz")):
-        render(SPECS[saved.parent.name].eval_task(), np.load(saved)["qpos"], saved.with_suffix(".mp4"))
+        name = saved.parent.name.removesuffix("_warp")  # rendered by C MuJoCo either way
+        render(SPECS[name].eval_task("jax"), np.load(saved)["qpos"], saved.with_suffix(".mp4"))
 
 
-def run_task(name: str, total_steps: int | None, out: Path, eval_envs: int, smoke: bool, video: bool) -> dict:
+def launch_seconds() -> float:
+    """Seconds since this process started (Linux: /proc), imports included."""
+    start_ticks = int(Path("/proc/self/stat").read_text().rsplit(")", 1)[1].split()[19])
+    uptime = float(Path("/proc/uptime").read_text().split()[0])
+    return uptime - start_ticks / os.sysconf("SC_CLK_TCK")
+
+
+def run_task(name: str, total_steps: int | None, out: Path, eval_envs: int, smoke: bool, video: bool,
+             impl: str = "jax", final_eval: bool = True, first_in_process: bool = False) -> dict:  # fmt: skip
     spec = SPECS[name]
+    run_dir = out / (name if impl == "jax" else f"{name}_{impl}")
     fields = mjzoo.envs.hyperparameters(name, "ppo")
     if total_steps:
         fields["total_steps"] = total_steps
@@ -136,27 +163,52 @@ def run_task(name: str, total_steps: int | None, out: Path, eval_envs: int, smok
         eval_envs = min(eval_envs, 8)
     config = ppo.Config(**fields)
     episode = 50 if smoke else mjzoo.envs.defaults(name)["episode_steps"]
-    train_task, eval_task = spec.train_task(), spec.eval_task()
-    raw = raw_steps_per_s(eval_task, name, *inputs(eval_task, config.num_envs, 20 if smoke else 100), repeats=3)
-    print(f"{name}: raw stepping {raw:,.0f} steps/s at {config.num_envs} envs", flush=True)
-    settings = training.Settings(out_dir=out / name, updates_per_chunk=1 if smoke else 10,
+    # Training first: launch-to-first-update counts from the process start to its first record.
+    settings = training.Settings(out_dir=run_dir, updates_per_chunk=1 if smoke else 10,
                                  eval_envs=16 if smoke else 128, eval_steps=episode, checkpoint_every=0,
                                  video=video, overwrite=True)  # fmt: skip  # a new measurement replaces the last
+    launched = launch_seconds()
     start = time.perf_counter()
-    train_state, _ = ppo.train(config, train_task, settings)
+    train_state, _ = ppo.train(config, spec.train_task(impl), settings)
     total = time.perf_counter() - start
-    curve, steps_per_s = training_curve(out / name / "metrics.jsonl", total)
-    row = {"task": name, "config": training.config_dict(config), "raw_steps_per_s": raw,
-           "steps_per_s": steps_per_s, "train_s": total, "threshold": spec.threshold,
-           "time_to_threshold_s": time_to(curve, spec.threshold), "curve": curve}  # fmt: skip
+    curve, steps_per_s = training_curve(run_dir / "metrics.jsonl", total)
+    eval_task = spec.eval_task(impl)
+    raw = raw_steps_per_s(eval_task, name, *inputs(eval_task, config.num_envs, 20 if smoke else 100), repeats=3)
+    print(f"{name} ({impl}): raw stepping {raw:,.0f} steps/s at {config.num_envs} envs", flush=True)
+    row = {"task": name, "impl": impl, "config": training.config_dict(config), "raw_steps_per_s": raw,
+           "steps_per_s": steps_per_s, "fraction_of_raw": steps_per_s / raw, "train_s": total,
+           "threshold": spec.threshold, "time_to_threshold_s": time_to(curve, spec.threshold),
+           "first_update_s": curve[0][1],
+           "launch_to_first_update_s": launched + curve[0][1] if first_in_process else None, "curve": curve}  # fmt: skip
     # Kept before evaluating: compiling the evaluation takes minutes on a GPU.
-    (out / name / "training.json").write_text(json.dumps(row, indent=2))
+    (run_dir / "training.json").write_text(json.dumps(row, indent=2))
+    if not final_eval:
+        return row
     row["final"], qpos = evaluate(config, eval_task, train_state, eval_envs, episode)
     # The task as evaluated (the joystick: at level 1); --render makes the video elsewhere.
-    np.savez_compressed(out / name / "final_policy.npz", qpos=qpos)
+    np.savez_compressed(run_dir / "final_policy.npz", qpos=qpos)
     if video:
-        render(eval_task, qpos, out / name / "final_policy.mp4")
+        render(eval_task, qpos, run_dir / "final_policy.mp4")
     return row
+
+
+def warp_vs_jax(name: str, warp: dict, jax_: dict) -> dict:
+    """Warp's figures over JAX's for one task (None where either never got there)."""
+    keys = ("raw_steps_per_s", "steps_per_s", "time_to_threshold_s", "train_s", "first_update_s")
+    return {"task": name, **{k: ratio(warp[k], jax_[k]) for k in keys}}
+
+
+def summary(row: dict) -> str:
+    ttt, f = row["time_to_threshold_s"], row.get("final")
+    line = (f"{row['task']} ({row['impl']}): {row['steps_per_s']:,.0f} steps/s ({row['fraction_of_raw']:.2f} of raw), "
+            f"threshold {row['threshold']:.0f} at {'never' if ttt is None else f'{ttt:.1f} s'} (compile included), "
+            f"first update at {row['first_update_s']:.1f} s"
+            + (f" ({row['launch_to_first_update_s']:.1f} s from launch)" if row["launch_to_first_update_s"] else "")
+            + f", trained {row['train_s']:.0f} s, last eval return {row['curve'][-1][2]:.1f}")  # fmt: skip
+    if f:
+        line += (f"; final return {f['return']:.1f}, speed {f['forward_speed_m_s']:.2f} m/s, velocity error "
+                 f"{f['velocity_error_m_s']:.3f} m/s, fell {f['fell_fraction']:.2f}, length {f['length']:.0f}")  # fmt: skip
+    return line
 
 
 def main() -> None:
@@ -168,26 +220,33 @@ def main() -> None:
     parser.add_argument("--smoke", action="store_true", help="tiny sizes, to check the script on a CPU")
     parser.add_argument("--no-video", action="store_true", help="save the final episodes, render them later")
     parser.add_argument("--render", action="store_true", help="only render the saved final episodes under --out")
+    parser.add_argument("--no-final-eval", action="store_true", help="skip (c), the final evaluation (minutes to compile)")
+    parser.add_argument("--tag", default="", help="suffix of the JSON file")
+    add_impl_argument(parser)
     args = parser.parse_args()
     if args.render:
         return render_saved(args.out)
     device = jax.devices()[0].device_kind
     print(f"device: {device}, jax {jax.__version__}", flush=True)
-    rows = []
+    rows, ratios = [], []
+    args.out.mkdir(parents=True, exist_ok=True)
+    tag = "_".join(args.tasks) + (f"_{args.tag}" if args.tag else "")
+    path = args.out / f"locomotion_{jax.default_backend()}_{tag}.json"
     for name in args.tasks:
-        row = run_task(name, args.steps, args.out, args.eval_envs, args.smoke, not args.no_video)
-        rows.append(row)
-        f = row["final"]
-        print(f"{name}: {row['steps_per_s']:,.0f} steps/s ({row['steps_per_s'] / row['raw_steps_per_s']:.2f} of raw), "
-              f"return {f['return']:.1f} (threshold {row['threshold']:.0f} at "
-              f"{row['time_to_threshold_s'] and round(row['time_to_threshold_s'], 1)} s), speed "
-              f"{f['forward_speed_m_s']:.2f} m/s, velocity error {f['velocity_error_m_s']:.3f} m/s, "
-              f"fell {f['fell_fraction']:.2f}, length {f['length']:.0f}, trained {row['train_s']:.0f} s", flush=True)
-        args.out.mkdir(parents=True, exist_ok=True)
-        path = args.out / f"locomotion_{jax.default_backend()}_{'_'.join(args.tasks)}.json"
-        path.write_text(json.dumps({"device": device, "jax": jax.__version__, "rows": rows}, indent=2))
-    print(f"wrote {path}")
+        by_impl = {}
+        for impl in impls(args.impl):
+            row = run_task(name, args.steps, args.out, args.eval_envs, args.smoke, not args.no_video, impl,
+                           final_eval=not args.no_final_eval, first_in_process=not rows)  # fmt: skip
+            rows.append(by_impl.setdefault(impl, row))
+            print(summary(row), flush=True)
+            if len(by_impl) == 2:
+                ratios.append(warp_vs_jax(name, by_impl["warp"], by_impl["jax"]))
+                print(f"{name}: warp/jax " + ", ".join(f"{k} {v:.2f}x" for k, v in ratios[-1].items() if k != "task" and v))
+            path.write_text(json.dumps({"device": device, "jax": jax.__version__, "rows": rows, "warp_vs_jax": ratios},
+                                       indent=2))  # fmt: skip
+    print(f"wrote {path}", flush=True)
 
 
 if __name__ == "__main__":
     main()
+    os._exit(0)  # Warp on a CPU may hang at interpreter exit

@@ -6,6 +6,13 @@ beside it, of one jitted batch of bare MJX rollouts of the same N x H (raw `mjx.
 on the same model, controls given): the physical limit. Also predictive sampling and
 CEM at 1024 samples, and what `lax.scan` unrolling buys.
 
+Each measurement runs on every physics implementation of ``--impl`` (MJX-JAX, MuJoCo
+Warp), one after the other in this process. JSON: ``rows`` holds one row per (env,
+impl, planner, samples, horizon, unroll), its ``"impl"`` naming the physics and the
+other keys meaning what they always did (old files, without ``"impl"``, are JAX);
+``warp_vs_jax`` holds, per row measured on both, Warp's replanning rate over JAX's
+(``plan_hz``) and the bare rollouts' speed-up (``bare``: JAX's ms over Warp's).
+
 Envs: any registered one; `--physics` makes the planning model coarser. A humanoid
 plans with Brax's humanoid (`humanoid_walk`: MJX collisions, 17 actuators) at physics step
 0.025 s and control step 0.05 s (8 and 3.3 x coarser than the simulation's 0.003 /
@@ -14,6 +21,9 @@ plans with Brax's humanoid (`humanoid_walk`: MJX collisions, 17 actuators) at ph
     python benchmarks/planner_latency.py --envs cartpole_swingup
     python benchmarks/planner_latency.py --envs humanoid_walk --horizons 10 20 --tag humanoid \
         --physics dt=0.025 ctrl_dt=0.05 iterations=1 ls_iterations=2
+    # the humanoid's replanning rate at 1024 samples over 0.5 s, on both physics:
+    python benchmarks/planner_latency.py --envs humanoid_walk --samples 1024 --horizons 10 --no-extras \
+        --physics dt=0.025 ctrl_dt=0.05 iterations=1 ls_iterations=2 --impl jax warp --tag humanoid_impls
 """
 
 from __future__ import annotations
@@ -22,6 +32,7 @@ import argparse
 import json
 import os
 import statistics
+import sys
 import time
 from pathlib import Path
 
@@ -31,6 +42,9 @@ import mjzoo
 import mjzoo.envs
 from mjzoo import physics
 from mjzoo.algorithms import cem, mppi, predictive_sampling
+
+sys.path.insert(0, str(Path(__file__).parent))
+from task_overhead import add_impl_argument, impls, ratio  # noqa: E402
 
 
 def make(env: str, physics_options: dict) -> tuple[mjzoo.Task, int]:
@@ -55,6 +69,8 @@ def median_ms(fn, *args, repeats: int) -> float:
 def bare_rollouts(task: mjzoo.Task, n_substeps: int, unroll: int = 1):
     @jax.jit
     def run(data, controls):  # controls [N, H, nu]
+        data = physics.for_worlds(data, controls.shape[0])  # Warp: a contact pool for the N samples
+
         def one(sample_controls):
             step = lambda d, u: (physics.step(task.model, d, u, n_substeps), None)  # noqa: E731
             return jax.lax.scan(step, data, sample_controls, unroll=unroll)[0].qpos
@@ -65,8 +81,8 @@ def bare_rollouts(task: mjzoo.Task, n_substeps: int, unroll: int = 1):
 
 
 def measure(env: str, physics_options: dict, samples: list[int], horizons: list[int], repeats: int, extras: bool,
-            save) -> list[dict]:  # fmt: skip
-    task, n_substeps = make(env, physics_options)
+            save, impl: str = "jax") -> list[dict]:  # fmt: skip
+    task, n_substeps = make(env, {**physics_options, "impl": impl})
     state = mjzoo.complete(task, mjzoo.reset(task, jax.random.key(0)))
     rows = []
 
@@ -77,11 +93,11 @@ def measure(env: str, physics_options: dict, samples: list[int], horizons: list[
         plan_ms = median_ms(plan, config, task, planner_state, state, jax.random.key(1), repeats=repeats)
         controls = jax.random.uniform(jax.random.key(2), (n, h, task.action_size), minval=-1, maxval=1)
         bare_ms = median_ms(bare_rollouts(task, n_substeps, unroll), state.data, controls, repeats=repeats)
-        result = {"env": env, "physics": physics_options, "planner": planner.__name__.rsplit(".", 1)[-1], "samples": n, "horizon_steps": h,
+        result = {"env": env, "impl": impl, "physics": physics_options, "planner": planner.__name__.rsplit(".", 1)[-1], "samples": n, "horizon_steps": h,
                   "horizon_s": h * n_substeps * float(task.model.opt.timestep), "unroll": unroll,
                   "plan_ms": plan_ms, "bare_ms": bare_ms, "overhead": plan_ms / bare_ms - 1.0,
                   "ms_per_physics_step": plan_ms / (h * n_substeps), "plan_hz": 1e3 / plan_ms}  # fmt: skip
-        print(f"{env:<16} {result['planner']:<20} N={n:<6} H={h:<3} ({result['horizon_s']:.2f} s) unroll={unroll} "
+        print(f"{env:<16} {impl:<5} {result['planner']:<20} N={n:<6} H={h:<3} ({result['horizon_s']:.2f} s) unroll={unroll} "
               f"plan {plan_ms:8.2f} ms  bare {bare_ms:8.2f} ms  overhead {100 * result['overhead']:+6.1f}%  "
               f"{result['ms_per_physics_step']:.3f} ms/step  {result['plan_hz']:.0f} Hz", flush=True)  # fmt: skip
         rows.append(result)
@@ -108,6 +124,7 @@ def main() -> None:
     parser.add_argument("--no-extras", action="store_true", help="only MPPI over the samples x horizons grid")
     parser.add_argument("--out", type=Path, default=Path(__file__).parent / "results")
     parser.add_argument("--tag", default="", help="suffix of the JSON file, e.g. for a run under other XLA_FLAGS")
+    add_impl_argument(parser)
     args = parser.parse_args()
     device = jax.devices()[0].device_kind
     print(f"device: {device}, jax {jax.__version__}, XLA_FLAGS={os.environ.get('XLA_FLAGS', '')!r}", flush=True)
@@ -115,15 +132,34 @@ def main() -> None:
     args.out.mkdir(parents=True, exist_ok=True)
     path = args.out / f"planner_latency_{jax.default_backend()}{'_' + args.tag if args.tag else ''}.json"
     flags = os.environ.get("XLA_FLAGS", "")
+
     def save(env_rows: list[dict]) -> None:
         path.write_text(json.dumps({"device": device, "jax": jax.__version__, "xla_flags": flags,
-                                    "rows": rows + env_rows}, indent=2))  # fmt: skip
+                                    "rows": rows + env_rows, "warp_vs_jax": warp_vs_jax(rows + env_rows)}, indent=2))  # fmt: skip
 
     options = {k: float(v) if "." in v else int(v) for k, v in (item.split("=", 1) for item in args.physics)}
     for env in args.envs:
-        rows += measure(env, options, args.samples, args.horizons, args.repeats, not args.no_extras, save)
-    print(f"wrote {path}")
+        for impl in impls(args.impl):
+            rows += measure(env, options, args.samples, args.horizons, args.repeats, not args.no_extras, save, impl)
+    for r in warp_vs_jax(rows):
+        print(f"{r['env']:<16} warp/jax {r['planner']:<20} N={r['samples']:<6} H={r['horizon_steps']:<3} "
+              f"({r['horizon_s']:.2f} s) unroll={r['unroll']}  plan Hz {r['plan_hz']:.2f}x  bare {r['bare']:.2f}x  "
+              f"(warp {r['warp_plan_hz']:.0f} Hz, jax {r['jax_plan_hz']:.0f} Hz)")  # fmt: skip
+    print(f"wrote {path}", flush=True)
+
+
+def warp_vs_jax(rows: list[dict]) -> list[dict]:
+    """Per measurement made on both physics: Warp's plan_hz over JAX's, and JAX's bare
+    rollout time over Warp's."""
+    setting = lambda r: (r["env"], r["planner"], r["samples"], r["horizon_steps"], r["unroll"])  # noqa: E731
+    jax_rows = {setting(r): r for r in rows if r["impl"] == "jax"}
+    pairs = [(r, jax_rows[setting(r)]) for r in rows if r["impl"] == "warp" and setting(r) in jax_rows]
+    return [{"env": w["env"], "planner": w["planner"], "samples": w["samples"], "horizon_steps": w["horizon_steps"],
+             "horizon_s": w["horizon_s"], "unroll": w["unroll"], "plan_hz": ratio(w["plan_hz"], j["plan_hz"]),
+             "bare": ratio(j["bare_ms"], w["bare_ms"]), "warp_plan_hz": w["plan_hz"], "jax_plan_hz": j["plan_hz"]}
+            for w, j in pairs]  # fmt: skip
 
 
 if __name__ == "__main__":
     main()
+    os._exit(0)  # Warp on a CPU may hang at interpreter exit

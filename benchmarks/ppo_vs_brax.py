@@ -7,16 +7,28 @@ through `mjzoo.interop.brax`. Hyperparameters: MuJoCo Playground's DM Control de
 entropy 1e-2, discount 0.995, reward scaling 10, normalized observations, clip 0.3, no
 gradient clipping, Brax's default networks: policy 4x32, value 5x256, swish).
 
+Each env runs on every physics implementation of ``--impl`` (MJX-JAX, MuJoCo Warp), all
+three measurements per implementation; Brax PPO runs on Warp where it can (it vmaps the
+env itself: the task's contact pool is sized for its batches first), else the reason is
+recorded and printed.
+
 Prints a table (training steps/s, ratio to raw stepping, wall-clock time to a return
-threshold, final return) and writes JSON.
+threshold, final return) and writes JSON: ``rows`` holds one row per (env, impl), its
+``"impl"`` naming the physics, with the old keys' meanings (old files, without
+``"impl"``, are JAX) plus ``mjzoo_fraction_of_raw`` / ``brax_fraction_of_raw`` (training
+steps/s over raw stepping's); a trainer that could not run has ``{"error": why}`` in
+place of its result. ``warp_vs_jax`` holds, per env measured on both, Warp's figure over
+JAX's for raw stepping, each trainer's steps/s and time to its threshold.
 
     python benchmarks/ppo_vs_brax.py --envs cartpole_balance cylinder_push --steps 20000000
+    python benchmarks/ppo_vs_brax.py --envs cartpole_balance --steps 4000000 --impl warp jax
 """
 
 from __future__ import annotations
 
 import argparse
 import json
+import os
 import sys
 import tempfile
 import time
@@ -27,7 +39,7 @@ import numpy as np
 
 sys.path.insert(0, str(Path(__file__).parent))
 from brax_peer import train_brax_ppo  # noqa: E402
-from task_overhead import inputs, raw_steps_per_s  # noqa: E402
+from task_overhead import add_impl_argument, impls, inputs, ratio, raw_steps_per_s  # noqa: E402
 
 import mjzoo  # noqa: E402
 import mjzoo.envs  # noqa: E402
@@ -80,6 +92,64 @@ def time_to(curve: list, threshold: float) -> float | None:
     return next((seconds for _, seconds, ret in curve if ret >= threshold), None)
 
 
+def train_peer(task: mjzoo.Task, total_steps: int, episode_length: int) -> dict:
+    """Brax PPO's result, or ``{"error": why}`` where it cannot train `task` (Brax's
+    wrappers on Warp's physics state)."""
+    try:
+        # Brax trains at least one epoch between evaluations: fewer of them on short runs.
+        epoch = HYPER["batch_size"] * HYPER["unroll_length"] * HYPER["num_minibatches"]
+        num_evals = min(20, max(3, total_steps // epoch + 1))
+        return train_brax_ppo(task, num_timesteps=total_steps, episode_length=episode_length, num_evals=num_evals,
+                              **HYPER)  # fmt: skip
+    except Exception as e:  # noqa: BLE001  # recorded in the JSON: the run goes on
+        return {"error": f"{type(e).__name__}: {e}"[:2000]}
+
+
+def measure(env: str, impl: str, total_steps: int, threshold: float) -> dict:
+    """One row: raw stepping, mjzoo PPO and Brax PPO on `env` with `impl` physics."""
+    task = mjzoo.envs.make(env, impl=impl)
+    episode_length = mjzoo.envs.defaults(env)["episode_steps"]
+    raw = raw_steps_per_s(task, env, *inputs(task, HYPER["num_envs"], 100), repeats=3)
+    ours = train_mjzoo(task, total_steps, episode_length)
+    print(f"{env} ({impl}): mjzoo done {ours['steps_per_s']:,.0f} steps/s final {ours['final_return']:.1f}", flush=True)
+    peer = train_peer(task, total_steps, episode_length)
+    if "error" in peer:
+        print(f"{env} ({impl}): brax PPO could not run: {peer['error'][:500]}", flush=True)
+    else:
+        print(f"{env} ({impl}): brax done {peer['steps_per_s']:,.0f} steps/s final {peer['final_return']:.1f}", flush=True)
+    results = {"mjzoo": ours, "brax": peer}
+    best = threshold * max(r["final_return"] for r in results.values() if "error" not in r)
+    row = {"env": env, "impl": impl, "raw_steps_per_s": raw, "threshold": best, **results}
+    for name, r in results.items():
+        row[f"{name}_time_to_threshold_s"] = None if "error" in r else time_to(r["curve"], best)
+        row[f"{name}_fraction_of_raw"] = None if "error" in r else r["steps_per_s"] / raw
+    return row
+
+
+def warp_vs_jax(env: str, warp: dict, jax_: dict) -> dict:
+    """Warp's figures over JAX's (None where a trainer did not run or never got there)."""
+    speed = lambda row, name: row[name].get("steps_per_s")  # noqa: E731
+    return {"env": env, "raw_steps_per_s": ratio(warp["raw_steps_per_s"], jax_["raw_steps_per_s"]),
+            **{f"{name}_steps_per_s": ratio(speed(warp, name), speed(jax_, name)) for name in ("mjzoo", "brax")},
+            **{f"{name}_time_to_threshold_s": ratio(warp[f"{name}_time_to_threshold_s"], jax_[f"{name}_time_to_threshold_s"])
+               for name in ("mjzoo", "brax")}}  # fmt: skip
+
+
+def print_table(rows: list[dict]) -> None:
+    print(f"\n{'env':<18} {'impl':<5} {'trainer':<7} {'steps/s':>11} {'/raw':>6} {'to thr (s)':>10} {'final':>8} {'compile s':>9}")
+    for r in rows:
+        for name in ("mjzoo", "brax"):
+            res, ttt = r[name], r[f"{name}_time_to_threshold_s"]
+            if "error" in res:
+                print(f"{r['env']:<18} {r['impl']:<5} {name:<7} did not run: {res['error'][:200]}")
+                continue
+            print(f"{r['env']:<18} {r['impl']:<5} {name:<7} {res['steps_per_s']:>11,.0f} {r[f'{name}_fraction_of_raw']:>6.2f} "
+                  f"{'never' if ttt is None else f'{ttt:.1f}':>10} {res['final_return']:>8.1f} {res['compile_s']:>9.1f}")  # fmt: skip
+        peer = r["brax"].get("steps_per_s")
+        print(f"{'':<18} {r['impl']:<5} raw     {r['raw_steps_per_s']:>11,.0f}   threshold {r['threshold']:.1f}"
+              + (f"; mjzoo/brax steps/s = {r['mjzoo']['steps_per_s'] / peer:.2f}x" if peer else ""))
+
+
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     parser.add_argument("--envs", nargs="*", default=["cartpole_balance", "cylinder_push"])
@@ -87,37 +157,32 @@ def main() -> None:
     parser.add_argument("--threshold", type=float, default=0.9, help="fraction of the best final return of the two")
     parser.add_argument("--out", type=Path, default=Path(__file__).parent / "results")
     parser.add_argument("--smoke", action="store_true", help="tiny sizes, to check the script on a CPU")
+    parser.add_argument("--tag", default="", help="suffix of the JSON file")
+    add_impl_argument(parser)
     args = parser.parse_args()
     if args.smoke:
         HYPER.update(num_envs=16, batch_size=16, num_minibatches=4, num_updates_per_batch=2)
     device = jax.devices()[0].device_kind
     print(f"device: {device}, jax {jax.__version__}, {args.steps:,} env steps per run", flush=True)
-    rows = []
-    for env in args.envs:
-        task = mjzoo.envs.make(env)
-        episode_length = mjzoo.envs.defaults(env)["episode_steps"]
-        raw = raw_steps_per_s(task, env, *inputs(task, HYPER["num_envs"], 100), repeats=3)
-        ours = train_mjzoo(task, args.steps, episode_length)
-        print(f"{env}: mjzoo done {ours['steps_per_s']:,.0f} steps/s final {ours['final_return']:.1f}", flush=True)
-        peer = train_brax_ppo(task, num_timesteps=args.steps, episode_length=episode_length, num_evals=20, **HYPER)
-        print(f"{env}: brax done {peer['steps_per_s']:,.0f} steps/s final {peer['final_return']:.1f}", flush=True)
-        threshold = args.threshold * max(ours["final_return"], peer["final_return"])
-        rows.append({"env": env, "raw_steps_per_s": raw, "threshold": threshold, "mjzoo": ours, "brax": peer,
-                     "mjzoo_time_to_threshold_s": time_to(ours["curve"], threshold),
-                     "brax_time_to_threshold_s": time_to(peer["curve"], threshold)})  # fmt: skip
-    print(f"\n{'env':<18} {'trainer':<7} {'steps/s':>11} {'/raw':>6} {'to thr (s)':>10} {'final':>8} {'compile s':>9}")
-    for r in rows:
-        for name in ("mjzoo", "brax"):
-            res, ttt = r[name], r[f"{name}_time_to_threshold_s"]
-            print(f"{r['env']:<18} {name:<7} {res['steps_per_s']:>11,.0f} {res['steps_per_s'] / r['raw_steps_per_s']:>6.2f} "
-                  f"{'never' if ttt is None else f'{ttt:.1f}':>10} {res['final_return']:>8.1f} {res['compile_s']:>9.1f}")  # fmt: skip
-        print(f"{'':<18} raw     {r['raw_steps_per_s']:>11,.0f}   threshold {r['threshold']:.1f}; "
-              f"mjzoo/brax steps/s = {r['mjzoo']['steps_per_s'] / r['brax']['steps_per_s']:.2f}x")
+    rows, ratios = [], []
     args.out.mkdir(parents=True, exist_ok=True)
-    path = args.out / f"ppo_vs_brax_{jax.default_backend()}.json"
-    path.write_text(json.dumps({"device": device, "jax": jax.__version__, "hyper": HYPER, "rows": rows}, indent=2))
-    print(f"wrote {path}")
+    path = args.out / f"ppo_vs_brax_{jax.default_backend()}{'_' + args.tag if args.tag else ''}.json"
+    for env in args.envs:
+        by_impl = {}
+        for impl in impls(args.impl):
+            rows.append(by_impl.setdefault(impl, measure(env, impl, args.steps, args.threshold)))
+            if len(by_impl) == 2:
+                ratios.append(warp_vs_jax(env, by_impl["warp"], by_impl["jax"]))
+            # After each row: a later one that runs out of time leaves these.
+            path.write_text(json.dumps({"device": device, "jax": jax.__version__, "hyper": HYPER, "rows": rows,
+                                        "warp_vs_jax": ratios}, indent=2))  # fmt: skip
+    print_table(rows)
+    for r in ratios:
+        print(f"{r['env']}: warp/jax raw {r['raw_steps_per_s']:.2f}x, mjzoo PPO {r['mjzoo_steps_per_s']:.2f}x"
+              + (f", brax PPO {r['brax_steps_per_s']:.2f}x" if r["brax_steps_per_s"] else ""))
+    print(f"wrote {path}", flush=True)
 
 
 if __name__ == "__main__":
     main()
+    os._exit(0)  # Warp on a CPU may hang at interpreter exit
