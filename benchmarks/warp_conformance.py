@@ -104,12 +104,15 @@ def conformance(env: str, stack: str, num_envs: int = 2) -> dict[str, Any]:
     return result
 
 
-def comparison(env: str, steps: int, tight_steps: int) -> dict[str, Any]:
-    """Per-step largest |warp - jax| of qpos, qvel and reward on `env` over `steps` control
-    steps from one key with one action sequence, and the first step out of tolerance."""
+def comparison(env: str, steps: int, tight_steps: int, options: dict[str, Any] | None = None) -> dict[str, Any]:
+    """Per-step largest |warp - jax| of qpos, qvel and reward on `env` (with physics
+    `options`, e.g. a converged solver) over `steps` control steps from one key with one
+    action sequence, and the first step out of tolerance."""
     start = time.perf_counter()
+    options = options or {}
     keys = jax.random.split(jax.random.key(1), 1)
-    runs = {impl: jax.tree.map(lambda x: np.asarray(x[0]), _trajectories(mjzoo.envs.make(env, impl=impl), keys, steps))
+    make = lambda impl: mjzoo.envs.make(env, impl=impl, **options)  # noqa: E731
+    runs = {impl: jax.tree.map(lambda x: np.asarray(x[0]), _trajectories(make(impl), keys, steps))
             for impl in ("jax", "warp")}  # fmt: skip
     jx, wp = runs["jax"], runs["warp"]
     reward = lambda r: np.concatenate([[0.0], r])
@@ -121,6 +124,7 @@ def comparison(env: str, steps: int, tight_steps: int) -> dict[str, Any]:
     out = np.flatnonzero(~inside)
     return {
         "env": env,
+        "physics": options,
         "steps": steps,
         f"max_first_{tight_steps}": {k: float(v[: tight_steps + 1].max()) for k, v in error.items()},
         f"max_all_{steps}": {k: float(v.max()) for k, v in error.items()},
@@ -129,6 +133,15 @@ def comparison(env: str, steps: int, tight_steps: int) -> dict[str, Any]:
         "error_per_step": {k: [float(f"{x:.3g}") for x in v] for k, v in error.items()},
         "seconds": round(time.perf_counter() - start, 1),
     }
+
+
+def _number(text: str) -> Any:
+    for kind in (int, float):
+        try:
+            return kind(text)
+        except ValueError:
+            pass
+    return text
 
 
 def _table(results: dict[str, Any]) -> str:
@@ -159,13 +172,17 @@ def _table(results: dict[str, Any]) -> str:
 def main(argv: list[str] | None = None) -> dict[str, Any]:
     parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     parser.add_argument("--envs", nargs="+", default=mjzoo.envs.names(), help="default: every registered env")
-    parser.add_argument("--stacks", nargs="+", default=["bare", "all"], choices=["bare", "all"])
+    parser.add_argument("--stacks", nargs="*", default=["bare", "all"], choices=["bare", "all"], help="--stacks alone: none")
     parser.add_argument("--compare", nargs="*", default=list(COMPARED),
                         help="envs whose Warp and JAX trajectories are compared (those also in --envs); --compare alone: none")  # fmt: skip
     parser.add_argument("--steps", type=int, default=50, help="control steps compared")
     parser.add_argument("--tight-steps", type=int, default=10, help="the first steps that must stay within tolerance")
+    parser.add_argument("--physics", nargs="*", default=[], metavar="KEY=VALUE",
+                        help="physics options of the compared envs, e.g. iterations=50 ls_iterations=20 (a converged "
+                             "solver: the envs' own single Newton iteration leaves each implementation its own answer)")  # fmt: skip
     parser.add_argument("--out", type=Path, default=None, help="JSON file, rewritten after every case")
     args = parser.parse_args(argv)
+    options = {k: _number(v) for k, _, v in (p.partition("=") for p in args.physics)}
     unknown = sorted(set(args.envs) - set(mjzoo.envs.names()))
     if unknown:
         parser.error(f"unknown env(s) {unknown}; registered: {mjzoo.envs.names()}")
@@ -191,7 +208,7 @@ def main(argv: list[str] | None = None) -> dict[str, Any]:
             jax.clear_caches()
     for env in [e for e in args.compare if e in args.envs]:
         try:
-            results["comparison"]["envs"].append(comparison(env, args.steps, args.tight_steps))
+            results["comparison"]["envs"].append(comparison(env, args.steps, args.tight_steps, options))
         except Exception as error:  # noqa: BLE001  reported; the other envs still run
             results["comparison"]["envs"].append({"env": env, "error": f"{type(error).__name__}: {str(error)[:300]}"})
         print(f"{env} warp vs jax: {results['comparison']['envs'][-1].get('diverges_at', 'error')}", flush=True)
