@@ -41,7 +41,7 @@ import numpy as np
 sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "tests" / "conformance"))
 import mjzoo
 import mjzoo.envs
-from mjzoo import physics, running
+from mjzoo import physics, running, worlds
 from mjzoo.testing import PROPERTIES, TaskCheckError, check_task
 from test_conformance import STEPS, task_for
 
@@ -55,7 +55,7 @@ COMPARED = ("pendulum_swingup", "cartpole_balance", "point_mass", "cylinder_push
 def _trajectories(task: mjzoo.Task, keys: jax.Array, num_steps: int) -> dict[str, jax.Array]:
     """Reset per key ([E]) and `num_steps` uniform random actions drawn from the key:
     qpos and qvel [E, T+1, ...] (the reset's first), reward [E, T]."""
-    task = physics.for_worlds(task, keys.shape[0])
+    task = worlds.sized(task, keys.shape[0])
 
     def policy(obs: Any, key: jax.Array) -> jax.Array:
         return jax.random.uniform(key, (task.action_size,), minval=-1.0, maxval=1.0)

@@ -27,7 +27,7 @@ import io
 with contextlib.redirect_stdout(io.StringIO()):  # mjx prints a notice when its optional warp backend is absent
     from mujoco import mjx  # noqa: F401
 
-from mjzoo import checks, lazy, names, physics, tree
+from mjzoo import checks, lazy, names, physics, tree, worlds
 from mjzoo.combinators import (
     with_action_repeat,
     with_auto_reset,
@@ -85,6 +85,7 @@ __all__ = [
     "with_action_noise",
     "with_domain_randomization",
     "physics",
+    "worlds",
     "tree",
     "names",
     "checks",

@@ -21,7 +21,7 @@ import jax
 import jax.numpy as jnp
 from mujoco import mjx
 
-from mjzoo import checks, physics, tree
+from mjzoo import checks, tree, worlds
 from mjzoo.running import OUTCOME, complete, reset, reward_terms, transition_with_terms
 from mjzoo.types import State, Task, bind
 
@@ -121,7 +121,7 @@ def _select(cond: Array, on_true: State, on_false: State) -> State:
     """`on_false` (the running state) with data, obs and info taken from `on_true` where
     `cond` holds."""
     return on_false.replace(
-        data=physics.where(cond, on_true.data, on_false.data),
+        data=worlds.where(cond, on_true.data, on_false.data),
         obs=tree.where(cond, on_true.obs, on_false.obs),
         info=tree.where(cond, on_true.info, on_false.info),
     )
@@ -329,7 +329,7 @@ def _revert_physics(ok: Array, new: mjx.Data, old: mjx.Data) -> mjx.Data:
     Selecting the whole of `old` would keep every buffer of the previous step alive and
     force XLA to copy them all each step (measured: +25% per step on a cheap model).
     """
-    zeroed = physics.where(~ok, jax.tree.map(jnp.zeros_like, new), new)
+    zeroed = worlds.where(~ok, jax.tree.map(jnp.zeros_like, new), new)
     names = {f.name for f in dataclasses.fields(new)}
     restored = {k: tree.where(ok, getattr(new, k), getattr(old, k)) for k in INTEGRATION_STATE if k in names}
     return zeroed.replace(**restored)
@@ -340,10 +340,10 @@ def _overflow_metrics(data: mjx.Data) -> dict[str, Array]:
     dropped some) or stopped the solver at its iteration limit; nothing on JAX."""
     if data.impl != mjx.Impl.WARP:
         return {}
-    flags = physics.overflow(data)
+    flags = worlds.overflow(data)
     return {
-        "physics/capacity_overflow": ((flags & physics.OVERFLOW_CAPACITY) != 0).astype(jnp.float32),
-        "physics/solver_limit": ((flags & physics.OVERFLOW_SOLVER) != 0).astype(jnp.float32),
+        "physics/capacity_overflow": ((flags & worlds.OVERFLOW_CAPACITY) != 0).astype(jnp.float32),
+        "physics/solver_limit": ((flags & worlds.OVERFLOW_SOLVER) != 0).astype(jnp.float32),
     }
 
 

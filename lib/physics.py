@@ -14,9 +14,8 @@ pure-JAX one, and MuJoCo Warp (CUDA kernels; the default where it is installed a
 CUDA GPU is present). Warp keeps its contacts in one pool shared by every simulated
 world of a batch, sized ``max_contacts`` per world, and ``max_constraints`` constraint
 rows per world: both are measured by a probe rollout of C MuJoCo at load time unless
-given; `for_worlds` sizes the pool for a batch before it is vmapped. Code that must see
-Warp's private fields goes through this module: `where` to merge Data, `contacts` to
-read them, `overflow` for Warp's overflow flags.
+given; `mjzoo.worlds` sizes the pool for a batch, and is the one reader of Warp's
+private fields.
 """
 
 from __future__ import annotations
@@ -28,18 +27,18 @@ import math
 import numbers
 import os
 from pathlib import Path
-from typing import Any, NamedTuple
+from typing import Any
 
 import jax
-import jax.numpy as jnp
 import mujoco
 import numpy as np
 from mujoco import mjx
 
+from mjzoo.worlds import clear_overflow
+
 __all__ = [
-    "Physics", "load", "step", "substep", "OPTIONS", "IMPLS", "default_impl", "for_worlds", "per_world", "where",
-    "Contacts", "contacts", "overflow", "clear_overflow", "OVERFLOW_CAPACITY", "OVERFLOW_SOLVER",
-    "check_differentiable", "probe_capacity", "of_model",
+    "Physics", "load", "of_model", "step", "substep", "OPTIONS", "IMPLS", "default_impl", "probe_capacity",
+    "check_differentiable",
 ]  # fmt: skip
 
 SOLVERS = {"cg": mujoco.mjtSolver.mjSOL_CG, "newton": mujoco.mjtSolver.mjSOL_NEWTON}
@@ -53,11 +52,6 @@ OPTIONS = (
     "disable_euler_damping", "impl", "max_contacts", "max_constraints",
 )  # fmt: skip
 IMPLS = ("jax", "warp")
-# MuJoCo Warp's overflow bits (mujoco_warp OverflowType): capacities a run outgrew (its
-# physics then drops contacts or constraints) and solver iteration limits (it stops early).
-OVERFLOW_CAPACITY = 1 | 2 | 4 | 8 | 16 | 32 | 64 | 128 | 256 | 4096  # nefc, nnz, broad/narrowphase, ccd, ...
-OVERFLOW_SOLVER = 512 | 1024  # iterations, line-search iterations
-_WARP_SCRATCH = {"actuator_moment", "moment_colind", "moment_rowadr"}  # sparse, filled in atomic order
 WARP_ON_CPU = "MJZOO_WARP_ON_CPU"  # =1: let impl="warp" run on Warp's CPU backend (slow; for debugging)
 _KINDS = {
     "body": mujoco.mjtObj.mjOBJ_BODY,
@@ -91,7 +85,7 @@ class Physics:
     @functools.cached_property
     def data0(self) -> mjx.Data:
         """The template every reset starts from: ``qpos = qpos0``, zero velocity, nothing
-        computed; on Warp, with a contact pool for one world (`for_worlds` sizes it)."""
+        computed; on Warp, with a contact pool for one world (`mjzoo.worlds.sized` sizes it)."""
         if self.impl == "jax":
             return mjx.make_data(self.mj_model, impl="jax")
         data = mjx.make_data(self.mj_model, impl="warp", naconmax=self.max_contacts, njmax=self.max_constraints)
@@ -189,7 +183,7 @@ def load(
 def step(model: mjx.Model, data: mjx.Data, ctrl: jax.Array, n_substeps: int) -> mjx.Data:
     """Applies `ctrl` ([nu]) and advances `n_substeps` (static) physics steps.
 
-    On Warp, the overflow flags (`overflow`) are cleared first, so afterwards they
+    On Warp, the overflow flags (`mjzoo.worlds.overflow`) are cleared first, so afterwards they
     report this control step's substeps.
     """
     data = clear_overflow(data).replace(ctrl=ctrl)
@@ -257,142 +251,6 @@ def _require_warp(label: str) -> None:
 
     warp.config.quiet = True  # no banner,
     warp.config.log_level = max(warp.config.log_level, warp.LOG_WARNING)  # nor a line per kernel module loaded
-
-
-# --- Warp's shared contact pool ------------------------------------------------------
-
-
-def for_worlds(tree: Any, worlds: int) -> Any:
-    """`tree` (a Task, a State, a Data, any pytree) with every Warp Data in it holding a
-    contact pool for `worlds` simulated worlds: what a batch of `worlds` needs before it
-    is vmapped (resets from the task's template, or one state broadcast over planner
-    samples). The pools' contents are dropped: the next step recomputes them. Warp
-    sizes its pool statically, so the caller who knows the batch sizes it; identity on
-    JAX."""
-    is_data = lambda x: isinstance(x, mjx.Data)  # noqa: E731
-    return jax.tree.map(lambda x: _sized(x, worlds) if is_data(x) else x, tree, is_leaf=is_data)
-
-
-def _sized(data: mjx.Data, worlds: int) -> mjx.Data:
-    impl = data._impl
-    if data.impl != mjx.Impl.WARP or impl.nworld == worlds:
-        return data
-    per_world = impl.naconmax // impl.nworld
-    pool = {}
-    for f in dataclasses.fields(impl):
-        value = getattr(impl, f.name)
-        if f.name.startswith("contact__") and np.shape(value)[0] == impl.naconmax:
-            pool[f.name] = jnp.zeros((per_world * worlds,) + value.shape[1:], value.dtype)
-    naccdmax = impl.naccdmax // impl.nworld * worlds if impl.naccdmax else impl.naccdmax
-    return data.replace(_impl=impl.replace(**pool, naconmax=per_world * worlds, naccdmax=naccdmax, nworld=worlds))
-
-
-def per_world(tree: Any) -> Any:
-    """`tree` with only each world's own state in every Warp Data: without the contact
-    pool the batch shares, and without the sparse actuator layouts Warp's kernels fill in
-    a varying order (both recomputed by every step; their fields become None). Every
-    leaf then has the batch's axes and compares across runs: for indexing or comparing
-    batched states. Identity on JAX."""
-    is_data = lambda x: isinstance(x, mjx.Data)  # noqa: E731
-    return jax.tree.map(lambda x: _own_fields(x) if is_data(x) else x, tree, is_leaf=is_data)
-
-
-def _own_fields(data: mjx.Data) -> mjx.Data:
-    if data.impl != mjx.Impl.WARP:
-        return data
-    from mujoco.mjx.warp.types import DATA_NON_VMAP
-
-    dropped = DATA_NON_VMAP | _WARP_SCRATCH
-    shared = {f.name: None for f in dataclasses.fields(data._impl)
-              if f.name in dropped and isinstance(getattr(data._impl, f.name), jax.Array)}  # fmt: skip
-    return data.replace(_impl=data._impl.replace(**shared))
-
-
-def where(cond: jax.Array, on_true: mjx.Data, on_false: mjx.Data) -> mjx.Data:
-    """`on_true` where `cond` (a scalar per world), else `on_false`, field by field.
-
-    Warp's contact pool is shared by all worlds, not one world's: it is taken from
-    `on_false`, which should be the running state (the one just stepped)."""
-    if on_false.impl != mjx.Impl.WARP:
-        return jax.tree.map(lambda a, b: jnp.where(cond, a, b), on_true, on_false)
-    from mujoco.mjx.warp.types import DATA_NON_VMAP  # present where Warp data exists
-
-    pick = lambda a, b: jnp.where(cond, a, b)  # noqa: E731
-    impl = {  # per-world fields only: the pool and its counters are shared
-        f.name: pick(getattr(on_true._impl, f.name), getattr(on_false._impl, f.name))
-        for f in dataclasses.fields(on_false._impl)
-        if f.name not in DATA_NON_VMAP and isinstance(getattr(on_false._impl, f.name), jax.Array)
-    }
-    public = {f.name: pick(getattr(on_true, f.name), getattr(on_false, f.name))
-              for f in dataclasses.fields(on_false) if f.name != "_impl"}  # fmt: skip
-    return on_false.replace(**public, _impl=on_false._impl.replace(**impl))
-
-
-# --- contacts and overflow: the one reader of Warp's private fields ---------------------
-
-
-class Contacts(NamedTuple):
-    """One world's contacts as slots [C] (MJX-JAX: one per candidate geom pair; Warp: one
-    per contact constraint row); inactive slots have ``active`` False and zero force."""
-
-    geom1: jax.Array  # [C] int32
-    geom2: jax.Array  # [C] int32
-    active: jax.Array  # [C] bool
-    normal_force: jax.Array | None  # [C] float32, N (a slot's share of its contact's); None without a model
-
-
-def contacts(data: mjx.Data, model: mjx.Model | None = None) -> Contacts:
-    """The contacts the last `mjx.step` / `mjx.forward` found, for ONE world; normal forces
-    need `model` (on MJX-JAX, its cone type says how a contact's rows add up)."""
-    if data.impl == mjx.Impl.WARP:
-        return _warp_contacts(data)
-    contact = data._impl.contact
-    active = contact.dist < contact.includemargin
-    address, dim = np.asarray(contact.efc_address), np.asarray(contact.dim)
-    if model is None or address.size == 0:
-        force = None if model is None else jnp.zeros(0, jnp.float32)
-        return Contacts(contact.geom1, contact.geom2, active, force)
-    # A contact's rows start at its (static) efc_address. Pyramidal cones: the normal force
-    # is the sum of its 2 (condim - 1) edge forces (1 row for condim 1); elliptic: row 0.
-    rows = np.where(dim == 1, 1, 2 * (dim - 1)) if model.opt.cone == mjx.ConeType.PYRAMIDAL else np.ones_like(dim)
-    offsets = np.arange(rows.max())
-    index = np.maximum(address, 0)[:, None] + np.minimum(offsets[None, :], rows[:, None] - 1)
-    used = (offsets[None, :] < rows[:, None]) & (address[:, None] >= 0)
-    force = jnp.sum(jnp.where(used, data._impl.efc_force[index], 0.0), axis=1).astype(jnp.float32)
-    return Contacts(contact.geom1, contact.geom2, active, jnp.where(active, force, 0.0))
-
-
-def _warp_contacts(data: mjx.Data) -> Contacts:
-    # This world's contact constraint rows point (efc__id) into the pool shared by all
-    # worlds. A pyramidal contact's normal force is the sum of its rows' forces; an
-    # elliptic one's is its first row's.
-    impl, kind = data._impl, mujoco.mjtConstraint
-    rows = jnp.arange(impl.efc__type.shape[-1])
-    valid = rows < impl.nefc.reshape(())
-    frictionless = valid & (impl.efc__type == int(kind.mjCNSTR_CONTACT_FRICTIONLESS))
-    pyramidal = valid & (impl.efc__type == int(kind.mjCNSTR_CONTACT_PYRAMIDAL))
-    elliptic = valid & (impl.efc__type == int(kind.mjCNSTR_CONTACT_ELLIPTIC))
-    cid = jnp.where(frictionless | pyramidal | elliptic, impl.efc__id, 0)
-    elliptic &= impl.contact__efc_address[cid, 0] == rows
-    active = frictionless | pyramidal | elliptic
-    geoms = impl.contact__geom[cid]
-    return Contacts(geoms[:, 0], geoms[:, 1], active, jnp.where(active, impl.efc__force, 0.0).astype(jnp.float32))
-
-
-def overflow(data: mjx.Data) -> jax.Array:
-    """[] int32 bitmask of what overflowed in this world since `step` began (0 on JAX):
-    `OVERFLOW_CAPACITY` bits mean ``max_contacts`` / ``max_constraints`` were too small,
-    `OVERFLOW_SOLVER` bits that the solver stopped at its iteration limit."""
-    if data.impl != mjx.Impl.WARP:
-        return jnp.zeros((), jnp.int32)
-    return jnp.asarray(data._impl.overflow).reshape(()).astype(jnp.int32)
-
-
-def clear_overflow(data: mjx.Data) -> mjx.Data:
-    """`data` with Warp's (sticky) overflow flags cleared; identity on JAX."""
-    if data.impl != mjx.Impl.WARP:
-        return data
-    return data.replace(_impl=data._impl.replace(overflow=jnp.zeros_like(data._impl.overflow)))
 
 
 def _read(source: str | os.PathLike) -> tuple[str, str, float]:
@@ -482,7 +340,7 @@ def of_model(
         raise ValueError(f"{source}: MJX ({impl}) cannot simulate this model: {e}") from None
     if impl != "warp":
         return Physics(source=source, mj_model=mj_model, model=model, n_substeps=n_substeps)
-    # Overflows are counted in metrics (`overflow`) instead of printed per world and step.
+    # Overflows are counted in metrics (`mjzoo.worlds.overflow`) instead of printed per world and step.
     model = model.replace(opt=model.opt.replace(_impl=model.opt._impl.replace(warn_overflow=0)))
     contacts, constraints = probe_capacity(mj_model)
     return Physics(

@@ -21,7 +21,7 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
-from mjzoo import physics, running
+from mjzoo import running, worlds
 from mjzoo.combinators import resets_itself, with_time_limit
 from mjzoo.types import State, Task
 
@@ -145,17 +145,17 @@ def _uniform(size: int, obs: PyTree, key: jax.Array) -> jax.Array:
 @functools.partial(jax.jit, static_argnums=(2, 3))
 def _episodes(task: Task, keys: jax.Array, policy, num_steps: int):
     """A reset per key ([E]) and the `Trajectory` of `num_steps` transitions from it ([E, T]),
-    with every leaf per env (`physics.per_world`)."""
+    with every leaf per env (`worlds.own`)."""
     _TRACES[0] += 1  # runs only while tracing
     policy = policy or functools.partial(_uniform, task.action_size)
-    task = physics.for_worlds(task, keys.shape[0])  # Warp: a contact pool for every env
+    task = worlds.sized(task, keys.shape[0])  # Warp: a contact pool for every env
 
     def one(key):
         reset_key, run_key = jax.random.split(key)
         first = running.reset(task, reset_key)
         return first, running.rollout(task, policy, first, run_key, num_steps)[1]
 
-    return physics.per_world(jax.vmap(one)(keys))  # Warp's shared contact pool is not one env's
+    return worlds.own(jax.vmap(one)(keys))  # Warp's shared contact pool is not one env's
 
 
 # --- properties: each returns why it fails, or None ----------------------------------

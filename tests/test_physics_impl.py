@@ -19,7 +19,7 @@ import mjzoo.envs
 import mujoco
 import numpy as np
 import pytest
-from mjzoo import physics, running
+from mjzoo import physics, running, worlds
 from mjzoo.catalog import contacts as catalog_contacts
 from mjzoo.harness import cli, training
 from mjzoo.testing import check_task
@@ -131,19 +131,19 @@ def _two_states() -> tuple[mjx.Data, mjx.Data]:
     return data0, data0.replace(qpos=data0.qpos + 1.0, qvel=data0.qvel - 2.0, time=jnp.float32(3.0))
 
 
-def test_for_worlds_and_per_world_leave_jax_data_alone():
+def test_sized_and_own_leave_jax_data_alone():
     data, _ = _two_states()
-    assert physics.for_worlds(data, 8) is data
-    assert physics.per_world(data) is data
+    assert worlds.sized(data, 8) is data
+    assert worlds.own(data) is data
     task = mjzoo.envs.make("cartpole_balance")
-    for changed in (physics.for_worlds(task, 8), physics.per_world(task)):
+    for changed in (worlds.sized(task, 8), worlds.own(task)):
         assert all(a is b for a, b in zip(jax.tree.leaves(changed), jax.tree.leaves(task), strict=True))
 
 
 @pytest.mark.parametrize("cond", [True, False])
 def test_where_is_leafwise_jnp_where_on_jax(cond):
     a, b = _two_states()
-    merged = physics.where(jnp.asarray(cond), a, b)
+    merged = worlds.where(jnp.asarray(cond), a, b)
     expected = jax.tree.map(lambda x, y: jnp.where(cond, x, y), a, b)
     assert jax.tree.structure(merged) == jax.tree.structure(expected)
     for x, y in zip(jax.tree.leaves(merged), jax.tree.leaves(expected), strict=True):
@@ -152,8 +152,8 @@ def test_where_is_leafwise_jnp_where_on_jax(cond):
 
 def test_no_overflow_on_jax():
     data, _ = _two_states()
-    assert physics.overflow(data).shape == () and int(physics.overflow(data)) == 0
-    assert physics.clear_overflow(data) is data
+    assert worlds.overflow(data).shape == () and int(worlds.overflow(data)) == 0
+    assert worlds.clear_overflow(data) is data
 
 
 def test_the_divergence_guard_adds_no_physics_metrics_on_jax():
@@ -181,7 +181,7 @@ def settled_box():
 
 def test_contacts_of_a_resting_box_carry_its_weight(settled_box):
     box, _, data = settled_box
-    found = physics.contacts(data, box.model)
+    found = worlds.contacts(data, box.model)
     floor, body = box.id("geom", "floor"), box.id("geom", "box")
     between = ((found.geom1 == floor) & (found.geom2 == body)) | ((found.geom1 == body) & (found.geom2 == floor))
     assert bool(jnp.any(found.active & between))
@@ -189,12 +189,12 @@ def test_contacts_of_a_resting_box_carry_its_weight(settled_box):
     assert float(jnp.sum(jnp.where(found.active, 0.0, jnp.abs(found.normal_force)))) == 0.0
     weight = BOX_MASS * -float(box.mj_model.opt.gravity[2])
     np.testing.assert_allclose(float(jnp.sum(found.normal_force)), weight, rtol=0.02)
-    assert physics.contacts(data).normal_force is None  # no model: no forces
+    assert worlds.contacts(data).normal_force is None  # no model: no forces
 
 
 def test_catalog_contacts_read_what_they_read_before(settled_box):
-    """touching / forces through physics.contacts equal the direct read of MJX-JAX's
-    contact slots and constraint forces (the catalog's code before physics.contacts)."""
+    """touching / forces through worlds.contacts equal the direct read of MJX-JAX's
+    contact slots and constraint forces (the catalog's code before worlds.contacts)."""
     box, _, data = settled_box
     geoms, others = catalog_contacts.geom_sets(box.mj_model, ["box"], ["floor"], "test")
     contact = data._impl.contact

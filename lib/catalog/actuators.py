@@ -27,7 +27,7 @@ import mujoco
 import numpy as np
 from mujoco import mjx
 
-from mjzoo import checks, names, physics, tree
+from mjzoo import checks, names, physics, tree, worlds
 from mjzoo.types import State, Task, bind
 
 __all__ = [
@@ -258,7 +258,7 @@ def step(model: mjx.Model, data: mjx.Data, actuator: Actuator, action: Array, n_
         ctrl = actuator(model, data, action, jax.random.fold_in(key, i))
         return physics.substep(model, data.replace(ctrl=jnp.asarray(ctrl, data.ctrl.dtype)))
 
-    return jax.lax.fori_loop(0, n_substeps, substep, physics.clear_overflow(data))
+    return jax.lax.fori_loop(0, n_substeps, substep, worlds.clear_overflow(data))
 
 
 # --- combinators on the action ------------------------------------------------------

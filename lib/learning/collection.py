@@ -28,7 +28,7 @@ from typing import Any
 import jax
 import jax.numpy as jnp
 
-from mjzoo import checks, physics
+from mjzoo import checks, worlds
 from mjzoo.combinators import with_auto_reset
 from mjzoo.running import reset, transition
 from mjzoo.types import State, Task
@@ -74,7 +74,7 @@ class Collector:
         """`num_envs` freshly reset envs of `task` (auto-resetting) and each env's copy of
         the policy's initial `carry` (one env's carry, broadcast)."""
         num_envs = checks.integer("Collector.create", "num_envs", num_envs)
-        batch = physics.for_worlds(with_auto_reset(task), num_envs)  # Warp: a contact pool for them all
+        batch = worlds.sized(with_auto_reset(task), num_envs)  # Warp: a contact pool for them all
         env_state = jax.vmap(reset, in_axes=(None, 0))(batch, jax.random.split(key, num_envs))
         zeros = jnp.zeros((num_envs,), jnp.float32)
         return cls(

@@ -15,7 +15,7 @@ from typing import Any, NamedTuple
 import jax
 import jax.numpy as jnp
 
-from mjzoo import checks, physics
+from mjzoo import checks, worlds
 from mjzoo.learning.collection import Policy
 from mjzoo.running import reset, transition
 from mjzoo.types import Task, Trajectory
@@ -75,7 +75,7 @@ def evaluate(
     num_envs = checks.integer("evaluate", "num_envs", num_envs)
     num_steps = episode_steps(task) if num_steps is None else checks.integer("evaluate", "num_steps", num_steps)
 
-    task = physics.for_worlds(task, num_envs)  # Warp: a contact pool for every env
+    task = worlds.sized(task, num_envs)  # Warp: a contact pool for every env
 
     def one(key: Array):
         reset_key, key = jax.random.split(key)
@@ -95,4 +95,4 @@ def evaluate(
         return jnp.sum(trajectory.next_state.reward * alive), jnp.sum(alive, dtype=jnp.int32), trajectory
 
     returns, lengths, trajectories = jax.vmap(one)(jax.random.split(key, num_envs))
-    return Evaluation(returns, lengths, jax.tree.map(lambda x: x[0], physics.per_world(trajectories)))
+    return Evaluation(returns, lengths, jax.tree.map(lambda x: x[0], worlds.own(trajectories)))

@@ -15,7 +15,7 @@ from typing import Callable
 import jax
 import jax.numpy as jnp
 
-from mjzoo import physics
+from mjzoo import worlds
 from mjzoo.planning.learned import TerminalValue, as_terminal_value
 from mjzoo.running import complete, transition
 from mjzoo.types import State, Task
@@ -72,7 +72,7 @@ def rollout_costs(
     variants = task if isinstance(task, Ensemble) else Ensemble(task, {})
     base = variants.task
     num_models = max(1, *(len(v) for v in variants.fields.values())) if variants.fields else 1
-    start = physics.for_worlds(complete(base, state), num_models * controls.shape[0])  # Warp: a pool for all
+    start = worlds.sized(complete(base, state), num_models * controls.shape[0])  # Warp: a pool for all
     step_keys = jax.random.split(key, controls.shape[1])
 
     def cost(model, sample_controls: Array) -> tuple[Array, Array]:

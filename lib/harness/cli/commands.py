@@ -73,7 +73,7 @@ def _random_returns(task: mjzoo.Task, keys: jax.Array, steps: int, nu: int):
         obs_size = jnp.size(jax.tree.leaves(state.obs)[0])
         return jnp.sum(trajectory.next_state.reward * alive), obs_size
 
-    task = mjzoo.physics.for_worlds(task, keys.shape[0])  # Warp: a contact pool for every env
+    task = mjzoo.worlds.sized(task, keys.shape[0])  # Warp: a contact pool for every env
     return jax.vmap(one)(keys)
 
 
