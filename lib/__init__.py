@@ -5,7 +5,7 @@ step, reward, terminate); combinators turn tasks into tasks; `transition` and `r
 run one environment, and `jax.vmap` runs many. This package's root is that core; the
 rest is grouped by concern, each subpackage importing only what sits below it:
 
-    mjzoo               the core: Task and State, running a task, physics, combinators
+    mjzoo               the core: Task and State, running a task, physics and its batches of worlds, combinators
     mjzoo.catalog       building blocks of tasks (observations, rewards, terminations, ...)
     mjzoo.learning      pure pieces RL algorithms are composed from (gae, losses, networks)
     mjzoo.planning      pieces sampling planners are composed from, the closed loop
