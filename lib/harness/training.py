@@ -268,10 +268,14 @@ def _init_fn(algorithm: ModuleType):
 
 
 def physics_info(task: Task) -> dict[str, Any]:
-    """The physics implementation a task runs on, and Warp's capacities, for config.json."""
-    info: dict[str, Any] = {"impl": task.model.impl.value}
+    """The physics implementation a task runs on, and Warp's capacities, for config.json
+    (nothing for a task without an `mjx.Model`, which the harness also trains)."""
+    model = getattr(task, "model", None)
+    if not isinstance(model, mjx.Model):
+        return {}
+    info: dict[str, Any] = {"impl": model.impl.value}
     template = _data0(task)
-    if template is not None and task.model.impl.value == "warp":
+    if template is not None and model.impl == mjx.Impl.WARP:
         info.update(max_contacts=int(template._impl.naconmax), max_constraints=int(template._impl.njmax))
     return info
 
@@ -325,6 +329,7 @@ def run(algorithm: Algorithm, config: AlgorithmConfig, task: Task, settings: Set
     total_chunks = -(-config.num_updates // settings.updates_per_chunk)
     writer = metrics_lib.MetricsWriter(out) if out is not None else None
     progress = metrics_lib.Progress(total_chunks * settings.updates_per_chunk * config.steps_per_update, "train")
+    shown = {"physics": impl} if (impl := physics_info(task).get("impl")) else {}
     last: dict[str, float] = {}
     history: list[dict[str, float]] = []
     warned = None
@@ -348,8 +353,7 @@ def run(algorithm: Algorithm, config: AlgorithmConfig, task: Task, settings: Set
                 if settings.checkpoint_every and chunks_done % settings.checkpoint_every == 0:
                     checkpoints.save(out / "checkpoints", step, state)
             if settings.progress:
-                progress.update(step, physics=task.model.impl.value, ret=f"{last['eval/return']:.1f}",
-                                sps=f"{last['perf/steps_per_s']:,.0f}")  # fmt: skip
+                progress.update(step, **shown, ret=f"{last['eval/return']:.1f}", sps=f"{last['perf/steps_per_s']:,.0f}")
             history.append(last)
             _check_capacity(task, last)
             warned = _diagnose(algorithm, history, warned)
