@@ -95,11 +95,11 @@ def test_point_mass_goal_is_in_info_obs_and_marker():
 
 def test_point_mass_reach_is_one_on_the_target_and_falls_to_a_tenth_at_the_margin():
     pm = mjzoo.envs.point_mass
+    task = mjzoo.envs.make("point_mass")
     params = pm.Params(
         **mjzoo.envs.base.floats(reach_weight=1.0, effort_weight=0.01, target_radius=0.03, reach_margin=0.5, spawn_range=0.4),
-        n_substeps=2,
+        data0=mjzoo.reset(task, jax.random.key(0)).data, n_substeps=2,
     )  # fmt: skip
-    task = mjzoo.envs.make("point_mass")
     state = mjzoo.reset(task, jax.random.key(0))
     goal = state.info["goal"]
     at = lambda xy: state.replace(data=state.data.replace(qpos=xy))  # noqa: E731
