@@ -194,7 +194,7 @@ def shard_envs(train_state: Any, per_env_fields: Sequence[str], devices: list | 
     devices = devices or jax.devices()
     if len(devices) == 1:
         return jax.device_put(train_state, devices[0])
-    if _data0(train_state) is not None and _data0(train_state).impl == mjx.Impl.WARP:
+    if (data := _data0(train_state)) is not None and data.impl == mjx.Impl.WARP:
         raise NotImplementedError(
             f"training on {len(devices)} devices needs impl='jax' for now: MuJoCo Warp's contact pool "
             "belongs to one call on one device, and splitting it is not supported yet"
@@ -309,7 +309,7 @@ def run(algorithm: Algorithm, config: AlgorithmConfig, task: Task, settings: Set
     out = Path(settings.out_dir) if settings.out_dir else None
     if out is not None:
         _claim(out, settings)
-    key = jax.random.key(settings.seed)
+    key, physics = jax.random.key(settings.seed), physics_info(task)
     state = _init_fn(algorithm)(config, task, key)
     _check_state(algorithm, state)
     if out is not None:
@@ -318,7 +318,7 @@ def run(algorithm: Algorithm, config: AlgorithmConfig, task: Task, settings: Set
             state = _resume(out, state)
         out.mkdir(parents=True, exist_ok=True)
         run_info = {"algorithm": algorithm.__name__.split(".")[-1], "config": config_dict(config),
-                    "physics": physics_info(task),
+                    "physics": physics,
                     "settings": {k: str(v) if isinstance(v, Path) else v for k, v in dataclasses.asdict(settings).items()}}  # fmt: skip
         (out / "config.json").write_text(json.dumps(run_info, indent=2))
     # Own every buffer once: the chunk donates the state, and XLA may hand out one buffer
@@ -329,7 +329,7 @@ def run(algorithm: Algorithm, config: AlgorithmConfig, task: Task, settings: Set
     total_chunks = -(-config.num_updates // settings.updates_per_chunk)
     writer = metrics_lib.MetricsWriter(out) if out is not None else None
     progress = metrics_lib.Progress(total_chunks * settings.updates_per_chunk * config.steps_per_update, "train")
-    shown = {"physics": impl} if (impl := physics_info(task).get("impl")) else {}
+    shown = {"physics": physics["impl"]} if physics else {}
     last: dict[str, float] = {}
     history: list[dict[str, float]] = []
     warned = None
