@@ -20,6 +20,8 @@ import mujoco
 import numpy as np
 from mujoco import mjx
 
+from mjzoo.tree import where as leafwise_where
+
 __all__ = [
     "sized", "own", "where", "Contacts", "contacts", "overflow", "clear_overflow", "OVERFLOW_CAPACITY",
     "OVERFLOW_SOLVER",
@@ -84,7 +86,7 @@ def where(cond: jax.Array, on_true: mjx.Data, on_false: mjx.Data) -> mjx.Data:
     Warp's contact pool is shared by all worlds, not one world's: it is taken from
     `on_false`, which should be the running state (the one just stepped)."""
     if on_false.impl != mjx.Impl.WARP:
-        return jax.tree.map(lambda a, b: jnp.where(cond, a, b), on_true, on_false)
+        return leafwise_where(cond, on_true, on_false)
     from mujoco.mjx.warp.types import DATA_NON_VMAP  # present where Warp data exists
 
     pick = lambda a, b: jnp.where(cond, a, b)  # noqa: E731
