@@ -29,6 +29,7 @@ one line saying so and return None, so a training run never dies for want of a v
 from __future__ import annotations
 
 import copy
+import dataclasses
 import os
 import sys
 import warnings
@@ -40,9 +41,42 @@ import mujoco
 import numpy as np
 from numpy.typing import ArrayLike
 
-__all__ = ["render_frames", "render_video"]
+__all__ = ["RenderConfig", "render_frames", "render_video"]
 
 Camera = str | int | None
+
+
+@dataclasses.dataclass(frozen=True, kw_only=True)
+class RenderConfig:
+    """How every video and image mjzoo writes is drawn (end of training, `mjzoo eval`,
+    `mjzoo plan`, the viewer's recordings) and how learning curves are plotted; KSim's
+    render options. From the CLI: ``--render.NAME VALUE``."""
+
+    # image size in pixels: full (videos) and small (previews, thumbnails)
+    width: int = 640
+    height: int = 480
+    small_width: int = 320
+    small_height: int = 240
+    length_seconds: float | None = None  # None: the whole trajectory
+    fps: float | None = None  # None: real time, 1 / the trajectory's time step
+    slowdown: float = 1.0  # 2.0 plays at half speed
+    # what is drawn
+    shadows: bool = True
+    reflections: bool = True
+    contact_forces: bool = False
+    contact_points: bool = False
+    inertia: bool = False  # equivalent-inertia boxes
+    markers: bool = False  # debug markers: site frames and the centre of mass
+    # the camera: a model camera by name or id, else a free camera
+    camera: str | int | None = None
+    distance: float | None = None  # None: MuJoCo's default, fitted to the model
+    azimuth: float | None = None  # degrees
+    elevation: float | None = None  # degrees
+    lookat: tuple[float, float, float] | None = None
+    track_body: str | int | None = None  # the free camera follows this body
+    # learning curves
+    max_series_per_plot: int = 8
+    plot_figsize: tuple[float, float] = (4.5, 3.0)  # inches per subplot
 
 # Why a failure is remembered: the backend is fixed when mujoco is imported, so it
 # cannot start working later, and a second attempt after a failed one can abort the
