@@ -1,11 +1,20 @@
-"""Rendering recorded trajectories to frames and MP4 videos, on the host.
+"""Rendering recorded trajectories to frames and MP4 videos, on the host, as one
+`RenderConfig` says.
 
     _, traj = mjzoo.rollout(task, policy, state, key, num_steps=250)
-    render_video(task.mj_model, traj.next_state.data.qpos, "runs/a/eval.mp4", fps=50)  # 1 / ctrl_dt
+    trajectory_video(task, traj, "runs/a/eval.mp4", RenderConfig(length_seconds=5, track_body="torso"))
+    render_video(task.mj_model, traj.next_state.data.qpos, "runs/a/raw.mp4", dt=0.02)  # dt: seconds per row
 
 Each frame sets ``qpos`` (and mocap poses) into a `mujoco.MjData`, runs `mj_forward`
-and draws it with `mujoco.Renderer`; videos are H.264 MP4 through imageio's ffmpeg
-plugin (imageio-ffmpeg ships its own ffmpeg binary, so no system ffmpeg is needed).
+(so contacts and their forces are those of the drawn state) and draws it with
+`mujoco.Renderer`; videos are H.264 MP4 through imageio's ffmpeg plugin (imageio-ffmpeg
+ships its own ffmpeg binary, so no system ffmpeg is needed).
+
+Time. ``dt`` is the trajectory's time per row. A video holds ``fps`` frames per
+simulated second (default real time, ``1 / dt``): a lower rate draws every k-th row, a
+higher one repeats rows. The file plays at ``fps / slowdown`` frames per second, so it
+runs at ``1 / slowdown`` of real time with every frame kept (no frame is repeated for
+slow motion). Without ``dt`` each row is one frame at ``fps``.
 
 OpenGL. MuJoCo picks its OpenGL backend from the environment variable ``MUJOCO_GL``
 when ``mujoco`` is first imported, so set it before importing mujoco or mjzoo, e.g.
@@ -20,7 +29,7 @@ when ``mujoco`` is first imported, so set it before importing mujoco or mjzoo, e
 
 On Mesa's CPU renderers a frame costs about 0.1 s (2 shared cores), most of it the
 model's 4096-pixel shadow map: ``<visual><quality shadowsize="1024" offsamples="0"/>``
-in the model XML makes it several times faster.
+in the model XML, or ``RenderConfig(shadows=False)``, makes it several times faster.
 
 Without a working backend, creating the renderer fails; the functions here then print
 one line saying so and return None, so a training run never dies for want of a video.
@@ -30,53 +39,106 @@ from __future__ import annotations
 
 import copy
 import dataclasses
+import math
 import os
 import sys
 import warnings
-from pathlib import Path
 from collections.abc import Iterator
+from pathlib import Path
+from typing import TYPE_CHECKING, Any
 
 import imageio.v2 as imageio
 import mujoco
 import numpy as np
 from numpy.typing import ArrayLike
 
-__all__ = ["RenderConfig", "render_frames", "render_video"]
+if TYPE_CHECKING:
+    from mjzoo.types import Task
 
-Camera = str | int | None
+__all__ = ["RenderConfig", "render_frames", "render_video", "trajectory_video"]
+
+_FREE_CAMERA = ("distance", "azimuth", "elevation", "lookat", "track_body")
 
 
 @dataclasses.dataclass(frozen=True, kw_only=True)
 class RenderConfig:
     """How every video and image mjzoo writes is drawn (end of training, `mjzoo eval`,
     `mjzoo plan`, the viewer's recordings) and how learning curves are plotted; KSim's
-    render options. From the CLI: ``--render.NAME VALUE``."""
+    render options. From the CLI: ``--render.NAME VALUE``. Values are checked here;
+    camera and body names when a model is drawn."""
 
     # image size in pixels: full (videos) and small (previews, thumbnails)
     width: int = 640
     height: int = 480
     small_width: int = 320
     small_height: int = 240
-    length_seconds: float | None = None  # None: the whole trajectory
-    fps: float | None = None  # None: real time, 1 / the trajectory's time step
-    slowdown: float = 1.0  # 2.0 plays at half speed
+    length_seconds: float | None = None  # simulated seconds drawn from the start; None: the whole trajectory
+    fps: float | None = None  # frames per simulated second; None: real time, 1 / the trajectory's time step
+    slowdown: float = 1.0  # the file plays at fps / slowdown: 2.0 is half speed
     # what is drawn
     shadows: bool = True
-    reflections: bool = True
+    reflections: bool = True  # on reflective materials only
     contact_forces: bool = False
     contact_points: bool = False
     inertia: bool = False  # equivalent-inertia boxes
     markers: bool = False  # debug markers: site frames and the centre of mass
-    # the camera: a model camera by name or id, else a free camera
+    # the camera: a model camera by name or id, else a free camera (fields None: MuJoCo's fit to the model)
     camera: str | int | None = None
-    distance: float | None = None  # None: MuJoCo's default, fitted to the model
+    distance: float | None = None  # metres from lookat
     azimuth: float | None = None  # degrees
     elevation: float | None = None  # degrees
     lookat: tuple[float, float, float] | None = None
-    track_body: str | int | None = None  # the free camera follows this body
+    track_body: str | int | None = None  # the free camera follows this body (lookat is its subtree's centre)
     # learning curves
     max_series_per_plot: int = 8
     plot_figsize: tuple[float, float] = (4.5, 3.0)  # inches per subplot
+
+    def __post_init__(self) -> None:
+        for name in ("lookat", "plot_figsize"):  # JSON gives lists back
+            if isinstance(getattr(self, name), list):
+                object.__setattr__(self, name, tuple(getattr(self, name)))
+        for name in ("width", "height", "small_width", "small_height", "max_series_per_plot"):
+            _require(
+                name,
+                getattr(self, name),
+                isinstance(getattr(self, name), int) and getattr(self, name) >= 1,
+                "an integer >= 1",
+            )
+        for name in ("length_seconds", "fps", "distance"):
+            value = getattr(self, name)
+            _require(name, value, value is None or _finite(value) and value > 0, "> 0 or None")
+        _require("slowdown", self.slowdown, _finite(self.slowdown) and self.slowdown > 0, "> 0")
+        _require("lookat", self.lookat, self.lookat is None or _vector(self.lookat, 3), "3 finite numbers or None")
+        _require(
+            "plot_figsize",
+            self.plot_figsize,
+            _vector(self.plot_figsize, 2) and min(self.plot_figsize) > 0,
+            "2 numbers > 0",
+        )
+        free = [f for f in _FREE_CAMERA if getattr(self, f) is not None]
+        if self.camera not in (None, -1) and free:
+            raise ValueError(
+                f"render config: camera={self.camera!r} is a model camera; {', '.join(free)} set a free camera - give one or the other"
+            )
+
+    @property
+    def free_camera(self) -> bool:
+        """Whether any free-camera field is set."""
+        return any(getattr(self, f) is not None for f in _FREE_CAMERA)
+
+
+def _finite(value: Any) -> bool:
+    return isinstance(value, (int, float)) and not isinstance(value, bool) and math.isfinite(value)
+
+
+def _vector(value: Any, size: int) -> bool:
+    return isinstance(value, tuple) and len(value) == size and all(map(_finite, value))
+
+
+def _require(name: str, value: Any, ok: bool, allowed: str) -> None:
+    if not ok:
+        raise ValueError(f"render config: {name} must be {allowed}, got {value!r}")
+
 
 # Why a failure is remembered: the backend is fixed when mujoco is imported, so it
 # cannot start working later, and a second attempt after a failed one can abort the
@@ -91,31 +153,32 @@ def render_frames(
     *,
     mocap_pos: ArrayLike | None = None,
     mocap_quat: ArrayLike | None = None,
-    width: int = 640,
-    height: int = 480,
-    camera: Camera = None,
+    dt: float | None = None,
+    config: RenderConfig = RenderConfig(),
+    small: bool = False,
 ) -> np.ndarray | None:
-    """Renders one image per row of `qpos`.
+    """Renders the frames a video of this trajectory holds, as `config` says.
 
     Args:
       mj_model: the host model (`Task.mj_model`); not modified.
       qpos: [T, nq] joint positions, e.g. ``trajectory.next_state.data.qpos``.
       mocap_pos: [T, nmocap, 3] mocap body positions; None keeps the model's.
       mocap_quat: [T, nmocap, 4] mocap body orientations; None keeps the model's.
-      width, height: image size in pixels.
-      camera: a camera name or id from the model; None (or -1) for the default free
-        camera looking at the whole model.
+      dt: the trajectory's time per row (s). Needed for ``config.length_seconds``
+        unless ``config.fps`` is set (without `dt`, each row is one frame).
+      config: size, time, what is drawn and the camera.
+      small: draw at ``config.small_width x small_height`` instead of ``width x height``.
 
     Returns:
-      [T, height, width, 3] uint8 RGB images, or None if no OpenGL backend works
-      (after printing one line saying so).
+      [F, height, width, 3] uint8 RGB images, F = T for the defaults, or None if no
+      OpenGL backend works (after printing one line saying so).
     """
-    frames = _Frames(mj_model, qpos, mocap_pos, mocap_quat, width, height, camera)
+    frames = _Frames(mj_model, qpos, mocap_pos, mocap_quat, dt=dt, fps=None, config=config, small=small)
     renderer = frames.open_renderer("frames")
     if renderer is None:
         return None
     with renderer:
-        images = np.empty((frames.length, height, width, 3), np.uint8)
+        images = np.empty((len(frames.qpos), frames.height, frames.width, 3), np.uint8)
         for t, image in enumerate(frames.render(renderer)):
             images[t] = image
     return images
@@ -125,28 +188,32 @@ def render_video(
     mj_model: mujoco.MjModel,
     qpos: ArrayLike,
     path: str | Path,
-    fps: float,
+    fps: float | None = None,
     *,
     mocap_pos: ArrayLike | None = None,
     mocap_quat: ArrayLike | None = None,
-    width: int = 640,
-    height: int = 480,
-    camera: Camera = None,
+    dt: float | None = None,
+    config: RenderConfig = RenderConfig(),
+    small: bool = False,
 ) -> Path | None:
-    """Renders one frame per row of `qpos` into an H.264 MP4 video at `path`.
+    """Renders a trajectory into an H.264 MP4 video at `path`, as `config` says.
 
     Arguments as for `render_frames`, plus the output `path` (parent directories are
-    created) and the frame rate `fps`, usually ``1 / ctrl_dt`` for real time. Frames
-    are encoded as they are drawn, so a long video does not have to fit in memory;
-    the file appears under `path` only when complete.
+    created) and `fps`, the frames per simulated second, which overrides ``config.fps``;
+    with neither, real time ``1 / dt``. One of `dt`, `fps` and ``config.fps`` is needed.
+    The file's frame rate is ``fps / config.slowdown``. Frames are encoded as they are
+    drawn, so a long video does not have to fit in memory; the file appears under
+    `path` only when complete.
 
     Returns:
       `path`, or None if no OpenGL backend works (after printing one line saying so).
     """
-    if not fps > 0:
-        raise ValueError(f"fps must be > 0, got {fps}")
+    frames = _Frames(mj_model, qpos, mocap_pos, mocap_quat, dt=dt, fps=fps, config=config, small=small)
+    if frames.fps is None:
+        raise ValueError(
+            "render_video needs the frame rate: pass dt= (the trajectory's time per row), fps= or config.fps"
+        )
     path = Path(path)
-    frames = _Frames(mj_model, qpos, mocap_pos, mocap_quat, width, height, camera)
     renderer = frames.open_renderer(f"video {path}")
     if renderer is None:
         return None
@@ -158,18 +225,55 @@ def render_video(
             warnings.filterwarnings("ignore", r"os\.fork\(\) was called", RuntimeWarning)
             # macro_block_size=2: H.264 with yuv420p needs even sizes; imageio's default
             # of 16 would rescale common sizes such as 250x250.
-            with (
-                renderer,
-                imageio.get_writer(
-                    partial, format="FFMPEG", mode="I", fps=fps, codec="libx264", macro_block_size=2
-                ) as writer,
-            ):
+            writer = imageio.get_writer(
+                partial,
+                format="FFMPEG",
+                mode="I",
+                fps=frames.fps / config.slowdown,
+                codec="libx264",
+                macro_block_size=2,
+            )
+            with renderer, writer:
                 for image in frames.render(renderer):
                     writer.append_data(image)
         os.replace(partial, path)
     finally:
         partial.unlink(missing_ok=True)
     return path
+
+
+def trajectory_video(
+    task: Task, trajectory: Any, path: str | Path, config: RenderConfig = RenderConfig()
+) -> Path | None:
+    """Renders one environment's trajectory (`mjzoo.rollout`'s, or an algorithm's
+    ``evaluate``: leaves [T, ...]) into an MP4 at `path`, as `config` says.
+
+    The time step is read from ``next_state.data.time``. With no camera chosen in
+    `config` (neither ``camera`` nor a free-camera field), the model's first camera is
+    used if it has one: task authors put their best view there.
+
+    Returns:
+      `path`, or None if no OpenGL backend works (after printing one line saying so).
+    """
+    data = trajectory.next_state.data
+    qpos, time = np.asarray(data.qpos), np.asarray(data.time, np.float64).reshape(-1)
+    if len(time) > 1 and time[1] > time[0]:
+        dt = float(time[1] - time[0])
+    else:  # one row, or an episode reset at the first step: measure the task's own step
+        from mjzoo.running import control_dt
+
+        dt = control_dt(task)
+    if config.camera is None and not config.free_camera and task.mj_model.ncam:
+        config = dataclasses.replace(config, camera=0)
+    return render_video(
+        task.mj_model,
+        qpos,
+        path,
+        mocap_pos=np.asarray(data.mocap_pos),
+        mocap_quat=np.asarray(data.mocap_quat),
+        dt=dt,
+        config=config,
+    )
 
 
 class _Frames:
@@ -182,23 +286,34 @@ class _Frames:
         qpos: ArrayLike,
         mocap_pos: ArrayLike | None,
         mocap_quat: ArrayLike | None,
-        width: int,
-        height: int,
-        camera: Camera,
+        *,
+        dt: float | None,
+        fps: float | None,
+        config: RenderConfig,
+        small: bool,
     ) -> None:
-        self.qpos = _trajectory("qpos", qpos, (mj_model.nq,))
-        self.length = self.qpos.shape[0]
-        self.mocap_pos = _optional("mocap_pos", mocap_pos, (self.length, mj_model.nmocap, 3))
-        self.mocap_quat = _optional("mocap_quat", mocap_quat, (self.length, mj_model.nmocap, 4))
-        if width < 1 or height < 1:
-            raise ValueError(f"width and height must be >= 1, got {width}x{height}")
-        self.width, self.height = int(width), int(height)
-        self.camera = _camera_id(mj_model, camera)
+        qpos = _trajectory("qpos", qpos, (mj_model.nq,))
+        mocap_pos = _optional("mocap_pos", mocap_pos, (len(qpos), mj_model.nmocap, 3))
+        mocap_quat = _optional("mocap_quat", mocap_quat, (len(qpos), mj_model.nmocap, 4))
+        for name, value in (("dt", dt), ("fps", fps)):
+            if value is not None and not (_finite(value) and value > 0):
+                raise ValueError(f"{name} must be > 0, got {value!r}")
+        rows, self.fps = _timing(len(qpos), dt, config.fps if fps is None else fps, config.length_seconds)
+        self.qpos = qpos[rows]
+        self.mocap_pos = None if mocap_pos is None else mocap_pos[rows]
+        self.mocap_quat = None if mocap_quat is None else mocap_quat[rows]
+        self.width, self.height = (config.small_width, config.small_height) if small else (config.width, config.height)
+        self.camera = _camera(mj_model, config)
+        self.option = _scene_option(config)
+        self.flags = {
+            mujoco.mjtRndFlag.mjRND_SHADOW: config.shadows,
+            mujoco.mjtRndFlag.mjRND_REFLECTION: config.reflections,
+        }
         # Drawn from a copy: the renderer draws into the model's offscreen buffer, which
         # may need enlarging, and the floor may need extending.
         self.model = copy.copy(mj_model)
-        self.model.vis.global_.offwidth = max(width, mj_model.vis.global_.offwidth)
-        self.model.vis.global_.offheight = max(height, mj_model.vis.global_.offheight)
+        self.model.vis.global_.offwidth = max(self.width, mj_model.vis.global_.offwidth)
+        self.model.vis.global_.offheight = max(self.height, mj_model.vis.global_.offheight)
         _extend_floors(self.model, self.qpos)
 
     def open_renderer(self, what: str) -> mujoco.Renderer | None:
@@ -207,8 +322,11 @@ class _Frames:
             try:
                 with warnings.catch_warnings():  # glfw warns on every failed call; the notice says it once
                     warnings.simplefilter("ignore")
-                    return mujoco.Renderer(self.model, height=self.height, width=self.width)
-            except Exception as err:  # the backends fail in many ways: ImportError, FatalError, ...
+                    renderer = mujoco.Renderer(self.model, height=self.height, width=self.width)
+                for flag, on in self.flags.items():  # kept by the scene: Renderer.render restores them after each frame
+                    renderer.scene.flags[flag] = on
+                return renderer
+            except Exception as err:  # noqa: BLE001 - the backends fail in many ways: ImportError, FatalError, ...
                 _no_opengl = " ".join(f"{type(err).__name__}: {err}".split())
         print(
             f"mjzoo: no OpenGL backend (MUJOCO_GL={os.environ.get('MUJOCO_GL', 'unset')}; {_no_opengl}) - "
@@ -219,16 +337,66 @@ class _Frames:
         return None
 
     def render(self, renderer: mujoco.Renderer) -> Iterator[np.ndarray]:
+        """Yields [height, width, 3] uint8 images, one per frame."""
         data = mujoco.MjData(self.model)
-        for t in range(self.length):
+        for t in range(len(self.qpos)):
             data.qpos[:] = self.qpos[t]
             if self.mocap_pos is not None:
                 data.mocap_pos[:] = self.mocap_pos[t]
             if self.mocap_quat is not None:
                 data.mocap_quat[:] = self.mocap_quat[t]
-            mujoco.mj_forward(self.model, data)
-            renderer.update_scene(data, camera=self.camera)
+            mujoco.mj_forward(self.model, data)  # positions, and the contacts and forces drawn
+            renderer.update_scene(data, camera=self.camera, scene_option=self.option)
             yield renderer.render()
+
+
+def _timing(length: int, dt: float | None, fps: float | None, seconds: float | None) -> tuple[np.ndarray, float | None]:
+    """The rows to draw, [F] indices into [T = length], and the frames per simulated
+    second (None when neither `dt` nor `fps` is known: then every row is drawn).
+
+    Frame k shows simulated time k / fps, i.e. the row at or before it: rows are
+    skipped below real time and repeated above it, so playback at `fps` is real time."""
+    if dt is None and fps is None:
+        if seconds is not None:
+            raise ValueError("render config: length_seconds needs the trajectory's time step: pass dt= (or an fps)")
+        return np.arange(length), None
+    dt = 1.0 / fps if dt is None else dt  # without dt, each row is one frame
+    fps = 1.0 / dt if fps is None else fps
+    duration = length * dt if seconds is None else min(length * dt, seconds)
+    count = max(1, round(duration * fps))
+    # 1e-6: k / (fps * dt) is k less a rounding error at real time, which floor would drop a row for.
+    return np.minimum(np.floor(np.arange(count) / (fps * dt) + 1e-6).astype(int), length - 1), fps
+
+
+def _camera(mj_model: mujoco.MjModel, config: RenderConfig) -> int | mujoco.MjvCamera:
+    """A model camera's id, -1 for MuJoCo's default free camera, or a free (or
+    tracking) camera with the config's distance, angles and lookat."""
+    if config.camera is not None:
+        return _camera_id(mj_model, config.camera)
+    if not config.free_camera:
+        return -1
+    camera = mujoco.MjvCamera()
+    mujoco.mjv_defaultFreeCamera(mj_model, camera)  # the fit to the model, for the fields left None
+    if config.track_body is not None:
+        camera.type = mujoco.mjtCamera.mjCAMERA_TRACKING
+        camera.trackbodyid = _body_id(mj_model, config.track_body)
+    for name in ("distance", "azimuth", "elevation"):
+        if getattr(config, name) is not None:
+            setattr(camera, name, getattr(config, name))
+    if config.lookat is not None:
+        camera.lookat[:] = config.lookat
+    return camera
+
+
+def _scene_option(config: RenderConfig) -> mujoco.MjvOption:
+    option = mujoco.MjvOption()
+    option.flags[mujoco.mjtVisFlag.mjVIS_CONTACTFORCE] = config.contact_forces
+    option.flags[mujoco.mjtVisFlag.mjVIS_CONTACTPOINT] = config.contact_points
+    option.flags[mujoco.mjtVisFlag.mjVIS_INERTIA] = config.inertia
+    option.flags[mujoco.mjtVisFlag.mjVIS_COM] = config.markers
+    if config.markers:
+        option.frame = mujoco.mjtFrame.mjFRAME_SITE
+    return option
 
 
 def _extend_floors(model: mujoco.MjModel, qpos: np.ndarray, margin: float = 10.0) -> None:
@@ -271,7 +439,7 @@ def _optional(name: str, value: ArrayLike | None, shape: tuple[int, ...]) -> np.
     return array
 
 
-def _camera_id(mj_model: mujoco.MjModel, camera: Camera) -> int:
+def _camera_id(mj_model: mujoco.MjModel, camera: str | int) -> int:
     names = [mujoco.mj_id2name(mj_model, mujoco.mjtObj.mjOBJ_CAMERA, i) for i in range(mj_model.ncam)]
     if camera is None:
         return -1
@@ -282,3 +450,16 @@ def _camera_id(mj_model: mujoco.MjModel, camera: Camera) -> int:
     if not -1 <= camera < mj_model.ncam:
         raise ValueError(f"camera id {camera} out of range [-1, {mj_model.ncam}); the model's cameras are {names}")
     return int(camera)
+
+
+def _body_id(mj_model: mujoco.MjModel, body: str | int) -> int:
+    names = [mujoco.mj_id2name(mj_model, mujoco.mjtObj.mjOBJ_BODY, i) for i in range(mj_model.nbody)]
+    if isinstance(body, str):
+        if body not in names:
+            raise ValueError(f"render config: track_body: no body named {body!r} in the model; it has {names}")
+        return names.index(body)
+    if not 0 <= body < mj_model.nbody:
+        raise ValueError(
+            f"render config: track_body: body id {body} out of range [0, {mj_model.nbody}); the bodies are {names}"
+        )
+    return int(body)
