@@ -15,15 +15,16 @@ non-finite values are written as ``NaN`` / ``Infinity``, which Python's `json` (
 
 from __future__ import annotations
 
+import contextlib
 import json
 import math
 import sys
 import time
 import warnings
+from collections.abc import Iterator, Mapping, Sequence
 from pathlib import Path
 from types import TracebackType
-from collections.abc import Mapping
-from typing import Any, TextIO
+from typing import Any, Self, TextIO
 
 import jax
 import numpy as np
@@ -32,7 +33,7 @@ import rich.progress
 import rich.text
 from tensorboardX import SummaryWriter
 
-__all__ = ["MetricsWriter", "read_metrics", "Progress", "METRICS_FILE"]
+__all__ = ["METRICS_FILE", "MetricsWriter", "Progress", "device_memory", "read_metrics"]
 
 METRICS_FILE = "metrics.jsonl"
 Scalar = float | int | bool | np.ndarray | np.generic | jax.Array
@@ -51,7 +52,7 @@ class MetricsWriter:
         self.out_dir.mkdir(parents=True, exist_ok=True)
         self.path = self.out_dir / METRICS_FILE
         cut_short = self.path.exists() and self.path.stat().st_size > 0 and _last_byte(self.path) != b"\n"
-        self._file: TextIO | None = open(self.path, "a", encoding="utf-8")
+        self._file: TextIO | None = open(self.path, "a", encoding="utf-8")  # noqa: SIM115 (open until close)
         if cut_short:  # a crash mid-line: end that line, so it stays the only bad one
             self._file.write("\n")
         self._use_tensorboard = tensorboard
@@ -86,7 +87,7 @@ class MetricsWriter:
             self._tensorboard = None
         self._use_tensorboard = False
 
-    def __enter__(self) -> MetricsWriter:
+    def __enter__(self) -> Self:
         return self
 
     def __exit__(self, *exc: object) -> None:
@@ -121,6 +122,26 @@ def read_metrics(path: str | Path) -> list[dict[str, float]]:
     return records
 
 
+def device_memory(devices: Sequence[Any] | None = None) -> tuple[dict[str, float], list[str]]:
+    """Device memory in use, for the metrics: ``memory/<device>/bytes_in_use`` and
+    ``memory/<device>/peak_bytes_in_use`` of each of `devices` (default: this
+    process's, `jax.local_devices()`), named platform and id (``gpu0``: TensorBoard
+    tags allow no colon), and the names of the devices that report no statistics
+    (``memory_stats()`` is None on XLA's CPU)."""
+    values: dict[str, float] = {}
+    silent: list[str] = []
+    for device in jax.local_devices() if devices is None else devices:
+        name = f"{device.platform}{device.id}"
+        stats = device.memory_stats()
+        if not stats:
+            silent.append(name)
+            continue
+        for field in ("bytes_in_use", "peak_bytes_in_use"):
+            if field in stats:
+                values[f"memory/{name}/{field}"] = float(stats[field])
+    return values, silent
+
+
 def _tensorboard_writer(directory: Path, first_step: int) -> SummaryWriter:
     """A writer into `directory`. If an earlier run logged there, TensorBoard is told to
     hide its events from `first_step` on (``purge_step``), as `read_metrics` does."""
@@ -152,6 +173,9 @@ class Progress:
     """A progress bar over training steps: done/total, steps/s, time left, and the
     latest `fields` passed to `update`.
 
+    Time spent inside `paused()` (evaluation, videos) is left out of steps/s, which so
+    stays the training rate, and kept in the time left, which is wall-clock.
+
     On a terminal (or in Jupyter) it is a live `rich` bar. Otherwise (CI logs, output
     piped to a file) it prints one compact line at most every `min_interval` seconds,
     plus the first and the last update, instead of redrawing.
@@ -170,7 +194,9 @@ class Progress:
         self.description = description
         self._file = file
         self._min_interval = min_interval
-        self._last: tuple[float, int] | None = None  # (time, step) of the last printed line
+        self._paused = 0.0  # seconds spent in `paused` so far
+        self._last: tuple[float, float, int] | None = None  # (time, paused, step) of the last printed line
+        self._previous: tuple[float, int] | None = None  # (training time, step) of the last update
         self._pending: str | None = None  # the latest line not yet printed
         console = rich.console.Console(file=file)
         self._bar: rich.progress.Progress | None = None
@@ -192,16 +218,28 @@ class Progress:
     def update(self, step: int, **fields: Any) -> None:
         """Shows that `step` steps are done, with `fields` (numbers or text) beside."""
         text = " ".join(f"{name}={_fmt(value)}" for name, value in fields.items())
-        if self._bar is not None:
-            self._bar.update(self._task, completed=int(step), fields=text)
-            return
         now = time.monotonic()
+        if self._bar is not None:
+            trained, previous = now - self._paused, self._previous
+            rate = _rate(int(step) - previous[1], trained - previous[0]) if previous else None
+            self._previous = (trained, int(step))
+            self._bar.update(self._task, completed=int(step), fields=text, rate=rate)
+            return
         line = self._line(now, int(step), text)
         if self._last is None or now - self._last[0] >= self._min_interval or step >= self.total_steps:
             self._print(line)
-            self._last, self._pending = (now, int(step)), None
+            self._last, self._pending = (now, self._paused, int(step)), None
         else:
             self._pending = line
+
+    @contextlib.contextmanager
+    def paused(self) -> Iterator[None]:
+        """Time spent inside is no training: steps/s leaves it out."""
+        start = time.monotonic()
+        try:
+            yield
+        finally:
+            self._paused += time.monotonic() - start
 
     def close(self) -> None:
         """Stops the bar, or prints the last update not yet printed."""
@@ -212,7 +250,7 @@ class Progress:
             self._print(self._pending)
             self._pending = None
 
-    def __enter__(self) -> Progress:
+    def __enter__(self) -> Self:
         return self
 
     def __exit__(
@@ -223,10 +261,12 @@ class Progress:
     def _line(self, now: float, step: int, text: str) -> str:
         share = f" ({100 * step / self.total_steps:.0f}%)" if self.total_steps > 0 else ""
         parts = [f"{self.description}: {step:,}/{self.total_steps:,} steps{share}"]
-        if self._last is not None and now > self._last[0] and step > self._last[1]:
-            rate = (step - self._last[1]) / (now - self._last[0])  # since the last printed line
-            parts.append(f"{rate:,.0f} steps/s")
-            parts.append(f"eta {_duration(max(self.total_steps - step, 0) / rate)}")
+        if self._last is not None and now > self._last[0] and step > self._last[2]:
+            then, paused, done = self._last  # since the last printed line
+            rate = _rate(step - done, now - then - (self._paused - paused))
+            if rate is not None:
+                parts.append(f"{rate:,.0f} steps/s")
+            parts.append(f"eta {_duration(max(self.total_steps - step, 0) * (now - then) / (step - done))}")
         if text:
             parts.append(text)
         return " | ".join(parts)
@@ -235,11 +275,16 @@ class Progress:
         print(line, file=self._file if self._file is not None else sys.stdout, flush=True)
 
 
+def _rate(steps: int, seconds: float) -> float | None:
+    return steps / seconds if seconds > 0 and steps > 0 else None
+
+
 class _RateColumn(rich.progress.ProgressColumn):
-    """Steps per second, as rich estimates it over its recent updates."""
+    """Training steps per second over the last update (time in `Progress.paused` left
+    out), else as rich estimates it over its recent updates."""
 
     def render(self, task: rich.progress.Task) -> rich.text.Text:
-        speed = task.speed
+        speed = task.fields.get("rate") or task.speed
         return rich.text.Text(f"{speed:,.0f} steps/s" if speed else "- steps/s", style="progress.data.speed")
 
 

@@ -6,10 +6,11 @@ and `PER_ENV_FIELDS`), run with a config that satisfies `AlgorithmConfig`
 (`num_updates`, `steps_per_update`); `run` checks both and does the rest:
 
     out/config.json       the algorithm config and the run settings
-    out/metrics.jsonl     one JSON object per chunk: step, eval/return, losses, reward terms, steps/s
+    out/metrics.jsonl     one JSON object per logged chunk: step, eval/return, losses, reward terms, perf/*
     out/tensorboard/      the same scalars for TensorBoard
     out/checkpoints/      atomic, exactly resumable train states
     out/curves.png        learning curves;  out/eval.mp4  the final policy (where GL exists)
+    out/videos/           eval_<step>.mp4 every `video_every` evaluations
 """
 
 from __future__ import annotations
@@ -29,10 +30,11 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 from jax.sharding import NamedSharding, PartitionSpec
-from mujoco import mjx
-
-from mjzoo.harness import checkpoints, metrics as metrics_lib, plotting, rendering
+from mjzoo.harness import checkpoints, plotting, rendering
+from mjzoo.harness import metrics as metrics_lib
+from mjzoo.running import control_dt
 from mjzoo.types import Task
+from mujoco import mjx
 
 __all__ = [
     "RUN_FILES",
@@ -50,11 +52,20 @@ __all__ = [
     "shard_envs",
 ]  # fmt: skip
 
+
 class TrainingWarning(UserWarning):
     """Training has gone wrong in a way its metrics show (an algorithm's `diagnose`)."""
 
 
-RUN_FILES = ("config.json", "metrics.jsonl", "checkpoints", "tensorboard", "curves.png", "eval.mp4")  # what `run` writes
+RUN_FILES = (
+    "config.json",
+    "metrics.jsonl",
+    "checkpoints",
+    "tensorboard",
+    "curves.png",
+    "eval.mp4",
+    "videos",
+)  # what `run` writes
 
 
 class AlgorithmConfig(Protocol):
@@ -114,6 +125,7 @@ def check_algorithm(algorithm: Any, config: Any) -> None:
 
 def _check_state(algorithm: Algorithm, state: Any) -> None:
     """The state `init` made has the fields the harness and PER_ENV_FIELDS name."""
+
     def has(path: str) -> bool:
         node = state
         for name in path.split("."):
@@ -130,27 +142,69 @@ def _check_state(algorithm: Algorithm, state: Any) -> None:
 
 @dataclasses.dataclass(frozen=True, kw_only=True)
 class Settings:
-    """How a run is driven (not what is learned)."""
+    """How a run is driven (not what is learned). KSim's RLConfig names in brackets.
+
+    Evaluation schedule (`_Schedule`): the run's last chunk always evaluates, so a run
+    ends with an eval/return. Any other chunk evaluates when `eval_first_seconds` (if
+    set) have passed since `run` was called and one trigger fires: its number is a
+    multiple of `eval_every` (counted over the whole run, so a resumed run evaluates at
+    the same steps); `eval_every_seconds` have passed since the last evaluation began
+    (or since the launch); or it is the first chance after `eval_first_seconds` (KSim's
+    "first validation after M seconds"). Metrics lines of chunks that do not evaluate
+    lack eval/*. Evaluating with `eval_every=0` and no seconds: only at the end.
+    """
 
     out_dir: Path | None = None
     seed: int = 0
     updates_per_chunk: int = 10
     eval_envs: int = 16
-    eval_steps: int | None = None  # None: the task's own episode length, int(task.time_limit)
-    video: bool = True
+    eval_steps: int | None = None  # None: eval_seconds, else the task's own episode length, int(task.time_limit)
+    eval_seconds: float | None = None  # [rollout_length_seconds] episode length in seconds (/ mjzoo.control_dt)
+    eval_every: int = 1  # [valid_every_n_steps] chunks between evaluations; 0: no count trigger
+    eval_every_seconds: float | None = None  # [valid_every_n_seconds] wall-clock trigger
+    eval_first_seconds: float | None = None  # [valid_first_n_seconds] no evaluation before, the first one after
+    video: bool = True  # out/eval.mp4 of the final evaluation (where an OpenGL backend works)
+    video_every: int = 0  # [render_full_every_n_steps] also videos/eval_<step>.mp4 every N evaluations; 0: never
+    render: rendering.RenderConfig = dataclasses.field(default_factory=rendering.RenderConfig)  # how videos are drawn
+    log_train_metrics: bool = True  # [log_train_metrics] False: metrics lines hold only eval/*, perf/* (memory/*)
+    log_every: int = 1  # [epochs_per_log_step] chunks between metrics lines; evaluating chunks always write one
+    profile_memory: bool = False  # [profile_memory] memory/<device>/{bytes_in_use,peak_bytes_in_use} per chunk
     checkpoint_every: int = 1  # chunks between checkpoints; 0: never
     resume: bool = False  # continue the run in out_dir from its newest intact checkpoint
     overwrite: bool = False  # replace a run already in out_dir: its files are deleted first
     progress: bool = True
 
     def __post_init__(self):
-        for field in ("updates_per_chunk", "eval_envs", "eval_steps"):
-            if field == "eval_steps" and self.eval_steps is None:
-                continue
-            if getattr(self, field) < 1:
-                raise ValueError(f"training.Settings: {field}={getattr(self, field)!r} must be >= 1")
-        if self.checkpoint_every < 0:
-            raise ValueError(f"training.Settings: checkpoint_every={self.checkpoint_every!r} must be >= 0")
+        problems = [_problem(name, getattr(self, name)) for name in _LOWEST]
+        if self.eval_steps is not None and self.eval_seconds is not None:
+            problems.append(f"eval_steps={self.eval_steps!r} and eval_seconds={self.eval_seconds!r} both give the "
+                            "evaluation's length; give one")  # fmt: skip
+        if self.video_every and not self.video:
+            problems.append(f"video_every={self.video_every!r} needs video=True")
+        if not isinstance(self.render, rendering.RenderConfig):
+            problems.append(f"render={self.render!r} must be a mjzoo.harness.rendering.RenderConfig")
+        if problem := next((p for p in problems if p), None):
+            raise ValueError(f"training.Settings: {problem}")
+
+
+# Settings' numeric fields: the lowest value allowed; "> 0" where it is excluded.
+_LOWEST = {"updates_per_chunk": 1, "eval_envs": 1, "eval_steps": 1, "eval_seconds": "> 0", "eval_every": 0,
+           "eval_every_seconds": "> 0", "eval_first_seconds": 0, "video_every": 0, "log_every": 1,
+           "checkpoint_every": 0}  # fmt: skip
+_OPTIONAL = ("eval_steps", "eval_seconds", "eval_every_seconds", "eval_first_seconds")  # None allowed
+
+
+def _problem(name: str, value: Any) -> str | None:
+    """What is wrong with Settings' numeric field `name` (seconds may be floats), or None."""
+    if value is None and name in _OPTIONAL:
+        return None
+    kinds = (int, float) if name.endswith("seconds") else int
+    if isinstance(value, bool) or not isinstance(value, kinds):
+        return f"{name}={value!r} must be {'a number' if kinds == (int, float) else 'an int'}"
+    low = _LOWEST[name]
+    if value <= 0 if low == "> 0" else value < low:
+        return f"{name}={value!r} must be {low if low == '> 0' else f'>= {low}'}"
+    return None
 
 
 def existing(out: Path, names: tuple[str, ...] = RUN_FILES) -> list[str]:
@@ -254,11 +308,15 @@ def _resume(out_dir: Path, state: Any) -> Any:
 
 
 def _eval_steps(task: Task, settings: Settings) -> int:
+    """The evaluation's length in control steps: eval_steps, eval_seconds at the task's
+    control rate (the nearest count, at least 1), or the task's episode length."""
     if settings.eval_steps is not None:
         return settings.eval_steps
+    if settings.eval_seconds is not None:
+        return max(1, round(settings.eval_seconds / control_dt(task)))  # round: 5 / 0.02 is 249.99...
     if getattr(task, "time_limit", None) is None:
         raise ValueError("training.Settings: eval_steps=None evaluates the task's own episode length, but the task "
-                         "has no time limit (mjzoo.with_time_limit); give eval_steps")  # fmt: skip
+                         "has no time limit (mjzoo.with_time_limit); give eval_steps or eval_seconds")  # fmt: skip
     return int(task.time_limit)
 
 
@@ -302,14 +360,129 @@ class PhysicsCapacityError(RuntimeError):
     """A Warp run's contacts or constraints overflowed the capacities of its physics."""
 
 
-def run(algorithm: Algorithm, config: AlgorithmConfig, task: Task, settings: Settings) -> tuple[Any, dict[str, float]]:
-    """Trains `task` with `algorithm` under `config`; returns the final state and metrics."""
-    check_algorithm(algorithm, config)
-    eval_steps = _eval_steps(task, settings)
-    out = Path(settings.out_dir) if settings.out_dir else None
-    if out is not None:
-        _claim(out, settings)
-    key, physics = jax.random.key(settings.seed), physics_info(task)
+_clock = time.perf_counter  # the loop's clock (tests put a fake one here)
+
+
+class _Schedule:
+    """Which chunks evaluate, by the rule in `Settings`' docstring."""
+
+    def __init__(self, settings: Settings, launched: float) -> None:
+        self.settings, self.launched = settings, launched
+        self.last: float | None = None  # when the last evaluation of this launch began
+
+    def due(self, chunk: int, final: bool, now: float) -> bool:
+        """Whether chunk number `chunk` (1-based), ending at `now`, evaluates; if so,
+        the clock trigger counts from now."""
+        s = self.settings
+        waiting = s.eval_first_seconds is not None and now - self.launched < s.eval_first_seconds
+        since = now - (self.launched if self.last is None else self.last)
+        fires = (
+            (s.eval_every > 0 and chunk % s.eval_every == 0)
+            or (s.eval_every_seconds is not None and since >= s.eval_every_seconds)
+            or (s.eval_first_seconds is not None and self.last is None)
+        )
+        if final or (fires and not waiting):
+            self.last = now
+            return True
+        return False
+
+
+class _Loop:
+    """`run`'s host loop, one chunk at a time: train, evaluate when due, write the
+    metrics line, checkpoint, show progress, check capacity and diagnose."""
+
+    def __init__(self, algorithm: Algorithm, config: AlgorithmConfig, task: Task, settings: Settings,
+                 out: Path | None, key: jax.Array, eval_steps: int, launched: float, shown: dict[str, str]) -> None:  # fmt: skip
+        self.algorithm, self.config, self.task, self.settings = algorithm, config, task, settings
+        self.out, self.key, self.launched, self.shown = out, key, launched, shown
+        self.schedule = _Schedule(settings, launched)
+        self.chunk = _chunk_fn(algorithm, config, settings.updates_per_chunk)
+        self.evaluate, self.eval_steps = _evaluate_fn(algorithm), eval_steps
+        self.total_updates = -(-config.num_updates // settings.updates_per_chunk) * settings.updates_per_chunk
+        self.writer = metrics_lib.MetricsWriter(out) if out is not None else None
+        self.progress = metrics_lib.Progress(self.total_updates * config.steps_per_update, "train")
+        self.last: dict[str, float] = {}
+        self.history: list[dict[str, float]] = []
+        self.warned: str | None = None
+        self.trajectory = None  # the latest evaluation's, for the final video
+        self.evaluations = 0  # in this launch, for video_every
+        self.video: tuple[int, Path] | None = None  # (step, path) of the latest videos/eval_<step>.mp4
+        self.pending: dict[str, float] = {}  # once-only metrics waiting for the next metrics line
+        if settings.profile_memory and (silent := metrics_lib.device_memory()[1]):
+            warnings.warn(f"training: profile_memory: {', '.join(silent)} report no memory statistics "
+                          "(memory_stats() is None, as on XLA's CPU); nothing is recorded for them",
+                          TrainingWarning, stacklevel=3)  # fmt: skip
+
+    def done(self, state: Any) -> bool:
+        return int(state.updates) >= self.total_updates
+
+    def step(self, state: Any) -> Any:
+        """Trains one chunk and does its bookkeeping; returns the new state."""
+        start = _clock()
+        state, chunk_metrics = self.chunk(self.task, state)
+        jax.block_until_ready(state)
+        end = _clock()
+        updates, per_chunk = int(state.updates), self.settings.updates_per_chunk
+        step, number = updates * self.config.steps_per_update, updates // per_chunk
+        metrics = {"perf/steps_per_s": per_chunk * self.config.steps_per_update / max(end - start, 1e-9),
+                   **{k: float(v) for k, v in chunk_metrics.items() if np.isfinite(v)}}  # fmt: skip
+        if not self.history:  # this launch's first chunk: compile (and init) included
+            metrics["perf/first_update_s"] = self.pending["perf/first_update_s"] = end - self.launched
+            self.shown["first"] = f"{end - self.launched:.1f}s"
+        with self.progress.paused():  # the bar's steps/s is the training rate
+            evaluated = self.schedule.due(number, updates >= self.total_updates, end)
+            metrics.update(self._evaluate(state, step) if evaluated else {"perf/eval_s": 0.0})
+        metrics["perf/elapsed_s"] = _clock() - self.launched
+        if self.settings.profile_memory:
+            metrics.update(metrics_lib.device_memory()[0])
+        self._write(state, step, number, metrics, evaluated)
+        if self.settings.progress:
+            self.progress.update(step, **self.shown, sps=f"{metrics['perf/steps_per_s']:,.0f}")
+        self.last = metrics
+        self.history.append(metrics)
+        _check_capacity(self.task, metrics)
+        self.warned = _diagnose(self.algorithm, self.history, self.warned)
+        return state
+
+    def _evaluate(self, state: Any, step: int) -> dict[str, float]:
+        """Evaluates (`settings.eval_envs` episodes) and writes a video when one is due."""
+        start = _clock()
+        key = jax.random.fold_in(self.key, int(state.updates))
+        s = self.settings
+        mean, _, self.trajectory = self.evaluate(self.config, self.task, state, key, s.eval_envs, self.eval_steps)
+        result = {"eval/return": float(mean), "perf/eval_s": _clock() - start}  # float(): waits for it
+        self.evaluations += 1
+        self.shown["ret"] = f"{result['eval/return']:.1f}"
+        due = s.video_every and self.evaluations % s.video_every == 0
+        if due and self.out is not None and self.trajectory is not None:
+            start = _clock()
+            path = write_video(self.task, self.trajectory, self.out / "videos" / f"eval_{step}.mp4", s.render)
+            self.video = (step, path) if path is not None else self.video
+            result["perf/video_s"] = _clock() - start
+        return result
+
+    def _write(self, state: Any, step: int, number: int, metrics: dict[str, float], evaluated: bool) -> None:
+        """The metrics line (every `log_every` chunks and at each evaluation) and the checkpoint."""
+        if self.writer is None:
+            return
+        s = self.settings
+        if evaluated or number % s.log_every == 0:
+            shared = ("eval/", "perf/", "memory/")  # what a run that logs no training metrics still writes
+            kept = metrics if s.log_train_metrics else {k: v for k, v in metrics.items() if k.startswith(shared)}
+            self.writer.write(step, {**self.pending, **kept})
+            self.pending = {}
+        if s.checkpoint_every and number % s.checkpoint_every == 0:
+            checkpoints.save(self.out / "checkpoints", step, state)
+
+    def close(self) -> None:
+        self.progress.close()
+        if self.writer is not None:
+            self.writer.close()
+
+
+def _start(algorithm: Algorithm, config: AlgorithmConfig, task: Task, settings: Settings, out: Path | None,
+           key: jax.Array, physics: dict[str, Any]) -> Any:  # fmt: skip
+    """The initial (or resumed) train state, with config.json written, ready for the loop."""
     state = _init_fn(algorithm)(config, task, key)
     _check_state(algorithm, state)
     if out is not None:
@@ -317,53 +490,40 @@ def run(algorithm: Algorithm, config: AlgorithmConfig, task: Task, settings: Set
         if settings.resume and checkpoints.latest_step(out / "checkpoints") is not None:
             state = _resume(out, state)
         out.mkdir(parents=True, exist_ok=True)
-        run_info = {"algorithm": algorithm.__name__.split(".")[-1], "config": config_dict(config),
-                    "physics": physics,
+        run_info = {"algorithm": algorithm.__name__.split(".")[-1], "config": config_dict(config), "physics": physics,
                     "settings": {k: str(v) if isinstance(v, Path) else v for k, v in dataclasses.asdict(settings).items()}}  # fmt: skip
         (out / "config.json").write_text(json.dumps(run_info, indent=2))
     # Own every buffer once: the chunk donates the state, and XLA may hand out one buffer
     # for equal constants (two zero arrays), which cannot be donated twice.
-    state, task = shard_envs(jax.tree.map(jnp.copy, state), algorithm.PER_ENV_FIELDS), replicate(task)
-    chunk = _chunk_fn(algorithm, config, settings.updates_per_chunk)
-    evaluate = _evaluate_fn(algorithm)
-    total_chunks = -(-config.num_updates // settings.updates_per_chunk)
-    writer = metrics_lib.MetricsWriter(out) if out is not None else None
-    progress = metrics_lib.Progress(total_chunks * settings.updates_per_chunk * config.steps_per_update, "train")
-    shown = {"physics": physics["impl"]} if physics else {}
-    last: dict[str, float] = {}
-    history: list[dict[str, float]] = []
-    warned = None
-    trajectory = None
-    started = time.perf_counter()
-    try:
-        while int(state.updates) < total_chunks * settings.updates_per_chunk:
-            start = time.perf_counter()
-            state, chunk_metrics = chunk(task, state)
-            jax.block_until_ready(state)
-            seconds = time.perf_counter() - start
-            eval_key = jax.random.fold_in(key, int(state.updates))
-            eval_return, _, trajectory = evaluate(config, task, state, eval_key, settings.eval_envs, eval_steps)
-            step = int(state.updates) * config.steps_per_update
-            last = {"eval/return": float(eval_return), "perf/steps_per_s": settings.updates_per_chunk * config.steps_per_update / seconds,
-                    "perf/elapsed_s": time.perf_counter() - started,
-                    **{k: float(v) for k, v in chunk_metrics.items() if np.isfinite(v)}}  # fmt: skip
-            if writer is not None:
-                writer.write(step, last)
-                chunks_done = int(state.updates) // settings.updates_per_chunk
-                if settings.checkpoint_every and chunks_done % settings.checkpoint_every == 0:
-                    checkpoints.save(out / "checkpoints", step, state)
-            if settings.progress:
-                progress.update(step, **shown, ret=f"{last['eval/return']:.1f}", sps=f"{last['perf/steps_per_s']:,.0f}")
-            history.append(last)
-            _check_capacity(task, last)
-            warned = _diagnose(algorithm, history, warned)
-    finally:
-        progress.close()
-        if writer is not None:
-            writer.close()
+    return shard_envs(jax.tree.map(jnp.copy, state), algorithm.PER_ENV_FIELDS)
+
+
+def run(algorithm: Algorithm, config: AlgorithmConfig, task: Task, settings: Settings) -> tuple[Any, dict[str, float]]:
+    """Trains `task` with `algorithm` under `config`; returns the final state and the
+    last chunk's metrics (all of them, whatever `settings` logs; it always evaluated).
+
+    Metrics of note: perf/steps_per_s (training only), perf/eval_s (evaluating in this
+    chunk; 0 without; the first includes compiling), perf/video_s, perf/first_update_s
+    (once: from this call to the end of the first chunk, compiles included),
+    perf/elapsed_s (since this call)."""
+    launched = _clock()
+    check_algorithm(algorithm, config)
+    eval_steps = _eval_steps(task, settings)  # a wrong length fails here, before anything is written
+    out = Path(settings.out_dir) if settings.out_dir else None
     if out is not None:
-        _finish(out, task, trajectory, settings)
-    return state, last
+        _claim(out, settings)
+    key, physics = jax.random.key(settings.seed), physics_info(task)
+    state = _start(algorithm, config, task, settings, out, key, physics)
+    shown = {"physics": physics["impl"]} if physics else {}
+    loop = _Loop(algorithm, config, replicate(task), settings, out, key, eval_steps, launched, shown)
+    try:
+        while not loop.done(state):
+            state = loop.step(state)
+    finally:
+        loop.close()
+    if out is not None:
+        _finish(out, loop, settings)
+    return state, loop.last
 
 
 def _diagnose(algorithm: Algorithm, history: list[dict[str, float]], warned: str | None) -> str | None:
@@ -376,20 +536,31 @@ def _diagnose(algorithm: Algorithm, history: list[dict[str, float]], warned: str
     return warned
 
 
-def _finish(out: Path, task: Task, trajectory, settings: Settings) -> None:
-    """Learning curves and a video of the last evaluation episode."""
+def _finish(out: Path, loop: _Loop, settings: Settings) -> None:
+    """Learning curves, and a video of the final evaluation's first episode (a copy of
+    its videos/ one if `video_every` made that already)."""
     plotting.plot_curves(out / "metrics.jsonl", out / "curves.png")
-    if settings.video and trajectory is not None:
-        write_video(task, trajectory, out / "eval.mp4")
+    if not settings.video or loop.trajectory is None:
+        return
+    final_step = int(loop.total_updates * loop.config.steps_per_update)
+    if loop.video is not None and loop.video[0] == final_step:
+        shutil.copyfile(loop.video[1], out / "eval.mp4")
+    else:
+        write_video(loop.task, loop.trajectory, out / "eval.mp4", settings.render)
 
 
-def write_video(task: Task, trajectory, path: Path) -> Path | None:
-    """Renders a single-env trajectory ([T] leaves) at its own control rate, through the
-    model's first camera if it has one."""
+def write_video(task: Task, trajectory, path: Path, config: rendering.RenderConfig | None = None) -> Path | None:
+    """Renders a single-env trajectory ([T] leaves) as `config` says (default
+    `RenderConfig()`): at its own control rate unless config.fps, through config.camera
+    or else the model's first camera if it has one."""
+    config = config or rendering.RenderConfig()
     data = jax.device_get(trajectory.next_state.data)
     times = np.asarray(data.time)
-    fps = 1.0 / float(times[1] - times[0]) if len(times) > 1 and times[1] > times[0] else 50.0
+    step = float(times[1] - times[0]) if len(times) > 1 and times[1] > times[0] else 0.02
+    fps = (config.fps or 1.0 / step) / config.slowdown
+    frames = len(times) if config.length_seconds is None else max(1, round(config.length_seconds / step))
+    camera = config.camera if config.camera is not None else (0 if task.mj_model.ncam else None)
     return rendering.render_video(
-        task.mj_model, np.asarray(data.qpos), path, fps, mocap_pos=np.asarray(data.mocap_pos),
-        mocap_quat=np.asarray(data.mocap_quat), camera=0 if task.mj_model.ncam else None,
+        task.mj_model, np.asarray(data.qpos)[:frames], path, fps, mocap_pos=np.asarray(data.mocap_pos)[:frames],
+        mocap_quat=np.asarray(data.mocap_quat)[:frames], camera=camera, width=config.width, height=config.height,
     )  # fmt: skip
