@@ -67,31 +67,48 @@ class RenderConfig:
     render options. From the CLI: ``--render.NAME VALUE``. Values are checked here;
     camera and body names when a model is drawn."""
 
-    # image size in pixels: full (videos) and small (previews, thumbnails)
     width: int = 640
+    """Video width in pixels."""
     height: int = 480
+    """Video height in pixels."""
     small_width: int = 320
+    """Width of small renders (previews, thumbnails) in pixels."""
     small_height: int = 240
-    length_seconds: float | None = None  # simulated seconds drawn from the start; None: the whole trajectory
-    fps: float | None = None  # frames per simulated second; None: real time, 1 / the trajectory's time step
-    slowdown: float = 1.0  # the file plays at fps / slowdown: 2.0 is half speed
-    # what is drawn
+    """Height of small renders in pixels."""
+    length_seconds: float | None = None
+    """Simulated seconds drawn, from the start; None: the whole trajectory."""
+    fps: float | None = None
+    """Frames per simulated second (rows are skipped or repeated); None: real time, one frame per row."""
+    slowdown: float = 1.0
+    """Slow motion: the file plays at fps / slowdown frames per second (2.0: half speed)."""
     shadows: bool = True
-    reflections: bool = True  # on reflective materials only
+    """Draw shadows (off: several times faster on CPU renderers)."""
+    reflections: bool = True
+    """Draw reflections on reflective materials."""
     contact_forces: bool = False
+    """Draw contact force arrows."""
     contact_points: bool = False
-    inertia: bool = False  # equivalent-inertia boxes
-    markers: bool = False  # debug markers: site frames and the centre of mass
-    # the camera: a model camera by name or id, else a free camera (fields None: MuJoCo's fit to the model)
-    camera: str | int | None = None
-    distance: float | None = None  # metres from lookat
-    azimuth: float | None = None  # degrees
-    elevation: float | None = None  # degrees
+    """Draw contact points."""
+    inertia: bool = False
+    """Draw each body's equivalent-inertia box."""
+    markers: bool = False
+    """Draw debug markers: site frames and centres of mass."""
+    camera: int | str | None = None  # int first: the CLI then reads "0" as an id
+    """A model camera, by id or name; None: a free camera (the fields below)."""
+    distance: float | None = None
+    """Free camera: metres from the point looked at; None: MuJoCo's fit to the model."""
+    azimuth: float | None = None
+    """Free camera: azimuth in degrees; None: MuJoCo's default (90)."""
+    elevation: float | None = None
+    """Free camera: elevation in degrees; None: MuJoCo's default (-45)."""
     lookat: tuple[float, float, float] | None = None
-    track_body: str | int | None = None  # the free camera follows this body (lookat is its subtree's centre)
-    # learning curves
+    """Free camera: the point looked at (m); None: the model's centre."""
+    track_body: int | str | None = None
+    """Free camera that follows this body (id or name), looking at its subtree's centre of mass."""
     max_series_per_plot: int = 8
-    plot_figsize: tuple[float, float] = (4.5, 3.0)  # inches per subplot
+    """Learning curves: most series one subplot draws (a group such as reward/ keeps the largest)."""
+    plot_figsize: tuple[float, float] = (4.5, 3.0)
+    """Learning curves: width and height of one subplot, in inches (100 dpi)."""
 
     def __post_init__(self) -> None:
         for name in ("lookat", "plot_figsize"):  # JSON gives lists back
@@ -115,6 +132,8 @@ class RenderConfig:
             _vector(self.plot_figsize, 2) and min(self.plot_figsize) > 0,
             "2 numbers > 0",
         )
+        if self.lookat is not None and self.track_body is not None:
+            raise ValueError("render config: lookat and track_body both choose the point looked at - give one")
         free = [f for f in _FREE_CAMERA if getattr(self, f) is not None]
         if self.camera not in (None, -1) and free:
             raise ValueError(
