@@ -549,18 +549,8 @@ def _finish(out: Path, loop: _Loop, settings: Settings) -> None:
         write_video(loop.task, loop.trajectory, out / "eval.mp4", settings.render)
 
 
-def write_video(task: Task, trajectory, path: Path, config: rendering.RenderConfig | None = None) -> Path | None:
-    """Renders a single-env trajectory ([T] leaves) as `config` says (default
-    `RenderConfig()`): at its own control rate unless config.fps, through config.camera
-    or else the model's first camera if it has one."""
-    config = config or rendering.RenderConfig()
-    data = jax.device_get(trajectory.next_state.data)
-    times = np.asarray(data.time)
-    step = float(times[1] - times[0]) if len(times) > 1 and times[1] > times[0] else 0.02
-    fps = (config.fps or 1.0 / step) / config.slowdown
-    frames = len(times) if config.length_seconds is None else max(1, round(config.length_seconds / step))
-    camera = config.camera if config.camera is not None else (0 if task.mj_model.ncam else None)
-    return rendering.render_video(
-        task.mj_model, np.asarray(data.qpos)[:frames], path, fps, mocap_pos=np.asarray(data.mocap_pos)[:frames],
-        mocap_quat=np.asarray(data.mocap_quat)[:frames], camera=camera, width=config.width, height=config.height,
-    )  # fmt: skip
+def write_video(task: Task, trajectory: Any, path: Path, config: rendering.RenderConfig | None = None) -> Path | None:
+    """An MP4 of a single-env trajectory ([T] leaves) as `config` says (default
+    `RenderConfig()`): `rendering.trajectory_video`, kept here for `mjzoo eval`.
+    Returns `path`, or None without an OpenGL backend."""
+    return rendering.trajectory_video(task, trajectory, path, config or rendering.RenderConfig())

@@ -10,10 +10,9 @@ import struct
 import jax.numpy as jnp
 import numpy as np
 import pytest
-from tensorboardX.proto import event_pb2
-
 from mjzoo.harness import metrics
 from mjzoo.harness.metrics import MetricsWriter, Progress, read_metrics
+from tensorboardX.proto import event_pb2
 
 
 def tensorboard_events(directory) -> list[list[event_pb2.Event]]:
@@ -179,3 +178,34 @@ def test_progress_on_a_terminal_draws_a_rich_bar(monkeypatch):
     text = out.getvalue()
     assert "\x1b" in text  # drawn with terminal control codes
     assert "50/50" in text and "steps/s" in text and "ret=2.5" in text and "train" in text
+
+
+def test_progress_leaves_paused_time_out_of_steps_per_s_but_not_out_of_the_eta(monkeypatch):
+    clock = FakeClock()
+    monkeypatch.setattr(metrics.time, "monotonic", clock)
+    out = io.StringIO()
+    with Progress(1000, "train", file=out, min_interval=0.0) as bar:
+        bar.update(100)
+        with bar.paused():  # an evaluation
+            clock.now += 3.0
+        clock.now += 1.0
+        bar.update(200)  # 4 s of wall-clock, 1 of them training: the eta counts all 4
+    assert out.getvalue().splitlines()[1] == "train: 200/1,000 steps (20%) | 100 steps/s | eta 0:00:32"
+
+
+class FakeDevice:
+    def __init__(self, platform: str, id: int, stats: dict | None) -> None:
+        self.platform, self.id, self.stats = platform, id, stats
+
+    def memory_stats(self) -> dict | None:
+        return self.stats
+
+
+def test_device_memory_names_each_device_and_those_without_statistics():
+    devices = [FakeDevice("gpu", 0, {"bytes_in_use": 5, "peak_bytes_in_use": 9, "bytes_limit": 100}),
+               FakeDevice("gpu", 1, {"bytes_in_use": 7}), FakeDevice("cpu", 0, None)]  # fmt: skip
+    values, silent = metrics.device_memory(devices)
+    assert values == {"memory/gpu0/bytes_in_use": 5.0, "memory/gpu0/peak_bytes_in_use": 9.0,
+                      "memory/gpu1/bytes_in_use": 7.0}  # fmt: skip
+    assert silent == ["cpu0"]
+    assert metrics.device_memory() == ({}, ["cpu0"])  # what XLA's CPU reports: nothing

@@ -5,14 +5,22 @@ sharded; evaluation runs the task's own episode length unless told otherwise."""
 from __future__ import annotations
 
 import dataclasses
+import json
+import os
+import re
+import subprocess
+import sys
 import types
+from pathlib import Path
 
 import jax
 import jax.numpy as jnp
-import pytest
-
 import mjzoo
-from mjzoo.harness import training
+import pytest
+from mjzoo.harness import metrics, rendering, training
+from mjzoo.harness.cli import runs
+
+from tests.harness.test_rendering import egl_installed
 
 XML = """
 <mujoco model="block">
@@ -87,3 +95,182 @@ def test_init_is_jitted_by_the_harness():
 
     training.run(counter(init=init), CountConfig(), TASK, SETTINGS)
     assert traces == [True]  # traced (under jit), once
+
+
+# KSim's validation and logging options. One algorithm module for all of them, so they
+# share one compile of its chunk (the harness caches it per module, config and length).
+LOGGING = counter(update=lambda config, task, s: (Count(s.updates + 1, s.per_env + 1.0), {"loss/n": s.updates * 1.0}))
+
+
+class FakeClock:
+    """training._clock: each chunk of updates takes 10 s; nothing else takes time."""
+
+    def __init__(self, monkeypatch: pytest.MonkeyPatch) -> None:
+        self.now = 0.0
+        real = training._chunk_fn
+
+        def timed(*args):
+            chunk = real(*args)
+
+            def run_chunk(task, state):
+                self.now += 10.0
+                return chunk(task, state)
+
+            return run_chunk
+
+        monkeypatch.setattr(training, "_clock", lambda: self.now)
+        monkeypatch.setattr(training, "_chunk_fn", timed)
+
+
+def lines(tmp_path, chunks: int, **settings) -> list[dict]:
+    """metrics.jsonl of a run of `chunks` one-update chunks (step = 10 x chunk number)."""
+    settings = dataclasses.replace(SETTINGS, out_dir=tmp_path, checkpoint_every=0, overwrite=True, **settings)
+    training.run(LOGGING, CountConfig(num_updates=chunks), TASK, settings)
+    return metrics.read_metrics(tmp_path)
+
+
+def evaluated(records: list[dict]) -> list[int]:
+    """The chunk numbers whose metrics line holds an evaluation."""
+    return [r["step"] // 10 for r in records if "eval/return" in r]
+
+
+@pytest.mark.parametrize(
+    "settings, chunks",
+    [
+        ({}, [1, 2, 3, 4, 5, 6, 7]),  # every chunk, as before
+        ({"eval_every": 3}, [3, 6, 7]),  # multiples of 3; the last chunk always evaluates
+        ({"eval_every": 0}, [7]),  # only at the end
+        ({"eval_every": 0, "eval_every_seconds": 35}, [4, 7]),  # 40 s after launch; 80 s is past the end
+        ({"eval_every": 5, "eval_every_seconds": 25}, [3, 5, 7]),  # either trigger: 30 s, chunk 5 (then 20 s < 25)
+        ({"eval_every": 2, "eval_first_seconds": 45}, [5, 6, 7]),  # none before 45 s; the first chance; then 2s
+        ({"eval_every": 0, "eval_first_seconds": 0}, [1, 7]),  # KSim's "first validation after M seconds"
+    ],
+)
+def test_evaluation_schedule(tmp_path, monkeypatch, settings, chunks):
+    FakeClock(monkeypatch)
+    records = lines(tmp_path, 7, log_every=1, **settings)
+    assert [r["step"] for r in records] == [10 * c for c in range(1, 8)]  # every chunk logged (log_every=1)
+    assert evaluated(records) == chunks
+    assert all(r["perf/eval_s"] == 0.0 for r in records)  # in every line; evaluating takes no fake time
+    assert records[0]["perf/first_update_s"] == 10.0 and all("perf/first_update_s" not in r for r in records[1:])
+
+
+def test_log_every_and_log_train_metrics_choose_what_metrics_jsonl_holds(tmp_path, monkeypatch):
+    FakeClock(monkeypatch)
+    records = lines(tmp_path, 6, eval_every=3, log_every=2)
+    assert [r["step"] // 10 for r in records] == [2, 3, 4, 6]  # every 2nd chunk, and each evaluation
+    assert evaluated(records) == [3, 6]
+    assert [r["loss/n"] for r in records] == [1.0, 2.0, 3.0, 5.0]  # that chunk's own
+    assert records[0]["perf/first_update_s"] == 10.0  # carried to the first line written
+    records = lines(tmp_path, 6, eval_every=3, log_every=2, log_train_metrics=False)
+    assert [r["step"] // 10 for r in records] == [2, 3, 4, 6]
+    assert {k.split("/")[0] for r in records for k in r if k != "step"} == {"eval", "perf"}
+
+
+def test_progress_shows_the_first_update_and_the_training_rate(tmp_path, monkeypatch, capsys):
+    FakeClock(monkeypatch)
+    _, last = training.run(LOGGING, CountConfig(num_updates=2), TASK, dataclasses.replace(SETTINGS, progress=True))
+    assert last["perf/steps_per_s"] == 1.0 and last["perf/elapsed_s"] == 20.0  # 10 steps in 10 s of chunk
+    assert "first=10.0s" in capsys.readouterr().out
+
+
+def test_profile_memory_on_the_cpu_records_nothing_and_says_so_once(tmp_path):
+    settings = dataclasses.replace(SETTINGS, out_dir=tmp_path, profile_memory=True, checkpoint_every=0)
+    with pytest.warns(training.TrainingWarning, match=r"profile_memory: cpu0 report no memory statistics") as caught:
+        _, last = training.run(LOGGING, CountConfig(), TASK, settings)
+    assert len(caught) == 1 and not [k for k in last if k.startswith("memory/")]
+
+
+def test_eval_seconds_is_converted_at_the_task_s_control_rate(monkeypatch):
+    # mjzoo.control_dt measures a step of the task (a compile of MJX's step: ~15 s here).
+    monkeypatch.setattr(training, "control_dt", lambda task: 0.02 if task is TASK else None)
+    _, last = training.run(LOGGING, CountConfig(), TASK, dataclasses.replace(SETTINGS, eval_seconds=5.0))
+    assert last["eval/return"] == 250.0  # the counter's evaluation returns its step count; 5 / 0.02 = 249.99...
+
+
+@pytest.mark.parametrize(
+    "fields, message",
+    [
+        ({"eval_every": -1}, "eval_every=-1 must be >= 0"),
+        ({"eval_every": 1.5}, "eval_every=1.5 must be an int"),
+        ({"eval_every_seconds": 0}, "eval_every_seconds=0 must be > 0"),
+        ({"eval_first_seconds": -1.0}, "eval_first_seconds=-1.0 must be >= 0"),
+        ({"eval_first_seconds": "1"}, "eval_first_seconds='1' must be a number"),
+        ({"video_every": -2}, "video_every=-2 must be >= 0"),
+        ({"video_every": 2, "video": False}, "video_every=2 needs video=True"),
+        ({"log_every": 0}, "log_every=0 must be >= 1"),
+        ({"log_every": True}, "log_every=True must be an int"),
+        ({"eval_seconds": -0.5}, "eval_seconds=-0.5 must be > 0"),
+        ({"eval_steps": 10, "eval_seconds": 1.0}, "eval_steps=10 and eval_seconds=1.0 both give the evaluation's"),
+        ({"updates_per_chunk": 0}, "updates_per_chunk=0 must be >= 1"),
+        ({"render": {"width": 64}}, "render={'width': 64} must be a mjzoo.harness.rendering.RenderConfig"),
+    ],
+)
+def test_each_invalid_setting_is_named(fields, message):
+    with pytest.raises(ValueError, match=f"^training.Settings: {re.escape(message)}"):
+        training.Settings(**fields)
+
+
+def test_config_json_holds_the_settings_and_the_cli_reads_it_back(tmp_path):
+    render = rendering.RenderConfig(width=64, height=48, lookat=(0.0, 0.0, 1.0))
+    settings = dataclasses.replace(SETTINGS, out_dir=tmp_path, render=render, eval_every_seconds=60.0)
+    training.run(LOGGING, CountConfig(), TASK, settings)
+    _, info = runs.read_run(tmp_path)
+    saved = info["settings"]
+    assert saved["render"]["lookat"] == [0.0, 0.0, 1.0] and saved["eval_every_seconds"] == 60.0
+    assert rendering.RenderConfig(**saved["render"]) == render  # JSON's lists become tuples again
+    saved = {**saved, "out_dir": Path(saved["out_dir"]), "render": rendering.RenderConfig(**saved["render"])}
+    assert training.Settings(**saved) == settings
+
+
+# In a fresh process: MuJoCo reads MUJOCO_GL once, at import.
+VIDEO_SCRIPT = """
+import dataclasses, json, sys
+from pathlib import Path
+from typing import Any, NamedTuple
+import jax.numpy as jnp
+from mjzoo.harness import rendering, training
+sys.path.insert(0, sys.argv[2])
+import test_training as t
+
+class Data(NamedTuple):  # what rendering reads of a trajectory: next_state.data's leaves, [T, ...]
+    time: Any
+    qpos: Any
+    mocap_pos: Any
+    mocap_quat: Any
+
+class State(NamedTuple):
+    data: Data
+
+class Trajectory(NamedTuple):
+    next_state: State
+
+def evaluate(config, task, s, key, n, steps):
+    qpos = jnp.full((4, 1), 0.02) * s.updates  # each evaluation's video differs (the box in view)
+    data = Data(jnp.arange(4) * 0.02, qpos, jnp.zeros((4, 0, 3)), jnp.zeros((4, 0, 4)))
+    return jnp.float32(steps), jnp.zeros(n), Trajectory(State(data))
+
+algorithm = t.counter(evaluate=evaluate)
+out = Path(sys.argv[1])
+for chunks in (5, 4):  # the final evaluation is not (5) or is (4) one of video_every's
+    settings = dataclasses.replace(t.SETTINGS, out_dir=out / str(chunks), video=True, video_every=2,
+                                   render=rendering.RenderConfig(width=64, height=48))
+    training.run(algorithm, t.CountConfig(num_updates=chunks), t.TASK, settings)
+print(json.dumps(sorted(str(p.relative_to(out)) for p in out.rglob("*.mp4"))))
+"""
+
+
+@pytest.mark.skipif(not egl_installed(), reason="no EGL to render with")
+def test_video_every_writes_a_video_every_n_evaluations(tmp_path):
+    result = subprocess.run(
+        [sys.executable, "-c", VIDEO_SCRIPT, str(tmp_path), str(Path(__file__).parent)],
+        env={**os.environ, "MUJOCO_GL": "egl"}, capture_output=True, text=True, timeout=120, check=False,
+        close_fds=False,  # lets Python use posix_spawn: no fork of this multithreaded (JAX) process
+    )  # fmt: skip
+    assert result.returncode == 0, result.stderr
+    assert json.loads(result.stdout.splitlines()[-1]) == [
+        "4/eval.mp4", "4/videos/eval_20.mp4", "4/videos/eval_40.mp4",
+        "5/eval.mp4", "5/videos/eval_20.mp4", "5/videos/eval_40.mp4",
+    ]  # fmt: skip
+    assert (tmp_path / "4/eval.mp4").read_bytes() == (tmp_path / "4/videos/eval_40.mp4").read_bytes()  # a copy
+    assert (tmp_path / "5/eval.mp4").read_bytes() != (tmp_path / "5/videos/eval_40.mp4").read_bytes()
