@@ -115,30 +115,23 @@ class RenderConfig:
             if isinstance(getattr(self, name), list):
                 object.__setattr__(self, name, tuple(getattr(self, name)))
         for name in ("width", "height", "small_width", "small_height", "max_series_per_plot"):
+            value = getattr(self, name)
             _require(
-                name,
-                getattr(self, name),
-                isinstance(getattr(self, name), int) and getattr(self, name) >= 1,
-                "an integer >= 1",
+                name, value, isinstance(value, int) and not isinstance(value, bool) and value >= 1, "an integer >= 1"
             )
         for name in ("length_seconds", "fps", "distance"):
             value = getattr(self, name)
             _require(name, value, value is None or _finite(value) and value > 0, "> 0 or None")
         _require("slowdown", self.slowdown, _finite(self.slowdown) and self.slowdown > 0, "> 0")
         _require("lookat", self.lookat, self.lookat is None or _vector(self.lookat, 3), "3 finite numbers or None")
-        _require(
-            "plot_figsize",
-            self.plot_figsize,
-            _vector(self.plot_figsize, 2) and min(self.plot_figsize) > 0,
-            "2 numbers > 0",
-        )
+        figsize_ok = _vector(self.plot_figsize, 2) and min(self.plot_figsize) > 0
+        _require("plot_figsize", self.plot_figsize, figsize_ok, "2 numbers > 0")
         if self.lookat is not None and self.track_body is not None:
             raise ValueError("render config: lookat and track_body both choose the point looked at - give one")
-        free = [f for f in _FREE_CAMERA if getattr(self, f) is not None]
+        free = ", ".join(f for f in _FREE_CAMERA if getattr(self, f) is not None)
         if self.camera not in (None, -1) and free:
-            raise ValueError(
-                f"render config: camera={self.camera!r} is a model camera; {', '.join(free)} set a free camera - give one or the other"
-            )
+            message = f"camera={self.camera!r} is a model camera; {free} set a free camera - give one or the other"
+            raise ValueError(f"render config: {message}")
 
     @property
     def free_camera(self) -> bool:
