@@ -18,6 +18,8 @@ from __future__ import annotations
 import dataclasses
 import functools
 import json
+import math
+import numbers
 import shutil
 import time
 import warnings
@@ -49,6 +51,7 @@ __all__ = [
     "physics_info",
     "replicate",
     "run",
+    "seconds_to_steps",
     "shard_envs",
 ]  # fmt: skip
 
@@ -185,6 +188,10 @@ class Settings:
             problems.append(f"render={self.render!r} must be a mjzoo.harness.rendering.RenderConfig")
         if problem := next((p for p in problems if p), None):
             raise ValueError(f"training.Settings: {problem}")
+        for name in _LOWEST:  # NumPy scalars as Python's: config.json is written with `json`
+            value = getattr(self, name)
+            if isinstance(value, numbers.Number) and type(value) not in (int, float):
+                object.__setattr__(self, name, int(value) if isinstance(value, numbers.Integral) else float(value))
 
 
 # Settings' numeric fields: the lowest value allowed; "> 0" where it is excluded.
@@ -198,9 +205,9 @@ def _problem(name: str, value: Any) -> str | None:
     """What is wrong with Settings' numeric field `name` (seconds may be floats), or None."""
     if value is None and name in _OPTIONAL:
         return None
-    kinds = (int, float) if name.endswith("seconds") else int
-    if isinstance(value, bool) or not isinstance(value, kinds):
-        return f"{name}={value!r} must be {'a number' if kinds == (int, float) else 'an int'}"
+    kind = numbers.Real if name.endswith("seconds") else numbers.Integral  # NumPy's too
+    if isinstance(value, bool) or not isinstance(value, kind) or not math.isfinite(value):
+        return f"{name}={value!r} must be {'a finite number' if kind is numbers.Real else 'an int'}"
     low = _LOWEST[name]
     if value <= 0 if low == "> 0" else value < low:
         return f"{name}={value!r} must be {low if low == '> 0' else f'>= {low}'}"
@@ -307,13 +314,20 @@ def _resume(out_dir: Path, state: Any) -> Any:
     return restored
 
 
+def seconds_to_steps(task: Task, seconds: float) -> int:
+    """`seconds` of simulated time as a count of the task's control steps (the nearest
+    count, at least 1), e.g. a rollout length given in seconds (KSim's
+    rollout_length_seconds). Measures `mjzoo.control_dt` (one compiled step)."""
+    return max(1, round(seconds / control_dt(task)))  # round, not int: 5 / 0.02 is 249.99...
+
+
 def _eval_steps(task: Task, settings: Settings) -> int:
     """The evaluation's length in control steps: eval_steps, eval_seconds at the task's
     control rate (the nearest count, at least 1), or the task's episode length."""
     if settings.eval_steps is not None:
         return settings.eval_steps
     if settings.eval_seconds is not None:
-        return max(1, round(settings.eval_seconds / control_dt(task)))  # round: 5 / 0.02 is 249.99...
+        return seconds_to_steps(task, settings.eval_seconds)
     if getattr(task, "time_limit", None) is None:
         raise ValueError("training.Settings: eval_steps=None evaluates the task's own episode length, but the task "
                          "has no time limit (mjzoo.with_time_limit); give eval_steps or eval_seconds")  # fmt: skip

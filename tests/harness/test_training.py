@@ -16,6 +16,7 @@ from pathlib import Path
 import jax
 import jax.numpy as jnp
 import mjzoo
+import numpy as np
 import pytest
 from mjzoo.harness import metrics, rendering, training
 from mjzoo.harness.cli import runs
@@ -195,7 +196,8 @@ def test_eval_seconds_is_converted_at_the_task_s_control_rate(monkeypatch):
         ({"eval_every": 1.5}, "eval_every=1.5 must be an int"),
         ({"eval_every_seconds": 0}, "eval_every_seconds=0 must be > 0"),
         ({"eval_first_seconds": -1.0}, "eval_first_seconds=-1.0 must be >= 0"),
-        ({"eval_first_seconds": "1"}, "eval_first_seconds='1' must be a number"),
+        ({"eval_first_seconds": "1"}, "eval_first_seconds='1' must be a finite number"),
+        ({"eval_every_seconds": float("inf")}, "eval_every_seconds=inf must be a finite number"),
         ({"video_every": -2}, "video_every=-2 must be >= 0"),
         ({"video_every": 2, "video": False}, "video_every=2 needs video=True"),
         ({"log_every": 0}, "log_every=0 must be >= 1"),
@@ -209,6 +211,11 @@ def test_eval_seconds_is_converted_at_the_task_s_control_rate(monkeypatch):
 def test_each_invalid_setting_is_named(fields, message):
     with pytest.raises(ValueError, match=f"^training.Settings: {re.escape(message)}"):
         training.Settings(**fields)
+
+
+def test_numpy_numbers_are_kept_as_python_ones_for_config_json():
+    settings = training.Settings(eval_every=np.int64(3), eval_every_seconds=np.float32(2.5))
+    assert type(settings.eval_every) is int and type(settings.eval_every_seconds) is float
 
 
 def test_config_json_holds_the_settings_and_the_cli_reads_it_back(tmp_path):
