@@ -55,7 +55,7 @@ from numpy.typing import ArrayLike
 if TYPE_CHECKING:
     from mjzoo.types import Task
 
-__all__ = ["RenderConfig", "render_frames", "render_video", "trajectory_video"]
+__all__ = ["RenderConfig", "render_frames", "render_video", "trajectory_video", "with_model_camera"]
 
 _FREE_CAMERA = ("distance", "azimuth", "elevation", "lookat", "track_body")
 
@@ -260,9 +260,8 @@ def trajectory_video(
     """Renders one environment's trajectory (`mjzoo.rollout`'s, or an algorithm's
     ``evaluate``: leaves [T, ...]) into an MP4 at `path`, as `config` says.
 
-    The time step is read from ``next_state.data.time``. With no camera chosen in
-    `config` (neither ``camera`` nor a free-camera field), the model's first camera is
-    used if it has one: task authors put their best view there.
+    The time step is read from ``next_state.data.time``; the camera is
+    `with_model_camera`'s.
 
     Returns:
       `path`, or None if no OpenGL backend works (after printing one line saying so).
@@ -275,8 +274,6 @@ def trajectory_video(
         from mjzoo.running import control_dt
 
         dt = control_dt(task)
-    if config.camera is None and not config.free_camera and task.mj_model.ncam:
-        config = dataclasses.replace(config, camera=0)
     return render_video(
         task.mj_model,
         qpos,
@@ -284,8 +281,17 @@ def trajectory_video(
         mocap_pos=np.asarray(data.mocap_pos),
         mocap_quat=np.asarray(data.mocap_quat),
         dt=dt,
-        config=config,
+        config=with_model_camera(config, task.mj_model),
     )
+
+
+def with_model_camera(config: RenderConfig, mj_model: mujoco.MjModel) -> RenderConfig:
+    """`config` with the model's first camera when it chooses no camera (neither
+    ``camera`` nor a free-camera field) and the model has one: task authors put their
+    best view there."""
+    if config.camera is None and not config.free_camera and mj_model.ncam:
+        return dataclasses.replace(config, camera=0)
+    return config
 
 
 class _Frames:
