@@ -551,9 +551,9 @@ def _diagnose(algorithm: Algorithm, history: list[dict[str, float]], warned: str
 
 
 def _finish(out: Path, loop: _Loop, settings: Settings) -> None:
-    """Learning curves, and a video of the final evaluation's first episode (a copy of
-    its videos/ one if `video_every` made that already)."""
-    plotting.plot_curves(out / "metrics.jsonl", out / "curves.png")
+    """Learning curves (drawn as settings.render says), and a video of the final
+    evaluation's first episode (a copy of its videos/ one if `video_every` made that)."""
+    plotting.plot_curves(out / "metrics.jsonl", out / "curves.png", config=settings.render)
     if not settings.video or loop.trajectory is None:
         return
     final_step = int(loop.total_updates * loop.config.steps_per_update)
