@@ -143,8 +143,8 @@ def train(label: str, algorithm: types.ModuleType, config, task: mjzoo.Task, sty
 
 def render(task: mjzoo.Task, qpos: np.ndarray, path: Path) -> None:
     """The video of an episode's qpos [T, nq] at the task's control rate."""
-    camera = 0 if task.mj_model.ncam else None
-    rendering.render_video(task.mj_model, qpos, path, 1.0 / float(task.motion.dt), camera=camera)
+    config = rendering.with_model_camera(rendering.RenderConfig(), task.mj_model)
+    rendering.render_video(task.mj_model, qpos, path, dt=float(task.motion.dt), config=config)
     print(f"wrote {path}")
 
 

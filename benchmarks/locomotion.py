@@ -132,8 +132,8 @@ def evaluate(config: ppo.Config, task: mjzoo.Task, train_state, num_envs: int, n
 
 def render(task: mjzoo.Task, qpos: np.ndarray, path: Path) -> None:
     """The video of an episode's qpos [T, nq] of `task` at its control rate."""
-    rendering.render_video(task.mj_model, qpos, path, 1.0 / mjzoo.control_dt(task),
-                           camera=0 if task.mj_model.ncam else None)  # fmt: skip
+    config = rendering.with_model_camera(rendering.RenderConfig(), task.mj_model)
+    rendering.render_video(task.mj_model, qpos, path, dt=mjzoo.control_dt(task), config=config)
     print(f"wrote {path}")
 
 

@@ -24,8 +24,10 @@ from mjzoo.types import Task
 __all__ = ["write"]
 
 
-def write(out: Path, problem: Problem, result: Result, stats: dict[str, float], video: bool = True, **extra: Any) -> dict:
-    """Writes summary.json, plan.png and (where GL exists) plan.mp4 to `out`; returns the summary.
+def write(out: Path, problem: Problem, result: Result, stats: dict[str, float], video: bool = True,
+          render: rendering.RenderConfig = rendering.RenderConfig(), **extra: Any) -> dict:  # noqa: B008 (frozen)
+    """Writes summary.json, plan.png and (where GL exists) plan.mp4, drawn as `render`
+    says, to `out`; returns the summary with `extra` in it.
 
     final_cost is the mean per-step cost (-reward) over the last second of the run."""
     out.mkdir(parents=True, exist_ok=True)
@@ -42,9 +44,9 @@ def write(out: Path, problem: Problem, result: Result, stats: dict[str, float], 
     _plot(out / "plan.png", time_s, costs, controls, problem.sim_task)
     if video:
         mj = problem.sim_task.mj_model
-        rendering.render_video(mj, np.asarray(states.data.qpos), out / "plan.mp4", 1.0 / problem.sim_dt,
+        rendering.render_video(mj, np.asarray(states.data.qpos), out / "plan.mp4", dt=problem.sim_dt,
                                mocap_pos=np.asarray(states.data.mocap_pos), mocap_quat=np.asarray(states.data.mocap_quat),
-                               camera=0 if mj.ncam else None)  # fmt: skip
+                               config=rendering.with_model_camera(render, mj))  # fmt: skip
     return summary
 
 

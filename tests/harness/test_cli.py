@@ -19,7 +19,7 @@ import pytest
 
 import mjzoo.envs
 from mjzoo.algorithms import ppo
-from mjzoo.harness import checkpoints, cli, training
+from mjzoo.harness import checkpoints, cli, rendering, training
 
 ENV = "pendulum_swingup"
 TINY = dict(num_envs=8, unroll_length=8, num_minibatches=2, num_epochs=1, total_steps=128)
@@ -183,7 +183,7 @@ def test_eval_falls_back_past_a_damaged_checkpoint(capsys, tmp_path, monkeypatch
         return state.updates.astype(jnp.float32), jnp.zeros(episodes), None
 
     monkeypatch.setattr(ppo, "evaluate", evaluate)
-    monkeypatch.setattr(training, "write_video", lambda task, trajectory, path: None)
+    monkeypatch.setattr(training, "write_video", lambda task, trajectory, path, config=None: None)
     cli.main(["eval", str(run), "--episodes", "2"])
     out, err = capsys.readouterr()
     assert f"{ENV}: mean return 1.00" in out
@@ -310,6 +310,30 @@ def test_resume_keeps_the_runs_own_settings(capsys, tmp_path, monkeypatch, ppo_s
     cli.main(["train", "ppo", ENV, "--resume", str(run), "--seed", "5"])
     assert [(s.seed, s.eval_envs, s.updates_per_chunk, s.resume) for s in seen] == [(3, 2, 1, True), (5, 2, 1, True)]
     assert not seen[0].video and seen[1].video
+
+
+def test_schedule_and_render_flags_reach_the_settings_and_a_resume_keeps_them(tmp_path, monkeypatch, ppo_state):
+    """KSim's validation, logging and render options on the command line; a resumed run
+    keeps what it started with (config.json) unless the flag is given again."""
+    seen = []
+    monkeypatch.setattr(ppo, "train", lambda config, task, settings: (seen.append(settings), (None, {}))[1])
+    run = tmp_path / "run"
+    cli.main(["train", "ppo", ENV, "--out", str(run), "--eval-every", "3", "--eval-seconds", "0.5", "--log-every", "2",
+              "--no-log-train-metrics", "--video-every", "4", "--profile-memory", "--render.width", "64",
+              "--render.contact-points", "--render.lookat", "0", "0", "1"])  # fmt: skip
+    new = seen[-1]
+    assert (new.eval_every, new.eval_seconds, new.log_every, new.log_train_metrics, new.video_every) == (3, 0.5, 2, False, 4)
+    assert new.profile_memory and new.render == rendering.RenderConfig(width=64, contact_points=True, lookat=(0, 0, 1))
+    info = json.loads((write_run(tmp_path / "resumed") / "config.json").read_text())
+    info["settings"] = json.loads(json.dumps({k: v for k, v in dataclasses.asdict(new).items() if k != "out_dir"}))
+    (tmp_path / "resumed" / "config.json").write_text(json.dumps(info))
+    checkpoints.save(tmp_path / "resumed" / "checkpoints", 64, ppo_state)
+    cli.main(["train", "ppo", ENV, "--resume", str(tmp_path / "resumed")])
+    cli.main(["train", "ppo", ENV, "--resume", str(tmp_path / "resumed"), "--eval-every", "5", "--render.width", "32"])
+    kept, changed = seen[-2:]
+    assert (kept.eval_every, kept.log_every, kept.render, kept.resume) == (3, 2, new.render, True)
+    assert changed.render == dataclasses.replace(new.render, width=32)
+    assert (changed.eval_every, changed.log_every) == (5, 2)
 
 
 def test_training_refuses_a_directory_that_holds_a_run_unless_told(tmp_path):

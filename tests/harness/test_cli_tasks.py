@@ -152,7 +152,7 @@ def test_train_writes_the_spec_and_eval_runs_its_episode_length(capsys, cli_run,
     make, evaluate = mjzoo.envs.make, ppo.evaluate
     monkeypatch.setattr(mjzoo.envs, "make", lambda spec, **overrides: (built.append((spec, overrides)), make(spec, **overrides))[1])  # fmt: skip
     monkeypatch.setattr(ppo, "evaluate", lambda *args: (lengths.append(args[4:]), evaluate(*args))[1])
-    monkeypatch.setattr(training, "write_video", lambda task, trajectory, path: None)
+    monkeypatch.setattr(training, "write_video", lambda task, trajectory, path, config=None: None)
     cli.main(["eval", str(cli_run), "--episodes", "2"])
     assert capsys.readouterr().out.startswith(f"{SPEC}: mean return ")
     assert built[0] == (SPEC, {"upright_weight": 2.0})  # the saved overrides (then the factory's own make)
@@ -173,7 +173,7 @@ def test_eval_of_a_run_trained_from_python_needs_task(capsys, in_user_dir, monke
     assert_usage_error(capsys, ["eval", str(run)], f"{run}: has no task.json (trained from Python?)", "--task")
     seen = []
     monkeypatch.setattr(ppo, "evaluate", lambda config, task, state, key, n, steps: (seen.append(steps), (0.0, np.zeros(n), None))[1])  # fmt: skip
-    monkeypatch.setattr(training, "write_video", lambda task, trajectory, path: None)
+    monkeypatch.setattr(training, "write_video", lambda task, trajectory, path, config=None: None)
     cli.main(["eval", str(run), "--task", SPEC, "--env-overrides", "episode_steps=10", "--episodes", "2"])
     assert capsys.readouterr().out.startswith(f"{SPEC}: mean return 0.00")
     assert seen == [10]

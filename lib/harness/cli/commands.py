@@ -4,10 +4,11 @@ trajectories.py). Each takes a task spec: a registered env, or ``package.module:
 
 from __future__ import annotations
 
+import dataclasses
 import json
 import time
 from pathlib import Path
-from typing import Annotated, Literal
+from typing import Annotated, Any, Literal
 
 import jax
 import jax.numpy as jnp
@@ -16,13 +17,42 @@ import tyro
 
 import mjzoo
 from mjzoo.harness.cli import runs
+from mjzoo.harness.rendering import RenderConfig
 from mjzoo.harness.cli.arguments import (PLANNERS, UsageError, algorithm_module, at_least_one, build_config,
                                          checking, episode_steps, parse_assignments, slug)  # fmt: skip
 
-__all__ = ["envs", "demo", "train", "evaluate", "plan"]
+__all__ = ["envs", "demo", "train", "evaluate", "plan", "Schedule"]
 
 PLAN_FILES = ("summary.json",)
 RUN_DEFAULTS = {"seed": 0, "eval_envs": 16, "updates_per_chunk": 10}  # how `train` drives a new run
+# training.Settings that are not a run's own: where it is and how this process shows it
+_NOT_KEPT = ("out_dir", "resume", "overwrite", "progress", "video")
+
+
+@dataclasses.dataclass(frozen=True)
+class Schedule:
+    """When a run evaluates, records and logs (KSim's validation and logging options).
+    A flag left at its default keeps a new run's default, or what a resumed run was
+    started with."""
+
+    eval_every: int | None = None
+    """Chunks between evaluations (default 1); 0: none by count (the last chunk always evaluates)."""
+    eval_every_seconds: float | None = None
+    """Also evaluate when this many wall-clock seconds have passed since the last evaluation."""
+    eval_first_seconds: float | None = None
+    """No evaluation before this many seconds after launch; the first one right after."""
+    eval_steps: int | None = None
+    """Evaluation episode length in control steps (default: the task's episode length)."""
+    eval_seconds: float | None = None
+    """Evaluation episode length in simulated seconds, instead of --eval-steps."""
+    video_every: int | None = None
+    """Also write videos/eval_STEP.mp4 every N evaluations; 0: only the final eval.mp4."""
+    log_every: int | None = None
+    """Chunks between metrics lines (default 1); evaluations are always logged."""
+    log_train_metrics: bool = True
+    """Log training metrics (losses, rewards); off: only eval/*, perf/* (and memory/*)."""
+    profile_memory: bool = False
+    """Record each device's memory in use and its peak as memory/*."""
 
 
 def envs() -> None:
@@ -90,6 +120,8 @@ def train(
     updates_per_chunk: int | None = None,
     video: bool = True,
     impl: Literal["jax", "warp"] | None = None,
+    schedule: Annotated[Schedule, tyro.conf.OmitArgPrefixes] = Schedule(),
+    render: RenderConfig = RenderConfig(),
 ) -> None:
     """Train ALGORITHM on ENV (a registered env or package.module:factory), writing
     task.json, config.json, metrics.jsonl, TensorBoard events, checkpoints, curves.png
@@ -100,7 +132,9 @@ def train(
     overrides of the env, as `mjzoo envs` lists them, or a factory's keyword arguments.
     --impl picks the physics (MJX's JAX implementation or MuJoCo Warp; default Warp
     where it is installed and a CUDA GPU is present). Evaluation runs the task's
-    episode length.
+    episode length unless --eval-steps or --eval-seconds say otherwise; --eval-every,
+    --log-every and the rest schedule it; --render.NAME VALUE sets how the videos and
+    curves are drawn.
 
     --resume DIR continues the run in DIR from its newest intact checkpoint with its
     saved settings, --seed, --eval-envs and --updates-per-chunk included unless given
@@ -119,14 +153,17 @@ def train(
             env_values.update({"impl": impl} if impl else {})
             config_values = parse_assignments(config, "--config")
             run_settings = dict(RUN_DEFAULTS)
-        given = {"seed": seed, "eval_envs": eval_envs, "updates_per_chunk": updates_per_chunk}
+        given = {"seed": seed, "eval_envs": eval_envs, "updates_per_chunk": updates_per_chunk,
+                 **_changed(schedule, Schedule())}  # fmt: skip
         run_settings.update({k: v for k, v in given.items() if v is not None})
+        run_settings["render"] = _render(run_settings.pop("render", None), render)
         if total_steps is not None:
             config_values["total_steps"] = total_steps
         cfg = build_config(module, env, config_values)
         task = mjzoo.envs.make(env, **env_values)
-        if task.time_limit is None:  # evaluation runs one episode
-            raise UsageError(f"{env}: the task has no time limit (mjzoo.with_time_limit) to end its evaluation episodes")
+        if task.time_limit is None and run_settings.get("eval_steps") is None and run_settings.get("eval_seconds") is None:
+            raise UsageError(f"{env}: the task has no time limit (mjzoo.with_time_limit) to end its evaluation "
+                             "episodes; give --eval-steps or --eval-seconds")  # fmt: skip
         if resume is None:
             out = out or Path("runs") / f"{slug(env)}-{algorithm}"
             hint = f"continue it with --resume {out}, or choose a new --out"
@@ -141,6 +178,16 @@ def train(
     print(f"final eval/return {last.get('eval/return', float('nan')):.2f}")
     print(f"curves: {out / 'curves.png'}")
     print(f"video:  {out / 'eval.mp4'}" if (out / "eval.mp4").exists() else "video:  (not written)")
+
+
+def _render(saved: dict | None, given: RenderConfig) -> RenderConfig:
+    """A resumed run's render config (JSON) with the --render flags given again on top."""
+    return RenderConfig(**{**(saved or {}), **_changed(given, RenderConfig())})
+
+
+def _changed(given: Any, default: Any) -> dict[str, Any]:
+    """The fields of dataclass `given` that differ from `default`: the flags given."""
+    return {k: v for k, v in dataclasses.asdict(given).items() if v != getattr(default, k)}
 
 
 def _resumed(resume: Path, out: Path | None, env: str, algorithm: str, env_overrides: tuple[str, ...],
@@ -159,7 +206,10 @@ def _resumed(resume: Path, out: Path | None, env: str, algorithm: str, env_overr
         if ours != theirs:
             raise UsageError(f"--resume {resume}: that run's {what} is {theirs}, not {ours}")
     config_values = {**info["config"], **parse_assignments(config, "--config")}
-    run_settings = {**RUN_DEFAULTS, **{k: v for k, v in info.get("settings", {}).items() if k in RUN_DEFAULTS}}
+    from mjzoo.harness import training
+
+    kept = {f.name for f in dataclasses.fields(training.Settings)} - set(_NOT_KEPT)
+    run_settings = {**RUN_DEFAULTS, **{k: v for k, v in info.get("settings", {}).items() if k in kept}}
     physics_impl = impl or info.get("physics", {}).get("impl")
     return resume, {**saved["overrides"], **({"impl": physics_impl} if physics_impl else {})}, config_values, run_settings
 
@@ -172,6 +222,7 @@ def evaluate(
     steps: int | None = None,
     seed: int = 1,
     video: Path | None = None,
+    render: RenderConfig = RenderConfig(),
 ) -> None:
     """Reload RUN's newest intact checkpoint, run deterministic episodes of --steps
     steps, by default the task's episode length, print the mean return and write a
@@ -180,7 +231,7 @@ def evaluate(
     The task is the one RUN/task.json names, with its overrides. --task names another,
     a registered env or package.module:factory; a run trained from Python has no
     task.json and needs it. --env-overrides NAME=VALUE go on top, e.g. to evaluate
-    under other physics.
+    under other physics. --render.NAME VALUE sets how the video is drawn.
     """
     from mjzoo.harness import training
 
@@ -193,7 +244,7 @@ def evaluate(
         trained.cfg, trained.task, state, jax.random.key(seed), episodes, steps
     )
     print(f"{trained.spec}: mean return {float(mean):.2f} ± {float(jnp.std(returns)):.2f} over {episodes} episodes")
-    path = training.write_video(trained.task, trajectory, video or run / "eval.mp4")
+    path = training.write_video(trained.task, trajectory, video or run / "eval.mp4", render)
     if path is not None:
         print(f"video: {path}")
 
@@ -210,6 +261,7 @@ def plan(
     seed: int = 0,
     video: bool = True,
     impl: Literal["jax", "warp"] | None = None,
+    render: RenderConfig = RenderConfig(),
 ) -> None:
     """Solve ENV (a registered env or package.module:factory) closed loop with a sampling
     planner and write summary.json (success, final_cost, plan_hz, plan_latency_ms),
@@ -219,7 +271,8 @@ def plan(
     rate --plan-hz, by default the env's replanning period; --offline runs the whole
     episode as one jitted scan instead. --config takes NAME=VALUE fields of the
     planner's Config, over the env's defaults; --env-overrides NAME=VALUE change the
-    env; --impl picks its physics (as for train). The planning task, hooks, success
+    env; --impl picks its physics (as for train); --render.NAME VALUE sets how the
+    video is drawn. The planning task, hooks, success
     test and length (--seconds) are the env's,
     from mjzoo.envs.planning: for a factory its module's PLANNING, else one episode,
     replanning every step, with no success test (final_cost tells).
@@ -241,7 +294,7 @@ def plan(
     key = jax.random.key(seed)
     result, stats = realtime.offline(problem, key) if offline else realtime.realtime(problem, key, plan_hz)
     summary = plan_report.write(out, problem, result, stats, video, env=env, algorithm=algorithm,
-                                mode="offline" if offline else "realtime")  # fmt: skip
+                                mode="offline" if offline else "realtime", render=render)  # fmt: skip
     print(json.dumps(summary, indent=2))
     print(f"plot:  {out / 'plan.png'}")
     print(f"video: {out / 'plan.mp4'}" if (out / "plan.mp4").exists() else "video: (not written)")
