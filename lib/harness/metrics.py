@@ -24,14 +24,16 @@ import warnings
 from collections.abc import Iterator, Mapping, Sequence
 from pathlib import Path
 from types import TracebackType
-from typing import Any, Self, TextIO
+from typing import TYPE_CHECKING, Any, Self, TextIO
 
 import jax
 import numpy as np
 import rich.console
 import rich.progress
 import rich.text
-from tensorboardX import SummaryWriter
+
+if TYPE_CHECKING:
+    from tensorboardX import SummaryWriter
 
 __all__ = ["METRICS_FILE", "MetricsWriter", "Progress", "device_memory", "read_metrics"]
 
@@ -142,11 +144,26 @@ def device_memory(devices: Sequence[Any] | None = None) -> tuple[dict[str, float
     return values, silent
 
 
+def _tensorboardx() -> Any:
+    """tensorboardX, imported without PyTorch: its writer imports torch where installed
+    (only to accept torch tensors), which costs seconds of every launch."""
+    if "tensorboardX" in sys.modules or "torch" in sys.modules:
+        import tensorboardX
+
+        return tensorboardX
+    sys.modules["torch"] = None  # `import torch` raises ImportError, which tensorboardX expects
+    try:
+        import tensorboardX
+    finally:
+        del sys.modules["torch"]
+    return tensorboardX
+
+
 def _tensorboard_writer(directory: Path, first_step: int) -> SummaryWriter:
     """A writer into `directory`. If an earlier run logged there, TensorBoard is told to
     hide its events from `first_step` on (``purge_step``), as `read_metrics` does."""
     resumed = directory.is_dir() and any(directory.glob("events.out.tfevents.*"))
-    return SummaryWriter(
+    return _tensorboardx().SummaryWriter(
         str(directory),
         purge_step=first_step if resumed else None,
         flush_secs=10,

@@ -5,7 +5,10 @@ from __future__ import annotations
 import io
 import json
 import math
+import os
 import struct
+import subprocess
+import sys
 
 import jax.numpy as jnp
 import numpy as np
@@ -209,3 +212,18 @@ def test_device_memory_names_each_device_and_those_without_statistics():
                       "memory/gpu1/bytes_in_use": 7.0}  # fmt: skip
     assert silent == ["cpu0"]
     assert metrics.device_memory() == ({}, ["cpu0"])  # what XLA's CPU reports: nothing
+
+
+def test_tensorboard_logging_does_not_import_pytorch(tmp_path):
+    """tensorboardX's writer imports torch where it is installed, seconds of every
+    launch; mjzoo logs without it. A stand-in `torch` package records any import."""
+    (tmp_path / "torch").mkdir()
+    marker = tmp_path / "imported"
+    (tmp_path / "torch" / "__init__.py").write_text(f"open({str(marker)!r}, 'w').close()\n")
+    code = (f"import os\nfrom mjzoo.harness.metrics import MetricsWriter\nw = MetricsWriter({str(tmp_path / 'run')!r})\n"
+            f"w.write(1, {{'loss': 1.0}})\nw.close()\nprint(os.path.exists({str(marker)!r}))\n"
+            f"import torch\nprint(os.path.exists({str(marker)!r}))\n")  # fmt: skip
+    env = {**os.environ, "PYTHONPATH": os.pathsep.join(filter(None, [str(tmp_path), os.environ.get("PYTHONPATH")]))}
+    result = subprocess.run([sys.executable, "-c", code], env=env, capture_output=True, text=True, check=True, timeout=120)
+    assert list((tmp_path / "run" / "tensorboard").glob("events.out.tfevents.*"))  # TensorBoard's file was written
+    assert result.stdout.split() == ["False", "True"]  # not imported by logging; the stand-in itself works
