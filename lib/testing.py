@@ -115,7 +115,8 @@ def check_task(
         raise TaskCheckError(failures, skipped) from error
 
     states = trajectory.next_state
-    check("reset_matches_transition", lambda: _differences(first, jax.tree.map(lambda x: x[:, 0], states)))
+    step_0 = lambda x: jax.ShapeDtypeStruct(x.shape[:1] + x.shape[2:], x.dtype)  # noqa: E731 (types only: no compile)
+    check("reset_matches_transition", lambda: _differences(first, jax.tree.map(step_0, states)))
     check("scalars", lambda: _scalar_problems(states, num_envs, num_steps))
     check("reward_terms", lambda: _reward_terms_problem(states))
     check("finite", lambda: _non_finite(first, states))
@@ -195,9 +196,9 @@ def _scalar_problems(states: State, num_envs: int, num_steps: int) -> str | None
 
 
 def _reward_terms_problem(states: State) -> str | None:
-    terms = running.reward_terms(states)
-    total = np.asarray(sum(terms.values(), jnp.zeros_like(states.reward)))
+    terms = {name: np.asarray(term) for name, term in running.reward_terms(states).items()}
     reward = np.asarray(states.reward)
+    total = sum(terms.values(), np.zeros_like(reward))  # on the host: no compile
     wrong = ~np.isclose(total, reward, rtol=1e-5, atol=1e-5, equal_nan=True)
     if wrong.any():
         env, step = np.argwhere(wrong)[0]
@@ -250,9 +251,17 @@ def _nudged(task: Task) -> Task:
     def nudge(x):
         if isinstance(x, float):
             return x * (1 + NUDGE)
-        if isinstance(x, (np.ndarray, np.generic, jax.Array)) and jnp.issubdtype(x.dtype, jnp.floating):
+        if not (isinstance(x, (np.ndarray, np.generic, jax.Array)) and jnp.issubdtype(x.dtype, jnp.floating)):
+            return x
+        if isinstance(x, jax.Array) and (x.weak_type or len(x.sharding.device_set) > 1):
             return (x * (1 + NUDGE)).astype(x.dtype)
-        return x
+        # On the host: an eager multiply per leaf shape is a compile each (hundreds per model).
+        value = (np.asarray(x) * (1 + NUDGE)).astype(x.dtype)
+        if not isinstance(x, jax.Array):
+            return value
+        # Placed as the leaf was (committed or not): the jit cache keys on it, and a
+        # difference would recompile without a retrace.
+        return jax.device_put(value, x.sharding) if getattr(x, "_committed", True) else jnp.asarray(value)
 
     return jax.tree.map(nudge, task)
 
