@@ -11,6 +11,7 @@ between two jitted calls.
 from __future__ import annotations
 
 import collections
+import socket
 import threading
 import time
 from typing import Any
@@ -42,7 +43,7 @@ class Viewer:
                  speed: float | str = 1.0, playing: bool = True, track_body: str | None = None,
                  record: bool = False, label: str = "mjzoo view"):  # fmt: skip
         self.source, self.display_hz, self.record = source, display_hz, record
-        self.server = viser.ViserServer(host=host, port=port, label=label, verbose=False)
+        self.server = viser.ViserServer(host=host, port=port or _free_port(), label=label, verbose=False)
         self.lock = threading.RLock()
         self.scene = Scene(self.server, source.mj_model, source.num_envs)
         self.speed, self.playing, self.shown, self.track = speed, playing, None, None
@@ -111,9 +112,9 @@ class Viewer:
                 if self.playing:
                     behind = self._catch_up(behind + (now - last) * self._speed_factor())
                 last = now
-                if now >= next_display:
+                if now >= next_display and self.playing:  # paused: the actions display what they change
                     self.display()
-                    next_display = max(next_display + period, now)
+                    next_display = max(next_display + period, time.perf_counter())  # no bursts after a slow call
             if not (self.playing and self.speed == "max"):
                 time.sleep(max(0.0, min(next_display - time.perf_counter(), 0.005)))
 
@@ -183,6 +184,13 @@ class Viewer:
             offset = np.asarray(camera.position) - np.asarray(camera.look_at)
             with client.atomic():
                 camera.look_at, camera.position = target, target + offset
+
+
+def _free_port() -> int:
+    """A TCP port no one listens on now (port 0 asks for any)."""
+    with socket.socket() as s:
+        s.bind(("", 0))
+        return s.getsockname()[1]
 
 
 class _Rate:

@@ -5,7 +5,8 @@ then steps the simulation `replan_every` control steps under the new plan, as
 `mjzoo.planning.closed_loop.run` does, one jitted call each. The traces drawn are a
 subset of the replan's own samples (the same key, so the same knots: exact for
 predictive sampling and MPPI, CEM's explore samples aside) and the chosen plan, rolled
-out in the planning task, as positions of one body or site over the horizon.
+out in the planning task, as positions of one site or body (its centre of mass) over
+the horizon.
 
 The planner's `Config` is a static argument of these jitted functions: a new value
 (`set_config`) compiles them again, keeping the simulated and the planner's state.
@@ -34,7 +35,8 @@ __all__ = ["Planning", "trace_point", "config_floats"]
 
 def trace_point(mj_model: mujoco.MjModel, name: str | None = None) -> tuple[str, int]:
     """("body" or "site", id) of the point traces follow: `name` (a body or a site), or
-    by default the model's first site, else its last body (the end of a chain)."""
+    by default the model's first site, else its last body (the end of a chain). A body
+    is traced by its centre of mass."""
     if name is None:
         return ("site", 0) if mj_model.nsite else ("body", mj_model.nbody - 1)
     for kind, obj in (("body", mujoco.mjtObj.mjOBJ_BODY), ("site", mujoco.mjtObj.mjOBJ_SITE)):
@@ -68,8 +70,7 @@ class Planning:
         """The jitted replan, simulation steps and traces for `self.config` (static)."""
         self.compiles += 1
         self._replan = jax.jit(self._replan_fn)
-        self._simulate = jax.jit(self._simulate_fn)
-        self._trace = jax.jit(self._traces_fn)
+        self._after = jax.jit(self._after_fn)  # traces and simulation steps: one compile
 
     def reset(self, seed: int = 0) -> None:
         self.key = jax.random.key(seed)
@@ -87,9 +88,9 @@ class Planning:
         new = jax.block_until_ready(self._replan(p.plan_task, self.planner_state, self.sim_state, plan_key,
                                                  p.terminal_value))  # fmt: skip
         self.latencies = (self.latencies + [time.perf_counter() - tick])[-50:]
-        self.points = self._trace(p.plan_task, self.planner_state, new, self.sim_state, plan_key)
+        self.points, self.sim_state = self._after(p.plan_task, p.sim_task, self.planner_state, new, self.sim_state,
+                                                  plan_key, sim_key)  # fmt: skip
         self.planner_state = new
-        self.sim_state = self._simulate(p.sim_task, new, self.sim_state, sim_key)
         self.steps += p.replan_every
         return p.replan_every
 
@@ -134,6 +135,11 @@ class Planning:
         return closed_loop.replan(self.problem.planner, self.config, plan_task, planner_state, sim_state, key,
                                   self.problem.hooks, value)  # fmt: skip
 
+    def _after_fn(self, plan_task, sim_task: Task, old, new, sim_state: State, plan_key: jax.Array,
+                  sim_key: jax.Array) -> tuple[jax.Array, State]:  # fmt: skip
+        """(the traces of this replan, the simulation `replan_every` steps on under `new`)."""
+        return self._traces_fn(plan_task, old, new, sim_state, plan_key), self._simulate_fn(sim_task, new, sim_state, sim_key)
+
     def _simulate_fn(self, sim_task: Task, planner_state, sim_state: State, key: jax.Array) -> State:
         def body(state: State, key: jax.Array) -> tuple[State, None]:
             return closed_loop.sim_step(self.config, sim_task, planner_state, state, key, self.problem.hooks)[0], None
@@ -159,7 +165,7 @@ class Planning:
 
         def body(state: State, action: jax.Array) -> tuple[State, jax.Array]:
             state = transition(task, state, action, jax.random.key(0))
-            where = state.data.site_xpos if kind == "site" else state.data.xpos
+            where = state.data.site_xpos if kind == "site" else state.data.xipos  # a hinge's body origin stays put
             return state, where[index]
 
         return jax.lax.scan(body, start, sequence)[1]

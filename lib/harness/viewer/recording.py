@@ -69,7 +69,7 @@ class Recording:
 
 def from_dataset(mj_model: mujoco.MjModel, dataset, episodes: int = 1) -> Recording:
     """The first `episodes` episodes of a `mjzoo.harness.datasets.Dataset`."""
-    names = tuple(mujoco.mj_id2name(mj_model, mujoco.mjtObj.mjOBJ_JNT, j) for j in range(mj_model.njnt))
+    names = tuple(mujoco.mj_id2name(mj_model, mujoco.mjtObj.mjOBJ_JOINT, j) for j in range(mj_model.njnt))
     if tuple(dataset.joint_names) != names:
         raise ValueError(f"recording: the dataset's joints {list(dataset.joint_names)} are not the model's {list(names)}")
     e = max(1, min(episodes, dataset.num_episodes))
@@ -80,7 +80,7 @@ def from_dataset(mj_model: mujoco.MjModel, dataset, episodes: int = 1) -> Record
 
 def from_clip(mj_model: mujoco.MjModel, clip: motion.Clip) -> Recording:
     """One motion clip (`mjzoo.motion.load_file`), checked against the model's joints."""
-    names = tuple(mujoco.mj_id2name(mj_model, mujoco.mjtObj.mjOBJ_JNT, j) for j in range(mj_model.njnt))
+    names = tuple(mujoco.mj_id2name(mj_model, mujoco.mjtObj.mjOBJ_JOINT, j) for j in range(mj_model.njnt))
     if tuple(clip.joint_names) != names or clip.qpos.shape[-1] != mj_model.nq:
         raise ValueError(f"recording: clip {clip.name!r} has joints {list(clip.joint_names)}; the model has {list(names)}")
     return Recording(mj_model, np.asarray(clip.qpos)[None], 1.0 / clip.fps)

@@ -120,6 +120,7 @@ class Scene:
         self.spacing = spacing or _spacing(mj_model)
         self.offsets = np.zeros((num_envs, 3), np.float32)
         self.offsets[:, 0] = self.spacing * (np.arange(num_envs) - (num_envs - 1) / 2)
+        _stage(server, mj_model, float(self.offsets[-1, 0] - self.offsets[0, 0]))
         self.ids = {g.name: g.body_id for g in self.groups}
         self.handles: dict[tuple[int, str], viser.FrameHandle] = {}
         for env in range(num_envs):
@@ -129,11 +130,13 @@ class Scene:
     def _add(self, env: int, group: BodyGroup) -> viser.FrameHandle:
         frame = self.server.scene.add_frame(f"/env{env}/{group.name}", show_axes=False, position=self.offsets[env])
         for geom in group.geoms:
-            if env > 0 and group.body_id == 0 and _is_plane(geom):
+            floor = group.body_id == 0 and _is_plane(geom)
+            if floor and env > 0:
                 continue  # one floor under all environments (overlapping copies flicker)
+            name = f"/floor/{geom.name}" if floor else f"/env{env}/{group.name}/{geom.name}"
             color = tuple(int(255 * c) for c in geom.rgba[:3])
             opacity = float(geom.rgba[3]) if geom.rgba[3] < 1 else None
-            self.server.scene.add_mesh_simple(f"/env{env}/{group.name}/{geom.name}", geom.vertices, geom.faces,
+            self.server.scene.add_mesh_simple(name, geom.vertices, geom.faces,
                                               color=color, opacity=opacity, position=geom.pos, wxyz=geom.quat)  # fmt: skip
         return frame
 
@@ -148,9 +151,24 @@ class Scene:
 
 
 def _is_plane(geom: Geom) -> bool:
-    return geom.name == "floor" or (np.ptp(geom.vertices[:, 2]) < 0.01 and len(geom.vertices) == 8)
+    """A plane geom's mesh: a thin box (see `geom_mesh`)."""
+    return len(geom.vertices) == 8 and float(np.ptp(geom.vertices[:, 2])) < 0.01
 
 
 def _spacing(mj_model: mujoco.MjModel) -> float:
     """Side-by-side distance: the model's extent (its statistic), at least 1 m."""
     return float(max(1.0, 2.5 * mj_model.stat.extent))
+
+
+def _stage(server: viser.ViserServer, mj_model: mujoco.MjModel, width: float) -> None:
+    """MuJoCo's z up, plain lights (no image-based lighting: its HDRI comes from the
+    internet, and washes colours out), and a first camera framing every environment."""
+    server.scene.set_up_direction("+z")
+    server.scene.configure_environment_map(None)
+    server.scene.configure_default_lights(enabled=False)
+    server.scene.add_light_hemisphere("/lights/sky", sky_color=(255, 255, 255), ground_color=(90, 90, 100), intensity=1.2)
+    server.scene.add_light_directional("/lights/sun", intensity=1.8, wxyz=(0.92, 0.2, -0.2, 0.25), position=(0, 0, 5))
+    centre, extent = np.asarray(mj_model.stat.center, float), float(mj_model.stat.extent)
+    distance = 1.3 * extent + 0.5 * width
+    server.initial_camera.look_at = centre
+    server.initial_camera.position = centre + distance * np.array([0.0, -1.0, 0.35])

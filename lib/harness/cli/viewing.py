@@ -1,0 +1,224 @@
+"""`mjzoo view`: a live browser viewer (`mjzoo.harness.viewer`) of a task, a trained run,
+a sampling planner or a recording, with KSim's viewer options (a duration, frames or a
+video of what was shown)."""
+
+from __future__ import annotations
+
+from pathlib import Path
+from typing import Annotated, Any, Literal
+
+import imageio.v3 as iio
+import mujoco
+import numpy as np
+import tyro
+
+import mjzoo
+from mjzoo.harness import datasets, rendering
+from mjzoo.harness.cli import runs
+from mjzoo.harness.cli.arguments import (PLANNERS, UsageError, algorithm_module, at_least_one, build_config,
+                                         checking, parse_assignments)  # fmt: skip
+from mjzoo.harness.rendering import RenderConfig
+
+__all__ = ["view", "target_kind"]
+
+Kind = Literal["run", "dataset", "clip", "task"]
+_FRAME = "frame_{:05d}.png"
+_SPEEDS = (0.25, 0.5, 1.0, 2.0, 4.0)
+
+
+def view(
+    target: Annotated[str, tyro.conf.Positional],
+    task: str | None = None,
+    env_overrides: tuple[str, ...] = (),
+    controls: Literal["zero", "random", "sliders"] = "zero",
+    planner: Literal["predictive_sampling", "cem", "mppi"] | None = None,
+    config: tuple[str, ...] = (),
+    sampled: bool = False,
+    num_envs: int = 1,
+    seconds: float | None = None,
+    speed: float = 1.0,
+    port: int = 8080,
+    host: str = "0.0.0.0",
+    track_body: str | None = None,
+    trace: str | None = None,
+    seed: int = 0,
+    save_frames: Path | None = None,
+    save_video: Path | None = None,
+    overwrite: bool = False,
+    render: RenderConfig = RenderConfig(),
+) -> None:
+    """Show TARGET live in a browser (http://localhost:PORT) until Ctrl-C, or for
+    --seconds simulated seconds.
+
+    TARGET is recognised in this order: a directory holding config.json is a trained
+    run (its newest checkpoint's policy, deterministic unless --sampled; its task
+    as in `mjzoo eval`, or --task); a directory holding dataset.npz (or that file) is
+    a `mjzoo collect` dataset, played back with a timeline (--num-envs episodes side
+    by side; its task from meta.json, or --task); another .npz file is a motion clip
+    (mjzoo.motion), on the model of --task, by default the registered env its file
+    name starts with (cartpole_swingup_mppi.npz: cartpole_swingup); anything else is a
+    task spec, a registered env or package.module:factory, run under --controls (zero,
+    uniform random, or a slider per actuator), or solved live by --planner with
+    --config NAME=VALUE fields of its Config, drawing its sampled rollouts and plan as
+    paths of --trace (a body or site). --env-overrides NAME=VALUE change the task;
+    --num-envs runs a batch side by side; --speed 0.25-4 sets the playback speed;
+    --track-body makes the camera follow a body.
+
+    --save-frames DIR writes each displayed frame as DIR/frame_NNNNN.png, and
+    --save-video PATH (.mp4 or .gif) a video of them, when the viewer ends, drawn
+    offscreen as --render.NAME VALUE says; existing files are kept unless --overwrite.
+    """
+    from mjzoo.harness import viewer
+
+    with checking():
+        kind = _check_flags(target, controls, planner, config, sampled, num_envs, seconds, speed, port)
+        _check_outputs(save_frames, save_video, overwrite)
+        source = _source(kind, target, task, env_overrides, controls, planner, config, sampled, num_envs, seed, trace)
+        _check_body(source.mj_model, track_body)
+    shown = viewer.serve(source, port, host=host, speed=speed, track_body=track_body,
+                         record=save_frames is not None or save_video is not None)  # fmt: skip
+    print(f"mjzoo view: {target} at http://localhost:{shown.port} ({'Ctrl-C to stop' if seconds is None else f'{seconds:g} s'})")
+    try:
+        shown.wait(seconds)
+    finally:
+        shown.stop()
+    _write(shown, save_frames, save_video, render)
+
+
+def target_kind(target: str) -> Kind:
+    """What TARGET names (see `view`): "run", "dataset", "clip" or "task"."""
+    path = Path(target)
+    if path.is_dir() and (path / "config.json").is_file():
+        return "run"
+    if path.is_dir() and (path / datasets.ARRAYS).is_file() or path.name == datasets.ARRAYS:
+        return "dataset"
+    if path.suffix == ".npz":
+        return "clip"
+    if path.is_dir():
+        raise UsageError(f"{target}: a directory without config.json (a run) or {datasets.ARRAYS} (a dataset)")
+    return "task"
+
+
+def _check_flags(target: str, controls: str, planner: str | None, config: tuple[str, ...], sampled: bool,
+                 num_envs: int, seconds: float | None, speed: float, port: int) -> Kind:  # fmt: skip
+    """The flags that do not fit TARGET's kind, or are out of range."""
+    kind = target_kind(target)
+    at_least_one(num_envs=num_envs)
+    if seconds is not None and not seconds > 0:
+        raise UsageError(f"--seconds must be > 0, got {seconds}")
+    if speed not in _SPEEDS:
+        raise UsageError(f"--speed must be one of {', '.join(f'{s:g}' for s in _SPEEDS)}, got {speed:g}")
+    if not 0 <= port < 65536:
+        raise UsageError(f"--port must be 0 (any free port) to 65535, got {port}")
+    wrong = {"--controls": controls != "zero" and kind != "task", "--planner": planner is not None and kind != "task",
+             "--sampled": sampled and kind != "run", "--config": bool(config) and planner is None}  # fmt: skip
+    for flag, bad in wrong.items():
+        if bad:
+            needs = {"--sampled": "a run", "--config": "--planner"}.get(flag, "a task")
+            raise UsageError(f"{flag}: only for {needs}; {target} is a {kind}")
+    if planner is not None and (controls != "zero" or num_envs > 1):
+        raise UsageError("--planner: plans one env; --controls and --num-envs do not apply")
+    return kind
+
+
+def _check_outputs(frames: Path | None, video: Path | None, overwrite: bool) -> None:
+    """Refuses outputs that exist (unless --overwrite) or a video type we do not write."""
+    if video is not None:
+        if video.suffix.lower() not in (".mp4", ".gif"):
+            raise UsageError(f"--save-video {video}: must end in .mp4 or .gif")
+        if video.exists() and not overwrite:
+            raise UsageError(f"--save-video {video} already exists: give --overwrite to replace it")
+    if frames is not None:
+        if frames.exists() and not frames.is_dir():
+            raise UsageError(f"--save-frames {frames}: is a file, not a directory")
+        if frames.is_dir() and any(frames.glob("frame_*.png")) and not overwrite:
+            raise UsageError(f"--save-frames {frames} already holds frames: give --overwrite to replace them")
+
+
+def _check_body(mj_model: mujoco.MjModel, name: str | None) -> None:
+    if name is not None and mujoco.mj_name2id(mj_model, mujoco.mjtObj.mjOBJ_BODY, name) < 0:
+        bodies = [mujoco.mj_id2name(mj_model, mujoco.mjtObj.mjOBJ_BODY, b) for b in range(1, mj_model.nbody)]
+        raise UsageError(f"--track-body {name!r}: no such body; bodies: {', '.join(map(str, bodies))}")
+
+
+def _source(kind: Kind, target: str, task: str | None, env_overrides: tuple[str, ...], controls: str,
+            planner: str | None, config: tuple[str, ...], sampled: bool, num_envs: int, seed: int,
+            trace: str | None) -> Any:  # fmt: skip
+    """The viewer source TARGET names."""
+    from mjzoo.harness import viewer
+
+    if kind == "run":
+        return _run(Path(target), task, env_overrides, sampled, num_envs, seed)
+    if kind in ("dataset", "clip"):
+        return _recording(kind, Path(target), task, env_overrides, num_envs)
+    if task is not None:
+        raise UsageError(f"--task: TARGET {target} is itself the task")
+    overrides = parse_assignments(env_overrides, "--env-overrides")
+    if planner is None:
+        return viewer.env(mjzoo.envs.make(target, **overrides), controls, num_envs, seed)
+    module = algorithm_module(planner, PLANNERS)
+    cfg = build_config(module, target, parse_assignments(config, "--config"))
+    return viewer.planner(mjzoo.envs.closed_loop_problem(target, module, cfg, **overrides), seed, trace=trace)
+
+
+def _run(run: Path, task: str | None, env_overrides: tuple[str, ...], sampled: bool, num_envs: int, seed: int) -> Any:
+    """A trained run's policy from its newest intact checkpoint (as `mjzoo eval` reads it)."""
+    from mjzoo.harness import viewer
+
+    trained = runs.load(run, task, env_overrides)
+    act = trained.module.policy(trained.cfg, trained.task, deterministic=not sampled)
+    params = trained.module.policy_params(runs.restore(run, trained))
+    return viewer.policy(trained.task, act, params, num_envs, seed)
+
+
+def _recording(kind: Kind, path: Path, task: str | None, env_overrides: tuple[str, ...], num_envs: int) -> Any:
+    from mjzoo.harness import viewer
+
+    if not path.exists():
+        raise UsageError(f"{path}: no such file")
+    overrides = parse_assignments(env_overrides, "--env-overrides")
+    if kind == "dataset":
+        directory = path if path.is_dir() else path.parent
+        data = datasets.load(directory)
+        spec = task or data.source.get("task")
+        if spec is None:
+            raise UsageError(f"{directory}: its meta.json names no task; give --task")
+        own = data.source.get("env_overrides", {}) if spec == data.source.get("task") else {}
+        model = mjzoo.envs.make(spec, **{**own, **overrides}).mj_model
+        return viewer.recording(model, data, episodes=num_envs)
+    clip = mjzoo.motion.load_file(path)
+    spec = task or _env_of_clip(path)
+    return viewer.recording(mjzoo.envs.make(spec, **overrides).mj_model, clip)
+
+
+def _env_of_clip(path: Path) -> str:
+    """The registered env a clip's file name starts with (the longest such name)."""
+    found = [n for n in mjzoo.envs.names() if path.stem == n or path.stem.startswith(n + "_")]
+    if not found:
+        raise UsageError(f"{path}: a motion clip holds no model; name its task with --task ENV")
+    return max(found, key=len)
+
+
+def _write(shown: Any, frames: Path | None, video: Path | None, render: RenderConfig) -> None:
+    """The displayed frames as PNGs and/or a video, drawn offscreen."""
+    if not (frames or video) or not shown.recorded:
+        return
+    model = shown.source.mj_model
+    qpos, mocap_pos, mocap_quat = (np.stack(x) for x in zip(*shown.recorded))
+    config = rendering.with_model_camera(render, model)
+    dt = 1.0 / shown.display_hz  # a frame per display: the video runs as the viewer did
+    drawn = {"mocap_pos": mocap_pos, "mocap_quat": mocap_quat, "dt": dt, "config": config}
+    images = None
+    if frames is not None or (video is not None and video.suffix.lower() == ".gif"):
+        images = rendering.render_frames(model, qpos, **drawn)
+    if images is not None and frames is not None:
+        frames.mkdir(parents=True, exist_ok=True)
+        for i, image in enumerate(images):
+            iio.imwrite(frames / _FRAME.format(i), image)
+        print(f"frames: {len(images)} in {frames}")
+    if video is not None and video.suffix.lower() == ".gif" and images is not None:
+        video.parent.mkdir(parents=True, exist_ok=True)
+        iio.imwrite(video, images, duration=1000 * dt * render.slowdown, loop=0)
+        print(f"video: {video}")
+    elif video is not None and rendering.render_video(model, qpos, video, **drawn) is not None:
+        print(f"video: {video}")
