@@ -315,13 +315,14 @@ def test_resume_keeps_the_runs_own_settings(capsys, tmp_path, monkeypatch, ppo_s
 def test_schedule_and_render_flags_reach_the_settings_and_a_resume_keeps_them(tmp_path, monkeypatch, ppo_state):
     """KSim's validation, logging and render options on the command line; a resumed run
     keeps what it started with (config.json) unless the flag is given again."""
-    seen = []
-    monkeypatch.setattr(ppo, "train", lambda config, task, settings: (seen.append(settings), (None, {}))[1])
+    seen, configs = [], []
+    monkeypatch.setattr(ppo, "train", lambda config, task, settings: (seen.append(settings), configs.append(config), (None, {}))[2])
     run = tmp_path / "run"
-    cli.main(["train", "ppo", ENV, "--out", str(run), "--eval-every", "3", "--eval-seconds", "0.5", "--log-every", "2",
+    cli.main(["train", "ppo", ENV, "--out", str(run), "--rollout-seconds", "0.5", "--eval-every", "3", "--eval-seconds", "0.5", "--log-every", "2",
               "--no-log-train-metrics", "--video-every", "4", "--profile-memory", "--render.width", "64",
               "--render.contact-points", "--render.lookat", "0", "0", "1"])  # fmt: skip
     new = seen[-1]
+    assert configs[-1].unroll_length == 25  # KSim's rollout_length_seconds: 0.5 s of 0.02 s control steps
     assert (new.eval_every, new.eval_seconds, new.log_every, new.log_train_metrics, new.video_every) == (3, 0.5, 2, False, 4)
     assert new.profile_memory and new.render == rendering.RenderConfig(width=64, contact_points=True, lookat=(0, 0, 1))
     info = json.loads((write_run(tmp_path / "resumed") / "config.json").read_text())

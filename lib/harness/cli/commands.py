@@ -114,6 +114,7 @@ def train(
     config: tuple[str, ...] = (),
     env_overrides: tuple[str, ...] = (),
     total_steps: int | None = None,
+    rollout_seconds: float | None = None,
     resume: Path | None = None,
     seed: int | None = None,
     eval_envs: int | None = None,
@@ -128,7 +129,8 @@ def train(
     and eval.mp4 to --out (default runs/ENV-ALGORITHM), which must not hold a run.
 
     --config takes NAME=VALUE fields of the algorithm's Config, over the env's defaults;
-    a factory has none, so the Config's own apply. --env-overrides takes NAME=VALUE
+    a factory has none, so the Config's own apply; --rollout-seconds gives its
+    unroll_length in simulated seconds. --env-overrides takes NAME=VALUE
     overrides of the env, as `mjzoo envs` lists them, or a factory's keyword arguments.
     --impl picks the physics (MJX's JAX implementation or MuJoCo Warp; default Warp
     where it is installed and a CUDA GPU is present). Evaluation runs the task's
@@ -149,18 +151,15 @@ def train(
             out, env_values, config_values, run_settings = _resumed(resume, out, env, algorithm, env_overrides,
                                                                     config, impl)  # fmt: skip
         else:
-            env_values = parse_assignments(env_overrides, "--env-overrides")
-            env_values.update({"impl": impl} if impl else {})
-            config_values = parse_assignments(config, "--config")
-            run_settings = dict(RUN_DEFAULTS)
+            env_values = {**parse_assignments(env_overrides, "--env-overrides"), **({"impl": impl} if impl else {})}
+            config_values, run_settings = parse_assignments(config, "--config"), dict(RUN_DEFAULTS)
         given = {"seed": seed, "eval_envs": eval_envs, "updates_per_chunk": updates_per_chunk,
                  **_changed(schedule, Schedule())}  # fmt: skip
         run_settings.update({k: v for k, v in given.items() if v is not None})
         run_settings["render"] = _render(run_settings.pop("render", None), render)
-        if total_steps is not None:
-            config_values["total_steps"] = total_steps
-        cfg = build_config(module, env, config_values)
         task = mjzoo.envs.make(env, **env_values)
+        config_values.update(_lengths(task, total_steps, rollout_seconds))
+        cfg = build_config(module, env, config_values)
         if task.time_limit is None and run_settings.get("eval_steps") is None and run_settings.get("eval_seconds") is None:
             raise UsageError(f"{env}: the task has no time limit (mjzoo.with_time_limit) to end its evaluation "
                              "episodes; give --eval-steps or --eval-seconds")  # fmt: skip
@@ -178,6 +177,19 @@ def train(
     print(f"final eval/return {last.get('eval/return', float('nan')):.2f}")
     print(f"curves: {out / 'curves.png'}")
     print(f"video:  {out / 'eval.mp4'}" if (out / "eval.mp4").exists() else "video:  (not written)")
+
+
+def _lengths(task: mjzoo.Task, total_steps: int | None, rollout_seconds: float | None) -> dict[str, int]:
+    """The Config fields --total-steps and --rollout-seconds set (KSim's rollout_length_seconds:
+    unroll_length in the task's control steps)."""
+    from mjzoo.harness import training
+
+    lengths = {} if total_steps is None else {"total_steps": total_steps}
+    if rollout_seconds is not None:
+        if not rollout_seconds > 0:
+            raise UsageError(f"--rollout-seconds must be > 0, got {rollout_seconds}")
+        lengths["unroll_length"] = training.seconds_to_steps(task, rollout_seconds)
+    return lengths
 
 
 def _render(saved: dict | None, given: RenderConfig) -> RenderConfig:
