@@ -154,7 +154,7 @@ def main() -> int:
     shown = viewer.serve(source, port=0, host="127.0.0.1")
     try:
         result = shoot(f"http://127.0.0.1:{shown.port}", args.out, binary,
-                       lambda: bool(shown.server.get_clients()), args.timeout)  # fmt: skip
+                       lambda: bool(shown.server.get_clients()) and shown.frames_shown > 30, args.timeout)  # fmt: skip
     finally:
         shown.stop()
     print(json.dumps({**result, "total_seconds": round(time.time() - begin, 1)}))

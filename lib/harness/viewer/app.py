@@ -110,7 +110,9 @@ class Viewer:
             now = time.perf_counter()
             with self.lock:
                 if self.playing:
-                    behind = self._catch_up(behind + (now - last) * self._speed_factor())
+                    behind = self._catch_up(behind + (now - last) * self._speed_factor(), next_display)
+                else:
+                    behind = 0.0  # a pause forgives what was due
                 last = now
                 if now >= next_display and self.playing:  # paused: the actions display what they change
                     self.display()
@@ -121,13 +123,14 @@ class Viewer:
     def _speed_factor(self) -> float:
         return float("inf") if self.speed == "max" else float(self.speed)
 
-    def _catch_up(self, behind: float) -> float:
-        """Advances while at least one call's simulated time is due; returns what is
-        still due (`behind`, seconds). "max" speed: one call per loop turn."""
+    def _catch_up(self, behind: float, deadline: float) -> float:
+        """Advances while simulated time is due (`behind`, seconds) until the next
+        display is (`deadline`): a source slower than the speed asked for drops time
+        rather than frames. Returns what is still due. "max" speed: one call a turn."""
         if self.speed == "max":
             self._advance()
             return 0.0
-        while behind > 0 and not self._stop.is_set():
+        while behind > 0 and self.playing and time.perf_counter() < deadline:
             behind -= self._advance() * self.source.dt
         return min(behind, _BEHIND_LIMIT_S)
 

@@ -65,6 +65,8 @@ class Planning:
         self.traces, self.compiles, self.steps, self.latencies = 0, 0, 0, []
         self._compile()
         self.reset(seed)
+        self.advance()  # compile before serving
+        self.reset(seed)
 
     def _compile(self) -> None:
         """The jitted replan, simulation steps and traces for `self.config` (static)."""
@@ -78,7 +80,7 @@ class Planning:
         self.sim_state = complete(self.problem.sim_task, reset(self.problem.sim_task, reset_key))
         self.planner_state = closed_loop.first_plan(self.problem.planner, self.config, self.problem.plan_task,
                                                     self.sim_state, self.problem.hooks)  # fmt: skip
-        self.points = None
+        self.points, self.latencies, self.steps = None, [], 0
 
     def advance(self) -> int:
         """One replan (timed), then `replan_every` simulation steps; returns the steps."""

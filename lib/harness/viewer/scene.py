@@ -169,6 +169,6 @@ def _stage(server: viser.ViserServer, mj_model: mujoco.MjModel, width: float) ->
     server.scene.add_light_hemisphere("/lights/sky", sky_color=(255, 255, 255), ground_color=(90, 90, 100), intensity=1.2)
     server.scene.add_light_directional("/lights/sun", intensity=1.8, wxyz=(0.92, 0.2, -0.2, 0.25), position=(0, 0, 5))
     centre, extent = np.asarray(mj_model.stat.center, float), float(mj_model.stat.extent)
-    distance = 1.3 * extent + 0.5 * width
+    distance = 1.0 * extent + 0.45 * width
     server.initial_camera.look_at = centre
     server.initial_camera.position = centre + distance * np.array([0.0, -1.0, 0.35])

@@ -128,6 +128,7 @@ class Simulation:
         self._reset = jax.jit(self._reset_all)
         self._advance = jax.jit(self._advance_all)
         self.reset(seed)
+        jax.block_until_ready(self._advance(task, act_params, self.states, self.key))  # compile before serving
 
     def reset(self, seed: int = 0) -> None:
         reset_key, self.key = jax.random.split(jax.random.key(seed))
