@@ -3,6 +3,7 @@ SwiftShader, the CPU), wait for the scene, save a screenshot and check that the 
 is not blank.
 
     python scripts/viewer_screenshot.py --out /tmp/viewer.png [--env pendulum_swingup --num-envs 3]
+    python scripts/viewer_screenshot.py --out /tmp/planner.png --planner mppi   # traces drawn
 
 Needs Chromium (Debian: ``apt-get install -y chromium``). Talks to it over the Chrome
 DevTools Protocol (``websockets``, a viser dependency). Exit status 0 when the canvas
@@ -140,6 +141,7 @@ def main() -> int:
     parser.add_argument("--out", type=Path, default=Path("viewer_screenshot.png"))
     parser.add_argument("--env", default="pendulum_swingup")
     parser.add_argument("--num-envs", type=int, default=3)
+    parser.add_argument("--planner", choices=("predictive_sampling", "cem", "mppi"), help="plan the env live instead")
     parser.add_argument("--timeout", type=float, default=40.0)
     args = parser.parse_args()
     binary = find_chromium()
@@ -150,7 +152,13 @@ def main() -> int:
     from mjzoo.harness import viewer
 
     begin = time.time()
-    source = viewer.env(mjzoo.envs.make(args.env), controls="random", num_envs=args.num_envs)
+    if args.planner:
+        import importlib
+
+        module = importlib.import_module(f"mjzoo.algorithms.{args.planner}")
+        source = viewer.planner(mjzoo.envs.closed_loop_problem(args.env, module, module.Config()))
+    else:
+        source = viewer.env(mjzoo.envs.make(args.env), controls="random", num_envs=args.num_envs)
     shown = viewer.serve(source, port=0, host="127.0.0.1")
     try:
         result = shoot(f"http://127.0.0.1:{shown.port}", args.out, binary,

@@ -208,6 +208,7 @@ def test_a_clip_plays_on_the_env_its_name_starts_with():
     [
         ("no_such_env", {}, "no_such_env"),
         ("missing.npz", {}, "missing.npz: no such file"),
+        ("runs/missing", {}, "runs/missing: no such run directory"),
         (ENV, {"sampled": True}, "--sampled: only for a run"),
         (ENV, {"config": ("temperature=1.0",)}, "--config: only for --planner"),
         (ENV, {"speed": 3.0}, "--speed must be one of"),

@@ -96,6 +96,8 @@ def target_kind(target: str) -> Kind:
         return "clip"
     if path.is_dir():
         raise UsageError(f"{target}: a directory without config.json (a run) or {datasets.ARRAYS} (a dataset)")
+    if "/" in target and ":" not in target:  # a path, not a registered name or module:factory
+        raise UsageError(f"{target}: no such run directory, dataset or file")
     return "task"
 
 
