@@ -56,7 +56,8 @@ def test_effort_is_the_sum_of_squared_actions():
 
 
 def test_base_height_observes_z_only():
-    data = mjx.forward(ct.BASE_AND_ARM.model, mjx.make_data(ct.BASE_AND_ARM.model).replace(qpos=jnp.asarray(ct.QPOS0)))
+    data = mjx.make_data(ct.BASE_AND_ARM.model).replace(qpos=jnp.asarray(ct.QPOS0))
+    data = jax.jit(mjx.forward)(ct.BASE_AND_ARM.model, data)  # one compile, not an eager op's each
     item = observations.base_height(ct.MJ)
     np.testing.assert_allclose(jax.jit(item)(ct.BASE_AND_ARM.model, State.create(data, None)), [0.5])
 
@@ -168,7 +169,7 @@ def test_bare_runs_a_catalog_actuator():
     """Ant motors have gear 150: a 75 N m torque limit turns action 1 into ctrl 0.5."""
     physics = mjzoo.envs.base.brax_asset("ant.xml", ctrl_dt=0.05)
     task = locomotion.bare(physics, observations.joint_positions, actuators.torque(physics.mj_model, 75.0))
-    state = mjzoo.reset(task, jax.random.key(0))
+    state = jax.jit(mjzoo.reset)(task, jax.random.key(0))  # eager, each of its ops compiles alone
     next_state = jax.jit(mjzoo.transition)(task, state, jnp.ones(8), jax.random.key(1))
     np.testing.assert_allclose(next_state.data.ctrl, 0.5)
     assert next_state.obs.shape == (8,) and np.isfinite(next_state.obs).all()
