@@ -9,6 +9,8 @@
     plan_report   summary.json, plan.png and plan.mp4 of a planning run
     datasets      a policy's or a planner's recorded episodes on disk, with one
                   motion clip per episode (the references AMP imitates)
+    viewer        a live browser viewer (viser) of tasks, policies, planners and
+                  recordings, with sliders on the task's numbers
     cli           the `mjzoo` command: the application on top, the one module of the
                   package that reaches up to `mjzoo.envs` and `mjzoo.algorithms`
 
@@ -18,7 +20,7 @@ TensorBoard and matplotlib, which a planner on a robot does not need.
 
 from mjzoo import lazy
 
-MODULES = ("training", "metrics", "checkpoints", "plotting", "rendering", "plan_report", "datasets", "cli")
+MODULES = ("training", "metrics", "checkpoints", "plotting", "rendering", "plan_report", "datasets", "viewer", "cli")
 
 __all__ = list(MODULES)
 

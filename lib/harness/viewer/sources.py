@@ -26,6 +26,7 @@ import mujoco
 import numpy as np
 
 from mjzoo import worlds
+from mjzoo.combinators import with_auto_reset
 from mjzoo.parameters import params as task_params
 from mjzoo.running import complete, control_dt, reset, transition
 from mjzoo.types import State, Task
@@ -157,20 +158,16 @@ class Simulation:
         return Frame(qpos, mocap_pos, mocap_quat, xpos, xquat, float(time[0]), terms)
 
     def _reset_all(self, task: Task, keys: jax.Array) -> State:
-        sized = worlds.sized(task, keys.shape[0])  # Warp: a contact pool for every env
+        sized = with_auto_reset(worlds.sized(task, keys.shape[0]))  # Warp: a contact pool for every env
         return jax.vmap(lambda k: complete(sized, reset(sized, k)))(keys)
 
     def _advance_all(self, task: Task, act_params: Any, states: State, key: jax.Array) -> State:
         self.traces += 1  # Python runs only while tracing: counts compiles
-        sized = worlds.sized(task, self.num_envs)
+        sized = with_auto_reset(worlds.sized(task, self.num_envs))  # Warp: a contact pool for every env
 
         def one(state: State, key: jax.Array) -> State:
-            act_key, step_key, reset_key = jax.random.split(key, 3)
-            after = transition(sized, state, self.act(act_params, state.obs, act_key), step_key)
-            fresh = complete(sized, reset(sized, reset_key))
-            done = after.terminated | after.truncated
-            chosen = jax.tree.map(lambda a, b: jnp.where(done, a, b), fresh, after)
-            return chosen.replace(metrics=after.metrics)  # show the finished step's reward terms
+            act_key, step_key = jax.random.split(key)
+            return transition(sized, state, self.act(act_params, state.obs, act_key), step_key)
 
         def body(states: State, key: jax.Array) -> tuple[State, None]:
             return jax.vmap(one)(states, jax.random.split(key, self.num_envs)), None
