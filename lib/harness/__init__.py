@@ -2,10 +2,13 @@
 
     training      the host loop over jitted chunks of an RL algorithm's updates:
                   progress, evaluation, metrics, checkpoints, curves, video
+    settings      how a run is driven: evaluation, logging and video schedules
+    devices       the env batch split over local devices, the rest replicated
     metrics       metrics.jsonl and TensorBoard writers, the progress bar
     checkpoints   atomic orbax checkpoints that resume exactly
     plotting      learning curves from metrics.jsonl
     rendering     MuJoCo frames and MP4 videos of trajectories
+    render_config RenderConfig: how every video, image and curve is drawn
     plan_report   summary.json, plan.png and plan.mp4 of a planning run
     datasets      a policy's or a planner's recorded episodes on disk, with one
                   motion clip per episode (the references AMP imitates)
@@ -20,7 +23,8 @@ TensorBoard and matplotlib, which a planner on a robot does not need.
 
 from mjzoo import lazy
 
-MODULES = ("training", "metrics", "checkpoints", "plotting", "rendering", "plan_report", "datasets", "viewer", "cli")
+MODULES = ("training", "settings", "devices", "metrics", "checkpoints", "plotting", "rendering", "render_config",
+           "plan_report", "datasets", "viewer", "cli")  # fmt: skip
 
 __all__ = list(MODULES)
 

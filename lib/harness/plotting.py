@@ -24,7 +24,7 @@ import numpy as np
 from matplotlib.backends.backend_agg import FigureCanvasAgg
 from matplotlib.figure import Figure
 from mjzoo.harness.metrics import read_metrics
-from mjzoo.harness.rendering import RenderConfig
+from mjzoo.harness.render_config import RenderConfig
 
 __all__ = ["DEFAULT_KEYS", "plot_curves"]
 

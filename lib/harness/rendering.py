@@ -52,105 +52,12 @@ import mujoco
 import numpy as np
 from numpy.typing import ArrayLike
 
+from mjzoo.harness.render_config import RenderConfig
+
 if TYPE_CHECKING:
     from mjzoo.types import Task
 
 __all__ = ["RenderConfig", "render_frames", "render_video", "trajectory_video", "with_model_camera"]
-
-_FREE_CAMERA = ("distance", "azimuth", "elevation", "lookat", "track_body")
-
-
-@dataclasses.dataclass(frozen=True, kw_only=True)
-class RenderConfig:
-    """How every video and image mjzoo writes is drawn (end of training, `mjzoo eval`,
-    `mjzoo plan`, the viewer's recordings) and how learning curves are plotted; KSim's
-    render options. From the CLI: ``--render.NAME VALUE``. Values are checked here;
-    camera and body names when a model is drawn."""
-
-    width: int = 640
-    """Video width in pixels."""
-    height: int = 480
-    """Video height in pixels."""
-    small_width: int = 320
-    """Width of small renders (previews, thumbnails) in pixels."""
-    small_height: int = 240
-    """Height of small renders in pixels."""
-    length_seconds: float | None = None
-    """Simulated seconds drawn, from the start; None: the whole trajectory."""
-    fps: float | None = None
-    """Frames per simulated second (rows are skipped or repeated); None: real time, one frame per row."""
-    slowdown: float = 1.0
-    """Slow motion: the file plays at fps / slowdown frames per second (2.0: half speed)."""
-    shadows: bool = True
-    """Draw shadows (off: several times faster on CPU renderers)."""
-    reflections: bool = True
-    """Draw reflections on reflective materials."""
-    contact_forces: bool = False
-    """Draw contact force arrows."""
-    contact_points: bool = False
-    """Draw contact points."""
-    inertia: bool = False
-    """Draw each body's equivalent-inertia box."""
-    markers: bool = False
-    """Draw debug markers: site frames and centres of mass."""
-    camera: int | str | None = None  # int first: the CLI then reads "0" as an id
-    """A model camera, by id or name; None: a free camera (the fields below)."""
-    distance: float | None = None
-    """Free camera: metres from the point looked at; None: MuJoCo's fit to the model."""
-    azimuth: float | None = None
-    """Free camera: azimuth in degrees; None: MuJoCo's default (90)."""
-    elevation: float | None = None
-    """Free camera: elevation in degrees; None: MuJoCo's default (-45)."""
-    lookat: tuple[float, float, float] | None = None
-    """Free camera: the point looked at (m); None: the model's centre."""
-    track_body: int | str | None = None
-    """Free camera that follows this body (id or name), looking at its subtree's centre of mass."""
-    max_series_per_plot: int = 8
-    """Learning curves: most series one subplot draws (a group such as reward/ keeps the largest)."""
-    plot_figsize: tuple[float, float] = (4.5, 3.0)
-    """Learning curves: width and height of one subplot, in inches (100 dpi)."""
-
-    def __post_init__(self) -> None:
-        for name in ("lookat", "plot_figsize"):  # JSON gives lists back
-            if isinstance(getattr(self, name), list):
-                object.__setattr__(self, name, tuple(getattr(self, name)))
-        for name in ("width", "height", "small_width", "small_height", "max_series_per_plot"):
-            value = getattr(self, name)
-            _require(
-                name, value, isinstance(value, int) and not isinstance(value, bool) and value >= 1, "an integer >= 1"
-            )
-        for name in ("length_seconds", "fps", "distance"):
-            value = getattr(self, name)
-            _require(name, value, value is None or _finite(value) and value > 0, "> 0 or None")
-        _require("slowdown", self.slowdown, _finite(self.slowdown) and self.slowdown > 0, "> 0")
-        _require("lookat", self.lookat, self.lookat is None or _vector(self.lookat, 3), "3 finite numbers or None")
-        figsize_ok = _vector(self.plot_figsize, 2) and min(self.plot_figsize) > 0
-        _require("plot_figsize", self.plot_figsize, figsize_ok, "2 numbers > 0")
-        if self.lookat is not None and self.track_body is not None:
-            raise ValueError("render config: lookat and track_body both choose the point looked at - give one")
-        free = ", ".join(f for f in _FREE_CAMERA if getattr(self, f) is not None)
-        if self.camera not in (None, -1) and free:
-            message = f"camera={self.camera!r} is a model camera; {free} set a free camera - give one or the other"
-            raise ValueError(f"render config: {message}")
-
-    @property
-    def free_camera(self) -> bool:
-        """Whether any free-camera field is set."""
-        return any(getattr(self, f) is not None for f in _FREE_CAMERA)
-
-
-def _finite(value: Any) -> bool:
-    return isinstance(value, (int, float)) and not isinstance(value, bool) and math.isfinite(value)
-
-
-def _vector(value: Any, size: int) -> bool:
-    return isinstance(value, tuple) and len(value) == size and all(map(_finite, value))
-
-
-def _require(name: str, value: Any, ok: bool, allowed: str) -> None:
-    if not ok:
-        raise ValueError(f"render config: {name} must be {allowed}, got {value!r}")
-
 
 # Why a failure is remembered: the backend is fixed when mujoco is imported, so it
 # cannot start working later, and a second attempt after a failed one can abort the
@@ -314,7 +221,7 @@ class _Frames:
         mocap_pos = _optional("mocap_pos", mocap_pos, (len(qpos), mj_model.nmocap, 3))
         mocap_quat = _optional("mocap_quat", mocap_quat, (len(qpos), mj_model.nmocap, 4))
         for name, value in (("dt", dt), ("fps", fps)):
-            if value is not None and not (_finite(value) and value > 0):
+            if value is not None and not (isinstance(value, (int, float)) and math.isfinite(value) and value > 0):
                 raise ValueError(f"{name} must be > 0, got {value!r}")
         rows, self.fps = _timing(len(qpos), dt, config.fps if fps is None else fps, config.length_seconds)
         self.qpos = qpos[rows]

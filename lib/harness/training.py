@@ -18,8 +18,6 @@ from __future__ import annotations
 import dataclasses
 import functools
 import json
-import math
-import numbers
 import shutil
 import time
 import warnings
@@ -31,44 +29,24 @@ from typing import Any, Protocol
 import jax
 import jax.numpy as jnp
 import numpy as np
-from jax.sharding import NamedSharding, PartitionSpec
 from mjzoo.harness import checkpoints, plotting, rendering
+from mjzoo.harness.devices import replicate, shard_envs, template_data
+from mjzoo.harness.settings import EvalSchedule, Settings, config_dict
 from mjzoo.harness import metrics as metrics_lib
 from mjzoo.running import control_dt
 from mjzoo.types import Task
 from mujoco import mjx
 
-__all__ = [
-    "RUN_FILES",
-    "Algorithm",
-    "AlgorithmConfig",
-    "PhysicsCapacityError",
-    "Settings",
-    "TrainingWarning",
-    "check_algorithm",
-    "config_dict",
-    "existing",
-    "physics_info",
-    "replicate",
-    "run",
-    "seconds_to_steps",
-    "shard_envs",
-]  # fmt: skip
+__all__ = ["RUN_FILES", "Algorithm", "AlgorithmConfig", "PhysicsCapacityError", "Settings", "TrainingWarning",
+           "check_algorithm", "config_dict", "existing", "physics_info", "replicate", "run", "seconds_to_steps",
+           "shard_envs"]  # fmt: skip
 
 
 class TrainingWarning(UserWarning):
     """Training has gone wrong in a way its metrics show (an algorithm's `diagnose`)."""
 
 
-RUN_FILES = (
-    "config.json",
-    "metrics.jsonl",
-    "checkpoints",
-    "tensorboard",
-    "curves.png",
-    "eval.mp4",
-    "videos",
-)  # what `run` writes
+RUN_FILES = ("config.json", "metrics.jsonl", "checkpoints", "tensorboard", "curves.png", "eval.mp4", "videos")  # `run` writes
 
 
 class AlgorithmConfig(Protocol):
@@ -143,77 +121,6 @@ def _check_state(algorithm: Algorithm, state: Any) -> None:
                         f"a dataclass with the fields {wrong} (updates, and each of PER_ENV_FIELDS)")  # fmt: skip
 
 
-@dataclasses.dataclass(frozen=True, kw_only=True)
-class Settings:
-    """How a run is driven (not what is learned). KSim's RLConfig names in brackets.
-
-    Evaluation schedule (`_Schedule`): the run's last chunk always evaluates, so a run
-    ends with an eval/return. Any other chunk evaluates when `eval_first_seconds` (if
-    set) have passed since `run` was called and one trigger fires: its number is a
-    multiple of `eval_every` (counted over the whole run, so a resumed run evaluates at
-    the same steps); `eval_every_seconds` have passed since the last evaluation began
-    (or since the launch); or it is the first chance after `eval_first_seconds` (KSim's
-    "first validation after M seconds"). Metrics lines of chunks that do not evaluate
-    lack eval/*. Evaluating with `eval_every=0` and no seconds: only at the end.
-    """
-
-    out_dir: Path | None = None
-    seed: int = 0
-    updates_per_chunk: int = 10
-    eval_envs: int = 16
-    eval_steps: int | None = None  # None: eval_seconds, else the task's own episode length, int(task.time_limit)
-    eval_seconds: float | None = None  # [rollout_length_seconds] episode length in seconds (/ mjzoo.control_dt)
-    eval_every: int = 1  # [valid_every_n_steps] chunks between evaluations; 0: no count trigger
-    eval_every_seconds: float | None = None  # [valid_every_n_seconds] wall-clock trigger
-    eval_first_seconds: float | None = None  # [valid_first_n_seconds] no evaluation before, the first one after
-    video: bool = True  # out/eval.mp4 of the final evaluation (where an OpenGL backend works)
-    video_every: int = 0  # [render_full_every_n_steps] also videos/eval_<step>.mp4 every N evaluations; 0: never
-    render: rendering.RenderConfig = dataclasses.field(default_factory=rendering.RenderConfig)  # how videos are drawn
-    log_train_metrics: bool = True  # [log_train_metrics] False: metrics lines hold only eval/*, perf/* (memory/*)
-    log_every: int = 1  # [epochs_per_log_step] chunks between metrics lines; evaluating chunks always write one
-    profile_memory: bool = False  # [profile_memory] memory/<device>/{bytes_in_use,peak_bytes_in_use} per chunk
-    checkpoint_every: int = 1  # chunks between checkpoints; 0: never
-    resume: bool = False  # continue the run in out_dir from its newest intact checkpoint
-    overwrite: bool = False  # replace a run already in out_dir: its files are deleted first
-    progress: bool = True
-
-    def __post_init__(self):
-        problems = [_problem(name, getattr(self, name)) for name in _LOWEST]
-        if self.eval_steps is not None and self.eval_seconds is not None:
-            problems.append(f"eval_steps={self.eval_steps!r} and eval_seconds={self.eval_seconds!r} both give the "
-                            "evaluation's length; give one")  # fmt: skip
-        if self.video_every and not self.video:
-            problems.append(f"video_every={self.video_every!r} needs video=True")
-        if not isinstance(self.render, rendering.RenderConfig):
-            problems.append(f"render={self.render!r} must be a mjzoo.harness.rendering.RenderConfig")
-        if problem := next((p for p in problems if p), None):
-            raise ValueError(f"training.Settings: {problem}")
-        for name in _LOWEST:  # NumPy scalars as Python's: config.json is written with `json`
-            value = getattr(self, name)
-            if isinstance(value, numbers.Number) and type(value) not in (int, float):
-                object.__setattr__(self, name, int(value) if isinstance(value, numbers.Integral) else float(value))
-
-
-# Settings' numeric fields: the lowest value allowed; "> 0" where it is excluded.
-_LOWEST = {"updates_per_chunk": 1, "eval_envs": 1, "eval_steps": 1, "eval_seconds": "> 0", "eval_every": 0,
-           "eval_every_seconds": "> 0", "eval_first_seconds": 0, "video_every": 0, "log_every": 1,
-           "checkpoint_every": 0}  # fmt: skip
-_OPTIONAL = ("eval_steps", "eval_seconds", "eval_every_seconds", "eval_first_seconds")  # None allowed
-
-
-def _problem(name: str, value: Any) -> str | None:
-    """What is wrong with Settings' numeric field `name` (seconds may be floats), or None."""
-    if value is None and name in _OPTIONAL:
-        return None
-    kind = numbers.Real if name.endswith("seconds") else numbers.Integral  # NumPy's too
-    if isinstance(value, bool) or not isinstance(value, kind) or not math.isfinite(value):
-        return f"{name}={value!r} must be {'a finite number' if kind is numbers.Real else 'an int'}"
-    low = _LOWEST[name]
-    if value <= 0 if low == "> 0" else value < low:
-        return f"{name}={value!r} must be {low if low == '> 0' else f'>= {low}'}"
-    return None
-
-
 def existing(out: Path, names: tuple[str, ...] = RUN_FILES) -> list[str]:
     """Which of `names` already exist in `out` (folders with a trailing slash)."""
     return [n + "/" * (out / n).is_dir() for n in names if (out / n).exists()]
@@ -229,61 +136,6 @@ def _claim(out: Path, settings: Settings) -> None:
     for name in found:
         path = out / name.rstrip("/")
         shutil.rmtree(path) if path.is_dir() else path.unlink()
-
-
-def config_dict(config: Any) -> dict[str, Any]:
-    """A dataclass config as JSON-ready data; user-supplied functions become their names."""
-
-    def plain(value):
-        if isinstance(value, (bool, int, float, str)) or value is None:
-            return value
-        if isinstance(value, (tuple, list)):
-            return [plain(v) for v in value]
-        return f"<custom {type(value).__name__}>"
-
-    return {f.name: plain(getattr(config, f.name)) for f in dataclasses.fields(config)}
-
-
-def shard_envs(train_state: Any, per_env_fields: Sequence[str], devices: list | None = None) -> Any:
-    """Places the leaves of a train state's `per_env_fields` (an algorithm's
-    `PER_ENV_FIELDS`) across devices (leading axis), the rest replicated. Under jit,
-    XLA then splits the env batch and averages gradients.
-
-    On one device this commits the state to it: jit compiles separately for
-    uncommitted inputs and for its own (committed) outputs, which would cost a second
-    compile on the second chunk."""
-    devices = devices or jax.devices()
-    if len(devices) == 1:
-        return jax.device_put(train_state, devices[0])
-    if (data := _data0(train_state)) is not None and data.impl == mjx.Impl.WARP:
-        raise NotImplementedError(
-            f"training on {len(devices)} devices needs impl='jax' for now: MuJoCo Warp's contact pool "
-            "belongs to one call on one device, and splitting it is not supported yet"
-        )
-    mesh = jax.sharding.Mesh(np.array(devices), ("envs",))
-    split, whole = NamedSharding(mesh, PartitionSpec("envs")), NamedSharding(mesh, PartitionSpec())
-
-    def place(node: Any, paths: list[list[str]]) -> Any:
-        if [] in paths:  # this node is per-env
-            return jax.tree.map(lambda x: jax.device_put(x, split if jnp.ndim(x) else whole), node)
-        if not paths or not dataclasses.is_dataclass(node):
-            return jax.device_put(node, whole)
-        return dataclasses.replace(node, **{
-            f.name: place(getattr(node, f.name), [p[1:] for p in paths if p[0] == f.name])
-            for f in dataclasses.fields(node)
-        })  # fmt: skip
-
-    return place(train_state, [path.split(".") for path in per_env_fields])
-
-
-def replicate(tree: Any, devices: list | None = None) -> Any:
-    """Copies every array of `tree` (e.g. a Task) onto all `devices`, to run beside a
-    state placed by `shard_envs`."""
-    devices = devices or jax.devices()
-    if len(devices) == 1:
-        return jax.device_put(tree, devices[0])
-    mesh = jax.sharding.Mesh(np.array(devices), ("envs",))
-    return jax.device_put(tree, NamedSharding(mesh, PartitionSpec()))
 
 
 @functools.lru_cache(maxsize=8)  # runs in one process with one config share the compile
@@ -346,16 +198,10 @@ def physics_info(task: Task) -> dict[str, Any]:
     if not isinstance(model, mjx.Model):
         return {}
     info: dict[str, Any] = {"impl": model.impl.value}
-    template = _data0(task)
+    template = template_data(task)
     if template is not None and model.impl == mjx.Impl.WARP:
         info.update(max_contacts=int(template._impl.naconmax), max_constraints=int(template._impl.njmax))
     return info
-
-
-def _data0(task: Any):
-    """The first Data in a pytree (a task's load-time template; None if it holds none)."""
-    found = [x for x in jax.tree.leaves(task, is_leaf=lambda x: isinstance(x, mjx.Data)) if isinstance(x, mjx.Data)]
-    return found[0] if found else None
 
 
 def _check_capacity(task: Task, metrics: dict[str, float]) -> None:
@@ -377,30 +223,6 @@ class PhysicsCapacityError(RuntimeError):
 _clock = time.perf_counter  # the loop's clock (tests put a fake one here)
 
 
-class _Schedule:
-    """Which chunks evaluate, by the rule in `Settings`' docstring."""
-
-    def __init__(self, settings: Settings, launched: float) -> None:
-        self.settings, self.launched = settings, launched
-        self.last: float | None = None  # when the last evaluation of this launch began
-
-    def due(self, chunk: int, final: bool, now: float) -> bool:
-        """Whether chunk number `chunk` (1-based), ending at `now`, evaluates; if so,
-        the clock trigger counts from now."""
-        s = self.settings
-        waiting = s.eval_first_seconds is not None and now - self.launched < s.eval_first_seconds
-        since = now - (self.launched if self.last is None else self.last)
-        fires = (
-            (s.eval_every > 0 and chunk % s.eval_every == 0)
-            or (s.eval_every_seconds is not None and since >= s.eval_every_seconds)
-            or (s.eval_first_seconds is not None and self.last is None)
-        )
-        if final or (fires and not waiting):
-            self.last = now
-            return True
-        return False
-
-
 class _Loop:
     """`run`'s host loop, one chunk at a time: train, evaluate when due, write the
     metrics line, checkpoint, show progress, check capacity and diagnose."""
@@ -409,7 +231,7 @@ class _Loop:
                  out: Path | None, key: jax.Array, eval_steps: int, launched: float, shown: dict[str, str]) -> None:  # fmt: skip
         self.algorithm, self.config, self.task, self.settings = algorithm, config, task, settings
         self.out, self.key, self.launched, self.shown = out, key, launched, shown
-        self.schedule = _Schedule(settings, launched)
+        self.schedule = EvalSchedule(settings, launched)
         self.chunk = _chunk_fn(algorithm, config, settings.updates_per_chunk)
         self.evaluate, self.eval_steps = _evaluate_fn(algorithm), eval_steps
         self.total_updates = -(-config.num_updates // settings.updates_per_chunk) * settings.updates_per_chunk

@@ -1,0 +1,64 @@
+"""Where a run's arrays live: the env batch of a train state split over the local
+devices, everything else replicated; XLA then splits the work and averages gradients."""
+
+from __future__ import annotations
+
+import dataclasses
+from collections.abc import Sequence
+from typing import Any
+
+import jax
+import jax.numpy as jnp
+import numpy as np
+from jax.sharding import NamedSharding, PartitionSpec
+from mujoco import mjx
+
+__all__ = ["shard_envs", "replicate", "template_data"]
+
+
+def shard_envs(train_state: Any, per_env_fields: Sequence[str], devices: list | None = None) -> Any:
+    """Places the leaves of a train state's `per_env_fields` (an algorithm's
+    `PER_ENV_FIELDS`) across devices (leading axis), the rest replicated. Under jit,
+    XLA then splits the env batch and averages gradients.
+
+    On one device this commits the state to it: jit compiles separately for
+    uncommitted inputs and for its own (committed) outputs, which would cost a second
+    compile on the second chunk."""
+    devices = devices or jax.devices()
+    if len(devices) == 1:
+        return jax.device_put(train_state, devices[0])
+    if (data := template_data(train_state)) is not None and data.impl == mjx.Impl.WARP:
+        raise NotImplementedError(
+            f"training on {len(devices)} devices needs impl='jax' for now: MuJoCo Warp's contact pool "
+            "belongs to one call on one device, and splitting it is not supported yet"
+        )
+    mesh = jax.sharding.Mesh(np.array(devices), ("envs",))
+    split, whole = NamedSharding(mesh, PartitionSpec("envs")), NamedSharding(mesh, PartitionSpec())
+
+    def place(node: Any, paths: list[list[str]]) -> Any:
+        if [] in paths:  # this node is per-env
+            return jax.tree.map(lambda x: jax.device_put(x, split if jnp.ndim(x) else whole), node)
+        if not paths or not dataclasses.is_dataclass(node):
+            return jax.device_put(node, whole)
+        return dataclasses.replace(node, **{
+            f.name: place(getattr(node, f.name), [p[1:] for p in paths if p[0] == f.name])
+            for f in dataclasses.fields(node)
+        })  # fmt: skip
+
+    return place(train_state, [path.split(".") for path in per_env_fields])
+
+
+def replicate(tree: Any, devices: list | None = None) -> Any:
+    """Copies every array of `tree` (e.g. a Task) onto all `devices`, to run beside a
+    state placed by `shard_envs`."""
+    devices = devices or jax.devices()
+    if len(devices) == 1:
+        return jax.device_put(tree, devices[0])
+    mesh = jax.sharding.Mesh(np.array(devices), ("envs",))
+    return jax.device_put(tree, NamedSharding(mesh, PartitionSpec()))
+
+
+def template_data(tree: Any) -> mjx.Data | None:
+    """The first Data in a pytree (a task's load-time template; None if it holds none)."""
+    found = [x for x in jax.tree.leaves(tree, is_leaf=lambda x: isinstance(x, mjx.Data)) if isinstance(x, mjx.Data)]
+    return found[0] if found else None

@@ -1,0 +1,123 @@
+"""How a training run is driven: `Settings` (KSim's validation, logging and rendering
+options among them) and the evaluation schedule they give. What is learned is the
+algorithm's config; `mjzoo.harness.training.run` takes both."""
+
+from __future__ import annotations
+
+import dataclasses
+import math
+import numbers
+from pathlib import Path
+from typing import Any
+
+from mjzoo.harness import rendering
+
+__all__ = ["Settings", "EvalSchedule", "config_dict"]
+
+
+@dataclasses.dataclass(frozen=True, kw_only=True)
+class Settings:
+    """How a run is driven (not what is learned). KSim's RLConfig names in brackets.
+
+    Evaluation schedule (`EvalSchedule`): the run's last chunk always evaluates, so a run
+    ends with an eval/return. Any other chunk evaluates when `eval_first_seconds` (if
+    set) have passed since `run` was called and one trigger fires: its number is a
+    multiple of `eval_every` (counted over the whole run, so a resumed run evaluates at
+    the same steps); `eval_every_seconds` have passed since the last evaluation began
+    (or since the launch); or it is the first chance after `eval_first_seconds` (KSim's
+    "first validation after M seconds"). Metrics lines of chunks that do not evaluate
+    lack eval/*. Evaluating with `eval_every=0` and no seconds: only at the end.
+    """
+
+    out_dir: Path | None = None
+    seed: int = 0
+    updates_per_chunk: int = 10
+    eval_envs: int = 16
+    eval_steps: int | None = None  # None: eval_seconds, else the task's own episode length, int(task.time_limit)
+    eval_seconds: float | None = None  # [rollout_length_seconds] episode length in seconds (/ mjzoo.control_dt)
+    eval_every: int = 1  # [valid_every_n_steps] chunks between evaluations; 0: no count trigger
+    eval_every_seconds: float | None = None  # [valid_every_n_seconds] wall-clock trigger
+    eval_first_seconds: float | None = None  # [valid_first_n_seconds] no evaluation before, the first one after
+    video: bool = True  # out/eval.mp4 of the final evaluation (where an OpenGL backend works)
+    video_every: int = 0  # [render_full_every_n_steps] also videos/eval_<step>.mp4 every N evaluations; 0: never
+    render: rendering.RenderConfig = dataclasses.field(default_factory=rendering.RenderConfig)  # how videos are drawn
+    log_train_metrics: bool = True  # [log_train_metrics] False: metrics lines hold only eval/*, perf/* (memory/*)
+    log_every: int = 1  # [epochs_per_log_step] chunks between metrics lines; evaluating chunks always write one
+    profile_memory: bool = False  # [profile_memory] memory/<device>/{bytes_in_use,peak_bytes_in_use} per chunk
+    checkpoint_every: int = 1  # chunks between checkpoints; 0: never
+    resume: bool = False  # continue the run in out_dir from its newest intact checkpoint
+    overwrite: bool = False  # replace a run already in out_dir: its files are deleted first
+    progress: bool = True
+
+    def __post_init__(self):
+        problems = [_problem(name, getattr(self, name)) for name in _LOWEST]
+        if self.eval_steps is not None and self.eval_seconds is not None:
+            problems.append(f"eval_steps={self.eval_steps!r} and eval_seconds={self.eval_seconds!r} both give the "
+                            "evaluation's length; give one")  # fmt: skip
+        if self.video_every and not self.video:
+            problems.append(f"video_every={self.video_every!r} needs video=True")
+        if not isinstance(self.render, rendering.RenderConfig):
+            problems.append(f"render={self.render!r} must be a mjzoo.harness.rendering.RenderConfig")
+        if problem := next((p for p in problems if p), None):
+            raise ValueError(f"training.Settings: {problem}")
+        for name in _LOWEST:  # NumPy scalars as Python's: config.json is written with `json`
+            value = getattr(self, name)
+            if isinstance(value, numbers.Number) and type(value) not in (int, float):
+                object.__setattr__(self, name, int(value) if isinstance(value, numbers.Integral) else float(value))
+
+
+# Settings' numeric fields: the lowest value allowed; "> 0" where it is excluded.
+_LOWEST = {"updates_per_chunk": 1, "eval_envs": 1, "eval_steps": 1, "eval_seconds": "> 0", "eval_every": 0,
+           "eval_every_seconds": "> 0", "eval_first_seconds": 0, "video_every": 0, "log_every": 1,
+           "checkpoint_every": 0}  # fmt: skip
+_OPTIONAL = ("eval_steps", "eval_seconds", "eval_every_seconds", "eval_first_seconds")  # None allowed
+
+
+def _problem(name: str, value: Any) -> str | None:
+    """What is wrong with Settings' numeric field `name` (seconds may be floats), or None."""
+    if value is None and name in _OPTIONAL:
+        return None
+    kind = numbers.Real if name.endswith("seconds") else numbers.Integral  # NumPy's too
+    if isinstance(value, bool) or not isinstance(value, kind) or not math.isfinite(value):
+        return f"{name}={value!r} must be {'a finite number' if kind is numbers.Real else 'an int'}"
+    low = _LOWEST[name]
+    if value <= 0 if low == "> 0" else value < low:
+        return f"{name}={value!r} must be {low if low == '> 0' else f'>= {low}'}"
+    return None
+
+
+class EvalSchedule:
+    """Which chunks evaluate, by the rule in `Settings`' docstring."""
+
+    def __init__(self, settings: Settings, launched: float) -> None:
+        self.settings, self.launched = settings, launched
+        self.last: float | None = None  # when the last evaluation of this launch began
+
+    def due(self, chunk: int, final: bool, now: float) -> bool:
+        """Whether chunk number `chunk` (1-based), ending at `now`, evaluates; if so,
+        the clock trigger counts from now."""
+        s = self.settings
+        waiting = s.eval_first_seconds is not None and now - self.launched < s.eval_first_seconds
+        since = now - (self.launched if self.last is None else self.last)
+        fires = (
+            (s.eval_every > 0 and chunk % s.eval_every == 0)
+            or (s.eval_every_seconds is not None and since >= s.eval_every_seconds)
+            or (s.eval_first_seconds is not None and self.last is None)
+        )
+        if final or (fires and not waiting):
+            self.last = now
+            return True
+        return False
+
+
+def config_dict(config: Any) -> dict[str, Any]:
+    """A dataclass config as JSON-ready data; user-supplied functions become their names."""
+
+    def plain(value):
+        if isinstance(value, (bool, int, float, str)) or value is None:
+            return value
+        if isinstance(value, (tuple, list)):
+            return [plain(v) for v in value]
+        return f"<custom {type(value).__name__}>"
+
+    return {f.name: plain(getattr(config, f.name)) for f in dataclasses.fields(config)}
