@@ -37,7 +37,7 @@ from mujoco import mjx
 from mjzoo.worlds import clear_overflow
 
 __all__ = [
-    "Physics", "load", "of_model", "step", "substep", "OPTIONS", "IMPLS", "default_impl", "probe_capacity",
+    "Physics", "load", "of_model", "step", "substep", "StandIn", "OPTIONS", "IMPLS", "default_impl", "probe_capacity",
     "check_differentiable",
 ]  # fmt: skip
 
@@ -192,8 +192,28 @@ def step(model: mjx.Model, data: mjx.Data, ctrl: jax.Array, n_substeps: int) -> 
     return jax.lax.fori_loop(0, n_substeps, lambda _, d: substep(model, d), data)
 
 
+class StandIn:
+    """A model stand-in that replaces the physics of a task's step: `substep` calls its
+    ``substep(data)`` instead of `mjx.step`. Every other attribute reads through to the
+    `mjx.Model` it holds as ``model``, so a task's functions use it as their model
+    (`mjzoo.planning.native` replays C MuJoCo's states through it)."""
+
+    model: mjx.Model
+
+    def substep(self, data: mjx.Data) -> mjx.Data:
+        raise NotImplementedError
+
+    def __getattr__(self, name: str) -> Any:
+        if name == "model":  # not yet set (copying, unpickling)
+            raise AttributeError(name)
+        return getattr(self.model, name)
+
+
 def substep(model: mjx.Model, data: mjx.Data) -> mjx.Data:
-    """One physics step, `mjx.step`; on Warp, differentiating through it raises a clear error."""
+    """One physics step, `mjx.step`; on Warp, differentiating through it raises a clear
+    error; a `StandIn` model steps its own way."""
+    if isinstance(model, StandIn):
+        return model.substep(data)
     if data.impl == mjx.Impl.WARP:
         return _warp_step(model, data)
     return mjx.step(model, data)

@@ -32,7 +32,8 @@ import jax
 
 from mjzoo.planning import sampling
 from mjzoo.planning.learned import TerminalValue
-from mjzoo.planning.rollouts import Ensemble
+from mjzoo.planning.native import Native, transition_native
+from mjzoo.planning.rollouts import Ensemble, base_task, with_base
 from mjzoo.planning.sampling import PlannerState, SamplingConfig
 from mjzoo.running import complete, transition
 from mjzoo.types import State, Task
@@ -100,7 +101,7 @@ def replan(
     """One replan from the simulated state, through the hooks, valuing final states by
     `terminal_value` if given."""
     start = hooks.to_planner(sim_state) if hooks.to_planner else sim_state
-    view = hooks.pre_rollout(plan_task, start) if hooks.pre_rollout else plan_task
+    view = with_base(plan_task, lambda t: hooks.pre_rollout(t, start)) if hooks.pre_rollout else plan_task
     return planner.plan(config, view, planner_state, start, key, terminal_value=terminal_value)[0]
 
 
@@ -111,16 +112,19 @@ def first_plan(
     if hooks.warm_start is None:
         return planner.init(config, plan_task)
     start = hooks.to_planner(sim_state) if hooks.to_planner else sim_state
-    return planner.init(config, plan_task, hooks.warm_start(plan_task, start, config.num_knots))
+    return planner.init(config, plan_task, hooks.warm_start(base_task(plan_task), start, config.num_knots))
 
 
 def sim_step(
-    config: SamplingConfig, sim_task: Task, planner_state: PlannerState, sim_state: State, key: Array, hooks: Hooks
+    config: SamplingConfig, sim_task: Task | Native, planner_state: PlannerState, sim_state: State, key: Array,
+    hooks: Hooks,
 ) -> tuple[State, Array]:
-    """One simulation control step under the current plan: (next state, executed control)."""
+    """One simulation control step under the current plan: (next state, executed control);
+    a `Native` simulation steps in C MuJoCo."""
     action = sampling.control_at(config, planner_state, sim_state.data.time, *sampling.control_limits(sim_task))
     step_key, hook_key = jax.random.split(key)
-    next_state = transition(sim_task, sim_state, action, step_key)
+    step = transition_native if isinstance(sim_task, Native) else transition
+    next_state = step(sim_task, sim_state, action, step_key)
     if hooks.post_sim_step is not None:
         next_state = hooks.post_sim_step(sim_task, next_state, hook_key)
     return next_state, action
@@ -130,8 +134,8 @@ def sim_step(
 def run(
     planner: ModuleType,
     config: SamplingConfig,
-    sim_task: Task,
-    plan_task: Task | Ensemble,
+    sim_task: Task | Native,
+    plan_task: Task | Ensemble | Native,
     sim_state: State,
     key: Array,
     num_replans: int,
@@ -141,10 +145,11 @@ def run(
 ) -> Result:
     """Simulates `sim_task` from `sim_state` for `num_replans x replan_every` control
     steps, replanning with `planner` (a module: `predictive_sampling`, `cem`, `mppi`)
-    on `plan_task` every `replan_every` steps. One jit; `planner`, `config` and the
+    on `plan_task` every `replan_every` steps (either may be `Native`: its physics in C
+    MuJoCo, `mjzoo.planning.native`). One jit; `planner`, `config` and the
     counts are static. `terminal_value`: None or a `jax.tree_util.Partial`
     (`mjzoo.planning.as_terminal_value`), whose weights are arguments, not constants."""
-    sim_state = complete(sim_task, sim_state)
+    sim_state = complete(base_task(sim_task), sim_state)
     planner_state = first_plan(planner, config, plan_task, sim_state, hooks)
 
     def period(carry, key):

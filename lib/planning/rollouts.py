@@ -10,7 +10,7 @@ from __future__ import annotations
 
 import dataclasses
 import math
-from typing import Callable
+from typing import Any, Callable
 
 import jax
 import jax.numpy as jnp
@@ -20,7 +20,7 @@ from mjzoo.planning.learned import TerminalValue, as_terminal_value
 from mjzoo.running import complete, transition
 from mjzoo.types import State, Task
 
-__all__ = ["Ensemble", "ensemble", "base_task", "rollout_costs", "aggregate", "RISKS"]
+__all__ = ["Ensemble", "ensemble", "base_task", "with_base", "rollout_costs", "aggregate", "RISKS"]
 
 Array = jax.Array
 RISKS = ("mean", "worst", "cvar")
@@ -113,6 +113,16 @@ def aggregate(costs: Array, risk: str = "mean", alpha: float = 0.25) -> Array:
     raise ValueError(f"planning.aggregate: unknown risk {risk!r}; choose one of {RISKS}")
 
 
-def base_task(task: Task | Ensemble) -> Task:
-    """The task itself, or an ensemble's base task."""
-    return task.task if isinstance(task, Ensemble) else task
+def base_task(task: Task | Ensemble | Any) -> Task:
+    """The task itself, or the task inside an `Ensemble` or `mjzoo.planning.native.Native`."""
+    while not isinstance(task, Task):
+        task = task.task
+    return task
+
+
+def with_base(task: Task | Ensemble | Any, fn: Callable[[Task], Task]) -> Task | Ensemble | Any:
+    """`fn` applied to the task inside any wrappers (`Ensemble`, `Native`), which are kept:
+    a planner hook that changes the planning task's reward works on each of them."""
+    if isinstance(task, Task):
+        return fn(task)
+    return dataclasses.replace(task, task=with_base(task.task, fn))

@@ -20,7 +20,7 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
-from mjzoo.planning import splines
+from mjzoo.planning import native, splines
 from mjzoo.planning.learned import TerminalValue, committed
 from mjzoo.planning.rollouts import RISKS, Ensemble, aggregate, base_task, rollout_costs
 from mjzoo.types import State, Task
@@ -94,7 +94,7 @@ class PlannerState:
         return dataclasses.replace(self, **changes)
 
 
-def control_limits(task: Task | Ensemble) -> tuple[np.ndarray, np.ndarray]:
+def control_limits(task: Task | Ensemble | native.Native) -> tuple[np.ndarray, np.ndarray]:
     """([nu], [nu]) lower and upper control bounds; +-inf where an actuator is unlimited."""
     mj_model = base_task(task).mj_model
     limited = np.asarray(mj_model.actuator_ctrllimited, bool)
@@ -102,13 +102,13 @@ def control_limits(task: Task | Ensemble) -> tuple[np.ndarray, np.ndarray]:
     return np.where(limited, bounds[:, 0], -np.inf), np.where(limited, bounds[:, 1], np.inf)
 
 
-def half_range(task: Task | Ensemble) -> np.ndarray:
+def half_range(task: Task | Ensemble | native.Native) -> np.ndarray:
     """[nu] half of each actuator's control range (1 where unlimited): the unit of noise."""
     low, high = control_limits(task)
     return np.where(np.isfinite(high - low), (high - low) / 2, 1.0).astype(np.float32)
 
 
-def initial_state(config: SamplingConfig, task: Task | Ensemble, knots: Array | None = None) -> PlannerState:
+def initial_state(config: SamplingConfig, task: Task | Ensemble | native.Native, knots: Array | None = None) -> PlannerState:
     """A plan of `knots` ([K, nu]; default: zero controls, clipped into the limits) with
     std = noise_scale x half the control range (x 1 for unlimited actuators).
 
@@ -168,7 +168,7 @@ def control_at(
 
 def sample_costs(
     config: SamplingConfig,
-    task: Task | Ensemble,
+    task: Task | Ensemble | native.Native,
     state: State,
     samples: Array,
     key: Array,
@@ -177,7 +177,8 @@ def sample_costs(
     """([N] risk-aggregated costs of knot samples [N, K, nu] from `state`, [] dt), each
     less the `terminal_value` of its final state if one is given."""
     sequences = controls(config, samples, *control_limits(task))
-    costs, dt = rollout_costs(task, state, sequences, key, terminal_value, config.unroll)
+    costs_of = native.rollout_costs if isinstance(task, native.Native) else rollout_costs
+    costs, dt = costs_of(task, state, sequences, key, terminal_value, config.unroll)
     costs = aggregate(costs, config.risk, config.cvar_alpha)
     # A sample whose physics blew up must never win.
     return jnp.where(jnp.isfinite(costs), costs, jnp.inf), dt
@@ -185,7 +186,7 @@ def sample_costs(
 
 def sample_around(
     config: SamplingConfig,
-    task: Task | Ensemble,
+    task: Task | Ensemble | native.Native,
     state: PlannerState,
     env_state: State,
     key: Array,
