@@ -37,6 +37,7 @@ from __future__ import annotations
 
 import dataclasses
 import os
+import time as time_lib
 from typing import Any
 
 import jax
@@ -93,8 +94,8 @@ class Engine:
         first = models[0]
         self.models, self.n_substeps, self.chunk_size = models, n_substeps, chunk_size
         self.dt = float(first.opt.timestep)
-        self.fields = [f for f in APPLIED if getattr(mujoco.MjData(first), f).size > 0]
-        self.spec = int(sum(_SPEC[f] for f in self.fields))
+        self.present = [f for f in APPLIED if getattr(mujoco.MjData(first), f).size > 0]
+        self.vary(self.present)
         self.sizes = {f: int(getattr(mujoco.MjData(first), f).size) for f in ("qpos", "qvel", "act", "sensordata")}
         self.full = int(mujoco.mjtState.mjSTATE_FULLPHYSICS)
         self.num_threads = max(1, num_threads)
@@ -102,11 +103,23 @@ class Engine:
         self._datas = [mujoco.MjData(first) for _ in range(self.num_threads)]
         self._pool = mj_rollout.Rollout(nthread=self.num_threads)
         self._batches: dict[tuple[int, int], list[mujoco.MjModel]] = {}
+        self.seconds: list[float] = []  # wall time of each call's C rollouts (a real-time runner reads it)
 
-    def __call__(self, time, qpos, qvel, act, history, warmstart, controls) -> tuple[np.ndarray, ...]:
-        """Rolls out [M, N, T, ncontrol] controls from one state; returns float32 time
-        [M, N, T], qpos, qvel, act and sensordata [M, N, T, size], NaN after a reset."""
+    def vary(self, fields: list[str]) -> None:
+        """Sends `fields` (and ctrl) to C as controls at every physics step; the other
+        applied inputs are held at the start state's values."""
+        self.fields = [f for f in self.present if f in fields or f == "ctrl"]
+        self.held = [f for f in self.present if f not in self.fields]
+        self.spec = int(sum(_SPEC[f] for f in self.fields))
+
+    def __call__(self, time, qpos, qvel, act, history, warmstart, held, controls) -> tuple[np.ndarray, ...]:
+        """Rolls out [M, N, T, ncontrol] controls from one state (whose `held` inputs stay
+        fixed); returns float32 time [M, N, T], qpos, qvel, act and sensordata
+        [M, N, T, size], NaN after a reset."""
         num_models, num_samples, steps, _ = controls.shape
+        for data in self._datas:
+            for name, value in zip(self.held, held):
+                getattr(data, name)[...] = value
         d = self._scratch
         d.time, d.qpos[:], d.qvel[:], d.act[:] = time, qpos, qvel, act
         if d.history.size:
@@ -116,12 +129,14 @@ class Engine:
         batch = num_models * num_samples
         if (num_models, num_samples) not in self._batches:
             self._batches[(num_models, num_samples)] = [m for m in self.models[:num_models] for _ in range(num_samples)]
+        tick = time_lib.perf_counter()
         states, sensors = self._pool.rollout(
             self._batches[(num_models, num_samples)], self._datas, start,
             np.asarray(controls, np.float64).reshape(batch, steps, -1), control_spec=self.spec,
             initial_warmstart=np.asarray(warmstart, np.float64)[None], chunk_size=self.chunk_size or
             max(1, -(-batch // self.num_threads)),
         )  # fmt: skip
+        self.seconds.append(time_lib.perf_counter() - tick)
         nq, nv, na = self.sizes["qpos"], self.sizes["qvel"], self.sizes["act"]
         times = states[..., 0]
         # C resets a diverging simulation (time back to 0): NaN from there on, as MJX's would be.
@@ -195,6 +210,7 @@ def native(task: Task | Ensemble, *, num_threads: int | None = None, chunk_size:
     n_substeps = _substeps(base, start)
     engine = Engine(_host_models(base.mj_model, variants.fields), n_substeps, num_threads or physical_cores(), chunk_size)
     result = Native(task, engine)
+    engine.vary(_changed(result, start))
     _check_applied(result, start)
     _check_reads(result, start)
     return result
@@ -276,8 +292,9 @@ def _roll(engine: Engine, base: Task, models: Any, start: State, controls: Array
     )
     d = start.data
     history = d.history if d.history is not None else jnp.zeros((0,))
-    out = jax.pure_callback(engine, out_shapes, d.time, d.qpos, d.qvel, d.act, history, d.qacc_warmstart, applied,
-                            vmap_method="sequential")  # fmt: skip
+    held = [getattr(d, f) for f in engine.held]
+    out = jax.pure_callback(engine, out_shapes, d.time, d.qpos, d.qvel, d.act, history, d.qacc_warmstart, held,
+                            applied, vmap_method="sequential")  # fmt: skip
     return dict(zip(("time", "qpos", "qvel", "act", "sensordata"), out))
 
 
@@ -345,6 +362,17 @@ def _probe_controls(task: Native, key: Array) -> Array:
     if base.action_size == base.mj_model.nu:
         u = jnp.where(limited, low + (u + 1) / 2 * (high - low), u)
     return u
+
+
+def _changed(task: Native, start: State) -> list[str]:
+    """The applied inputs (`APPLIED`) the task's step changes, for probe actions."""
+    base = task.task.task if isinstance(task.task, Ensemble) else task.task
+    actions, keys = _probe_controls(task, jax.random.key(1)), jax.random.split(jax.random.key(2), 2)
+    present = task.engine.present
+    applied = np.asarray(jax.jit(lambda s: _applied(base, present, s, actions, keys))(start))
+    sizes = [np.size(getattr(start.data, f)) for f in present]
+    parts = np.split(applied, np.cumsum(sizes)[:-1], axis=1)
+    return [f for f, part in zip(present, parts) if not np.allclose(part, np.ravel(getattr(start.data, f)))]
 
 
 def _check_applied(task: Native, start: State) -> None:

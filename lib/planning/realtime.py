@@ -32,12 +32,20 @@ import numpy as np
 from mjzoo.planning import closed_loop
 from mjzoo.planning.closed_loop import Hooks, Result
 from mjzoo.planning.learned import TerminalValue, as_terminal_value, committed
+from mjzoo.planning.native import Native, native
 from mjzoo.planning.rollouts import Ensemble
 from mjzoo.planning.sampling import SamplingConfig
 from mjzoo.running import control_dt, reset
 from mjzoo.types import Task
 
-__all__ = ["Problem", "offline", "realtime"]
+__all__ = ["Problem", "offline", "realtime", "BACKENDS", "default_backend"]
+
+BACKENDS = ("auto", "mjx", "native")
+
+
+def default_backend() -> str:
+    """"native" (C MuJoCo rollouts) where JAX computes on a CPU, "mjx" on a GPU or TPU."""
+    return "native" if jax.default_backend() == "cpu" else "mjx"
 
 
 @dataclasses.dataclass(frozen=True)
@@ -55,6 +63,9 @@ class Problem:
       success: optional ``states -> (solved, score)`` over the run's states [T].
       terminal_value: optional ``(model, state) -> value`` of each rollout's final
         state (a plain function is wrapped: `mjzoo.planning.as_terminal_value`).
+      backend: where the physics runs, for planning and simulation alike: "mjx", or
+        "native" (C MuJoCo, `mjzoo.planning.native`); "auto": native where JAX's
+        default device is a CPU, MJX on a GPU.
     """
 
     planner: ModuleType
@@ -66,14 +77,31 @@ class Problem:
     hooks: Hooks = Hooks()
     success: Callable[[Any], tuple[bool, float]] | None = None
     terminal_value: TerminalValue | None = None
+    backend: str = "auto"
 
     def __post_init__(self) -> None:
         object.__setattr__(self, "terminal_value", as_terminal_value(self.terminal_value))
+        if self.backend not in BACKENDS:
+            raise ValueError(f"Problem: unknown backend {self.backend!r}; choose one of {BACKENDS}")
+
+    @property
+    def physics(self) -> str:
+        """The backend in use: "mjx" or "native"."""
+        return default_backend() if self.backend == "auto" else self.backend
+
+    @functools.cached_property
+    def tasks(self) -> tuple[Task | Native, Task | Ensemble | Native]:
+        """(simulation, planning task) on the backend: wrapped by `native` for C MuJoCo."""
+        if self.physics == "mjx":
+            return self.sim_task, self.plan_task
+        sim = native(self.sim_task)
+        return sim, sim if self.plan_task is self.sim_task else native(self.plan_task)
 
     @functools.cached_property
     def sim_dt(self) -> float:
         """The simulation's control step (s), measured from one transition."""
-        return control_dt(self.sim_task)
+        sim = self.tasks[0]
+        return sim.engine.n_substeps * sim.engine.dt if isinstance(sim, Native) else control_dt(sim)
 
     @property
     def num_replans(self) -> int:
@@ -91,7 +119,7 @@ def offline(
     sim_state = reset(problem.sim_task, reset_key)
     static = (problem.planner, problem.config)
     counts = (problem.num_replans, problem.replan_every)
-    dynamic = (problem.sim_task, problem.plan_task, sim_state, run_key)
+    dynamic = (*problem.tasks, sim_state, run_key)
     functions = (problem.hooks, problem.terminal_value)
     start = time.perf_counter()
     compiled = closed_loop.run.lower(*static, *dynamic, *counts, *functions).compile(compiler_options)
@@ -105,38 +133,51 @@ def offline(
 
 def realtime(problem: Problem, key: jax.Array, plan_hz: float | None = None) -> tuple[Result, dict[str, float]]:
     """Simulates `problem.seconds` of wall-clock time, replanning at `plan_hz` (default:
-    every `replan_every` simulation steps' worth of time) or as fast as planning allows."""
+    every `replan_every` simulation steps' worth of time) or as fast as planning allows.
+
+    Returns the run and where its time went: the achieved ``plan_hz``, each replan's
+    latency (median, p95), of which ``plan_physics_ms`` was C MuJoCo's rollouts on the
+    native backend, the simulation's cost per control step (``sim_step_ms``), the busy
+    share of the wall clock and the real-time factor."""
     planner, config, hooks, value = problem.planner, problem.config, problem.hooks, problem.terminal_value
+    sim_task, plan_task = problem.tasks
     sim_dt = problem.sim_dt
     period = 1.0 / plan_hz if plan_hz else sim_dt * problem.replan_every
     total_steps = round(problem.seconds / sim_dt)
     reset_key, plan_key, key = jax.random.split(key, 3)
-    # Committed to the device like every jit output, so the loop's calls match the warm-up compile.
+    # Every argument committed to the device like the jit outputs it alternates with: an
+    # uncommitted one would compile the function again, mid-run.
+    step_keys = list(committed(jax.random.split(key, total_steps + 1)))
+    plan_keys = list(committed(jax.random.split(plan_key, total_steps + 1)))
     sim_state = committed(reset(problem.sim_task, reset_key))
-    first = jax.jit(lambda s: closed_loop.first_plan(planner, config, problem.plan_task, s, hooks))
-    replan = jax.jit(lambda p, s, k, v: closed_loop.replan(planner, config, problem.plan_task, p, s, k, hooks, v))
-    step = jax.jit(lambda p, s, k: closed_loop.sim_step(config, problem.sim_task, p, s, k, hooks))
-    planner_state = first(sim_state)
+    first = jax.jit(lambda s: closed_loop.first_plan(planner, config, plan_task, s, hooks))
+    replan = jax.jit(lambda p, s, k, v: closed_loop.replan(planner, config, plan_task, p, s, k, hooks, v))
+    step = jax.jit(lambda p, s, k: closed_loop.sim_step(config, sim_task, p, s, k, hooks))
+    planner_state = committed(first(sim_state))
     # Compile before the clock starts, for the first state and for states the loop makes
-    # (their leaves can differ in weak type from a reset's, which would recompile mid-run).
-    later_plan = replan(planner_state, sim_state, key, value)
-    later_state, _ = step(later_plan, sim_state, key)
-    jax.block_until_ready((replan(later_plan, later_state, key, value), step(later_plan, later_state, key)))
+    # (their leaves can differ in weak type from a reset's).
+    later_plan = replan(planner_state, sim_state, plan_keys[-1], value)
+    later_state, _ = step(later_plan, sim_state, step_keys[-1])
+    jax.block_until_ready((replan(later_plan, later_state, plan_keys[-1], value), step(later_plan, later_state, step_keys[-1])))
+    physics_seconds = plan_task.engine.seconds if isinstance(plan_task, Native) else []
+    physics_seconds.clear()
 
-    states, controls, plan_costs, latencies = [], [], [], []
+    states, controls, plan_costs, latencies, step_seconds = [], [], [], [], []
     begin = time.perf_counter()
 
     def advance_until(wall: float, plan) -> None:
         nonlocal sim_state
         due = min(total_steps, int((wall - begin) / sim_dt))
         while len(states) < due:
-            sim_state, control = step(plan, sim_state, jax.random.fold_in(key, len(states)))
+            tick = time.perf_counter()
+            sim_state, control = jax.block_until_ready(step(plan, sim_state, step_keys[len(states)]))
+            step_seconds.append(time.perf_counter() - tick)
             states.append(sim_state)
             controls.append(control)
 
     while len(states) < total_steps:
         tick = time.perf_counter()
-        replan_key = jax.random.fold_in(plan_key, len(latencies))
+        replan_key = plan_keys[len(latencies) % total_steps]
         new_plan = jax.block_until_ready(replan(planner_state, sim_state, replan_key, value))
         latencies.append(time.perf_counter() - tick)
         advance_until(time.perf_counter(), planner_state)  # the world did not wait
@@ -147,6 +188,8 @@ def realtime(problem: Problem, key: jax.Array, plan_hz: float | None = None) -> 
     wall = time.perf_counter() - begin
     stacked = jax.tree.map(lambda *xs: jnp.stack(xs), *states)
     result = Result(stacked, jnp.stack(controls), -stacked.reward, jnp.stack(plan_costs), planner_state)
-    return result, {"plan_hz": len(latencies) / wall, "plan_latency_ms": 1e3 * float(np.median(latencies)),
-                    "plan_latency_p95_ms": 1e3 * float(np.percentile(latencies, 95)),
+    ms = lambda xs, q=50: 1e3 * float(np.percentile(xs, q)) if xs else float("nan")  # noqa: E731
+    return result, {"plan_hz": len(latencies) / wall, "plan_latency_ms": ms(latencies),
+                    "plan_latency_p95_ms": ms(latencies, 95), "plan_physics_ms": ms(physics_seconds),
+                    "sim_step_ms": ms(step_seconds), "busy": (sum(latencies) + sum(step_seconds)) / wall,
                     "realtime_factor": total_steps * sim_dt / wall}  # fmt: skip
