@@ -35,25 +35,27 @@ would see on MJX.
 
 from __future__ import annotations
 
+import contextvars
+import copy
 import dataclasses
 import os
 import time as time_lib
+from collections.abc import Callable
 from typing import Any
 
 import jax
 import jax.numpy as jnp
 import mujoco
 import numpy as np
-from mujoco import mjx
-from mujoco import rollout as mj_rollout
-
 from mjzoo import physics
 from mjzoo.planning.learned import TerminalValue, as_terminal_value
 from mjzoo.planning.rollouts import Ensemble
 from mjzoo.running import complete, transition
 from mjzoo.types import State, Task
+from mujoco import mjx
+from mujoco import rollout as mj_rollout
 
-__all__ = ["Native", "Engine", "native", "rollout_costs", "transition_native", "physical_cores"]
+__all__ = ["Engine", "Native", "native", "physical_cores", "rollout_costs", "transition_native"]
 
 Array = jax.Array
 APPLIED = ("ctrl", "qfrc_applied", "xfrc_applied", "mocap_pos", "mocap_quat")  # in mjtState order
@@ -63,6 +65,7 @@ _SPEC = {
     "mocap_quat": mujoco.mjtState.mjSTATE_MOCAP_QUAT,
 }  # fmt: skip
 FROM_C = ("time", "qpos", "qvel", "act", "sensordata")
+C_OUTPUTS = FROM_C
 _HINTS = {
     "contact": "a touch or contact sensor", "efc": "a touch or force sensor", "cfrc": "a force or torque sensor",
     "qacc": "an accelerometer or framelinacc sensor", "actuator_force": "an actuatorfrc sensor",
@@ -96,13 +99,14 @@ class Engine:
         self.dt = float(first.opt.timestep)
         self.present = [f for f in APPLIED if getattr(mujoco.MjData(first), f).size > 0]
         self.vary(self.present)
+        self.direct = False  # True: ctrl is the action itself, no other input varies (set by `native`)
         self.sizes = {f: int(getattr(mujoco.MjData(first), f).size) for f in ("qpos", "qvel", "act", "sensordata")}
         self.full = int(mujoco.mjtState.mjSTATE_FULLPHYSICS)
-        self.num_threads = max(1, num_threads)
+        self.num_threads = num_threads
         self._scratch = mujoco.MjData(first)
-        self._datas = [mujoco.MjData(first) for _ in range(self.num_threads)]
-        self._pool = mj_rollout.Rollout(nthread=self.num_threads)
-        self._batches: dict[tuple[int, int], list[mujoco.MjModel]] = {}
+        self._datas = [mujoco.MjData(first) for _ in range(max(1, num_threads))]
+        self._pool = mj_rollout.Rollout(nthread=num_threads)  # 0: on the calling thread
+        self._batches: dict[tuple[int, int, int], dict[str, Any]] = {}  # preallocated per batch shape
         self.seconds: list[float] = []  # wall time of each call's C rollouts (a real-time runner reads it)
 
     def vary(self, fields: list[str]) -> None:
@@ -124,28 +128,43 @@ class Engine:
         d.time, d.qpos[:], d.qvel[:], d.act[:] = time, qpos, qvel, act
         if d.history.size:
             d.history[:] = history
-        start = np.empty((1, mujoco.mj_stateSize(self.models[0], self.full)))
-        mujoco.mj_getState(self.models[0], d, start[0], self.full)
         batch = num_models * num_samples
-        if (num_models, num_samples) not in self._batches:
-            self._batches[(num_models, num_samples)] = [m for m in self.models[:num_models] for _ in range(num_samples)]
+        buffers = self._buffers(num_models, num_samples, steps)
+        mujoco.mj_getState(self.models[0], d, buffers["start"][0], self.full)
+        buffers["start"][1:] = buffers["start"][0]
+        buffers["warmstart"][:] = warmstart
+        buffers["controls"][:] = controls.reshape(batch, steps, -1)
         tick = time_lib.perf_counter()
-        states, sensors = self._pool.rollout(
-            self._batches[(num_models, num_samples)], self._datas, start,
-            np.asarray(controls, np.float64).reshape(batch, steps, -1), control_spec=self.spec,
-            initial_warmstart=np.asarray(warmstart, np.float64)[None], chunk_size=self.chunk_size or
-            max(1, -(-batch // self.num_threads)),
+        # Every array already has rollout's exact shape and dtype: its Python checks are skipped.
+        self._pool.rollout(
+            buffers["models"], self._datas, buffers["start"], buffers["controls"], control_spec=self.spec,
+            skip_checks=True, nstep=steps, initial_warmstart=buffers["warmstart"], state=buffers["states"],
+            sensordata=buffers["sensors"], chunk_size=self.chunk_size or max(1, -(-batch // max(1, self.num_threads))),
         )  # fmt: skip
         self.seconds.append(time_lib.perf_counter() - tick)
-        nq, nv, na = self.sizes["qpos"], self.sizes["qvel"], self.sizes["act"]
+        states, nq, nv, na = buffers["states"], self.sizes["qpos"], self.sizes["qvel"], self.sizes["act"]
         times = states[..., 0]
         # C resets a diverging simulation (time back to 0): NaN from there on, as MJX's would be.
         earlier = np.concatenate([np.full((batch, 1), float(time)), times[:, :-1]], axis=1)
         reset_ = np.maximum.accumulate(times < earlier - 0.5 * self.dt, axis=1)[..., None]
         qpos_, qvel_ = (np.where(reset_, np.nan, x) for x in (states[..., 1 : 1 + nq], states[..., 1 + nq : 1 + nq + nv]))
-        act_ = states[..., 1 + nq + nv : 1 + nq + nv + na]
+        parts = (times, qpos_, qvel_, states[..., 1 + nq + nv : 1 + nq + nv + na], buffers["sensors"])
         shape = (num_models, num_samples, steps)
-        return tuple(np.asarray(x, np.float32).reshape(shape + x.shape[2:]) for x in (times, qpos_, qvel_, act_, sensors))
+        return tuple(x.astype(np.float32).reshape(shape + x.shape[2:]) for x in parts)  # copies: buffers are reused
+
+    def _buffers(self, num_models: int, num_samples: int, steps: int) -> dict[str, Any]:
+        key = (num_models, num_samples, steps)
+        if key not in self._batches:
+            batch, first = num_models * num_samples, self.models[0]
+            ncontrol = mujoco.mj_stateSize(first, self.spec)
+            self._batches[key] = {
+                "models": [m for m in self.models[:num_models] for _ in range(num_samples)],
+                "start": np.zeros((batch, mujoco.mj_stateSize(first, self.full))),
+                "warmstart": np.zeros((batch, first.nv)), "controls": np.zeros((batch, steps, ncontrol)),
+                "states": np.zeros((batch, steps, mujoco.mj_stateSize(first, self.full))),
+                "sensors": np.zeros((batch, steps, first.nsensordata)),
+            }  # fmt: skip
+        return self._batches[key]
 
     def close(self) -> None:
         self._pool.close()
@@ -159,7 +178,7 @@ class Native:
     models are fixed when it is made."""
 
     task: Task | Ensemble
-    engine: Engine = dataclasses.field(metadata=dict(static=True))
+    engine: Engine = dataclasses.field(metadata={"static": True})
 
 
 @jax.tree_util.register_dataclass
@@ -194,7 +213,8 @@ def native(task: Task | Ensemble, *, num_threads: int | None = None, chunk_size:
 
     Args:
       task: the planning task, or an `Ensemble` of M models of it (one C model each).
-      num_threads: rollout threads (default: the physical cores).
+      num_threads: rollout threads (default: the physical cores; 0: the calling thread,
+        best for a simulation's single rollout).
       chunk_size: rollouts per thread-pool task (default: an even split over threads,
         best for the short, equal rollouts of a planner).
 
@@ -206,13 +226,17 @@ def native(task: Task | Ensemble, *, num_threads: int | None = None, chunk_size:
     if base.model.impl != mjx.Impl.JAX:
         raise ValueError("planning.native: the task's physics is MuJoCo Warp; native rollouts replay C MuJoCo's "
                          "states through MJX's JAX implementation: load the planning task with impl='jax'")  # fmt: skip
-    start = _complete(base, base.start(base.model, jax.random.key(0)))
-    n_substeps = _substeps(base, start)
-    engine = Engine(_host_models(base.mj_model, variants.fields), n_substeps, num_threads or physical_cores(), chunk_size)
+    from mjzoo.planning import native_checks as checks  # built on this module
+
+    start = _complete(base, jax.jit(base.start)(base.model, jax.random.key(0)))
+    n_substeps = checks.substeps(base, start)
+    threads = physical_cores() if num_threads is None else num_threads
+    engine = Engine(_host_models(base.mj_model, variants.fields), n_substeps, threads, chunk_size)
     result = Native(task, engine)
-    engine.vary(_changed(result, start))
-    _check_applied(result, start)
-    _check_reads(result, start)
+    engine.vary(checks.changed(result, start))
+    checks.applied_without_state(result, start)
+    engine.direct = checks.direct(result, start)
+    checks.reads(result, start)
     return result
 
 
@@ -221,25 +245,13 @@ def _host_models(mj_model: mujoco.MjModel, fields: dict[str, Array]) -> list[muj
     count = max((len(v) for v in fields.values()), default=1)
     models = []
     for m in range(count):
-        model = mujoco.MjModel(mj_model) if fields else mj_model
+        model = copy.deepcopy(mj_model) if fields else mj_model
         for name, values in fields.items():
             if not hasattr(model, name):
                 raise ValueError(f"planning.native: the ensemble varies {name!r}, which the C model has no field for")
             getattr(model, name)[...] = np.asarray(values[m]).reshape(getattr(model, name).shape)
         models.append(model)
     return models
-
-
-def _substeps(task: Task, start: State) -> int:
-    """Physics steps per control step, counted by recording one transition."""
-    recording = task.replace(model=_Recorder(task.model))
-    after = jax.jit(lambda s: transition(recording, s, jnp.zeros(task.action_size), jax.random.key(0)))(start)
-    count = round(float(after.data.time - start.data.time) / float(task.mj_model.opt.timestep))
-    if count < 1:
-        raise ValueError("planning.native: the task's step never reached mjzoo.physics.step or substep with the "
-                         "model it was given (e.g. it replaces model fields per episode, as domain randomization "
-                         "does); plan with backend='mjx', or randomize with planning.ensemble")  # fmt: skip
-    return count
 
 
 def _complete(task: Task, state: State) -> State:
@@ -281,7 +293,7 @@ def _replay(task: Task, start: State, actions: Array, keys: Array, c_states: dic
 def _roll(engine: Engine, base: Task, models: Any, start: State, controls: Array, keys: Array) -> dict[str, Array]:
     """C rollouts of controls [N, H, nu] under each of M models ([M] leading axis of
     `models`, an `mjx.Model` batch): {field: [M, N, H x n_substeps, ...]}."""
-    applied_one = lambda model, c: _applied(base.replace(model=model), engine.fields, start, c, keys)  # noqa: E731
+    applied_one = lambda model, c: _applied(base.replace(model=model), engine.fields, start, c, keys)
     applied = jax.vmap(lambda model: jax.vmap(lambda c: applied_one(model, c))(controls))(models)
     applied = jnp.repeat(applied, engine.n_substeps, axis=2)  # the same inputs every physics step
     num_models, num_samples, steps = applied.shape[:3]
@@ -292,10 +304,61 @@ def _roll(engine: Engine, base: Task, models: Any, start: State, controls: Array
     )
     d = start.data
     history = d.history if d.history is not None else jnp.zeros((0,))
-    held = [getattr(d, f) for f in engine.held]
-    out = jax.pure_callback(engine, out_shapes, d.time, d.qpos, d.qvel, d.act, history, d.qacc_warmstart, held,
-                            applied, vmap_method="sequential")  # fmt: skip
-    return dict(zip(("time", "qpos", "qvel", "act", "sensordata"), out))
+    args = (d.time, d.qpos, d.qvel, d.act, history, d.qacc_warmstart, [getattr(d, f) for f in engine.held], applied)
+    host = _HOST.get()
+    if isinstance(host, list):  # `split`'s first pass: hand C's inputs out instead
+        host.append((engine, args))
+        out = tuple(jnp.zeros(s.shape, s.dtype) for s in out_shapes)
+    elif host is not None:  # `split`'s second pass: C's outputs come in
+        out = tuple(host)
+    else:
+        out = jax.pure_callback(engine, out_shapes, *args, vmap_method="sequential")
+    return dict(zip(C_OUTPUTS, out))
+
+
+_HOST: contextvars.ContextVar = contextvars.ContextVar("mjzoo_native_host", default=None)
+
+
+def split(fn: Callable) -> Callable:
+    """`jax.jit(fn)` for a function that runs C MuJoCo once (a replan or a simulation
+    step on `Native` tasks), as two jits around a call of C MuJoCo from the host.
+
+    One jit reaches C through `jax.pure_callback`, which costs ~0.3 ms a call on a CPU:
+    more than a whole replan's work besides physics. The first jit computes C's inputs
+    (its trace of `fn` hands them out; XLA drops the rest), the host runs C, and the
+    second jit computes `fn` with C's outputs passed in. Same result, same key use.
+    Raises if `fn` runs C more than once (a planner that costs samples iteratively).
+    """
+    engines: list[Engine] = []
+
+    def inputs(*args):
+        calls: list = []
+        token = _HOST.set(calls)
+        try:
+            fn(*args)
+        finally:
+            _HOST.reset(token)
+        if len(calls) != 1:
+            raise NotImplementedError(f"native.split: the function ran C MuJoCo {len(calls)} times; it must run it "
+                                      "once (jit it whole instead: C is then called through jax.pure_callback)")  # fmt: skip
+        engines[:] = [calls[0][0]]
+        return calls[0][1]
+
+    def outputs(c_states, *args):
+        token = _HOST.set(c_states)
+        try:
+            return fn(*args)
+        finally:
+            _HOST.reset(token)
+
+    first, second = jax.jit(inputs), jax.jit(outputs)
+
+    def run(*args):
+        c_inputs = first(*args)
+        c_states = engines[0](*jax.tree.map(np.asarray, c_inputs))
+        return second(c_states, *args)
+
+    return run
 
 
 def rollout_costs(
@@ -319,7 +382,7 @@ def rollout_costs(
         value = terminal_value(model, final) if terminal_value is not None else 0.0
         return -(jnp.sum(rewards) + value)
 
-    per_model = lambda model, states: jax.vmap(cost, in_axes=(None, 0, 0))(model, controls, states)  # noqa: E731
+    per_model = lambda model, states: jax.vmap(cost, in_axes=(None, 0, 0))(model, controls, states)
     costs = jax.vmap(per_model)(models, c_states)
     return costs, jnp.float32(engine.n_substeps * engine.dt)
 
@@ -328,7 +391,7 @@ def transition_native(task: Native, state: State, action: Array, key: Array) -> 
     """`mjzoo.transition` with the physics of the step in C MuJoCo: a simulation that
     steps in C (one control step: one C rollout of its physics steps)."""
     if isinstance(task.task, Ensemble):
-        raise ValueError("planning.native: a simulation steps one model, not an Ensemble")
+        raise TypeError("planning.native: a simulation steps one model, not an Ensemble")
     base = task.task
     models = jax.tree.map(lambda x: x[None], base.model)
     keys = key[None]
@@ -336,87 +399,3 @@ def transition_native(task: Native, state: State, action: Array, key: Array) -> 
     one = jax.tree.map(lambda x: x[0, 0], c_states)
     final, _, _ = _replay(base, state, action[None], keys, one, task.engine.n_substeps)
     return final
-
-
-# --- checks at construction ------------------------------------------------------------
-
-
-def _perturbed(tree: Any, seed: int) -> Any:
-    """Every float leaf moved by N(0, 0.1), every integer leaf by one (dtypes kept)."""
-    rng = np.random.default_rng(seed)
-
-    def move(leaf):
-        leaf = np.asarray(leaf)
-        if np.issubdtype(leaf.dtype, np.floating):
-            return (leaf + 0.1 * rng.standard_normal(leaf.shape)).astype(leaf.dtype)
-        return leaf + np.ones((), leaf.dtype) if np.issubdtype(leaf.dtype, np.integer) else leaf
-
-    return jax.tree.map(move, tree)
-
-
-def _probe_controls(task: Native, key: Array) -> Array:
-    base = task.task.task if isinstance(task.task, Ensemble) else task.task
-    low, high = np.asarray(base.mj_model.actuator_ctrlrange, np.float32).T
-    limited = np.asarray(base.mj_model.actuator_ctrllimited, bool)
-    u = jax.random.uniform(key, (2, base.action_size), minval=-1.0, maxval=1.0)
-    if base.action_size == base.mj_model.nu:
-        u = jnp.where(limited, low + (u + 1) / 2 * (high - low), u)
-    return u
-
-
-def _changed(task: Native, start: State) -> list[str]:
-    """The applied inputs (`APPLIED`) the task's step changes, for probe actions."""
-    base = task.task.task if isinstance(task.task, Ensemble) else task.task
-    actions, keys = _probe_controls(task, jax.random.key(1)), jax.random.split(jax.random.key(2), 2)
-    present = task.engine.present
-    applied = np.asarray(jax.jit(lambda s: _applied(base, present, s, actions, keys))(start))
-    sizes = [np.size(getattr(start.data, f)) for f in present]
-    parts = np.split(applied, np.cumsum(sizes)[:-1], axis=1)
-    return [f for f, part in zip(present, parts) if not np.allclose(part, np.ravel(getattr(start.data, f)))]
-
-
-def _check_applied(task: Native, start: State) -> None:
-    """Raises if what the task's step applies changes with the physics state alone."""
-    base = task.task.task if isinstance(task.task, Ensemble) else task.task
-    actions, keys = _probe_controls(task, jax.random.key(1)), jax.random.split(jax.random.key(2), 2)
-    applied = jax.jit(lambda s: _applied(base, task.engine.fields, s, actions, keys))
-    moved = start.replace(data=start.data.replace(**_perturbed({k: getattr(start.data, k) for k in ("qpos", "qvel", "act", "time")}, 3)))  # fmt: skip
-    if not np.allclose(applied(start), applied(moved), atol=1e-6):
-        raise ValueError("planning.native: the controls this task applies depend on the physics state (e.g. a PD "
-                         "actuator evaluated every physics step, or an action latency read from qpos); native "
-                         "rollouts need every control before the rollout starts: plan with backend='mjx'")  # fmt: skip
-
-
-def _check_reads(task: Native, start: State) -> None:
-    """Raises, naming the fields, if the task's reward or termination reads any part of
-    `data` that C MuJoCo does not return and the replay does not recompute."""
-    base = task.task.task if isinstance(task.task, Ensemble) else task.task
-    engine = task.engine
-    actions, keys = _probe_controls(task, jax.random.key(1)), jax.random.split(jax.random.key(2), 2)
-    models = jax.tree.map(lambda x: x[None], base.model)
-    c_states = jax.jit(lambda s: _roll(engine, base, models, s, actions[None], keys))(start)
-    one = jax.tree.map(lambda x: x[0, 0], c_states)
-    outcome = jax.jit(lambda s: _replay(base, s, actions, keys, one, engine.n_substeps)[1:])
-    start = jax.tree.map(np.asarray, start)  # numpy leaves: perturbed copies share one trace
-    reference = outcome(start)
-    fields = [f.name for f in dataclasses.fields(start.data) if f.name not in FROM_C + APPLIED]
-    fields += [f"_impl.{f.name}" for f in dataclasses.fields(start.data._impl)] if hasattr(start.data, "_impl") else []
-    read = []
-    for i, name in enumerate(fields):
-        if name == "_impl":
-            continue
-        owner, attr = (start.data._impl, name[6:]) if name.startswith("_impl.") else (start.data, name)
-        value = getattr(owner, attr)
-        if not any(isinstance(leaf, np.ndarray) for leaf in jax.tree.leaves(value)):
-            continue  # a static field (sizes), not data
-        moved_owner = owner.replace(**{attr: _perturbed(value, 10 + i)})
-        data = start.data.replace(_impl=moved_owner) if owner is not start.data else moved_owner
-        got = outcome(start.replace(data=data))
-        if not all(np.array_equal(a, b, equal_nan=True) for a, b in zip(jax.tree.leaves(got), jax.tree.leaves(reference))):
-            read.append(name.removeprefix("_impl."))
-    if read:
-        hints = sorted({hint for name in read for key, hint in _HINTS.items() if name.startswith(key)})
-        raise ValueError(f"planning.native: this task's reward or termination reads data.{', data.'.join(read)}, which "
-                         "exists only inside C MuJoCo's step (mujoco.rollout returns states and sensors)"
-                         + (f"; read {' or '.join(hints)} from data.sensordata instead" if hints else "")
-                         + ", or plan with backend='mjx'")  # fmt: skip
