@@ -55,10 +55,23 @@ from mjzoo.types import State, Task
 from mujoco import mjx
 from mujoco import rollout as mj_rollout
 
-__all__ = ["Engine", "Native", "native", "physical_cores", "rollout_costs", "transition_native"]
+__all__ = [
+    "Engine",
+    "Native",
+    "native",
+    "physical_cores",
+    "rollout_costs",
+    "transition_native",
+]
 
 Array = jax.Array
-APPLIED = ("ctrl", "qfrc_applied", "xfrc_applied", "mocap_pos", "mocap_quat")  # in mjtState order
+APPLIED = (
+    "ctrl",
+    "qfrc_applied",
+    "xfrc_applied",
+    "mocap_pos",
+    "mocap_quat",
+)  # in mjtState order
 _SPEC = {
     "ctrl": mujoco.mjtState.mjSTATE_CTRL, "qfrc_applied": mujoco.mjtState.mjSTATE_QFRC_APPLIED,
     "xfrc_applied": mujoco.mjtState.mjSTATE_XFRC_APPLIED, "mocap_pos": mujoco.mjtState.mjSTATE_MOCAP_POS,
@@ -79,7 +92,9 @@ def physical_cores() -> int:
     seen, cores = set(), 0
     for cpu in cpus:
         try:
-            with open(f"/sys/devices/system/cpu/cpu{cpu}/topology/thread_siblings_list") as f:
+            with open(
+                f"/sys/devices/system/cpu/cpu{cpu}/topology/thread_siblings_list"
+            ) as f:
                 siblings = f.read().strip()
         except OSError:
             return len(cpus)
@@ -93,21 +108,34 @@ class Engine:
     thread pool with its per-thread `MjData`, and the layout of states and controls.
     Compared by identity: a jitted planner compiles once per engine."""
 
-    def __init__(self, models: list[mujoco.MjModel], n_substeps: int, num_threads: int, chunk_size: int | None):
+    def __init__(
+        self,
+        models: list[mujoco.MjModel],
+        n_substeps: int,
+        num_threads: int,
+        chunk_size: int | None,
+    ):
         first = models[0]
         self.models, self.n_substeps, self.chunk_size = models, n_substeps, chunk_size
         self.dt = float(first.opt.timestep)
         self.present = [f for f in APPLIED if getattr(mujoco.MjData(first), f).size > 0]
         self.vary(self.present)
         self.direct = False  # True: ctrl is the action itself, no other input varies (set by `native`)
-        self.sizes = {f: int(getattr(mujoco.MjData(first), f).size) for f in ("qpos", "qvel", "act", "sensordata")}
+        self.sizes = {
+            f: int(getattr(mujoco.MjData(first), f).size)
+            for f in ("qpos", "qvel", "act", "sensordata")
+        }
         self.full = int(mujoco.mjtState.mjSTATE_FULLPHYSICS)
         self.num_threads = num_threads
         self._scratch = mujoco.MjData(first)
         self._datas = [mujoco.MjData(first) for _ in range(max(1, num_threads))]
         self._pool = mj_rollout.Rollout(nthread=num_threads)  # 0: on the calling thread
-        self._batches: dict[tuple[int, int, int], dict[str, Any]] = {}  # preallocated per batch shape
-        self.seconds: list[float] = []  # wall time of each call's C rollouts (a real-time runner reads it)
+        self._batches: dict[
+            tuple[int, int, int], dict[str, Any]
+        ] = {}  # preallocated per batch shape
+        self.seconds: list[
+            float
+        ] = []  # wall time of each call's C rollouts (a real-time runner reads it)
 
     def vary(self, fields: list[str]) -> None:
         """Sends `fields` (and ctrl) to C as controls at every physics step; the other
@@ -116,7 +144,9 @@ class Engine:
         self.held = [f for f in self.present if f not in self.fields]
         self.spec = int(sum(_SPEC[f] for f in self.fields))
 
-    def __call__(self, time, qpos, qvel, act, history, warmstart, held, controls) -> tuple[np.ndarray, ...]:
+    def __call__(
+        self, time, qpos, qvel, act, history, warmstart, held, controls
+    ) -> tuple[np.ndarray, ...]:
         """Rolls out [M, N, T, ncontrol] controls from one state (whose `held` inputs stay
         fixed); returns float32 time [M, N, T], qpos, qvel, act and sensordata
         [M, N, T, size], NaN after a reset."""
@@ -142,15 +172,35 @@ class Engine:
             sensordata=buffers["sensors"], chunk_size=self.chunk_size or max(1, -(-batch // max(1, self.num_threads))),
         )  # fmt: skip
         self.seconds.append(time_lib.perf_counter() - tick)
-        states, nq, nv, na = buffers["states"], self.sizes["qpos"], self.sizes["qvel"], self.sizes["act"]
+        states, nq, nv, na = (
+            buffers["states"],
+            self.sizes["qpos"],
+            self.sizes["qvel"],
+            self.sizes["act"],
+        )
         times = states[..., 0]
         # C resets a diverging simulation (time back to 0): NaN from there on, as MJX's would be.
-        earlier = np.concatenate([np.full((batch, 1), float(time)), times[:, :-1]], axis=1)
-        reset_ = np.maximum.accumulate(times < earlier - 0.5 * self.dt, axis=1)[..., None]
-        qpos_, qvel_ = (np.where(reset_, np.nan, x) for x in (states[..., 1 : 1 + nq], states[..., 1 + nq : 1 + nq + nv]))
-        parts = (times, qpos_, qvel_, states[..., 1 + nq + nv : 1 + nq + nv + na], buffers["sensors"])
+        earlier = np.concatenate(
+            [np.full((batch, 1), float(time)), times[:, :-1]], axis=1
+        )
+        reset_ = np.maximum.accumulate(times < earlier - 0.5 * self.dt, axis=1)[
+            ..., None
+        ]
+        qpos_, qvel_ = (
+            np.where(reset_, np.nan, x)
+            for x in (states[..., 1 : 1 + nq], states[..., 1 + nq : 1 + nq + nv])
+        )
+        parts = (
+            times,
+            qpos_,
+            qvel_,
+            states[..., 1 + nq + nv : 1 + nq + nv + na],
+            buffers["sensors"],
+        )
         shape = (num_models, num_samples, steps)
-        return tuple(x.astype(np.float32).reshape(shape + x.shape[2:]) for x in parts)  # copies: buffers are reused
+        return tuple(
+            x.astype(np.float32).reshape(shape + x.shape[2:]) for x in parts
+        )  # copies: buffers are reused
 
     def _buffers(self, num_models: int, num_samples: int, steps: int) -> dict[str, Any]:
         key = (num_models, num_samples, steps)
@@ -204,11 +254,20 @@ class _Replay(physics.StandIn):
 
     def substep(self, data: mjx.Data) -> mjx.Data:
         pre = data.replace(**self.before)
-        pre = mjx.com_vel(self.model, mjx.com_pos(self.model, mjx.kinematics(self.model, pre)))
-        return pre.replace(**{k: v.astype(getattr(data, k).dtype) for k, v in self.after.items()})
+        pre = mjx.com_vel(
+            self.model, mjx.com_pos(self.model, mjx.kinematics(self.model, pre))
+        )
+        return pre.replace(
+            **{k: v.astype(getattr(data, k).dtype) for k, v in self.after.items()}
+        )
 
 
-def native(task: Task | Ensemble, *, num_threads: int | None = None, chunk_size: int | None = None) -> Native:
+def native(
+    task: Task | Ensemble,
+    *,
+    num_threads: int | None = None,
+    chunk_size: int | None = None,
+) -> Native:
     """`task` with its rollouts in C MuJoCo.
 
     Args:
@@ -228,19 +287,26 @@ def native(task: Task | Ensemble, *, num_threads: int | None = None, chunk_size:
                          "states through MJX's JAX implementation: load the planning task with impl='jax'")  # fmt: skip
     from mjzoo.planning import native_checks as checks  # built on this module
 
-    start = _complete(base, jax.jit(base.start)(base.model, jax.random.key(0)))
-    n_substeps = checks.substeps(base, start)
+    start = checks.start_state(base)
+    models = _host_models(base.mj_model, variants.fields)
+    present = [f for f in APPLIED if getattr(mujoco.MjData(models[0]), f).size > 0]
+    probed = checks.probe(base, start, present)
+    if probed.state_dependent:
+        raise ValueError("planning.native: the controls this task applies depend on the physics state (e.g. a PD "
+                         "actuator evaluated every physics step, or an action latency read from qpos); native "
+                         "rollouts need every control before the rollout starts: plan with backend='mjx'")  # fmt: skip
     threads = physical_cores() if num_threads is None else num_threads
-    engine = Engine(_host_models(base.mj_model, variants.fields), n_substeps, threads, chunk_size)
+    engine = Engine(models, probed.n_substeps, threads, chunk_size)
+    engine.vary(probed.changed)
+    engine.direct = probed.direct
     result = Native(task, engine)
-    engine.vary(checks.changed(result, start))
-    checks.applied_without_state(result, start)
-    engine.direct = checks.direct(result, start)
-    checks.reads(result, start)
+    checks.reads(result, start, probed)
     return result
 
 
-def _host_models(mj_model: mujoco.MjModel, fields: dict[str, Array]) -> list[mujoco.MjModel]:
+def _host_models(
+    mj_model: mujoco.MjModel, fields: dict[str, Array]
+) -> list[mujoco.MjModel]:
     """One C model per ensemble member, its fields set from the ensemble's [M] values."""
     count = max((len(v) for v in fields.values()), default=1)
     models = []
@@ -248,8 +314,12 @@ def _host_models(mj_model: mujoco.MjModel, fields: dict[str, Array]) -> list[muj
         model = copy.deepcopy(mj_model) if fields else mj_model
         for name, values in fields.items():
             if not hasattr(model, name):
-                raise ValueError(f"planning.native: the ensemble varies {name!r}, which the C model has no field for")
-            getattr(model, name)[...] = np.asarray(values[m]).reshape(getattr(model, name).shape)
+                raise ValueError(
+                    f"planning.native: the ensemble varies {name!r}, which the C model has no field for"
+                )
+            getattr(model, name)[...] = np.asarray(values[m]).reshape(
+                getattr(model, name).shape
+            )
         models.append(model)
     return models
 
@@ -260,18 +330,30 @@ def _complete(task: Task, state: State) -> State:
     return complete(task.replace(model=_Recorder(task.model)), state)
 
 
-def _applied(task: Task, fields: list[str], start: State, actions: Array, keys: Array) -> Array:
+def _applied(
+    task: Task, fields: list[str], start: State, actions: Array, keys: Array
+) -> Array:
     """[H, ncontrol] what the task's step applies in each of H control steps, in C's order."""
     recording = task.replace(model=_Recorder(task.model))
 
     def body(state: State, inputs) -> tuple[State, Array]:
         state = transition(recording, state, *inputs)
-        return state, jnp.concatenate([jnp.ravel(getattr(state.data, f)).astype(jnp.float32) for f in fields])
+        return state, jnp.concatenate(
+            [jnp.ravel(getattr(state.data, f)).astype(jnp.float32) for f in fields]
+        )
 
     return jax.lax.scan(body, start, (actions, keys))[1]
 
 
-def _replay(task: Task, start: State, actions: Array, keys: Array, c_states: dict, n_substeps: int, unroll: int = 1):
+def _replay(
+    task: Task,
+    start: State,
+    actions: Array,
+    keys: Array,
+    c_states: dict,
+    n_substeps: int,
+    unroll: int = 1,
+):
     """The task's transitions over C's states (one rollout, [H x n_substeps] each):
     (final state, [H] rewards, [H] terminated)."""
     horizon = actions.shape[0]
@@ -279,32 +361,57 @@ def _replay(task: Task, start: State, actions: Array, keys: Array, c_states: dic
                   for k in ("time", "qpos", "qvel", "act")}  # fmt: skip
     after = {k: v[n_substeps::n_substeps] for k, v in with_start.items()}
     after["sensordata"] = c_states["sensordata"][n_substeps - 1 :: n_substeps]
-    before = {k: with_start[k][n_substeps - 1 :: n_substeps][:horizon] for k in ("qpos", "qvel")}
+    before = {
+        k: with_start[k][n_substeps - 1 :: n_substeps][:horizon]
+        for k in ("qpos", "qvel")
+    }
 
     def body(state: State, inputs) -> tuple[State, tuple[Array, Array]]:
         action, key, a, b = inputs
-        state = transition(task.replace(model=_Replay(task.model, a, b)), state, action, key)
+        state = transition(
+            task.replace(model=_Replay(task.model, a, b)), state, action, key
+        )
         return state, (state.reward, state.terminated)
 
-    final, (rewards, terminated) = jax.lax.scan(body, start, (actions, keys, after, before), unroll=unroll)
+    final, (rewards, terminated) = jax.lax.scan(
+        body, start, (actions, keys, after, before), unroll=unroll
+    )
     return final, rewards, terminated
 
 
-def _roll(engine: Engine, base: Task, models: Any, start: State, controls: Array, keys: Array) -> dict[str, Array]:
+def _roll(
+    engine: Engine, base: Task, models: Any, start: State, controls: Array, keys: Array
+) -> dict[str, Array]:
     """C rollouts of controls [N, H, nu] under each of M models ([M] leading axis of
     `models`, an `mjx.Model` batch): {field: [M, N, H x n_substeps, ...]}."""
-    applied_one = lambda model, c: _applied(base.replace(model=model), engine.fields, start, c, keys)
-    applied = jax.vmap(lambda model: jax.vmap(lambda c: applied_one(model, c))(controls))(models)
-    applied = jnp.repeat(applied, engine.n_substeps, axis=2)  # the same inputs every physics step
+    applied_one = lambda model, c: _applied(
+        base.replace(model=model), engine.fields, start, c, keys
+    )
+    applied = jax.vmap(
+        lambda model: jax.vmap(lambda c: applied_one(model, c))(controls)
+    )(models)
+    applied = jnp.repeat(
+        applied, engine.n_substeps, axis=2
+    )  # the same inputs every physics step
     num_models, num_samples, steps = applied.shape[:3]
     shape = (num_models, num_samples, steps)
     sizes = engine.sizes
     out_shapes = (jax.ShapeDtypeStruct(shape, jnp.float32),) + tuple(
-        jax.ShapeDtypeStruct(shape + (sizes[k],), jnp.float32) for k in ("qpos", "qvel", "act", "sensordata")
+        jax.ShapeDtypeStruct(shape + (sizes[k],), jnp.float32)
+        for k in ("qpos", "qvel", "act", "sensordata")
     )
     d = start.data
     history = d.history if d.history is not None else jnp.zeros((0,))
-    args = (d.time, d.qpos, d.qvel, d.act, history, d.qacc_warmstart, [getattr(d, f) for f in engine.held], applied)
+    args = (
+        d.time,
+        d.qpos,
+        d.qvel,
+        d.act,
+        history,
+        d.qacc_warmstart,
+        [getattr(d, f) for f in engine.held],
+        applied,
+    )
     host = _HOST.get()
     if isinstance(host, list):  # `split`'s first pass: hand C's inputs out instead
         host.append((engine, args))
@@ -316,7 +423,9 @@ def _roll(engine: Engine, base: Task, models: Any, start: State, controls: Array
     return dict(zip(C_OUTPUTS, out))
 
 
-_HOST: contextvars.ContextVar = contextvars.ContextVar("mjzoo_native_host", default=None)
+_HOST: contextvars.ContextVar = contextvars.ContextVar(
+    "mjzoo_native_host", default=None
+)
 
 
 def split(fn: Callable) -> Callable:
@@ -362,7 +471,12 @@ def split(fn: Callable) -> Callable:
 
 
 def rollout_costs(
-    task: Native, state: State, controls: Array, key: Array, terminal_value: TerminalValue | None = None, unroll: int = 1
+    task: Native,
+    state: State,
+    controls: Array,
+    key: Array,
+    terminal_value: TerminalValue | None = None,
+    unroll: int = 1,
 ) -> tuple[Array, Array]:
     """`mjzoo.planning.rollout_costs` with the physics in C MuJoCo: ([M, N] costs,
     [] control step dt) of controls [N, H, nu] from `state`."""
@@ -378,11 +492,21 @@ def rollout_costs(
     c_states = _roll(engine, base, models, start, controls, keys)
 
     def cost(model, actions: Array, sample: dict) -> Array:
-        final, rewards, _ = _replay(base.replace(model=model), start, actions, keys, sample, engine.n_substeps, unroll)
+        final, rewards, _ = _replay(
+            base.replace(model=model),
+            start,
+            actions,
+            keys,
+            sample,
+            engine.n_substeps,
+            unroll,
+        )
         value = terminal_value(model, final) if terminal_value is not None else 0.0
         return -(jnp.sum(rewards) + value)
 
-    per_model = lambda model, states: jax.vmap(cost, in_axes=(None, 0, 0))(model, controls, states)
+    per_model = lambda model, states: jax.vmap(cost, in_axes=(None, 0, 0))(
+        model, controls, states
+    )
     costs = jax.vmap(per_model)(models, c_states)
     return costs, jnp.float32(engine.n_substeps * engine.dt)
 
@@ -391,7 +515,9 @@ def transition_native(task: Native, state: State, action: Array, key: Array) -> 
     """`mjzoo.transition` with the physics of the step in C MuJoCo: a simulation that
     steps in C (one control step: one C rollout of its physics steps)."""
     if isinstance(task.task, Ensemble):
-        raise TypeError("planning.native: a simulation steps one model, not an Ensemble")
+        raise TypeError(
+            "planning.native: a simulation steps one model, not an Ensemble"
+        )
     base = task.task
     models = jax.tree.map(lambda x: x[None], base.model)
     keys = key[None]

@@ -118,7 +118,7 @@ def test_sensors_poses_and_mocap_are_what_mjx_gives():
     task = task.replace(step=bind(_mocap_step, task.step))
     nat = native.native(task)
     assert "mocap_pos" in nat.engine.fields and not nat.engine.direct
-    state = mjzoo.reset(task, jax.random.key(0))
+    state = jax.jit(mjzoo.reset)(task, jax.random.key(0))
     controls = jax.random.uniform(jax.random.key(1), (4, 40, 2), minval=-1, maxval=1)
     mjx_side, c_side = _both(task, nat, state, controls)
     _assert_agree(mjx_side, c_side)
@@ -168,7 +168,7 @@ def test_a_diverging_rollout_is_nan_in_c_and_caught_by_the_guard():
     keeps the last good state, as it does for MJX's NaN."""
     task = mjzoo.task(ARM.replace('gear="5"', 'gear="1e13"'), rewards={"tip": (_tip_height, 1.0)}, ctrl_dt=0.02)
     nat = native.native(task)
-    state = mjzoo.complete(task, mjzoo.reset(task, jax.random.key(0)))
+    state = mjzoo.complete(task, jax.jit(mjzoo.reset)(task, jax.random.key(0)))
     actions = jnp.array([[0.0, 0.0], [1.0, 0.0], [0.0, 0.0]])  # the middle one explodes
 
     def run(s):
@@ -211,7 +211,7 @@ def test_split_replan_equals_the_one_jit_replan():
     task = mjzoo.envs.make("cartpole_swingup", episode_steps=10**9)
     nat = native.native(task)
     config = mppi.Config(num_samples=16, horizon_steps=20, num_knots=4)
-    state = mjzoo.complete(task, mjzoo.reset(task, jax.random.key(0)))
+    state = mjzoo.complete(task, jax.jit(mjzoo.reset)(task, jax.random.key(0)))
     plan = mppi.init(config, nat)
     replan = lambda p, s, k: closed_loop.replan(mppi, config, nat, p, s, k)  # noqa: E731
     key = jax.random.key(1)
@@ -224,4 +224,4 @@ def test_native_needs_jax_physics_and_one_model_to_simulate():
     task = mjzoo.envs.make("pendulum_swingup")
     ensemble = planning.ensemble(task, _heavier, 2, jax.random.key(0))
     with pytest.raises(TypeError, match="one model"):
-        native.transition_native(native.native(ensemble), mjzoo.reset(task, jax.random.key(0)), jnp.zeros(1), jax.random.key(0))
+        native.transition_native(native.native(ensemble), jax.jit(mjzoo.reset)(task, jax.random.key(0)), jnp.zeros(1), jax.random.key(0))
