@@ -119,12 +119,14 @@ def planning(spec: str) -> base.PlanningSetup:
 
 
 def closed_loop_problem(
-    spec: str, planner: ModuleType, config: SamplingConfig, seconds: float | None = None, **overrides: Any
+    spec: str, planner: ModuleType, config: SamplingConfig, seconds: float | None = None, backend: str = "auto",
+    **overrides: Any,
 ) -> Problem:
     """The task's closed-loop problem (its `planning` setup): the task as the world, its
     planning view as the planner's model, its hooks and success test, for `seconds`
-    (default: the setup's, else one episode) of simulated time. Registered envs run with
-    no episode limit; `overrides` go to both tasks."""
+    (default: the setup's, else one episode) of simulated time, on `backend` ("mjx",
+    "native": C MuJoCo; "auto": native on a CPU). Registered envs run with no episode
+    limit; `overrides` go to both tasks."""
     setup = planning(spec)
     build = functools.partial(make, spec, **overrides)
     unlimited = {} if _is_user(spec) else {"episode_steps": 10**9}  # a user's factory may not take it
@@ -135,7 +137,7 @@ def closed_loop_problem(
     return Problem(
         planner=planner, config=config, sim_task=sim_task, plan_task=setup.plan_task(build, **unlimited),
         seconds=seconds or setup.seconds or int(sim_task.time_limit) * control_dt(sim_task),
-        replan_every=setup.replan_every, hooks=setup.hooks, success=setup.success,
+        replan_every=setup.replan_every, hooks=setup.hooks, success=setup.success, backend=backend,
     )  # fmt: skip
 
 

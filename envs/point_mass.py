@@ -6,7 +6,8 @@ Reward terms per step (each a weight times a value in [0, 1]):
   reach   +1.0  * tolerance(distance to target, upper=target_radius, margin=0.5 m)
   effort  -0.01 * mean(action^2)
 No termination; truncated after `episode_steps` (250 steps of 0.02 s = 5 s).
-Keeps ``info["goal"]`` (2,), the target, also shown by the model's mocap marker.
+Keeps ``info["goal"]`` (2,), the target, also shown by the model's mocap marker, and
+``info["plan_cost"]``, what a planner's last rollouts predicted (0 outside planning).
 """
 
 from __future__ import annotations
@@ -26,6 +27,7 @@ from mjzoo.types import State, Task, bind
 __all__ = ["Params", "reach"]
 
 Array = jax.Array
+MASS_BODY = 2  # the mass in point_mass.xml (0: world, 1: the mocap target)
 
 # PPO hyperparameters that solve this task (`mjzoo train ppo point_mass`).
 PPO = dict(num_envs=256, unroll_length=32, num_minibatches=8, num_epochs=4, learning_rate=1e-3,
@@ -40,6 +42,21 @@ def new_goal_when_reached(radius: Array, spawn_range: Array, sim_task: Task, sta
     goal = jnp.where(reached, jax.random.uniform(key, (2,), minval=-spawn_range, maxval=spawn_range), state.info["goal"])
     data = state.data.replace(mocap_pos=state.data.mocap_pos.at[0, :2].set(goal))
     return state.replace(data=data, obs=observe(data, goal), info={**state.info, "goal": goal})
+
+
+def gusts(force: Array, sim_task: Task, state: State, key: Array) -> State:
+    """Pre-simulation-step hook: a gust of wind on the mass, N(0, `force`) newtons along
+    x and y, drawn anew before every simulation step. The planner does not model it."""
+    wind = force * jax.random.normal(key, (2,))
+    xfrc = state.data.xfrc_applied.at[MASS_BODY, :2].set(wind.astype(state.data.xfrc_applied.dtype))
+    return state.replace(data=state.data.replace(xfrc_applied=xfrc))
+
+
+def plan_cost(state: State, planner_state) -> State:
+    """Post-rollout hook: what the last batch of rollouts found, kept in the simulation's
+    ``info["plan_cost"]``: the cost the planner predicts for its chosen plan (about
+    -horizon x reach weight once the mass holds the goal), for logs and the viewer."""
+    return state.replace(info={**state.info, "plan_cost": jnp.asarray(planner_state.cost, jnp.float32)})
 
 
 def warm_start(plan_task: Task, state: State, num_knots: int) -> Array:
@@ -62,11 +79,14 @@ def _reaches_goals(states) -> tuple[bool, float]:
 
 
 # Sampling planners (`mjzoo plan mppi point_mass`): continuous reaching, a new goal once
-# one is reached (a post-simulation-step hook); 0.05 s planning steps over 1 s.
+# one is reached (a post-simulation-step hook), in gusts of wind the planner does not
+# model (a pre-simulation-step hook), its predicted cost kept (a post-rollout hook);
+# 0.05 s planning steps over 1 s.
 _SAMPLING = dict(num_samples=32, horizon_steps=20, num_knots=3)
 PLANNING = base.PlanningSetup(
     seconds=6.0, replan_every=2, plan_overrides=dict(ctrl_dt=0.05), success=_reaches_goals,
-    hooks=Hooks(warm_start=warm_start, post_sim_step=bind(new_goal_when_reached, np.float32(0.05), np.float32(0.3))),
+    hooks=Hooks(warm_start=warm_start, post_sim_step=bind(new_goal_when_reached, np.float32(0.05), np.float32(0.3)),
+                pre_sim_step=bind(gusts, np.float32(0.05)), post_rollout=plan_cost),
     configs={"predictive_sampling": _SAMPLING, "mppi": dict(_SAMPLING, temperature=0.05),
              "cem": dict(_SAMPLING, num_elites=4, sigma_min=0.2)},
 )  # fmt: skip
@@ -94,7 +114,7 @@ def reset(p: Params, model: mjx.Model, key: Array) -> State:
     goal = jax.random.uniform(goal_key, (2,), minval=-p.spawn_range, maxval=p.spawn_range)
     data = p.data0
     data = data.replace(qpos=start, mocap_pos=data.mocap_pos.at[0, :2].set(goal))
-    return State.create(data, observe(data, goal), info={"goal": goal})
+    return State.create(data, observe(data, goal), info={"goal": goal, "plan_cost": jnp.zeros((), jnp.float32)})
 
 
 def step(p: Params, model: mjx.Model, state: State, action: Array, key: Array) -> State:

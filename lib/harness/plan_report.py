@@ -1,6 +1,6 @@
 """The files a closed-loop planning run writes (`mjzoo plan`):
 
-    out/summary.json   success, score, final_cost, physics, plan_hz, plan_latency_ms, ...
+    out/summary.json   success, score, final_cost, backend, physics, plan_hz, plan_latency_ms, ...
                        (on Warp also the simulation's physics/capacity_overflow and
                        physics/solver_limit: shares of its steps)
     out/plan.png       cost and controls over time
@@ -37,7 +37,8 @@ def write(out: Path, problem: Problem, result: Result, stats: dict[str, float], 
     solved, score = problem.success(states) if problem.success else (None, None)
     summary = {**extra, "success": solved, "score": score,
                "final_cost": float(np.mean(costs[time_s >= time_s[-1] - 1.0 + 1e-6])),
-               "physics": problem.sim_task.model.impl.value,
+               "physics": "c-mujoco" if problem.physics == "native" else problem.sim_task.model.impl.value,
+               "backend": problem.physics,
                **{k: float(np.mean(v)) for k, v in states.metrics.items() if k.startswith("physics/")},
                **{k: float(v) for k, v in stats.items()}}  # fmt: skip
     (out / "summary.json").write_text(json.dumps(summary, indent=2))

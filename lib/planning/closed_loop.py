@@ -17,8 +17,13 @@ Judo's task hooks, as pure functions in `Hooks`:
   pre_rollout(plan_task, start) -> plan_task  adjust the planning view before each
                                             rollout batch (e.g. a task phase)
   warm_start(plan_task, start, K) -> [K, nu]   the first plan's knots
+  pre_sim_step(sim_task, sim_state, key) -> sim_state    before each simulation step
+                                            (e.g. a gust, a moving target)
   post_sim_step(sim_task, sim_state, key) -> sim_state   simulation-side events
                                             (e.g. a new goal once one is reached)
+  post_rollout(sim_state, planner_state) -> sim_state    after each batch of rollouts,
+                                            with what they found (the chosen plan and
+                                            its predicted cost), e.g. to log or move a goal
 """
 
 from __future__ import annotations
@@ -38,7 +43,7 @@ from mjzoo.planning.sampling import PlannerState, SamplingConfig
 from mjzoo.running import complete, transition
 from mjzoo.types import State, Task
 
-__all__ = ["Hooks", "Result", "run", "replan", "first_plan", "sim_step"]
+__all__ = ["Hooks", "Result", "run", "replan", "after_rollout", "first_plan", "sim_step"]
 
 Array = jax.Array
 
@@ -62,6 +67,8 @@ class Hooks:
     pre_rollout: Callable | None = None
     warm_start: Callable | None = None
     post_sim_step: Callable | None = None
+    pre_sim_step: Callable | None = None
+    post_rollout: Callable | None = None
 
     def __post_init__(self) -> None:
         for field in dataclasses.fields(self):
@@ -105,6 +112,11 @@ def replan(
     return planner.plan(config, view, planner_state, start, key, terminal_value=terminal_value)[0]
 
 
+def after_rollout(hooks: Hooks, sim_state: State, planner_state: PlannerState) -> State:
+    """The simulation state after a replan: through the post-rollout hook, if any."""
+    return hooks.post_rollout(sim_state, planner_state) if hooks.post_rollout is not None else sim_state
+
+
 def first_plan(
     planner: ModuleType, config: SamplingConfig, plan_task: Task | Ensemble, sim_state: State, hooks: Hooks = Hooks()
 ) -> PlannerState:
@@ -121,12 +133,14 @@ def sim_step(
 ) -> tuple[State, Array]:
     """One simulation control step under the current plan: (next state, executed control);
     a `Native` simulation steps in C MuJoCo."""
+    step_key, hook_key, pre_key = jax.random.split(key, 3)
+    if hooks.pre_sim_step is not None:
+        sim_state = hooks.pre_sim_step(base_task(sim_task), sim_state, pre_key)
     action = sampling.control_at(config, planner_state, sim_state.data.time, *sampling.control_limits(sim_task))
-    step_key, hook_key = jax.random.split(key)
     step = transition_native if isinstance(sim_task, Native) else transition
     next_state = step(sim_task, sim_state, action, step_key)
     if hooks.post_sim_step is not None:
-        next_state = hooks.post_sim_step(sim_task, next_state, hook_key)
+        next_state = hooks.post_sim_step(base_task(sim_task), next_state, hook_key)
     return next_state, action
 
 
@@ -156,6 +170,7 @@ def run(
         sim_state, planner_state = carry
         plan_key, sim_key = jax.random.split(key)
         planner_state = replan(planner, config, plan_task, planner_state, sim_state, plan_key, hooks, terminal_value)
+        sim_state = after_rollout(hooks, sim_state, planner_state)
         def step(state: State, key: Array):
             next_state, control = sim_step(config, sim_task, planner_state, state, key, hooks)
             return next_state, (next_state, control)

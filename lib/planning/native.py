@@ -38,8 +38,6 @@ from __future__ import annotations
 import contextvars
 import copy
 import dataclasses
-import os
-import time as time_lib
 from collections.abc import Callable
 from typing import Any
 
@@ -49,34 +47,15 @@ import mujoco
 import numpy as np
 from mjzoo import physics
 from mjzoo.planning.learned import TerminalValue, as_terminal_value
+from mjzoo.planning.native_engine import APPLIED, Engine, physical_cores
 from mjzoo.planning.rollouts import Ensemble
 from mjzoo.running import complete, transition
 from mjzoo.types import State, Task
 from mujoco import mjx
-from mujoco import rollout as mj_rollout
 
-__all__ = [
-    "Engine",
-    "Native",
-    "native",
-    "physical_cores",
-    "rollout_costs",
-    "transition_native",
-]
+__all__ = ["Engine", "Native", "native", "physical_cores", "rollout_costs", "split", "transition_native"]
 
 Array = jax.Array
-APPLIED = (
-    "ctrl",
-    "qfrc_applied",
-    "xfrc_applied",
-    "mocap_pos",
-    "mocap_quat",
-)  # in mjtState order
-_SPEC = {
-    "ctrl": mujoco.mjtState.mjSTATE_CTRL, "qfrc_applied": mujoco.mjtState.mjSTATE_QFRC_APPLIED,
-    "xfrc_applied": mujoco.mjtState.mjSTATE_XFRC_APPLIED, "mocap_pos": mujoco.mjtState.mjSTATE_MOCAP_POS,
-    "mocap_quat": mujoco.mjtState.mjSTATE_MOCAP_QUAT,
-}  # fmt: skip
 FROM_C = ("time", "qpos", "qvel", "act", "sensordata")
 C_OUTPUTS = FROM_C
 _HINTS = {
@@ -84,140 +63,6 @@ _HINTS = {
     "qacc": "an accelerometer or framelinacc sensor", "actuator_force": "an actuatorfrc sensor",
     "qfrc": "a jointactuatorfrc sensor",
 }  # fmt: skip
-
-
-def physical_cores() -> int:
-    """CPU cores this process may run on, counting hyperthread siblings once."""
-    cpus = sorted(os.sched_getaffinity(0))
-    seen, cores = set(), 0
-    for cpu in cpus:
-        try:
-            with open(
-                f"/sys/devices/system/cpu/cpu{cpu}/topology/thread_siblings_list"
-            ) as f:
-                siblings = f.read().strip()
-        except OSError:
-            return len(cpus)
-        cores += siblings not in seen
-        seen.add(siblings)
-    return max(1, cores)
-
-
-class Engine:
-    """C MuJoCo's side: one host model per ensemble member, a persistent `mujoco.rollout`
-    thread pool with its per-thread `MjData`, and the layout of states and controls.
-    Compared by identity: a jitted planner compiles once per engine."""
-
-    def __init__(
-        self,
-        models: list[mujoco.MjModel],
-        n_substeps: int,
-        num_threads: int,
-        chunk_size: int | None,
-    ):
-        first = models[0]
-        self.models, self.n_substeps, self.chunk_size = models, n_substeps, chunk_size
-        self.dt = float(first.opt.timestep)
-        self.present = [f for f in APPLIED if getattr(mujoco.MjData(first), f).size > 0]
-        self.vary(self.present)
-        self.direct = False  # True: ctrl is the action itself, no other input varies (set by `native`)
-        self.sizes = {
-            f: int(getattr(mujoco.MjData(first), f).size)
-            for f in ("qpos", "qvel", "act", "sensordata")
-        }
-        self.full = int(mujoco.mjtState.mjSTATE_FULLPHYSICS)
-        self.num_threads = num_threads
-        self._scratch = mujoco.MjData(first)
-        self._datas = [mujoco.MjData(first) for _ in range(max(1, num_threads))]
-        self._pool = mj_rollout.Rollout(nthread=num_threads)  # 0: on the calling thread
-        self._batches: dict[
-            tuple[int, int, int], dict[str, Any]
-        ] = {}  # preallocated per batch shape
-        self.seconds: list[
-            float
-        ] = []  # wall time of each call's C rollouts (a real-time runner reads it)
-
-    def vary(self, fields: list[str]) -> None:
-        """Sends `fields` (and ctrl) to C as controls at every physics step; the other
-        applied inputs are held at the start state's values."""
-        self.fields = [f for f in self.present if f in fields or f == "ctrl"]
-        self.held = [f for f in self.present if f not in self.fields]
-        self.spec = int(sum(_SPEC[f] for f in self.fields))
-
-    def __call__(
-        self, time, qpos, qvel, act, history, warmstart, held, controls
-    ) -> tuple[np.ndarray, ...]:
-        """Rolls out [M, N, T, ncontrol] controls from one state (whose `held` inputs stay
-        fixed); returns float32 time [M, N, T], qpos, qvel, act and sensordata
-        [M, N, T, size], NaN after a reset."""
-        num_models, num_samples, steps, _ = controls.shape
-        for data in self._datas:
-            for name, value in zip(self.held, held):
-                getattr(data, name)[...] = value
-        d = self._scratch
-        d.time, d.qpos[:], d.qvel[:], d.act[:] = time, qpos, qvel, act
-        if d.history.size:
-            d.history[:] = history
-        batch = num_models * num_samples
-        buffers = self._buffers(num_models, num_samples, steps)
-        mujoco.mj_getState(self.models[0], d, buffers["start"][0], self.full)
-        buffers["start"][1:] = buffers["start"][0]
-        buffers["warmstart"][:] = warmstart
-        buffers["controls"][:] = controls.reshape(batch, steps, -1)
-        tick = time_lib.perf_counter()
-        # Every array already has rollout's exact shape and dtype: its Python checks are skipped.
-        self._pool.rollout(
-            buffers["models"], self._datas, buffers["start"], buffers["controls"], control_spec=self.spec,
-            skip_checks=True, nstep=steps, initial_warmstart=buffers["warmstart"], state=buffers["states"],
-            sensordata=buffers["sensors"], chunk_size=self.chunk_size or max(1, -(-batch // max(1, self.num_threads))),
-        )  # fmt: skip
-        self.seconds.append(time_lib.perf_counter() - tick)
-        states, nq, nv, na = (
-            buffers["states"],
-            self.sizes["qpos"],
-            self.sizes["qvel"],
-            self.sizes["act"],
-        )
-        times = states[..., 0]
-        # C resets a diverging simulation (time back to 0): NaN from there on, as MJX's would be.
-        earlier = np.concatenate(
-            [np.full((batch, 1), float(time)), times[:, :-1]], axis=1
-        )
-        reset_ = np.maximum.accumulate(times < earlier - 0.5 * self.dt, axis=1)[
-            ..., None
-        ]
-        qpos_, qvel_ = (
-            np.where(reset_, np.nan, x)
-            for x in (states[..., 1 : 1 + nq], states[..., 1 + nq : 1 + nq + nv])
-        )
-        parts = (
-            times,
-            qpos_,
-            qvel_,
-            states[..., 1 + nq + nv : 1 + nq + nv + na],
-            buffers["sensors"],
-        )
-        shape = (num_models, num_samples, steps)
-        return tuple(
-            x.astype(np.float32).reshape(shape + x.shape[2:]) for x in parts
-        )  # copies: buffers are reused
-
-    def _buffers(self, num_models: int, num_samples: int, steps: int) -> dict[str, Any]:
-        key = (num_models, num_samples, steps)
-        if key not in self._batches:
-            batch, first = num_models * num_samples, self.models[0]
-            ncontrol = mujoco.mj_stateSize(first, self.spec)
-            self._batches[key] = {
-                "models": [m for m in self.models[:num_models] for _ in range(num_samples)],
-                "start": np.zeros((batch, mujoco.mj_stateSize(first, self.full))),
-                "warmstart": np.zeros((batch, first.nv)), "controls": np.zeros((batch, steps, ncontrol)),
-                "states": np.zeros((batch, steps, mujoco.mj_stateSize(first, self.full))),
-                "sensors": np.zeros((batch, steps, first.nsensordata)),
-            }  # fmt: skip
-        return self._batches[key]
-
-    def close(self) -> None:
-        self._pool.close()
 
 
 @jax.tree_util.register_dataclass
@@ -254,12 +99,8 @@ class _Replay(physics.StandIn):
 
     def substep(self, data: mjx.Data) -> mjx.Data:
         pre = data.replace(**self.before)
-        pre = mjx.com_vel(
-            self.model, mjx.com_pos(self.model, mjx.kinematics(self.model, pre))
-        )
-        return pre.replace(
-            **{k: v.astype(getattr(data, k).dtype) for k, v in self.after.items()}
-        )
+        pre = mjx.com_vel(self.model, mjx.com_pos(self.model, mjx.kinematics(self.model, pre)))
+        return pre.replace(**{k: v.astype(getattr(data, k).dtype) for k, v in self.after.items()})
 
 
 def native(
@@ -288,7 +129,7 @@ def native(
     from mjzoo.planning import native_checks as checks  # built on this module
 
     start = checks.start_state(base)
-    models = _host_models(base.mj_model, variants.fields)
+    models = _host_models(base.mj_model, base.model, variants.fields)
     present = [f for f in APPLIED if getattr(mujoco.MjData(models[0]), f).size > 0]
     probed = checks.probe(base, start, present)
     if probed.state_dependent:
@@ -304,23 +145,28 @@ def native(
     return result
 
 
-def _host_models(
-    mj_model: mujoco.MjModel, fields: dict[str, Array]
-) -> list[mujoco.MjModel]:
-    """One C model per ensemble member, its fields set from the ensemble's [M] values."""
+def _host_models(mj_model: mujoco.MjModel, model: mjx.Model, fields: dict[str, Array]) -> list[mujoco.MjModel]:
+    """One C model per ensemble member: `mj_model` with the numbers `model` (the task's
+    MJX model, maybe edited: heavier links, other gains) holds where they differ, then
+    the member's `fields` ([M] leading axis) set."""
+    edited = {}
+    for f in dataclasses.fields(model):
+        value = getattr(model, f.name, None)
+        if isinstance(value, (jax.Array, np.ndarray)) and hasattr(mj_model, f.name):
+            host = getattr(mj_model, f.name)
+            if isinstance(host, np.ndarray) and host.size == np.size(value):
+                value = np.asarray(value, host.dtype).reshape(host.shape)
+                if not np.array_equal(value, host) and not np.allclose(value, host, rtol=1e-6, atol=0):
+                    edited[f.name] = value
     count = max((len(v) for v in fields.values()), default=1)
     models = []
     for m in range(count):
-        model = copy.deepcopy(mj_model) if fields else mj_model
-        for name, values in fields.items():
-            if not hasattr(model, name):
-                raise ValueError(
-                    f"planning.native: the ensemble varies {name!r}, which the C model has no field for"
-                )
-            getattr(model, name)[...] = np.asarray(values[m]).reshape(
-                getattr(model, name).shape
-            )
-        models.append(model)
+        host = copy.deepcopy(mj_model) if fields or edited else mj_model
+        for name, value in [*edited.items(), *((k, np.asarray(v[m])) for k, v in fields.items())]:
+            if not hasattr(host, name):
+                raise ValueError(f"planning.native: the ensemble varies {name!r}, which the C model has no field for")
+            getattr(host, name)[...] = value.reshape(getattr(host, name).shape)
+        models.append(host)
     return models
 
 
@@ -330,17 +176,13 @@ def _complete(task: Task, state: State) -> State:
     return complete(task.replace(model=_Recorder(task.model)), state)
 
 
-def _applied(
-    task: Task, fields: list[str], start: State, actions: Array, keys: Array
-) -> Array:
+def _applied(task: Task, fields: list[str], start: State, actions: Array, keys: Array) -> Array:
     """[H, ncontrol] what the task's step applies in each of H control steps, in C's order."""
     recording = task.replace(model=_Recorder(task.model))
 
     def body(state: State, inputs) -> tuple[State, Array]:
         state = transition(recording, state, *inputs)
-        return state, jnp.concatenate(
-            [jnp.ravel(getattr(state.data, f)).astype(jnp.float32) for f in fields]
-        )
+        return state, jnp.concatenate([jnp.ravel(getattr(state.data, f)).astype(jnp.float32) for f in fields])
 
     return jax.lax.scan(body, start, (actions, keys))[1]
 
@@ -361,44 +203,28 @@ def _replay(
                   for k in ("time", "qpos", "qvel", "act")}  # fmt: skip
     after = {k: v[n_substeps::n_substeps] for k, v in with_start.items()}
     after["sensordata"] = c_states["sensordata"][n_substeps - 1 :: n_substeps]
-    before = {
-        k: with_start[k][n_substeps - 1 :: n_substeps][:horizon]
-        for k in ("qpos", "qvel")
-    }
+    before = {k: with_start[k][n_substeps - 1 :: n_substeps][:horizon] for k in ("qpos", "qvel")}
 
     def body(state: State, inputs) -> tuple[State, tuple[Array, Array]]:
         action, key, a, b = inputs
-        state = transition(
-            task.replace(model=_Replay(task.model, a, b)), state, action, key
-        )
+        state = transition(task.replace(model=_Replay(task.model, a, b)), state, action, key)
         return state, (state.reward, state.terminated)
 
-    final, (rewards, terminated) = jax.lax.scan(
-        body, start, (actions, keys, after, before), unroll=unroll
-    )
+    final, (rewards, terminated) = jax.lax.scan(body, start, (actions, keys, after, before), unroll=unroll)
     return final, rewards, terminated
 
 
-def _roll(
-    engine: Engine, base: Task, models: Any, start: State, controls: Array, keys: Array
-) -> dict[str, Array]:
+def _roll(engine: Engine, base: Task, models: Any, start: State, controls: Array, keys: Array) -> dict[str, Array]:
     """C rollouts of controls [N, H, nu] under each of M models ([M] leading axis of
     `models`, an `mjx.Model` batch): {field: [M, N, H x n_substeps, ...]}."""
-    applied_one = lambda model, c: _applied(
-        base.replace(model=model), engine.fields, start, c, keys
-    )
-    applied = jax.vmap(
-        lambda model: jax.vmap(lambda c: applied_one(model, c))(controls)
-    )(models)
-    applied = jnp.repeat(
-        applied, engine.n_substeps, axis=2
-    )  # the same inputs every physics step
+    applied_one = lambda model, c: _applied(base.replace(model=model), engine.fields, start, c, keys)
+    applied = jax.vmap(lambda model: jax.vmap(lambda c: applied_one(model, c))(controls))(models)
+    applied = jnp.repeat(applied, engine.n_substeps, axis=2)  # the same inputs every physics step
     num_models, num_samples, steps = applied.shape[:3]
     shape = (num_models, num_samples, steps)
     sizes = engine.sizes
     out_shapes = (jax.ShapeDtypeStruct(shape, jnp.float32),) + tuple(
-        jax.ShapeDtypeStruct(shape + (sizes[k],), jnp.float32)
-        for k in ("qpos", "qvel", "act", "sensordata")
+        jax.ShapeDtypeStruct(shape + (sizes[k],), jnp.float32) for k in ("qpos", "qvel", "act", "sensordata")
     )
     d = start.data
     history = d.history if d.history is not None else jnp.zeros((0,))
@@ -423,9 +249,7 @@ def _roll(
     return dict(zip(C_OUTPUTS, out))
 
 
-_HOST: contextvars.ContextVar = contextvars.ContextVar(
-    "mjzoo_native_host", default=None
-)
+_HOST: contextvars.ContextVar = contextvars.ContextVar("mjzoo_native_host", default=None)
 
 
 def split(fn: Callable) -> Callable:
@@ -460,12 +284,18 @@ def split(fn: Callable) -> Callable:
         finally:
             _HOST.reset(token)
 
-    first, second = jax.jit(inputs), jax.jit(outputs)
+    treedefs: dict = {}
 
     def run(*args):
-        c_inputs = first(*args)
+        # Flattened once, in Python (an mjx.Data flattens slowly); the jits take the list.
+        leaves, treedef = jax.tree.flatten(args)
+        if treedef not in treedefs:
+            treedefs[treedef] = (jax.jit(lambda ls: inputs(*jax.tree.unflatten(treedef, ls))),
+                                 jax.jit(lambda c, ls: outputs(c, *jax.tree.unflatten(treedef, ls))))  # fmt: skip
+        first, second = treedefs[treedef]
+        c_inputs = first(leaves)
         c_states = engines[0](*jax.tree.map(np.asarray, c_inputs))
-        return second(c_states, *args)
+        return second(c_states, leaves)
 
     return run
 
@@ -504,9 +334,7 @@ def rollout_costs(
         value = terminal_value(model, final) if terminal_value is not None else 0.0
         return -(jnp.sum(rewards) + value)
 
-    per_model = lambda model, states: jax.vmap(cost, in_axes=(None, 0, 0))(
-        model, controls, states
-    )
+    per_model = lambda model, states: jax.vmap(cost, in_axes=(None, 0, 0))(model, controls, states)
     costs = jax.vmap(per_model)(models, c_states)
     return costs, jnp.float32(engine.n_substeps * engine.dt)
 
@@ -515,9 +343,7 @@ def transition_native(task: Native, state: State, action: Array, key: Array) -> 
     """`mjzoo.transition` with the physics of the step in C MuJoCo: a simulation that
     steps in C (one control step: one C rollout of its physics steps)."""
     if isinstance(task.task, Ensemble):
-        raise TypeError(
-            "planning.native: a simulation steps one model, not an Ensemble"
-        )
+        raise TypeError("planning.native: a simulation steps one model, not an Ensemble")
     base = task.task
     models = jax.tree.map(lambda x: x[None], base.model)
     keys = key[None]

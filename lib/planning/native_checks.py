@@ -42,9 +42,7 @@ def start_state(task: Task) -> State:
     mj_data = mujoco.MjData(task.mj_model)
     mujoco.mj_forward(task.mj_model, mj_data)
     data = mjx.put_data(task.mj_model, mj_data)
-    data = jax.tree.map(
-        lambda d, s: np.asarray(d, s.dtype).reshape(s.shape), data, shape.data
-    )
+    data = jax.tree.map(lambda d, s: np.asarray(d, s.dtype).reshape(s.shape), data, shape.data)
     zeros = lambda s: np.zeros(s.shape, s.dtype)
     state = shape.replace(data=data, obs=jax.tree.map(zeros, shape.obs), info=jax.tree.map(zeros, shape.info),
                           metrics=jax.tree.map(zeros, shape.metrics), reward=np.float32(0),
@@ -93,12 +91,8 @@ def probe(task: Task, start: State, present: list[str]) -> Probe:
         return (after.data.time, _applied(task, present, start, actions, keys), _applied(task, present, moved, actions, keys),
                 _applied(task, present, start, 2.0 * actions, keys))  # fmt: skip
 
-    time, applied, applied_moved, applied_wide = jax.device_get(
-        jax.jit(run)(start, moved)
-    )
-    n_substeps = round(
-        float(time - start.data.time) / float(task.mj_model.opt.timestep)
-    )
+    time, applied, applied_moved, applied_wide = jax.device_get(jax.jit(run)(start, moved))
+    n_substeps = round(float(time - start.data.time) / float(task.mj_model.opt.timestep))
     if n_substeps < 1:
         raise ValueError("planning.native: the task's step never reached mjzoo.physics.step or substep with the "
                          "model it was given (e.g. it replaces model fields per episode, as domain randomization "
@@ -106,16 +100,8 @@ def probe(task: Task, start: State, present: list[str]) -> Probe:
     sizes = [int(np.size(getattr(start.data, f))) for f in present]
     split = lambda x: dict(zip(present, np.split(x, np.cumsum(sizes)[:-1], axis=1)))
     parts, wide = split(applied), split(applied_wide)
-    changed = [
-        f
-        for f in present
-        if not np.allclose(parts[f], np.ravel(getattr(start.data, f)))
-    ]
-    clamped = (
-        np.where(limited, np.clip(2.0 * actions, low, high), 2.0 * actions)
-        if own
-        else None
-    )
+    changed = [f for f in present if not np.allclose(parts[f], np.ravel(getattr(start.data, f)))]
+    clamped = np.where(limited, np.clip(2.0 * actions, low, high), 2.0 * actions) if own else None
     direct = own and set(changed) <= {"ctrl"} and "ctrl" in wide and any(
         np.allclose(wide["ctrl"], target, atol=1e-6) for target in (2.0 * actions, clamped))  # fmt: skip
     state_dependent = not np.allclose(applied, applied_moved, atol=1e-6)
@@ -131,11 +117,7 @@ def _perturbed(tree: Any, seed: int) -> Any:
         leaf = np.asarray(leaf)
         if np.issubdtype(leaf.dtype, np.floating):
             return (leaf + 0.1 * (1 + np.abs(leaf)) * rng.standard_normal(leaf.shape)).astype(leaf.dtype)
-        return (
-            leaf + np.ones((), leaf.dtype)
-            if np.issubdtype(leaf.dtype, np.integer)
-            else leaf
-        )
+        return leaf + np.ones((), leaf.dtype) if np.issubdtype(leaf.dtype, np.integer) else leaf
 
     return jax.tree.map(move, tree)
 
@@ -151,53 +133,32 @@ def reads(task: Native, start: State, probed: Probe) -> None:
     d = start.data
     steps = 2 * engine.n_substeps
     controls = np.concatenate(
-        [
-            np.repeat(probed.applied[f], engine.n_substeps, axis=0)
-            for f in engine.fields
-        ],
+        [np.repeat(probed.applied[f], engine.n_substeps, axis=0) for f in engine.fields],
         axis=1,
     )
     history = d.history if d.history is not None else np.zeros((0,))
     out = engine(d.time, d.qpos, d.qvel, d.act, history, d.qacc_warmstart, [getattr(d, f) for f in engine.held],
                  controls.reshape(1, 1, steps, -1))  # fmt: skip
     one = {k: v[0, 0] for k, v in zip(C_OUTPUTS, out)}
-    outcome = jax.jit(
-        lambda s: _replay(
-            base, s, jnp.asarray(probed.actions), keys, one, engine.n_substeps
-        )[1:]
-    )
+    outcome = jax.jit(lambda s: _replay(base, s, jnp.asarray(probed.actions), keys, one, engine.n_substeps)[1:])
     reference = outcome(start)
     fields = [f.name for f in dataclasses.fields(d) if f.name not in FROM_C + APPLIED]
-    fields += (
-        [f"_impl.{f.name}" for f in dataclasses.fields(d._impl)]
-        if hasattr(d, "_impl")
-        else []
-    )
+    fields += [f"_impl.{f.name}" for f in dataclasses.fields(d._impl)] if hasattr(d, "_impl") else []
     read = []
     for i, name in enumerate(fields):
         owner, attr = (d._impl, name[6:]) if name.startswith("_impl.") else (d, name)
         value = getattr(owner, attr)
-        if name == "_impl" or not any(
-            isinstance(leaf, np.ndarray) for leaf in jax.tree.leaves(value)
-        ):
+        if name == "_impl" or not any(isinstance(leaf, np.ndarray) for leaf in jax.tree.leaves(value)):
             continue  # a static field (sizes), not data
         moved_owner = owner.replace(**{attr: _perturbed(value, 10 + i)})
         data = d.replace(_impl=moved_owner) if owner is not d else moved_owner
         got = outcome(start.replace(data=data))
         if not all(
-            np.array_equal(a, b, equal_nan=True)
-            for a, b in zip(jax.tree.leaves(got), jax.tree.leaves(reference))
+            np.array_equal(a, b, equal_nan=True) for a, b in zip(jax.tree.leaves(got), jax.tree.leaves(reference))
         ):
             read.append(name.removeprefix("_impl."))
     if read:
-        hints = sorted(
-            {
-                hint
-                for name in read
-                for key, hint in _HINTS.items()
-                if name.startswith(key)
-            }
-        )
+        hints = sorted({hint for name in read for key, hint in _HINTS.items() if name.startswith(key)})
         raise ValueError(f"planning.native: this task's reward or termination reads data.{', data.'.join(read)}, which "
                          "exists only inside C MuJoCo's step (mujoco.rollout returns states and sensors)"
                          + (f"; read {' or '.join(hints)} from data.sensordata instead" if hints else "")

@@ -33,6 +33,7 @@ from mjzoo.planning import closed_loop
 from mjzoo.planning.closed_loop import Hooks, Result
 from mjzoo.planning.learned import TerminalValue, as_terminal_value, committed
 from mjzoo.planning.native import Native, native
+from mjzoo.planning.native import split as native_split
 from mjzoo.planning.rollouts import Ensemble
 from mjzoo.planning.sampling import SamplingConfig
 from mjzoo.running import control_dt, reset
@@ -94,8 +95,8 @@ class Problem:
         """(simulation, planning task) on the backend: wrapped by `native` for C MuJoCo."""
         if self.physics == "mjx":
             return self.sim_task, self.plan_task
-        sim = native(self.sim_task)
-        return sim, sim if self.plan_task is self.sim_task else native(self.plan_task)
+        # The simulation's single rollout runs on the calling thread (no pool hand-off).
+        return native(self.sim_task, num_threads=0), native(self.plan_task)
 
     @functools.cached_property
     def sim_dt(self) -> float:
@@ -151,14 +152,20 @@ def realtime(problem: Problem, key: jax.Array, plan_hz: float | None = None) -> 
     plan_keys = list(committed(jax.random.split(plan_key, total_steps + 1)))
     sim_state = committed(reset(problem.sim_task, reset_key))
     first = jax.jit(lambda s: closed_loop.first_plan(planner, config, plan_task, s, hooks))
-    replan = jax.jit(lambda p, s, k, v: closed_loop.replan(planner, config, plan_task, p, s, k, hooks, v))
-    step = jax.jit(lambda p, s, k: closed_loop.sim_step(config, sim_task, p, s, k, hooks))
+    # Native: two jits around a host call of C each (`native.split`), not one jit through
+    # `jax.pure_callback`, whose ~0.3 ms a call a replan and every simulation step would pay.
+    compile_ = native_split if problem.physics == "native" else jax.jit
+    replan = compile_(lambda p, s, k, v: closed_loop.replan(planner, config, plan_task, p, s, k, hooks, v))
+    step = compile_(lambda p, s, k: closed_loop.sim_step(config, sim_task, p, s, k, hooks))
+    after_rollout = jax.jit(lambda s, p: closed_loop.after_rollout(hooks, s, p))
     planner_state = committed(first(sim_state))
     # Compile before the clock starts, for the first state and for states the loop makes
     # (their leaves can differ in weak type from a reset's).
     later_plan = replan(planner_state, sim_state, plan_keys[-1], value)
     later_state, _ = step(later_plan, sim_state, step_keys[-1])
     jax.block_until_ready((replan(later_plan, later_state, plan_keys[-1], value), step(later_plan, later_state, step_keys[-1])))
+    if hooks.post_rollout is not None:
+        jax.block_until_ready(after_rollout(later_state, later_plan))
     physics_seconds = plan_task.engine.seconds if isinstance(plan_task, Native) else []
     physics_seconds.clear()
 
@@ -182,6 +189,8 @@ def realtime(problem: Problem, key: jax.Array, plan_hz: float | None = None) -> 
         latencies.append(time.perf_counter() - tick)
         advance_until(time.perf_counter(), planner_state)  # the world did not wait
         planner_state = new_plan
+        if hooks.post_rollout is not None:
+            sim_state = after_rollout(sim_state, planner_state)
         plan_costs.append(planner_state.cost)
         advance_until(tick + period, planner_state)
         time.sleep(max(0.0, tick + period - time.perf_counter()))

@@ -27,19 +27,27 @@ OPTIMIZED = {"xla_backend_optimization_level": 3}
 PLANNERS = {"predictive_sampling": predictive_sampling, "cem": cem, "mppi": mppi}
 
 
-def setup_for(env: str, planner: str) -> realtime.Problem:
+def setup_for(env: str, planner: str, backend: str = "auto") -> realtime.Problem:
     """The env's documented closed-loop problem for `planner`."""
     module = PLANNERS[planner]
-    return mjzoo.envs.closed_loop_problem(env, module, module.Config(**mjzoo.envs.hyperparameters(env, planner)))
+    config = module.Config(**mjzoo.envs.hyperparameters(env, planner))
+    return mjzoo.envs.closed_loop_problem(env, module, config, backend=backend)
 
 
-@pytest.mark.parametrize("planner", PLANNERS)
-@pytest.mark.parametrize("env", ["pendulum_swingup", "cartpole_swingup", "cylinder_push", "point_mass"])
-def test_planner_solves_env_closed_loop(env, planner):
-    setup = setup_for(env, planner)
+ENVS = ["pendulum_swingup", "cartpole_swingup", "cylinder_push", "point_mass"]
+# Every planner on every env with C MuJoCo's rollouts (the default on a CPU); MJX's own
+# physics with one planner per env (the planners share everything above the rollouts).
+CASES = [(env, planner, "native") for env in ENVS for planner in PLANNERS]
+CASES += [(env, "mppi", "mjx") for env in ENVS]
+
+
+@pytest.mark.parametrize(("env", "planner", "backend"), CASES)
+def test_planner_solves_env_closed_loop(env, planner, backend):
+    setup = setup_for(env, planner, backend)
+    assert setup.physics == backend
     result, stats = realtime.offline(setup, jax.random.key(0), OPTIMIZED)
     solved, score = setup.success(jax.device_get(result.states))
-    print(f"{env} {planner}: score {score:.3f}, {stats['plan_latency_ms']:.1f} ms per replan on the CPU")
+    print(f"{env} {planner} {backend}: score {score:.3f}, {stats['plan_latency_ms']:.1f} ms per replan on the CPU")
     assert solved, f"{env} with {planner}: score {score}"
     assert np.all(np.isfinite(np.asarray(result.controls)))
     low, high = planning.control_limits(setup.sim_task)
@@ -114,3 +122,22 @@ def test_plan_cli_runs_in_real_time_and_writes_its_files(tmp_path):
     assert {"success", "final_cost", "plan_hz", "plan_latency_ms"} <= set(summary)
     assert summary["mode"] == "realtime" and summary["plan_hz"] > 0 and summary["plan_latency_ms"] > 0
     assert (tmp_path / "plan.png").stat().st_size > 0
+
+
+def test_pre_sim_step_and_post_rollout_hooks_reach_the_simulation():
+    """point_mass's gusts push the mass before every simulation step (xfrc_applied), and
+    the post-rollout hook keeps the cost the planner predicted for its chosen plan."""
+    setup = setup_for("point_mass", "mppi", "native")
+    assert "xfrc_applied" in setup.tasks[0].engine.held  # held at what the hook set, for the step's C rollout
+    calm = dataclasses.replace(setup, hooks=dataclasses.replace(setup.hooks, pre_sim_step=None), seconds=0.4)
+    windy = dataclasses.replace(setup, seconds=0.4)
+    states = {}
+    for name, problem in (("calm", calm), ("windy", windy)):
+        result, _ = realtime.offline(problem, jax.random.key(0))
+        states[name] = jax.device_get(result.states)
+    assert setup.sim_task.mj_model.body(point_mass.MASS_BODY).name == "mass"
+    wind = states["windy"].data.xfrc_applied[:, point_mass.MASS_BODY, :2]
+    assert np.all(np.abs(wind) > 0) and np.std(wind) < 0.2  # N(0, 0.05 N), fresh every step
+    assert np.abs(states["windy"].data.qpos - states["calm"].data.qpos).max() > 1e-4  # and it moves the mass
+    plan_costs = states["windy"].info["plan_cost"]
+    assert np.all(plan_costs[1:] < 0) and np.all(np.isfinite(plan_costs))  # predicted: rewards to come

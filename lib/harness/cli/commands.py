@@ -273,6 +273,7 @@ def plan(
     seed: int = 0,
     video: bool = True,
     impl: Literal["jax", "warp"] | None = None,
+    backend: Literal["auto", "mjx", "native"] = "auto",
     render: RenderConfig = RenderConfig(),
 ) -> None:
     """Solve ENV (a registered env or package.module:factory) closed loop with a sampling
@@ -283,7 +284,9 @@ def plan(
     rate --plan-hz, by default the env's replanning period; --offline runs the whole
     episode as one jitted scan instead. --config takes NAME=VALUE fields of the
     planner's Config, over the env's defaults; --env-overrides NAME=VALUE change the
-    env; --impl picks its physics (as for train); --render.NAME VALUE sets how the
+    env; --impl picks its physics (as for train); --backend where the planner's
+    rollouts and the simulation run: mjx, or native (C MuJoCo through mujoco.rollout:
+    the fast choice on a CPU); auto: native on a CPU, mjx on a GPU; --render.NAME VALUE sets how the
     video is drawn. The planning task, hooks, success
     test and length (--seconds) are the env's,
     from mjzoo.envs.planning: for a factory its module's PLANNING, else one episode,
@@ -302,7 +305,8 @@ def plan(
         out = out or Path("runs") / f"{slug(env)}-{algorithm}-plan"
         runs.refuse_existing(out, PLAN_FILES, "choose a new --out")
         overrides = {**parse_assignments(env_overrides, "--env-overrides"), **({"impl": impl} if impl else {})}
-        problem = mjzoo.envs.closed_loop_problem(env, module, cfg, seconds, **overrides)
+        problem = mjzoo.envs.closed_loop_problem(env, module, cfg, seconds, backend=backend, **overrides)
+        problem.tasks  # noqa: B018 (native tasks are checked here: a refusal is one line)
     key = jax.random.key(seed)
     result, stats = realtime.offline(problem, key) if offline else realtime.realtime(problem, key, plan_hz)
     summary = plan_report.write(out, problem, result, stats, video, env=env, algorithm=algorithm,

@@ -1,0 +1,164 @@
+"""Sampling MPC on a CPU, side by side with Judo: replan latency and closed-loop success.
+
+For cart-pole and cylinder push, predictive sampling, CEM and MPPI plan at Judo's shipped
+settings (32 rollouts, 4 knots, a 1 s horizon of 25 steps of 0.04 s for the cart-pole
+and 50 of 0.02 s for the push, replanning at 20 Hz) and at 4x the rollouts. mjzoo runs
+its real-time runner (`mjzoo.planning.realtime`, as `mjzoo plan` does) on each backend:
+native (C MuJoCo through `mujoco.rollout`) and MJX on the CPU; the planning model takes
+Judo's time step, the simulation is the env's own. Judo (PyPI `judo-rai`, in its own
+environment: ``bash benchmarks/judo_env.sh``) runs its own tasks in the same run, through
+``benchmarks/judo_peer.py``, with the same number of rollout threads.
+
+Per row: replan latency (median, p95), the part spent in C MuJoCo's rollouts (native and
+Judo), the rest (the fixed overhead of a replan), the achieved rate and the closed-loop
+success over seeds (cart-pole: within 0.2 rad of upright over the last second; push:
+cylinder within 0.05 m of its goal at the end).
+
+    python benchmarks/planner_cpu.py                       # everything, ~15 minutes
+    python benchmarks/planner_cpu.py --tasks cartpole --planners mppi --backends native --no-judo
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import os
+import platform
+import subprocess
+import sys
+import tempfile
+import time
+from pathlib import Path
+
+import jax
+import numpy as np
+
+import mjzoo
+import mjzoo.envs
+from mjzoo.algorithms import cem, mppi, predictive_sampling
+from mjzoo.planning import native, realtime
+
+ROOT = Path(__file__).resolve().parent.parent
+PLANNERS = {"ps": predictive_sampling, "cem": cem, "mppi": mppi}
+# Judo's shipped settings per task: its horizon in planning steps of its time step.
+TASKS = {
+    "cartpole": dict(env="cartpole_swingup", plan_dt=0.04, horizon_steps=25),
+    "cylinder_push": dict(env="cylinder_push", plan_dt=0.02, horizon_steps=50),
+}
+JUDO_ROLLOUTS, JUDO_KNOTS, RATE_HZ = 32, 4, 20.0
+
+
+def problem(task: str, planner: str, samples: int, backend: str, seconds: float) -> realtime.Problem:
+    """The env's closed-loop problem, planned at Judo's settings on `backend`."""
+    spec = TASKS[task]
+    setup = mjzoo.envs.planning(spec["env"])
+    module = PLANNERS[planner]
+    fields = mjzoo.envs.hyperparameters(spec["env"], module.__name__.rsplit(".", 1)[-1])
+    fields.update(num_samples=samples, num_knots=JUDO_KNOTS, horizon_steps=spec["horizon_steps"])
+    if "num_elites" in fields:
+        fields["num_elites"] = max(2, samples // 8)
+    overrides = {**setup.plan_overrides, "dt": spec["plan_dt"], "ctrl_dt": spec["plan_dt"], "episode_steps": 10**9}
+    plan_task = mjzoo.envs.make(spec["env"], **overrides)
+    plan_task = setup.plan_view(plan_task) if setup.plan_view else plan_task
+    sim_task = mjzoo.envs.make(spec["env"], episode_steps=10**9)
+    return realtime.Problem(module, module.Config(**fields), sim_task, plan_task, seconds=seconds,
+                            replan_every=setup.replan_every, hooks=setup.hooks, success=setup.success,
+                            backend=backend)  # fmt: skip
+
+
+def measure(task: str, planner: str, samples: int, backend: str, seconds: float, seeds: int) -> dict:
+    runs = []
+    p = problem(task, planner, samples, backend, seconds)
+    build = time.perf_counter()
+    p.tasks  # noqa: B018 (native: builds and checks the C side)
+    build = time.perf_counter() - build
+    for seed in range(seeds):
+        result, stats = realtime.realtime(p, jax.random.key(seed), plan_hz=RATE_HZ)
+        solved, score = p.success(jax.device_get(result.states))
+        runs.append({**stats, "success": bool(solved), "score": float(score)})
+    mean = lambda k: float(np.mean([r[k] for r in runs]))  # noqa: E731
+    row = {"task": task, "planner": planner, "num_samples": samples, "backend": backend, "peer": "mjzoo",
+           "replan_ms": {"median": mean("plan_latency_ms"), "p95": mean("plan_latency_p95_ms")},
+           "plan_hz": mean("plan_hz"), "sim_step_ms": mean("sim_step_ms"), "success_rate": mean("success"),
+           "score": mean("score"), "seeds": seeds, "setup_s": build, "runs": runs}  # fmt: skip
+    if backend == "native":
+        row["rollout_ms"] = {"median": mean("plan_physics_ms")}
+        row["overhead_ms"] = {"median": row["replan_ms"]["median"] - row["rollout_ms"]["median"]}
+    return row
+
+
+def judo(args, out: Path) -> dict | None:
+    python = Path(args.judo_python)
+    if not python.exists():
+        print(f"judo: {python} not found (bash benchmarks/judo_env.sh makes it); Judo's rows are left out")
+        return None
+    command = [str(python), str(ROOT / "benchmarks" / "judo_peer.py"), "--out", str(out), "--tasks", *args.tasks,
+               "--optimizers", *args.planners, "--sample-factors", *map(str, args.sample_factors),
+               "--seconds", str(args.seconds), "--seeds", str(args.seeds), "--threads", str(args.threads)]  # fmt: skip
+    subprocess.run(command, check=True, env={k: v for k, v in os.environ.items() if k != "PYTHONPATH"})
+    return json.loads(out.read_text())
+
+
+def table(rows: list[dict]) -> str:
+    lines = ["| task | planner | K | backend | replan ms (median / p95) | C rollouts ms | overhead ms | Hz | success |",
+             "|---|---|---|---|---|---|---|---|---|"]  # fmt: skip
+    for r in rows:
+        rollout = r.get("rollout_ms", {}).get("median")
+        overhead = r.get("overhead_ms", {}).get("median")
+        fmt = lambda x: "" if x is None else f"{x:.2f}"  # noqa: E731
+        lines.append(f"| {r['task']} | {r['planner']} | {r['num_samples']} | {r['backend']} | "
+                     f"{r['replan_ms']['median']:.2f} / {r['replan_ms']['p95']:.2f} | {fmt(rollout)} | {fmt(overhead)} | "
+                     f"{fmt(r.get('plan_hz'))} | {r['success_rate']:.2f} |")  # fmt: skip
+    return "\n".join(lines)
+
+
+def main() -> None:
+    parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
+    parser.add_argument("--tasks", nargs="+", default=list(TASKS), choices=list(TASKS))
+    parser.add_argument("--planners", nargs="+", default=list(PLANNERS), choices=list(PLANNERS))
+    parser.add_argument("--sample-factors", nargs="+", type=int, default=[1, 4])
+    parser.add_argument("--backends", nargs="+", default=["native", "mjx"], choices=["native", "mjx"])
+    parser.add_argument("--seconds", type=float, default=8.0)
+    parser.add_argument("--seeds", type=int, default=1)
+    parser.add_argument("--threads", type=int, default=native.physical_cores())
+    parser.add_argument("--judo-python", default=str(ROOT / ".judo" / "venv" / "bin" / "python"))
+    parser.add_argument("--no-judo", action="store_true")
+    parser.add_argument("--out", type=Path, default=ROOT / "benchmarks" / "results" / "planner_cpu" / "planner_cpu.json")
+    args = parser.parse_args()
+    load = [os.getloadavg()]
+    rows = []
+    for task in args.tasks:
+        for planner in args.planners:
+            for factor in args.sample_factors:
+                for backend in args.backends:
+                    row = measure(task, planner, JUDO_ROLLOUTS * factor, backend, args.seconds, args.seeds)
+                    rows.append(row)
+                    print(table([row]).splitlines()[-1], flush=True)
+    judo_rows = []
+    if not args.no_judo:
+        with tempfile.TemporaryDirectory() as tmp:
+            peer = judo(args, Path(tmp) / "judo.json")
+        for r in (peer or {}).get("rows", []):
+            judo_rows.append({"task": r["task"], "planner": r["optimizer"], "num_samples": r["settings"]["optimizer"]["num_rollouts"],
+                              "backend": "judo", "peer": "judo", "replan_ms": r["replan_ms"], "rollout_ms": r["rollout_ms"],
+                              "overhead_ms": r["overhead_ms"], "plan_hz": None, "success_rate": r["success_rate"],
+                              "score": r.get("mean_score"), "seeds": len(r.get("scores", []))})  # fmt: skip
+    load.append(os.getloadavg())
+    ratios = {}
+    for r in rows:
+        peer = [j for j in judo_rows if (j["task"], j["planner"], j["num_samples"]) == (r["task"], r["planner"], r["num_samples"])]
+        if peer and r["backend"] == "native":
+            ratios[f"{r['task']}/{r['planner']}/{r['num_samples']}"] = r["replan_ms"]["median"] / peer[0]["replan_ms"]["median"]
+    result = {"machine": {"cpu": platform.processor() or platform.machine(), "cores": os.cpu_count(),
+                          "physical_cores": native.physical_cores(), "loadavg_before_after": load},
+              "rollout_threads": args.threads, "seconds": args.seconds, "rate_hz": RATE_HZ,
+              "native_over_judo_latency": ratios, "rows": rows + judo_rows}  # fmt: skip
+    args.out.parent.mkdir(parents=True, exist_ok=True)
+    args.out.write_text(json.dumps(result, indent=1))
+    print(table(sorted(rows + judo_rows, key=lambda r: (r["task"], r["planner"], r["num_samples"], r["backend"]))))
+    print("native / judo replan latency:", json.dumps({k: round(v, 2) for k, v in ratios.items()}))
+    print(f"wrote {args.out}")
+
+
+if __name__ == "__main__":
+    sys.exit(main())
