@@ -5,6 +5,8 @@
                   start, the MPPI weights and the CEM update
     rollouts      batched rollouts of a task's own `transition` and their costs, model
                   ensembles and risk measures
+    native        the same rollouts in C MuJoCo (`mujoco.rollout`), costed by the task's
+                  own reward in JAX: the fast backend on a CPU
     learned       learned pieces planners call at run time (a terminal value), as
                   pytrees whose weights are leaves, and committed host-loop arguments
     closed_loop   simulate one task while planning with another, as one jit; Judo's hooks
@@ -15,8 +17,9 @@ of `sample_around`; a new planner reuses every piece here. The functions of `sam
 `rollouts` and `learned.as_terminal_value` are re-exported: ``mjzoo.planning.mppi_weights``.
 """
 
-from mjzoo.planning import closed_loop, learned, realtime, rollouts, sampling, splines
+from mjzoo.planning import closed_loop, learned, native, realtime, rollouts, sampling, splines
 from mjzoo.planning.learned import TerminalValue, as_terminal_value
+from mjzoo.planning.native import Native
 from mjzoo.planning.rollouts import RISKS, Ensemble, aggregate, base_task, ensemble, rollout_costs
 from mjzoo.planning.sampling import (
     PlannerState,
@@ -40,6 +43,8 @@ __all__ = [
     "rollouts",
     "learned",
     "closed_loop",
+    "native",
+    "Native",
     "realtime",
     "SamplingConfig",
     "PlannerState",

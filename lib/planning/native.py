@@ -5,7 +5,7 @@ On a CPU, MJX is 14-40x slower than C MuJoCo; on a GPU MJX is the right engine. 
 planning task (or an `Ensemble`: one C model per member) once, and plan with it where a
 task goes:
 
-    plan_task = planning.native(task)      # C models, a thread pool, checks of the task
+    plan_task = planning.native.wrap(task)  # C models, a thread pool, checks of the task
     state, controls = jax.jit(mppi.plan, static_argnums=0)(config, plan_task, state, env_state, key)
 
 A replan stays one jit. The controls a rollout applies are computed in JAX from its
@@ -23,7 +23,7 @@ the reward terms, terminations and observations. After a step, `data` holds:
                        spatial velocities (`mjx.com_pos`, `mjx.com_vel`), from the state
                        before the last physics step, where MJX's step leaves them
 Everything else (contacts, constraint forces, accelerations, actuator forces) exists only
-inside C's step: `native` raises at construction if the task's reward or termination
+inside C's step: `wrap` raises at construction if the task's reward or termination
 reads any of it (found by probing: perturbing the field changes them), and if the
 controls the task applies depend on the physics state (a PD actuator evaluated per
 substep): a rollout's controls must be known before it runs.
@@ -53,7 +53,7 @@ from mjzoo.running import complete, transition
 from mjzoo.types import State, Task
 from mujoco import mjx
 
-__all__ = ["Engine", "Native", "native", "physical_cores", "rollout_costs", "split", "transition_native"]
+__all__ = ["Engine", "Native", "wrap", "physical_cores", "rollout_costs", "split", "transition_native"]
 
 Array = jax.Array
 FROM_C = ("time", "qpos", "qvel", "act", "sensordata")
@@ -69,7 +69,7 @@ _HINTS = {
 @dataclasses.dataclass(frozen=True)
 class Native:
     """A planning task (or an `Ensemble`) whose rollouts run in C MuJoCo; make it with
-    `native`. Its numbers stay leaves (reward weights, targets: no recompile); the C
+    `wrap`. Its numbers stay leaves (reward weights, targets: no recompile); the C
     models are fixed when it is made."""
 
     task: Task | Ensemble
@@ -103,7 +103,7 @@ class _Replay(physics.StandIn):
         return pre.replace(**{k: v.astype(getattr(data, k).dtype) for k, v in self.after.items()})
 
 
-def native(
+def wrap(
     task: Task | Ensemble,
     *,
     num_threads: int | None = None,

@@ -32,7 +32,8 @@ import numpy as np
 from mjzoo.planning import closed_loop
 from mjzoo.planning.closed_loop import Hooks, Result
 from mjzoo.planning.learned import TerminalValue, as_terminal_value, committed
-from mjzoo.planning.native import Native, native
+from mjzoo.planning.native import Native
+from mjzoo.planning.native import wrap as native_wrap
 from mjzoo.planning.native import split as native_split
 from mjzoo.planning.rollouts import Ensemble
 from mjzoo.planning.sampling import SamplingConfig
@@ -92,11 +93,11 @@ class Problem:
 
     @functools.cached_property
     def tasks(self) -> tuple[Task | Native, Task | Ensemble | Native]:
-        """(simulation, planning task) on the backend: wrapped by `native` for C MuJoCo."""
+        """(simulation, planning task) on the backend: wrapped by `native.wrap` for C MuJoCo."""
         if self.physics == "mjx":
             return self.sim_task, self.plan_task
         # The simulation's single rollout runs on the calling thread (no pool hand-off).
-        return native(self.sim_task, num_threads=0), native(self.plan_task)
+        return native_wrap(self.sim_task, num_threads=0), native_wrap(self.plan_task)
 
     @functools.cached_property
     def sim_dt(self) -> float:

@@ -56,7 +56,7 @@ def _assert_agree(mjx_side, c_side) -> None:
 @pytest.mark.parametrize("env", PLANNING_ENVS)
 def test_native_rollouts_match_mjx_on_every_planning_env(env):
     task = mjzoo.envs.make(env, episode_steps=10**9)
-    nat = native.native(task)
+    nat = native.wrap(task)
     assert nat.engine.direct  # these envs apply their action as ctrl: no step runs before C
     state = mjzoo.reset(task, jax.random.key(3))
     controls = jax.random.uniform(jax.random.key(1), (SAMPLES, HORIZON, task.action_size), minval=-1, maxval=1)
@@ -116,7 +116,7 @@ def test_sensors_poses_and_mocap_are_what_mjx_gives():
     C as a control at every physics step (the weld then pulls the box in both)."""
     task = _arm()
     task = task.replace(step=bind(_mocap_step, task.step))
-    nat = native.native(task)
+    nat = native.wrap(task)
     assert "mocap_pos" in nat.engine.fields and not nat.engine.direct
     state = jax.jit(mjzoo.reset)(task, jax.random.key(0))
     controls = jax.random.uniform(jax.random.key(1), (4, 40, 2), minval=-1, maxval=1)
@@ -157,9 +157,9 @@ def _never(model, state):
 def test_what_c_cannot_give_is_refused_by_name():
     floor = ARM.replace("<worldbody>", '<worldbody><geom type="plane" size="2 2 0.1"/>')
     with pytest.raises(ValueError, match=r"reads data\.contact,.*contact sensor"):
-        native.native(mjzoo.task(floor, rewards={"contact": (_reads_contacts, 1.0)}, ctrl_dt=0.02))
+        native.wrap(mjzoo.task(floor, rewards={"contact": (_reads_contacts, 1.0)}, ctrl_dt=0.02))
     with pytest.raises(ValueError, match="depend on the physics state"):
-        native.native(_pd_arm())
+        native.wrap(_pd_arm())
 
 
 def test_a_diverging_rollout_is_nan_in_c_and_caught_by_the_guard():
@@ -167,7 +167,7 @@ def test_a_diverging_rollout_is_nan_in_c_and_caught_by_the_guard():
     replay sees NaN from there on, so the task's divergence guard ends the episode and
     keeps the last good state, as it does for MJX's NaN."""
     task = mjzoo.task(ARM.replace('gear="5"', 'gear="1e13"'), rewards={"tip": (_tip_height, 1.0)}, ctrl_dt=0.02)
-    nat = native.native(task)
+    nat = native.wrap(task)
     state = mjzoo.complete(task, jax.jit(mjzoo.reset)(task, jax.random.key(0)))
     actions = jnp.array([[0.0, 0.0], [1.0, 0.0], [0.0, 0.0]])  # the middle one explodes
 
@@ -191,7 +191,7 @@ def _heavier(model, key):
 def test_an_ensemble_rolls_out_one_c_model_per_member():
     task = mjzoo.envs.make("pendulum_swingup", episode_steps=10**9)
     ensemble = planning.ensemble(task, _heavier, 3, jax.random.key(0))
-    nat = native.native(ensemble)
+    nat = native.wrap(ensemble)
     assert len(nat.engine.models) == 3
     masses = [m.body_mass[1] for m in nat.engine.models]
     np.testing.assert_allclose(masses, np.asarray(ensemble.fields["body_mass"])[:, 1], rtol=1e-6)
@@ -209,7 +209,7 @@ def test_split_replan_equals_the_one_jit_replan():
     """The host-driven replan (two jits around C) computes what the one-jit replan (C
     through jax.pure_callback) does: same samples, same C states, same plan."""
     task = mjzoo.envs.make("cartpole_swingup", episode_steps=10**9)
-    nat = native.native(task)
+    nat = native.wrap(task)
     config = mppi.Config(num_samples=16, horizon_steps=20, num_knots=4)
     state = mjzoo.complete(task, jax.jit(mjzoo.reset)(task, jax.random.key(0)))
     plan = mppi.init(config, nat)
@@ -224,4 +224,4 @@ def test_native_needs_jax_physics_and_one_model_to_simulate():
     task = mjzoo.envs.make("pendulum_swingup")
     ensemble = planning.ensemble(task, _heavier, 2, jax.random.key(0))
     with pytest.raises(TypeError, match="one model"):
-        native.transition_native(native.native(ensemble), jax.jit(mjzoo.reset)(task, jax.random.key(0)), jnp.zeros(1), jax.random.key(0))
+        native.transition_native(native.wrap(ensemble), jax.jit(mjzoo.reset)(task, jax.random.key(0)), jnp.zeros(1), jax.random.key(0))
