@@ -102,7 +102,7 @@ class Problem:
     @functools.cached_property
     def sim_dt(self) -> float:
         """The simulation's control step (s), measured from one transition."""
-        sim = self.tasks[0]
+        sim = self.tasks[0] if "tasks" in self.__dict__ else self.sim_task  # made already: no MJX compile
         return sim.engine.n_substeps * sim.engine.dt if isinstance(sim, Native) else control_dt(sim)
 
     @property
@@ -120,8 +120,8 @@ def offline(
     reset_key, run_key = jax.random.split(key)
     sim_state = reset(problem.sim_task, reset_key)
     static = (problem.planner, problem.config)
-    counts = (problem.num_replans, problem.replan_every)
     dynamic = (*problem.tasks, sim_state, run_key)
+    counts = (problem.num_replans, problem.replan_every)
     functions = (problem.hooks, problem.terminal_value)
     start = time.perf_counter()
     compiled = closed_loop.run.lower(*static, *dynamic, *counts, *functions).compile(compiler_options)
@@ -133,16 +133,23 @@ def offline(
                     "realtime_factor": problem.seconds / wall, "compile_s": compile_s}  # fmt: skip
 
 
-def realtime(problem: Problem, key: jax.Array, plan_hz: float | None = None) -> tuple[Result, dict[str, float]]:
+def realtime(
+    problem: Problem, key: jax.Array, plan_hz: float | None = None, clock: str = "wall"
+) -> tuple[Result, dict[str, float]]:
     """Simulates `problem.seconds` of wall-clock time, replanning at `plan_hz` (default:
     every `replan_every` simulation steps' worth of time) or as fast as planning allows.
+    ``clock="simulated"``: the simulation waits for each replan instead and nothing
+    sleeps (the planner's rate in simulated time, its latency measured as a busy loop
+    measures it, as Judo's simulated-time runs do).
 
     Returns the run and where its time went: the achieved ``plan_hz``, each replan's
     latency (median, p95), of which ``plan_physics_ms`` was C MuJoCo's rollouts on the
     native backend, the simulation's cost per control step (``sim_step_ms``), the busy
     share of the wall clock and the real-time factor."""
+    if clock not in ("wall", "simulated"):
+        raise ValueError(f"realtime: clock must be 'wall' or 'simulated', got {clock!r}")
     planner, config, hooks, value = problem.planner, problem.config, problem.hooks, problem.terminal_value
-    sim_task, plan_task = problem.tasks
+    sim_task, plan_task = problem.tasks  # before sim_dt: a native simulation knows its step
     sim_dt = problem.sim_dt
     period = 1.0 / plan_hz if plan_hz else sim_dt * problem.replan_every
     total_steps = round(problem.seconds / sim_dt)
@@ -171,30 +178,35 @@ def realtime(problem: Problem, key: jax.Array, plan_hz: float | None = None) -> 
     physics_seconds.clear()
 
     states, controls, plan_costs, latencies, step_seconds = [], [], [], [], []
+    simulated = clock == "simulated"
     begin = time.perf_counter()
 
-    def advance_until(wall: float, plan) -> None:
+    def advance_to(due: int, plan) -> None:
         nonlocal sim_state
-        due = min(total_steps, int((wall - begin) / sim_dt))
-        while len(states) < due:
+        while len(states) < min(total_steps, due):
             tick = time.perf_counter()
             sim_state, control = jax.block_until_ready(step(plan, sim_state, step_keys[len(states)]))
             step_seconds.append(time.perf_counter() - tick)
             states.append(sim_state)
             controls.append(control)
 
+    due_at = lambda wall: int((wall - begin) / sim_dt)  # noqa: E731  steps due by a wall time
     while len(states) < total_steps:
         tick = time.perf_counter()
         replan_key = plan_keys[len(latencies) % total_steps]
         new_plan = jax.block_until_ready(replan(planner_state, sim_state, replan_key, value))
         latencies.append(time.perf_counter() - tick)
-        advance_until(time.perf_counter(), planner_state)  # the world did not wait
+        if not simulated:
+            advance_to(due_at(time.perf_counter()), planner_state)  # the world did not wait
         planner_state = new_plan
         if hooks.post_rollout is not None:
             sim_state = after_rollout(sim_state, planner_state)
         plan_costs.append(planner_state.cost)
-        advance_until(tick + period, planner_state)
-        time.sleep(max(0.0, tick + period - time.perf_counter()))
+        if simulated:  # the world waits for each replan: one period of steps follows it
+            advance_to(round(len(latencies) * period / sim_dt), planner_state)
+        else:
+            advance_to(due_at(tick + period), planner_state)
+            time.sleep(max(0.0, tick + period - time.perf_counter()))
     wall = time.perf_counter() - begin
     stacked = jax.tree.map(lambda *xs: jnp.stack(xs), *states)
     result = Result(stacked, jnp.stack(controls), -stacked.reward, jnp.stack(plan_costs), planner_state)
