@@ -59,7 +59,6 @@ __all__ = ["Engine", "Native", "wrap", "physical_cores", "rollout_costs", "split
 
 Array = jax.Array
 FROM_C = ("time", "qpos", "qvel", "act", "sensordata")  # what C returns after each step
-C_OUTPUTS = FROM_C
 _HINTS = {
     "contact": "a touch or contact sensor", "efc": "a touch or force sensor", "cfrc": "a force or torque sensor",
     "qacc": "an accelerometer or framelinacc sensor", "actuator_force": "an actuatorfrc sensor",
@@ -214,15 +213,16 @@ def _replay(
 def _roll(engine: Engine, base: Task, models: Any, start: State, controls: Array, keys: Array) -> dict[str, Array]:
     """C rollouts of controls [N, H, nu] under each of M models ([M] leading axis of
     `models`, an `mjx.Model` batch): {field: [M, N, H x n_substeps, ...]}."""
-    applied_one = lambda model, c: _applied(base.replace(model=model), engine.fields, start, c, keys)
-    applied = jax.vmap(lambda model: jax.vmap(lambda c: applied_one(model, c))(controls))(models)
+    num_models = jax.tree.leaves(models)[0].shape[0]
+    if engine.direct:  # the step applies its action as ctrl (C clamps it to the range): no step to run
+        applied = jnp.broadcast_to(controls.astype(jnp.float32), (num_models, *controls.shape))
+    else:
+        applied_one = lambda model, c: _applied(base.replace(model=model), engine.fields, start, c, keys)
+        applied = jax.vmap(lambda model: jax.vmap(lambda c: applied_one(model, c))(controls))(models)
     applied = jnp.repeat(applied, engine.n_substeps, axis=2)  # the same inputs every physics step
-    num_models, num_samples, steps = applied.shape[:3]
-    shape = (num_models, num_samples, steps)
-    sizes = engine.sizes
-    out_shapes = (jax.ShapeDtypeStruct(shape, jnp.float32),) + tuple(
-        jax.ShapeDtypeStruct(shape + (sizes[k],), jnp.float32) for k in ("qpos", "qvel", "act", "sensordata")
-    )
+    shape = applied.shape[:3]
+    out_shapes = (jax.ShapeDtypeStruct((*shape, engine.width), jnp.float32),
+                  jax.ShapeDtypeStruct((*shape, engine.sizes["sensordata"]), jnp.float32))  # fmt: skip
     d = start.data
     history = d.history if d.history is not None else jnp.zeros((0,))
     args = (
@@ -243,7 +243,14 @@ def _roll(engine: Engine, base: Task, models: Any, start: State, controls: Array
         out = tuple(host)
     else:
         out = jax.pure_callback(engine, out_shapes, *args, vmap_method="sequential")
-    return dict(zip(C_OUTPUTS, out))
+    return _from_c(engine, *out)
+
+
+def _from_c(engine: Engine, states: Array, sensordata: Array) -> dict[str, Array]:
+    """C's outputs (`Engine.__call__`) as {field of `FROM_C`: [..., size]} (time: [...])."""
+    ends = np.cumsum([1, engine.sizes["qpos"], engine.sizes["qvel"]])
+    time, qpos, qvel, act = jnp.split(jnp.asarray(states), ends, axis=-1)
+    return {"time": time[..., 0], "qpos": qpos, "qvel": qvel, "act": act, "sensordata": jnp.asarray(sensordata)}
 
 
 _HOST: contextvars.ContextVar = contextvars.ContextVar("mjzoo_native_host", default=None)

@@ -16,11 +16,11 @@ import numpy as np
 from mjzoo.planning.native import (
     _HINTS,
     APPLIED,
-    C_OUTPUTS,
     FROM_C,
     Native,
     _applied,
     _complete,
+    _from_c,
     _Recorder,
     _replay,
 )
@@ -139,7 +139,7 @@ def reads(task: Native, start: State, probed: Probe) -> None:
     history = d.history if d.history is not None else np.zeros((0,))
     out = engine(d.time, d.qpos, d.qvel, d.act, history, d.qacc_warmstart, [getattr(d, f) for f in engine.held],
                  controls.reshape(1, 1, steps, -1))  # fmt: skip
-    one = {k: v[0, 0] for k, v in zip(C_OUTPUTS, out)}
+    one = {k: v[0, 0] for k, v in _from_c(engine, *out).items()}
     outcome = jax.jit(lambda s: _replay(base, s, jnp.asarray(probed.actions), keys, one, engine.n_substeps)[1:])
     reference = outcome(start)
     fields = [f.name for f in dataclasses.fields(d) if f.name not in FROM_C + APPLIED]

@@ -55,6 +55,7 @@ class Engine:
         self.present = [f for f in APPLIED if getattr(blank, f).size > 0]
         self._defaults = {f: np.array(getattr(blank, f)) for f in self.present}  # what C resets them to
         self.sizes = {f: int(getattr(blank, f).size) for f in ("qpos", "qvel", "act", "sensordata")}
+        self.width = 1 + first.nq + first.nv + first.na  # time, qpos, qvel, act: the head of C's full state
         self.full = int(mujoco.mjtState.mjSTATE_FULLPHYSICS)
         self.vary(self.present)
         self.direct = False
@@ -71,8 +72,9 @@ class Engine:
 
     def __call__(self, time, qpos, qvel, act, history, warmstart, held, controls) -> tuple[np.ndarray, ...]:
         """Rolls out [M, N, T, size] per-step `controls` (of `fields`) from one state, with
-        the `held` inputs fixed; returns float32 time [M, N, T], qpos, qvel, act and
-        sensordata [M, N, T, size], NaN after C reset a diverging rollout."""
+        the `held` inputs fixed; returns float32 states [M, N, T, `width`] (time, qpos,
+        qvel, act; NaN but time after C reset a diverging rollout) and sensordata
+        [M, N, T, nsensordata]."""
         num_models, num_samples, steps, _ = controls.shape
         batch = num_models * num_samples
         kept = [(f, np.ravel(v)) for f, v in zip(self.held, held) if not np.array_equal(v, self._defaults[f])]
@@ -106,16 +108,15 @@ class Engine:
         self.seconds.append(time_lib.perf_counter() - tick)
         return self._split(buffers, float(time), (num_models, num_samples, steps))
 
-    def _split(self, buffers: dict, time: float, shape: tuple[int, int, int]) -> tuple[np.ndarray, ...]:
-        states, nq, nv, na = buffers["states"], self.sizes["qpos"], self.sizes["qvel"], self.sizes["act"]
+    def _split(self, buffers: dict, time: float, shape: tuple[int, int, int]) -> tuple[np.ndarray, np.ndarray]:
+        states = buffers["states"][..., : self.width]
         times = states[..., 0]
         # C resets a diverging simulation (time back to 0): NaN from there on, as MJX's would be.
         earlier = np.concatenate([np.full((times.shape[0], 1), time), times[:, :-1]], axis=1)
-        reset = np.maximum.accumulate(times < earlier - 0.5 * self.dt, axis=1)[..., None]
-        qpos = np.where(reset, np.nan, states[..., 1 : 1 + nq])
-        qvel = np.where(reset, np.nan, states[..., 1 + nq : 1 + nq + nv])
-        parts = (times, qpos, qvel, states[..., 1 + nq + nv : 1 + nq + nv + na], buffers["sensors"])
-        return tuple(x.astype(np.float32).reshape(shape + x.shape[2:]) for x in parts)  # copies: buffers are reused
+        reset = np.maximum.accumulate(times < earlier - 0.5 * self.dt, axis=1)
+        states = states.astype(np.float32)  # copies: the buffers are reused
+        states[..., 1:][reset] = np.nan
+        return states.reshape(*shape, -1), buffers["sensors"].astype(np.float32).reshape(*shape, -1)
 
     def _buffers(self, num_models: int, num_samples: int, steps: int, spec: int) -> dict[str, Any]:
         key = (num_models, num_samples, steps, spec)

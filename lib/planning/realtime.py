@@ -38,6 +38,7 @@ from mjzoo.planning.native import split as native_split
 from mjzoo.planning.rollouts import Ensemble
 from mjzoo.planning.sampling import SamplingConfig
 from mjzoo.running import control_dt, reset
+from mjzoo.tree import Packing
 from mjzoo.types import Task
 
 __all__ = ["Problem", "offline", "realtime", "BACKENDS", "default_backend"]
@@ -159,25 +160,33 @@ def realtime(
     step_keys = list(committed(jax.random.split(key, total_steps + 1)))
     plan_keys = list(committed(jax.random.split(plan_key, total_steps + 1)))
     sim_state = committed(reset(problem.sim_task, reset_key))
-    first = jax.jit(lambda s: closed_loop.first_plan(planner, config, plan_task, s, hooks))
+    planner_state = committed(jax.jit(lambda s: closed_loop.first_plan(planner, config, plan_task, s, hooks))(sim_state))
+    # The loop carries both states packed, a few arrays each (`mjzoo.tree.Packing`): a
+    # simulation state's ~100 leaves cost more to pass through a jit than a small step.
+    sims, plans = Packing.of(sim_state), Packing.of(planner_state)
     # Native: two jits around a host call of C each (`native.split`), not one jit through
     # `jax.pure_callback`, whose ~0.3 ms a call a replan and every simulation step would pay.
     compile_ = native_split if problem.physics == "native" else jax.jit
-    replan = compile_(lambda p, s, k, v: closed_loop.replan(planner, config, plan_task, p, s, k, hooks, v))
-    step = compile_(lambda p, s, k: closed_loop.sim_step(config, sim_task, p, s, k, hooks))
-    after_rollout = jax.jit(lambda s, p: closed_loop.after_rollout(hooks, s, p))
-    planner_state = committed(first(sim_state))
-    # Compile before the clock starts, for the first state and for states the loop makes
-    # (their leaves can differ in weak type from a reset's).
-    later_plan = replan(planner_state, sim_state, plan_keys[-1], value)
-    later_state, _ = step(later_plan, sim_state, step_keys[-1])
-    jax.block_until_ready((replan(later_plan, later_state, plan_keys[-1], value), step(later_plan, later_state, step_keys[-1])))
+
+    def replan_packed(p, s, k, v):
+        return plans.pack(closed_loop.replan(planner, config, plan_task, plans.unpack(p), sims.unpack(s), k, hooks, v))
+
+    def step_packed(p, s, k):
+        state, control = closed_loop.sim_step(config, sim_task, plans.unpack(p), sims.unpack(s), k, hooks)
+        return sims.pack(state), control
+
+    replan, step = compile_(replan_packed), compile_(step_packed)
+    after_rollout = jax.jit(lambda s, p: sims.pack(closed_loop.after_rollout(hooks, sims.unpack(s), plans.unpack(p))))
+    sim_state, planner_state = jax.jit(lambda s, p: (sims.pack(s), plans.pack(p)))(sim_state, planner_state)
+    # Compile before the clock starts (every argument committed, of fixed dtypes: once).
+    jax.block_until_ready((replan(planner_state, sim_state, plan_keys[-1], value),
+                           step(planner_state, sim_state, step_keys[-1])))  # fmt: skip
     if hooks.post_rollout is not None:
-        jax.block_until_ready(after_rollout(later_state, later_plan))
+        jax.block_until_ready(after_rollout(sim_state, planner_state))
     physics_seconds = plan_task.engine.seconds if isinstance(plan_task, Native) else []
     physics_seconds.clear()
 
-    states, controls, plan_costs, latencies, step_seconds = [], [], [], [], []
+    states, controls, plan_states, latencies, step_seconds = [], [], [], [], []
     simulated = clock == "simulated"
     begin = time.perf_counter()
 
@@ -201,15 +210,16 @@ def realtime(
         planner_state = new_plan
         if hooks.post_rollout is not None:
             sim_state = after_rollout(sim_state, planner_state)
-        plan_costs.append(planner_state.cost)
+        plan_states.append(planner_state)
         if simulated:  # the world waits for each replan: one period of steps follows it
             advance_to(round(len(latencies) * period / sim_dt), planner_state)
         else:
             advance_to(due_at(tick + period), planner_state)
             time.sleep(max(0.0, tick + period - time.perf_counter()))
     wall = time.perf_counter() - begin
-    stacked = jax.tree.map(lambda *xs: jnp.stack(xs), *states)
-    result = Result(stacked, jnp.stack(controls), -stacked.reward, jnp.stack(plan_costs), planner_state)
+    stack = lambda packing, xs: jax.jit(packing.unpack)(jax.tree.map(lambda *x: jnp.stack(x), *xs))  # noqa: E731
+    stacked, plan_states = stack(sims, states), stack(plans, plan_states)
+    result = Result(stacked, jnp.stack(controls), -stacked.reward, plan_states.cost, plans.unpack(planner_state))
     ms = lambda xs, q=50: 1e3 * float(np.percentile(xs, q)) if xs else float("nan")  # noqa: E731
     return result, {"plan_hz": len(latencies) / wall, "plan_latency_ms": ms(latencies),
                     "plan_latency_p95_ms": ms(latencies, 95), "plan_physics_ms": ms(physics_seconds),
