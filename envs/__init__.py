@@ -4,9 +4,12 @@
     mjzoo.envs.names()  # ['cartpole_balance', 'cartpole_swingup', ...]
     task = mjzoo.envs.make("my_pkg.my_module:make_task", mass=2.0)  # any function returning a Task
 
-Every function here takes a *task spec*: a registered name, or ``package.module:factory``
-naming a function whose keyword arguments are the overrides. Such a module may define
-``PLANNING`` (a `base.PlanningSetup`), as the envs here do, for `mjzoo plan`.
+Every function here takes a *task spec*: a registered name, ``package.module:factory``
+naming a function whose keyword arguments are the overrides, or ``playground:NAME``, a
+MuJoCo Playground env through `mjzoo.interop.playground` (its config fields the
+overrides; needs ``pip install 'mjzoo[playground]'``). A factory's module may define
+``PLANNING`` (a `base.PlanningSetup`), as the envs here do, for `mjzoo plan`; Playground
+envs plan with `PLAYGROUND_PLANNING`.
 
 Every task comes truncated after its episode length and guarded against diverging
 physics; overrides change weights, targets, episode length and physics options
@@ -34,7 +37,7 @@ from mjzoo.running import control_dt
 from mjzoo.types import Task
 
 __all__ = ["make", "names", "factory", "defaults", "register", "hyperparameters", "planning",
-           "closed_loop_problem"]
+           "closed_loop_problem", "PLAYGROUND", "PLAYGROUND_PLANNING"]
 
 _REGISTRY: dict[str, Callable[..., Task]] = {
     "pendulum_swingup": pendulum.swingup,
@@ -79,6 +82,16 @@ _PLANNING: dict[str, base.PlanningSetup] = {
 # A user's factory without `PLANNING`: one episode (`closed_loop_problem` measures it),
 # replanning every step, the planners' own default configs, no success criterion.
 _ONE_EPISODE = base.PlanningSetup(seconds=None, replan_every=1, plan_overrides={}, configs={}, success=None)
+PLAYGROUND = "playground:"  # the spec prefix of MuJoCo Playground's envs
+# Playground's envs: one episode, replanning every control step, 1 s horizons at the
+# DM Control Suite's control steps (0.01-0.04 s: 25-100 steps); rewards are in [0, 1] per
+# step, so MPPI's temperature is in those units.
+_PLAYGROUND_SAMPLING = dict(num_samples=128, horizon_steps=50, num_knots=4, noise_scale=0.3)
+PLAYGROUND_PLANNING = base.PlanningSetup(
+    seconds=None, replan_every=1, plan_overrides={}, success=None,
+    configs={"predictive_sampling": _PLAYGROUND_SAMPLING, "mppi": dict(_PLAYGROUND_SAMPLING, temperature=0.1),
+             "cem": dict(_PLAYGROUND_SAMPLING, num_elites=8, sigma_min=0.1)},
+)  # fmt: skip
 
 
 def names() -> list[str]:
@@ -104,9 +117,11 @@ def register(
 
 def planning(spec: str) -> base.PlanningSetup:
     """How the sampling planners solve `spec` closed loop: a registered env's setup (error
-    if it has none), or a user module's ``PLANNING`` (default: one episode, replanning
-    every step, no success criterion)."""
+    if it has none), a user module's ``PLANNING`` (default: one episode, replanning
+    every step, no success criterion), or `PLAYGROUND_PLANNING` for a Playground env."""
     factory(spec)
+    if _is_playground(spec):
+        return PLAYGROUND_PLANNING
     if _is_user(spec):
         setup = getattr(importlib.import_module(spec.partition(":")[0]), "PLANNING", _ONE_EPISODE)
         if not isinstance(setup, base.PlanningSetup):
@@ -126,10 +141,17 @@ def closed_loop_problem(
     planning view as the planner's model, its hooks and success test, for `seconds`
     (default: the setup's, else one episode) of simulated time, on `backend` ("mjx",
     "native": C MuJoCo; "auto": native on a CPU). Registered envs run with no episode
-    limit; `overrides` go to both tasks."""
+    limit; `overrides` go to both tasks. A Playground env steps MJX itself, so it plans
+    on MJX ("auto": "mjx"; "native" is refused)."""
     setup = planning(spec)
     build = functools.partial(make, spec, **overrides)
-    unlimited = {} if _is_user(spec) else {"episode_steps": 10**9}  # a user's factory may not take it
+    if _is_playground(spec):
+        if backend == "native":
+            raise ValueError(f"{spec}: Playground's envs step MJX themselves, which native C rollouts cannot replay; "
+                             "plan with backend 'mjx'")  # fmt: skip
+        backend = "mjx"
+    own_limit = _is_user(spec) or _is_playground(spec)  # a factory may not take episode_steps
+    unlimited = {} if own_limit else {"episode_steps": 10**9}
     sim_task = build(**unlimited)
     if not (seconds or setup.seconds) and sim_task.time_limit is None:
         raise ValueError(f"{spec}: the task has no time limit (mjzoo.with_time_limit) to set the run's length; "
@@ -143,8 +165,11 @@ def closed_loop_problem(
 
 def hyperparameters(spec: str, algorithm: str) -> dict[str, Any]:
     """The task's default config fields for `algorithm` (empty if it has none; a user's
-    task: its ``PLANNING.configs``, so PPO keeps ppo.Config's defaults)."""
-    if _is_user(spec):
+    task: its ``PLANNING.configs``, so PPO keeps ppo.Config's defaults; a Playground env:
+    its tuned PPO config in mjzoo's terms, and `PLAYGROUND_PLANNING`'s)."""
+    if _is_playground(spec) and algorithm == "ppo":
+        return _playground(spec).ppo_hyperparameters(_playground_name(spec))
+    if _is_user(spec) or _is_playground(spec):
         return dict(planning(spec).configs.get(algorithm, {}))
     factory(spec)
     return dict(_HYPERPARAMETERS.get(spec, {}).get(algorithm, {}))
@@ -154,7 +179,10 @@ _KEYWORDS = (inspect.Parameter.POSITIONAL_OR_KEYWORD, inspect.Parameter.KEYWORD_
 
 
 def defaults(spec: str) -> dict[str, Any]:
-    """The overridable arguments of a task and their default values."""
+    """The overridable arguments of a task and their default values (a Playground env:
+    its config, flattened)."""
+    if _is_playground(spec):
+        return _playground(spec).config_defaults(_playground_name(spec))
     kinds = _KEYWORDS if _is_user(spec) else (inspect.Parameter.KEYWORD_ONLY,)
     parameters = inspect.signature(factory(spec)).parameters.values()
     return {p.name: p.default for p in parameters if p.kind in kinds and p.default is not p.empty}
@@ -167,6 +195,8 @@ def make(spec: str, **overrides: Any) -> Task:
     Each override is checked against its default's type first (physics options by
     `physics.load`): a wrong one, e.g. episode_steps="abc" from a command line or a
     config file, would otherwise fail deep inside tracing with a message naming neither."""
+    if _is_playground(spec):  # the adapter checks the overrides against the env's config
+        return _playground(spec).task(_playground_name(spec), **overrides)
     build = factory(spec)
     parameters = inspect.signature(build).parameters
     if _is_user(spec):
@@ -229,7 +259,10 @@ def _expected_type(parameter: inspect.Parameter, value: Any) -> str | None:
 def factory(spec: str) -> Callable[..., Task]:
     """The function that builds `spec`: a registered env's (KeyError naming them if
     unknown), or the function ``package.module:factory`` names (ValueError or TypeError
-    naming what is missing)."""
+    naming what is missing), or for ``playground:NAME`` the adapter bound to NAME (ValueError
+    if Playground is not installed, KeyError naming near envs if NAME is unknown)."""
+    if _is_playground(spec):
+        return functools.partial(_playground(spec).task, _playground_name(spec))
     if _is_user(spec):
         return _imported(spec)
     name = spec
@@ -241,7 +274,29 @@ def factory(spec: str) -> Callable[..., Task]:
 
 
 def _is_user(spec: str) -> bool:
-    return ":" in spec
+    return ":" in spec and not _is_playground(spec)
+
+
+def _is_playground(spec: str) -> bool:
+    return spec.startswith(PLAYGROUND)
+
+
+def _playground(spec: str) -> ModuleType:
+    """The Playground adapter, or a one-line error if Playground is not installed."""
+    try:
+        from mjzoo.interop import playground
+    except ModuleNotFoundError as e:
+        if (e.name or "").partition(".")[0] != "mujoco_playground":
+            raise
+        raise ValueError(f"{spec}: MuJoCo Playground is not installed; pip install 'mjzoo[playground]'") from e
+    return playground
+
+
+def _playground_name(spec: str) -> str:
+    """The env name of ``playground:NAME``, checked (KeyError naming near ones)."""
+    name = spec[len(PLAYGROUND):]
+    _playground(spec).config_defaults(name)
+    return name
 
 
 def _imported(spec: str) -> Callable[..., Task]:

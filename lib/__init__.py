@@ -10,7 +10,7 @@ rest is grouped by concern, each subpackage importing only what sits below it:
     mjzoo.learning      pure pieces RL algorithms are composed from (gae, losses, networks)
     mjzoo.planning      pieces sampling planners are composed from, the closed loop
     mjzoo.harness       running experiments: training loop, metrics, checkpoints, CLI
-    mjzoo.interop       other ecosystems (Brax)
+    mjzoo.interop       other ecosystems (Brax, MuJoCo Playground)
     mjzoo.algorithms    PPO, MPPI, CEM, predictive sampling
     mjzoo.envs          concrete tasks and their registry
     mjzoo.testing       check_task: the Task contract's properties, checked on any task

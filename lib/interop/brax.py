@@ -1,4 +1,5 @@
-"""One mjzoo `Task` presented as a Brax `Env`, for Brax's own trainers.
+"""One mjzoo `Task` presented as a Brax `Env`, for Brax's own trainers; and the reverse,
+any Brax `Env` as an mjzoo Task (`task`, from `mjzoo.interop.brax_envs`).
 
     env = mjzoo.interop.brax.to_brax_env(mjzoo.envs.make("cartpole_balance"))
     brax.training.agents.ppo.train(env, ..., episode_length=500,
@@ -44,11 +45,12 @@ from brax.envs import base as brax_base
 from brax.envs.wrappers import training as brax_training
 
 from mjzoo import tree
+from mjzoo.interop.brax_envs import task
 from mjzoo.running import reset as mjzoo_reset
 from mjzoo.running import transition
 from mjzoo.types import State, Task
 
-__all__ = ["to_brax_env", "MjzooBraxEnv", "wrap_for_training", "patch_brax_for_current_jax"]
+__all__ = ["to_brax_env", "task", "MjzooBraxEnv", "wrap_for_training", "patch_brax_for_current_jax"]
 
 Array = jax.Array
 KEY = "mjzoo"  # this adapter's info entry
@@ -83,6 +85,11 @@ class MjzooBraxEnv(brax_base.Env):
     def task(self) -> Task:
         """The task, with `sys` as its model."""
         return self._task.replace(model=self.sys)
+
+    @property
+    def mj_model(self):
+        """The task's host `mujoco.MjModel` (static)."""
+        return self._task.mj_model
 
     @property
     def observation_size(self) -> int:

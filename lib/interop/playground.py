@@ -1,0 +1,267 @@
+"""MuJoCo Playground environments as mjzoo tasks, for PPO, AMP and the sampling planners.
+
+    task = mjzoo.interop.playground.task("CartpoleBalance")             # by Playground's name
+    task = mjzoo.interop.playground.task("CheetahRun", ctrl_dt=0.02)    # its config, overridden
+    task = mjzoo.interop.playground.task(my_env)                        # any bare `MjxEnv`
+    mjzoo train ppo playground:CartpoleBalance                          # from the command line
+
+Needs ``pip install 'mjzoo[playground]'`` (the `playground` package, `mujoco_playground`).
+One Playground transition becomes one mjzoo transition:
+
+  Playground State        mjzoo State
+  data, obs               data, obs (a dict observation stays a dict: PPO's `policy_obs_key`)
+  reward                  the one reward term ``"playground"``: `reward` and ``metrics["reward/playground"]``
+  done                    terminated (Playground's `done` ends an episode without bootstrap)
+  (episode_length)        truncated, by `mjzoo.with_time_limit` at the config's `episode_length`
+  metrics[k]              ``metrics["playground/<k>"]``: the env's own reward components
+                          (``"playground/reward/upright"``) kept apart from mjzoo's reward terms
+  info                    ``info["playground"]``: the env's info as it returned it, its ``"rng"``
+                          (uint32 key data) included; the env's randomness comes from there, as
+                          under Playground's own wrappers, so mjzoo's step key is not used
+
+Playground's reset is given ``jax.random.key_data(key)`` of mjzoo's reset key. The task is
+guarded against diverging physics (`mjzoo.with_divergence_guard`, ``metrics["diverged"]``).
+
+How the env object passes through `jax.jit`: it is a Python object holding Python numbers
+(its config, reward constants), so it is bound as static pytree metadata (`tree.Static`,
+equal by identity): tasks made from one env share a trace; a second env of the same name
+compiles again. The physics model is `task.model`, a leaf: while the env's reset or step
+is traced, its ``_mjx_model`` is set to the model the task is called with (Playground's own
+domain-randomization wrapper does the same), so edits of `task.model` (masses, gains,
+`mjzoo.with_domain_randomization`) apply without recompiling. The env's other numbers are
+trace constants: `mjzoo.params` finds no named numbers and `with_params` has nothing to
+change; change them with config overrides, which build a new env (and compile again).
+
+Physics defaults to MJX's JAX implementation (Playground's DM Control configs say
+``impl="warp"``): pass ``impl="warp"`` for MuJoCo Warp. Native C rollouts
+(`mjzoo.planning.native`) cannot replay these tasks: Playground steps MJX itself.
+"""
+
+from __future__ import annotations
+
+import contextlib
+import difflib
+import subprocess
+import threading
+from typing import Any, Iterator
+
+import jax
+import jax.numpy as jnp
+from mujoco import mjx
+from mujoco_playground import MjxEnv, registry
+from mujoco_playground._src import dm_control_suite, locomotion, manipulation, mjx_env
+
+from mjzoo import tree
+from mjzoo.combinators import record, with_divergence_guard, with_time_limit
+from mjzoo.running import OUTCOME
+from mjzoo.types import State, Task, bind
+
+__all__ = ["task", "load", "names", "offline_names", "needs_network", "config_defaults", "ppo_hyperparameters",
+           "NAME"]  # fmt: skip
+
+Array = jax.Array
+NAME = "playground"  # the reward term's name, the info key and the metrics prefix
+DEFAULT_IMPL = "jax"  # runs on any device; Playground's DM Control configs default to Warp
+_LOCK = threading.RLock()  # the model swap mutates the env: one trace of it at a time
+
+
+# --- finding and loading envs -----------------------------------------------------------
+
+
+def names() -> list[str]:
+    """Every env in Playground's registry, sorted."""
+    return sorted(registry.ALL_ENVS)
+
+
+def offline_names() -> list[str]:
+    """The envs whose assets ship with the package (the DM Control Suite), sorted."""
+    return sorted(dm_control_suite.ALL_ENVS)
+
+
+def needs_network(name: str) -> bool:
+    """Whether loading `name` clones robot assets (mujoco_menagerie) that are not here yet."""
+    return name not in dm_control_suite.ALL_ENVS and not mjx_env.MENAGERIE_PATH.exists()
+
+
+def _checked_name(name: str) -> str:
+    if name not in registry.ALL_ENVS:
+        close = difflib.get_close_matches(name, registry.ALL_ENVS, n=3, cutoff=0.5)
+        hint = f" (did you mean {', '.join(close)}?)" if close else ""
+        raise KeyError(f"unknown Playground env {name!r}{hint}; the DM Control Suite envs: "
+                       f"{', '.join(offline_names())}")  # fmt: skip
+    return name
+
+
+def config_defaults(name: str) -> dict[str, Any]:
+    """The env's config as flat ``{"a.b": value}`` overrides (the keys `task` takes), with
+    ``impl`` the adapter's default."""
+    flat = _flattened(registry.get_default_config(_checked_name(name)).to_dict())
+    return {**flat, "impl": DEFAULT_IMPL} if "impl" in flat else flat
+
+
+def _flattened(config: dict, prefix: str = "") -> dict[str, Any]:
+    flat = {}
+    for key, value in config.items():
+        if isinstance(value, dict):
+            flat.update(_flattened(value, f"{prefix}{key}."))
+        else:
+            flat[f"{prefix}{key}"] = value
+    return flat
+
+
+def load(name: str, **config_overrides: Any) -> MjxEnv:
+    """Playground's env `name` with its default config and `config_overrides` (flat keys,
+    "vision_config.nworld" for nested ones); ``impl`` defaults to "jax".
+
+    Raises KeyError for an unknown env (naming near ones), TypeError for an unknown
+    override or one of the wrong type, RuntimeError when robot assets cannot be fetched.
+    """
+    allowed = config_defaults(name)
+    unknown = sorted(set(config_overrides) - set(allowed))
+    if unknown:
+        raise TypeError(f"playground:{name}: unknown config override(s) {unknown}; its config: {sorted(allowed)}")
+    overrides = {**({"impl": DEFAULT_IMPL} if "impl" in allowed else {}), **config_overrides}
+    try:
+        return registry.load(name, config_overrides=overrides)
+    except subprocess.CalledProcessError as error:  # locomotion and manipulation clone their robots
+        raise RuntimeError(f"playground:{name}: could not fetch its robot assets (mujoco_menagerie, cloned from "
+                           f"GitHub at first use): {error}") from error  # fmt: skip
+    except (TypeError, ValueError) as error:  # ConfigDict's type check names the field
+        raise TypeError(f"playground:{name}: config override rejected: {error}") from error
+
+
+# --- the adapter --------------------------------------------------------------------------
+
+
+def task(env_or_name: str | MjxEnv, **config_overrides: Any) -> Task:
+    """A Playground env as an mjzoo `Task` (see the module docstring for the mapping).
+
+    Args:
+      env_or_name: a registry name ("CartpoleBalance") or a bare `MjxEnv` instance (not a
+        Playground wrapper: mjzoo's combinators replace those).
+      **config_overrides: the env's config fields (`config_defaults` lists them), only with
+        a name.
+
+    Returns:
+      A Task with action ``[env.action_size]``, the env's observation, one reward term,
+      guarded against divergence and truncated after the config's ``episode_length``
+      control steps (no time limit if the env's config has none).
+    """
+    if isinstance(env_or_name, str):
+        env = load(env_or_name, **config_overrides)
+    elif isinstance(env_or_name, MjxEnv):
+        if config_overrides:
+            raise TypeError(f"playground.task: config overrides {sorted(config_overrides)} apply when loading by "
+                            "name; build the env with them instead")  # fmt: skip
+        env = env_or_name
+    else:
+        raise TypeError(f"playground.task: expected a Playground env name or MjxEnv, got {type(env_or_name).__name__}")
+    if env.unwrapped is not env:
+        raise TypeError(f"playground.task: {type(env).__name__} is a Playground wrapper; pass the bare env "
+                        "(env.unwrapped) and use mjzoo's combinators (with_auto_reset, with_time_limit, "
+                        "with_domain_randomization) instead")  # fmt: skip
+    if not isinstance(getattr(env, "_mjx_model", None), mjx.Model):
+        raise TypeError(f"playground.task: {type(env).__name__} keeps no mjx.Model in _mjx_model, so the task's "
+                        "model could not be handed to it")  # fmt: skip
+    static = tree.Static(env)
+    action_size = int(env.action_size)
+    bare = Task(
+        model=env.mjx_model,
+        start=bind(_start, static),
+        step=bind(_step, static),
+        reward=bind(_recorded_reward),
+        terminate=bind(_recorded_terminate),
+        mj_model=env.mj_model,
+        action_dim=None if action_size == env.mj_model.nu else action_size,
+    )
+    guarded = with_divergence_guard(bare)
+    length = getattr(getattr(env, "_config", None), "episode_length", None)
+    return guarded if length is None else with_time_limit(guarded, int(length))
+
+
+@contextlib.contextmanager
+def _holding(env: MjxEnv, model: mjx.Model) -> Iterator[MjxEnv]:
+    """`env` stepping `model` (the task's, maybe traced) for the duration of a call."""
+    with _LOCK:
+        own = env._mjx_model
+        env._mjx_model = model
+        try:
+            yield env
+        finally:
+            env._mjx_model = own
+
+
+def _key_data(key: Array) -> Array:
+    return jax.random.key_data(key) if jnp.issubdtype(key.dtype, jax.dtypes.prng_key) else key
+
+
+def _start(env: tree.Static, model: mjx.Model, key: Array) -> State:
+    with _holding(env.value, model) as held:
+        first = held.reset(_key_data(key))
+    state = State.create(first.data, first.obs, info={NAME: dict(first.info)})
+    return state.replace(metrics=_prefixed(first.metrics))
+
+
+def _step(env: tree.Static, model: mjx.Model, state: State, action: Array, key: Array) -> State:
+    prefix = f"{NAME}/"
+    own = mjx_env.State(
+        data=state.data, obs=state.obs, reward=state.reward, done=state.terminated.astype(jnp.float32),
+        metrics={k[len(prefix):]: v for k, v in state.metrics.items() if k.startswith(prefix)},
+        info=dict(state.info[NAME]),  # fresh dicts: Playground's envs write into the ones they get
+    )  # fmt: skip
+    with _holding(env.value, model) as held:
+        after = held.step(own, action)
+    next_state = state.replace(
+        data=after.data, obs=after.obs, info={**state.info, NAME: dict(after.info)},
+        metrics={**state.metrics, **_prefixed(after.metrics)},
+    )  # fmt: skip
+    done = jnp.asarray(after.done) != 0
+    return record(next_state, {NAME: jnp.asarray(after.reward, jnp.float32)}, done, jnp.zeros((), bool))
+
+
+def _prefixed(metrics: dict[str, Array]) -> dict[str, Array]:
+    return {f"{NAME}/{k}": v for k, v in metrics.items()}
+
+
+def _recorded_reward(model, state: State, action: Array, next_state: State) -> dict[str, Array]:
+    return dict(next_state.info[OUTCOME]["reward"])
+
+
+def _recorded_terminate(model, state: State) -> tuple[Array, Array]:
+    return state.info[OUTCOME]["terminated"], state.info[OUTCOME]["truncated"]
+
+
+# --- Playground's tuned PPO, in mjzoo's terms ------------------------------------------------
+
+
+def ppo_hyperparameters(name: str) -> dict[str, Any]:
+    """Playground's tuned Brax PPO config for `name` as `mjzoo.algorithms.ppo.Config` fields.
+
+    Brax collects ``batch_size * num_minibatches / num_envs`` unrolls per env per update;
+    mjzoo collects one unroll that long. Networks default to Brax's (policy 4x32, value
+    5x256, swish); dict observations keep Playground's `policy_obs_key` / `value_obs_key`.
+    """
+    _checked_name(name)
+    from mujoco_playground.config import dm_control_suite_params, locomotion_params, manipulation_params
+
+    params = dm_control_suite_params
+    if name in locomotion.ALL_ENVS:
+        params = locomotion_params
+    elif name in manipulation.ALL_ENVS:
+        params = manipulation_params
+    rl = params.brax_ppo_config(name)
+    unrolls = max(1, rl.batch_size * rl.num_minibatches // rl.num_envs)
+    network = rl.get("network_factory", {})
+    config = dict(
+        num_envs=rl.num_envs, unroll_length=rl.unroll_length * unrolls, num_minibatches=rl.num_minibatches,
+        num_epochs=rl.num_updates_per_batch, learning_rate=rl.learning_rate, entropy_coef=rl.entropy_cost,
+        discount=rl.discounting, reward_scaling=rl.reward_scaling, normalize_observations=rl.normalize_observations,
+        gae_lambda=0.95, clip_epsilon=rl.get("clipping_epsilon", 0.3), max_grad_norm=rl.get("max_grad_norm", None),
+        policy_hidden_sizes=tuple(network.get("policy_hidden_layer_sizes", (32,) * 4)),
+        value_hidden_sizes=tuple(network.get("value_hidden_layer_sizes", (256,) * 5)),
+        activation="swish", total_steps=rl.num_timesteps,
+    )  # fmt: skip
+    for key in ("policy_obs_key", "value_obs_key"):
+        if key in network:
+            config[key] = network[key]
+    return config

@@ -1,0 +1,205 @@
+"""MuJoCo Playground envs as mjzoo tasks (`mjzoo.interop.playground`): the contract on two
+cheap DM Control envs, agreement with Playground's own reset and step, done as terminated,
+truncation at the episode length, a dict observation under PPO, and `playground:NAME`
+specs (resolution, defaults, one-line errors).
+
+All of Playground's DM Control Suite runs through `scripts/playground_conformance.py`;
+each compile here costs seconds to a minute on a CPU, so this file compiles five things.
+"""
+
+from __future__ import annotations
+
+import sys
+
+import jax
+import jax.numpy as jnp
+import numpy as np
+import pytest
+
+pytest.importorskip("mujoco_playground")
+
+from mujoco_playground._src.dm_control_suite import pendulum  # noqa: E402
+
+import mjzoo  # noqa: E402
+import mjzoo.envs  # noqa: E402
+from mjzoo.harness import cli  # noqa: E402
+from mjzoo.interop import playground
+
+L = 6  # episode length in these tests
+
+
+# --- the contract --------------------------------------------------------------------------
+
+
+@pytest.mark.parametrize("name", ["CartpoleBalance", "PendulumSwingup"])
+def test_cheap_dm_control_envs_pass_check_task(name):
+    # An episode shorter than the rollout: the time limit is checked without a second compile.
+    task = playground.task(name, episode_length=8)
+    report = mjzoo.testing.check_task(task, num_steps=10)
+    assert "time_limit" in report.passed and "no_retrace" in report.passed and report.traces == 1
+
+
+# --- agreement with Playground's own env ----------------------------------------------------
+
+
+_TRACES = [0]
+
+
+@jax.jit
+def _rollout(task: mjzoo.Task, key: jax.Array, actions: jax.Array):
+    """mjzoo's reset of `task` from `key`, then a transition per action ([T, nu])."""
+    _TRACES[0] += 1
+    state = mjzoo.reset(task, key)
+
+    def body(state, action):
+        state = mjzoo.transition(task, state, action, jax.random.key(99))
+        return state, state
+
+    return state, jax.lax.scan(body, state, actions)[1]
+
+
+@pytest.fixture(scope="module")
+def cartpole():
+    env = playground.load("CartpoleBalance", episode_length=L)
+    return env, playground.task(env)
+
+
+@jax.jit
+def _playground_rollout(key, actions):
+    """Playground's own reset and steps of the cartpole fixture's env (a module global)."""
+    own = _ENV[0].reset(jax.random.key_data(key))
+
+    def body(state, action):
+        state = _ENV[0].step(state, action)
+        return state, state
+
+    return own, jax.lax.scan(body, own, actions)[1]
+
+
+_ENV = [None]
+
+
+def test_rewards_metrics_and_truncation_match_playground(cartpole):
+    env, task = cartpole
+    key = jax.random.key(3)
+    actions = jax.random.uniform(jax.random.key(4), (L, 1), minval=-1.0, maxval=1.0)
+    first, ours = _rollout(task, key, actions)
+    _ENV[0] = env
+    own_first, own = _playground_rollout(key, actions)
+    np.testing.assert_array_equal(first.obs, own_first.obs)
+    np.testing.assert_array_equal(first.data.qpos, own_first.data.qpos)
+    np.testing.assert_allclose(ours.obs, own.obs, rtol=1e-6, atol=1e-6)
+    np.testing.assert_allclose(ours.reward, own.reward, rtol=1e-6, atol=1e-6)
+    assert np.all(np.asarray(own.reward) > 0.5)  # balancing: a real reward was compared
+    np.testing.assert_allclose(ours.metrics["reward/playground"], own.reward, rtol=1e-6, atol=1e-6)
+    for term in ("upright", "centered", "small_control", "small_velocity"):  # the env's own components
+        np.testing.assert_allclose(ours.metrics[f"playground/reward/{term}"], own.metrics[f"reward/{term}"],
+                                   rtol=1e-6, atol=1e-6)  # fmt: skip
+    assert sorted(mjzoo.reward_terms(ours)) == ["playground"]
+    np.testing.assert_array_equal(ours.info["playground"]["rng"], own.info["rng"])
+    # Playground's done never fires here; the episode is truncated exactly at episode_length.
+    np.testing.assert_array_equal(ours.truncated, [False] * (L - 1) + [True])
+    assert not np.asarray(ours.terminated).any() and not np.asarray(own.done).any()
+    assert int(task.time_limit) == L
+
+
+def test_model_edits_apply_without_recompiling(cartpole):
+    _, task = cartpole
+    key, actions = jax.random.key(5), jnp.ones((L, 1))
+    _, light_states = _rollout(task, key, actions)
+    before = _TRACES[0]
+    heavy = task.replace(model=task.model.replace(body_mass=task.model.body_mass * 3.0))
+    _, heavy_states = _rollout(heavy, key, actions)
+    assert _TRACES[0] == before
+    assert not np.allclose(light_states.data.qvel, heavy_states.data.qvel)  # the env stepped the task's model
+    assert mjzoo.params(task) == {}  # the env's own numbers are trace constants, not named leaves
+
+
+class _EndsOnPush(pendulum.SwingUp):
+    """Playground's pendulum with `done` when the action exceeds 0.5, and a dict observation."""
+
+    def reset(self, rng):
+        state = super().reset(rng)
+        return state.replace(obs=self._both(state.obs))
+
+    def step(self, state, action):
+        after = super().step(state.replace(obs=state.obs["state"]), action)
+        return after.replace(obs=self._both(after.obs), done=(action[0] > 0.5).astype(jnp.float32))
+
+    def _both(self, obs):
+        return {"state": obs, "privileged_state": jnp.concatenate([obs, obs])}
+
+
+def test_done_is_terminated_and_a_dict_observation_trains_with_ppo():
+    from mjzoo.algorithms import ppo
+
+    env = _EndsOnPush(config=pendulum.default_config(), config_overrides={"impl": "jax", "episode_length": L})
+    task = playground.task(env)
+    _, states = _rollout(task, jax.random.key(0), jnp.array([[0.0], [0.9], [-0.3], [0.2]]))
+    np.testing.assert_array_equal(states.terminated, [False, True, False, False])  # no auto-reset: steps on
+    assert not np.asarray(states.truncated).any()
+    assert set(states.obs) == {"state", "privileged_state"} and states.obs["privileged_state"].shape == (4, 6)
+    config = ppo.Config(num_envs=4, unroll_length=4, num_minibatches=2, num_epochs=1, total_steps=16,
+                        policy_hidden_sizes=(8,), value_hidden_sizes=(8,), policy_obs_key="state",
+                        value_obs_key="privileged_state")  # fmt: skip
+    train_state = ppo.init(config, task, jax.random.key(2))
+    train_state, metrics = jax.jit(ppo.update, static_argnums=0)(config, task, train_state)
+    assert all(np.isfinite(np.asarray(v)).all() for v in jax.tree.leaves(metrics))
+
+
+def test_bad_envs_are_refused():
+    from mujoco_playground._src import wrapper
+
+    with pytest.raises(TypeError, match="Playground wrapper"):
+        playground.task(wrapper.Wrapper(pendulum.SwingUp(config=pendulum.default_config())))
+    with pytest.raises(TypeError, match="apply when loading by name"):
+        playground.task(pendulum.SwingUp(config=pendulum.default_config()), episode_length=5)
+    with pytest.raises(TypeError, match=r"unknown config override\(s\) \['nope'\]"):
+        playground.task("PendulumSwingup", nope=1)
+
+
+# --- playground:NAME specs ---------------------------------------------------------------------
+
+
+def test_playground_specs_resolve():
+    task = mjzoo.envs.make("playground:PendulumSwingup", episode_length=50)
+    assert isinstance(task, mjzoo.Task) and int(task.time_limit) == 50 and task.model.impl.value == "jax"
+    assert mjzoo.envs.defaults("playground:CartpoleBalance")["episode_length"] == 1000
+    tuned = mjzoo.envs.hyperparameters("playground:CartpoleBalance", "ppo")  # Playground's, in mjzoo's terms
+    assert (tuned["num_envs"], tuned["unroll_length"], tuned["num_epochs"], tuned["discount"]) == (2048, 480, 16, 0.995)
+    assert mjzoo.envs.planning("playground:PendulumSwingup") is mjzoo.envs.PLAYGROUND_PLANNING
+    assert mjzoo.envs.hyperparameters("playground:PendulumSwingup", "mppi")["horizon_steps"] == 50
+    with pytest.raises(KeyError, match="did you mean CartpoleBalance"):
+        mjzoo.envs.make("playground:CartpolBalance")
+    with pytest.raises(ValueError, match="native C rollouts cannot replay"):
+        from mjzoo.algorithms import mppi
+
+        mjzoo.envs.closed_loop_problem("playground:PendulumSwingup", mppi, mppi.Config(), backend="native")
+
+
+def test_a_missing_playground_is_one_line(monkeypatch):
+    # As if the package were not installed: its import fails, and the adapter's with it.
+    monkeypatch.setitem(sys.modules, "mujoco_playground", None)
+    monkeypatch.delitem(sys.modules, "mjzoo.interop.playground")
+    monkeypatch.delattr(mjzoo.interop, "playground", raising=False)
+    with pytest.raises(ValueError, match=r"playground:CartpoleBalance: MuJoCo Playground is not installed; "
+                                         r"pip install 'mjzoo\[playground\]'"):  # fmt: skip
+        mjzoo.envs.make("playground:CartpoleBalance")
+
+
+@pytest.mark.parametrize(
+    "argv, words",
+    [
+        (["train", "ppo", "playground:CartpolBalance"], ["unknown Playground env 'CartpolBalance'", "CartpoleBalance"]),
+        (["plan", "mppi", "playground:Nope"], ["unknown Playground env 'Nope'", "PendulumSwingup"]),
+        (["train", "ppo", "playground:CartpoleBalance", "--env-overrides", "nope=1"], ["unknown config override"]),
+    ],
+)
+def test_cli_mistakes_are_one_line(capsys, tmp_path, monkeypatch, argv, words):
+    monkeypatch.chdir(tmp_path)
+    with pytest.raises(SystemExit) as exit_info:
+        cli.main(argv)
+    err = capsys.readouterr().err
+    assert exit_info.value.code == 2 and len(err.splitlines()) == 1 and "Traceback" not in err, err
+    assert all(w in err for w in words), err
+    assert list(tmp_path.iterdir()) == []
