@@ -38,6 +38,7 @@ __all__ = [
     "PER_ENV_FIELDS",
     "Config",
     "TrainState",
+    "acting",
     "evaluate",
     "improve",
     "init",
@@ -225,10 +226,12 @@ def init(config: Config, task: Task, key: jax.Array) -> TrainState:
 # --- acting -------------------------------------------------------------------------
 
 
-def _acting(config: Config, task: Task, params: dict[str, Any], deterministic: bool) -> learning.Policy:
+def acting(config: Config, task: Task, params: dict[str, Any], deterministic: bool) -> learning.Policy:
     """The policy of `policy_params` for one env, as `learning.collect` and
-    `learning.evaluate` take it. A sample records its pre-tanh value, its
-    log-probability and the carry it started from (the learner's sequences begin there)."""
+    `learning.evaluate` take it: ``act(carry, obs, start, key) -> (carry, ctrl, extras)``,
+    the carry () for a feed-forward network, `start` restarting a recurrent one. A sample
+    records its pre-tanh value, its log-probability and the carry it started from (the
+    learner's sequences begin there); the deterministic action is tanh of the mean."""
     policy_net, _ = _networks(config, task)
 
     def act(carry, obs, start, key):
@@ -262,7 +265,7 @@ def policy(config: Config, task: Task, deterministic: bool = True) -> Callable[[
         raise ValueError("ppo.policy: a recurrent policy needs its carry; use ppo.evaluate or the network directly")
 
     def act(params, obs, key):
-        return _acting(config, task, params, deterministic)((), obs, jnp.ones((), bool), key)[1]
+        return acting(config, task, params, deterministic)((), obs, jnp.ones((), bool), key)[1]
 
     return act
 
@@ -303,7 +306,7 @@ def rollout(config: Config, task: Task, train_state: TrainState, key: jax.Array)
     num_envs, ...], collection metrics). AMP rewrites the transitions' reward between
     this and `improve`.
     """
-    act = _acting(config, task, policy_params(train_state), deterministic=False)
+    act = acting(config, task, policy_params(train_state), deterministic=False)
     return learning.collect(task, act, train_state.collector, key, config.unroll_length)
 
 
@@ -365,7 +368,7 @@ def evaluate(config: Config, task: Task, train_state: TrainState, key: jax.Array
 
     Returns (mean return, per-env returns [num_envs], Trajectory of env 0 [num_steps]).
     """
-    act = _acting(config, task, policy_params(train_state), deterministic=True)
+    act = acting(config, task, policy_params(train_state), deterministic=True)
     carry = _initial_carry(_networks(config, task)[0])
     returns, _, trajectory = learning.evaluate(task, act, key, num_envs, num_steps, carry)
     return jnp.mean(returns), returns, trajectory

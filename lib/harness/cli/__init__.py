@@ -10,6 +10,7 @@
     mjzoo collect runs/cb --out data/cb --episodes 32  # a dataset of the policy's episodes (or a planner's)
     mjzoo train amp humanoid_amp_walk             # adversarial motion priors: move like a reference
     mjzoo view pendulum_swingup --controls sliders --num-envs 4  # a live browser viewer (also runs, planners, datasets)
+    mjzoo export runs/cb --format onnx   # the policy as ONNX (or a jax.export artifact) with its deployment contract
 
 Wherever a task is named, ``package.module:factory`` names a function returning a
 `mjzoo.Task` (importable from the current directory, as with ``python -m``), and
@@ -35,13 +36,14 @@ import tyro
 
 from mjzoo.harness.cli.arguments import UsageError
 from mjzoo.harness.cli.commands import demo, envs, evaluate, plan, train
+from mjzoo.harness.cli.exporting import export
 from mjzoo.harness.cli.trajectories import collect
 from mjzoo.harness.cli.viewing import view
 
-__all__ = ["main", "demo", "envs", "train", "evaluate", "plan", "collect", "view", "UsageError"]
+__all__ = ["main", "demo", "envs", "train", "evaluate", "plan", "collect", "view", "export", "UsageError"]
 
 COMMANDS = {"demo": demo, "envs": envs, "train": train, "eval": evaluate, "plan": plan, "collect": collect,
-            "view": view}  # fmt: skip
+            "view": view, "export": export}  # fmt: skip
 
 
 def main(argv: list[str] | None = None) -> None:

@@ -1,0 +1,116 @@
+"""`mjzoo export`: a trained run's deterministic policy as an ONNX model or a jax.export
+artifact with its deployment contract (`mjzoo.interop.export`)."""
+
+from __future__ import annotations
+
+import dataclasses
+from pathlib import Path
+from types import ModuleType
+from typing import TYPE_CHECKING, Annotated, Any, Literal
+
+import jax
+import jax.numpy as jnp
+import tyro
+
+import mjzoo
+from mjzoo.harness.cli import runs
+from mjzoo.harness.cli.arguments import UsageError, checking
+
+if TYPE_CHECKING:
+    from mjzoo.interop import export
+
+__all__ = ["export", "policy", "load_run", "SUFFIXES"]
+
+SUFFIXES = {"onnx": ".onnx", "jax": ".jaxexport"}
+
+
+def policy(module: ModuleType, cfg: Any, task: mjzoo.Task, params: dict[str, Any]) -> export.Policy:
+    """The deterministic policy of PPO or AMP `params` (``module.policy_params(state)``:
+    {"policy": network params, "obs_stats": `RunningStats`}) as an `export.Policy` for one
+    observation: `ppo.acting` (the normalization, the network, tanh of the mean, so
+    [-1, 1]), the carry explicit. AMP's policy sees the task's own observation; a dict
+    observation (PPO's ``policy_obs_key``) is refused with a `UsageError`.
+    """
+    from mjzoo.algorithms import ppo
+    from mjzoo.interop import export
+
+    if module.__name__.endswith(".amp"):
+        cfg = dataclasses.replace(cfg, policy_obs_key=None, value_obs_key=None)
+    elif cfg.policy_obs_key is not None:
+        raise UsageError(f"the run's policy sees the entry {cfg.policy_obs_key!r} of a dict observation; export "
+                         "describes one flat observation array")  # fmt: skip
+    # With action_dim set, to_controls passes the action through: the output stays in [-1, 1].
+    act = ppo.acting(cfg, task.replace(action_dim=task.action_size), params, deterministic=True)
+    obs_size = int(jax.tree.leaves(params["obs_stats"].mean)[0].shape[-1])
+
+    def apply(obs: jax.Array, carry: jax.Array | None) -> tuple[jax.Array, jax.Array | None]:
+        # The carry is explicit (zeros start an episode), so `start` stays False; deterministic: no key.
+        next_carry, action, _ = act(carry if cfg.recurrent else (), obs, jnp.zeros((), bool), None)
+        return action, (next_carry if cfg.recurrent else None)
+
+    return export.Policy(apply, obs_size, task.action_size, cfg.gru_hidden_size if cfg.recurrent else 0)
+
+
+def load_run(run: Path, task: str | None = None, env_overrides: tuple[str, ...] = ()) -> tuple[runs.Trained, Any]:
+    """(run read back on MJX's JAX physics, its newest train state). Raises `UsageError`."""
+    with checking():
+        saved, _ = runs.read_run(run)
+        spec = task or (saved or {}).get("env")
+        jax_physics = ("impl=jax",) if spec and ":" not in spec else ()  # C and the check replay MJX-JAX states
+        trained = runs.load(run, task, (*env_overrides, *jax_physics))
+    return trained, runs.restore(run, trained)
+
+
+def export(
+    run: Annotated[Path, tyro.conf.Positional],
+    format: Literal["onnx", "jax"] = "onnx",
+    out: Path | None = None,
+    task: str | None = None,
+    env_overrides: tuple[str, ...] = (),
+    overwrite: bool = False,
+) -> None:
+    """Export RUN's deterministic policy (PPO or AMP, recurrent ones included) with its
+    deployment contract, to --out (default RUN/policy.onnx or RUN/policy.jaxexport).
+
+    --format onnx: an ONNX model (jax2onnx; the observation normalization inside, a
+    dynamic batch size, a recurrent carry as an input and an output), the contract in
+    its metadata_props. --format jax: a serialized jax.export artifact, the contract
+    beside it in OUT.json. The contract (names, control ranges, the action mapping, the
+    observation's terms and history, the control and physics steps, PD gains) is checked
+    against the task's own observation first. --task and --env-overrides as for `mjzoo
+    eval`. An existing file is replaced only with --overwrite. Needs `pip install
+    'mjzoo[export]'` for ONNX.
+    """
+    from mjzoo.interop import contract, export as exporting
+
+    out = out or run / f"policy{SUFFIXES[format]}"
+    if out.is_dir():
+        raise UsageError(f"--out {out}: is a directory; give a file path")
+    targets = [out] + ([exporting.sidecar(out)] if format == "jax" else [])
+    existing = [str(p) for p in targets if p.exists()]
+    if existing and not overwrite:
+        raise UsageError(f"{', '.join(existing)} already exists; pass --overwrite to replace it")
+    if format == "onnx":
+        _need_onnx()
+    trained, state = load_run(run, task, env_overrides)
+    fn = policy(trained.module, trained.cfg, trained.task, trained.module.policy_params(state))
+    source = dict(run=str(run), env=trained.spec, overrides=trained.overrides, algorithm=trained.module.__name__,
+                  step=int(state.updates))  # fmt: skip
+    with checking(contract.ContractError):
+        described = exporting.describe(trained.task, fn, source=source)
+    write = exporting.write_onnx if format == "onnx" else exporting.write_jax
+    path = write(fn, described, out, overwrite=overwrite)
+    obs = described["observation"]
+    print(f"{path}: {trained.spec}, obs {obs['size']} ({len(obs['terms'])} terms x {obs['history']} frames), "
+          f"action {fn.action_size}{f', carry {fn.carry_size}' if fn.recurrent else ''}; observation layout checked "
+          f"(max error {obs['checked']['max_abs_error']:.2g})")  # fmt: skip
+    if format == "jax":
+        print(f"contract: {exporting.sidecar(path)}")
+
+
+def _need_onnx() -> None:
+    try:
+        import jax2onnx  # noqa: F401
+        import onnx  # noqa: F401
+    except ImportError as e:
+        raise UsageError(f"--format onnx needs {e.name}: pip install 'mjzoo[export]'") from None

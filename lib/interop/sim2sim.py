@@ -1,0 +1,340 @@
+"""Sim-to-sim: an exported policy driving plain C MuJoCo (`mujoco.MjData`, no MJX), its
+observations built from the contract alone, as a deployment would build them.
+
+    rollout = sim2sim.run_in_mujoco("policy.onnx", mj_model, steps=1000, qpos=..., qvel=...)
+    scored = sim2sim.replay(task, start_state, rollout)  # the task's own reward on C's states
+    scored.episode_return, scored.obs_error
+
+`run_in_mujoco` needs only mujoco, numpy and the artifact's runtime (onnxruntime or JAX):
+the loop a robot's controller runs. A deployment has no reward, so `replay` scores C's
+states with the task's own reward and terminations in JAX: the task's transitions are
+replayed with their physics replaced by C's (`mjzoo.physics.StandIn`), which also gives
+the observation the task itself would have computed from C's states, to compare with the
+one the contract built. `check_observation` does that comparison on MJX's own states (no
+C involved): the check `export.describe` runs before it writes a contract.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import functools
+import os
+from typing import Any, NamedTuple
+
+import jax
+import jax.numpy as jnp
+import mujoco
+import numpy as np
+from mujoco import mjx
+
+from mjzoo import physics
+from mjzoo.interop import contract as contracts
+from mjzoo.learning import to_controls
+from mjzoo.running import reset, transition
+from mjzoo.types import State, Task
+
+__all__ = ["Check", "Rollout", "Replayed", "check_observation", "without_observation_noise", "run_in_mujoco", "to_ctrl",
+           "replay", "starts"]
+
+Array = jax.Array
+
+
+class Check(NamedTuple):
+    max_error: float  # max |contract's observation - task's| over the checked states
+    control_dt: float  # seconds per task step, measured
+    history: int  # frames per observation
+
+
+class Rollout(NamedTuple):
+    """A closed-loop run in C MuJoCo, T control steps. obs [T, obs_size] the policy's
+    inputs; action [T, A] its outputs; task_action [T, A] (`action.to_task`); ctrl
+    [T, nu] at the last substep; time [T+1], qpos [T+1, nq], qvel [T+1, nv], act
+    [T+1, na] from the start; sensordata [T, ...] after each step; before_qpos [T, nq],
+    before_qvel [T, nv]: the state before each step's last physics substep."""
+
+    obs: np.ndarray
+    action: np.ndarray
+    task_action: np.ndarray
+    ctrl: np.ndarray
+    time: np.ndarray
+    qpos: np.ndarray
+    qvel: np.ndarray
+    act: np.ndarray
+    sensordata: np.ndarray
+    before_qpos: np.ndarray
+    before_qvel: np.ndarray
+
+
+class Replayed(NamedTuple):
+    """`replay`'s scores: rewards, terminated, truncated [T]; the return and length of the
+    first episode (as `mjzoo.learning.evaluate` counts them); obs_error: max |contract's
+    observation - the task's own on C's states| over that episode."""
+
+    rewards: np.ndarray
+    terminated: np.ndarray
+    truncated: np.ndarray
+    episode_return: float
+    length: int
+    obs_error: float
+
+
+# --- the observation, checked on MJX's states ---------------------------------------------------------------------
+
+_NOISE = ("mjzoo.perturbations:_noisy_reset", "mjzoo.perturbations:_noisy_obs_step",
+          "mjzoo.catalog.observations:_bias_reset", "mjzoo.catalog.observations:_scaled_reset",
+          "mjzoo.catalog.observations:_scaled_step")  # fmt: skip  (each binds (inner function, scale, ...))
+
+
+def without_observation_noise(task: Task) -> Task:
+    """`task` with the scales of its observation-noise combinators (`with_observation_noise`,
+    `with_observation_bias`, `with_multiplicative_observation_noise`) set to 0: the
+    observation a deployment computes. Same pytree structure, so no recompile."""
+
+    def clean(node: Any) -> Any:
+        if not isinstance(node, jax.tree_util.Partial):
+            return node
+        args = [clean(arg) for arg in node.args]
+        if contracts.function_key(node.func) in _NOISE:
+            args[1] = jnp.zeros_like(args[1])
+        return jax.tree_util.Partial(node.func, *args, **node.keywords)
+
+    return task.replace(start=clean(task.start), step=clean(task.step))
+
+
+def _history(frames: list[np.ndarray], length: int) -> np.ndarray:
+    """The newest `length` frames, newest first, the oldest repeated before there are enough."""
+    recent = frames[-length:][::-1]
+    return np.concatenate(recent + [recent[-1]] * (length - len(recent)))
+
+
+@functools.partial(jax.jit, static_argnums=2)  # module level: one compile per task structure
+def _random_run(task: Task, key: Array, steps: int):
+    """A reset and `steps` transitions under uniform random actions: (first state, (states, task actions))."""
+    reset_key, run_key = jax.random.split(key)
+    state = reset(task, reset_key)
+
+    def body(state: State, key):
+        act_key, step_key = jax.random.split(key)
+        action = to_controls(task, jax.random.uniform(act_key, (task.action_size,), minval=-1.0, maxval=1.0))
+        after = transition(task, state, action, step_key)
+        return after, (after, action)
+
+    return state, jax.lax.scan(body, state, jax.random.split(run_key, steps))[1]
+
+
+_READ = ("qpos", "qvel", "act", "xpos", "xquat", "xmat", "site_xpos", "cvel", "subtree_com", "sensordata",
+         "actuator_force")  # fmt: skip  (the arrays the vocabulary reads)
+
+
+def _c_data(m: mujoco.MjModel, data: mjx.Data) -> mujoco.MjData:
+    """A C MjData holding what the vocabulary reads of one MJX state (`mjx.get_data` also
+    refactors the inertia, and warns on MJX's states)."""
+    d = mujoco.MjData(m)
+    d.time = float(data.time)
+    for field in _READ:
+        target = getattr(d, field)
+        target[...] = np.asarray(getattr(data, field)).reshape(target.shape)
+    return d
+
+
+def check_observation(task: Task, terms: list[dict[str, Any]], key: Array, steps: int = 8) -> Check:
+    """Rebuilds `task`'s observation from `terms` on MJX states (a reset, then `steps`
+    transitions under uniformly random actions) and compares it with the task's own,
+    observation noise off (`without_observation_noise`).
+
+    Raises:
+      contract.ContractError: the observation is not one flat array, or the rebuilt one
+        differs by more than 1e-4 (relative above 1); the message names the worst terms.
+    """
+    first, (states, actions) = _random_run(without_observation_noise(task), key, steps)
+    if not isinstance(first.obs, jax.Array) or first.obs.ndim != 1:
+        raise contracts.ContractError(f"the task's observation is {jax.tree.structure(first.obs)}; the contract "
+                                      "describes one flat array (a dict observation is not supported)")  # fmt: skip
+    size = contracts.frame_size(terms)
+    history = first.info.get("observation_history")
+    length = 1 if history is None else int(history.shape[0])
+    if first.obs.shape[0] != length * size:
+        raise contracts.ContractError(f"the task observes {first.obs.shape[0]} numbers; the described terms make "
+                                      f"{size} per frame x {length} frames: {[t['name'] for t in terms]}")  # fmt: skip
+    m, previous, frames = task.mj_model, np.zeros(task.action_size), []
+    errors, expected = [], []
+    for t in range(steps + 1):
+        state = first if t == 0 else jax.tree.map(lambda x, t=t: x[t - 1], states)
+        if t > 0:
+            previous = np.asarray(actions[t - 1], float)
+        frames.append(contracts.frame(terms, m, _c_data(m, state.data), previous))
+        want = np.asarray(state.obs, np.float64)
+        errors.append(np.abs(_history(frames, length) - want) / np.maximum(1.0, np.abs(want)))
+        expected.append(want)
+    worst = np.max(errors, axis=0)
+    if not np.all(worst <= 1e-4) or not np.all(np.isfinite(worst)):
+        per_term, start = [], 0
+        for term in terms:
+            per_term.append((float(np.max(worst[: size].reshape(-1)[start : start + term["size"]])), term["name"]))
+            start += term["size"]
+        bad = ", ".join(f"{n} (error {e:.3g})" for e, n in sorted(per_term, reverse=True) if e > 1e-4)
+        raise contracts.ContractError(f"the described observation does not reproduce the task's: {bad or 'history'}")
+    control_dt = float(states.data.time[0] - first.data.time)
+    return Check(max_error=float(np.max(worst)), control_dt=control_dt, history=length)
+
+
+# --- C MuJoCo in a closed loop --------------------------------------------------------------------------------
+
+
+def to_ctrl(action: dict[str, Any], task_action: np.ndarray, d: mujoco.MjData) -> np.ndarray:
+    """ctrl [nu] from the task action, per the contract's ``action["to_ctrl"]``, at this substep."""
+    c, a = action["to_ctrl"], np.asarray(task_action, float)
+    if c["type"] == "direct":
+        return a
+    limit, gear = np.asarray(c["torque_limit"]), np.asarray(c["gear"])
+    a = np.clip(a, -1.0, 1.0)
+    if c["type"] == "torque":
+        return np.clip(a * limit, -limit, limit) / gear
+    nu = len(gear)
+    target_q = np.asarray(c["default_pose"]) + np.asarray(c["position_scale"]) * a[:nu]
+    target_qd = np.asarray(c["velocity_scale"]) * a[nu:] if c["type"] == "position_velocity" else 0.0
+    force = (np.asarray(c["kp"]) * (target_q - d.qpos[c["qpos_index"]])
+             + np.asarray(c["kd"]) * (target_qd - d.qvel[c["dof_index"]]))  # fmt: skip
+    return np.clip(force, -limit, limit) / gear
+
+
+def _to_task(action: dict[str, Any], a: np.ndarray) -> np.ndarray:
+    t = action["to_task"]
+    if t["type"] == "identity":
+        return a
+    low, high = np.asarray(t["low"]), np.asarray(t["high"])
+    return np.where(t["limited"], low + (a + 1.0) * 0.5 * (high - low), a)
+
+
+def _check_model(contract: dict[str, Any], m: mujoco.MjModel) -> None:
+    """The contract's model and physics step, or a ValueError naming what differs."""
+    want = contract["model"]
+    have = contracts.model_section(m)
+    for field in ("nq", "nv", "nu", "joint_names", "actuator_names"):
+        if have[field] != want[field]:
+            raise ValueError(f"run_in_mujoco: the model's {field} is {have[field]}; the policy was exported for "
+                             f"{want[field]}")  # fmt: skip
+    if not np.isclose(m.opt.timestep, contract["physics"]["physics_dt"], rtol=1e-6):
+        raise ValueError(f"run_in_mujoco: the model's timestep is {m.opt.timestep} s; the policy's contract says "
+                         f"{contract['physics']['physics_dt']} s (set mj_model.opt.timestep)")  # fmt: skip
+
+
+def run_in_mujoco(artifact: str | os.PathLike | Any, mj_model: mujoco.MjModel, steps: int, *,
+                  qpos: np.ndarray | None = None, qvel: np.ndarray | None = None) -> Rollout:  # fmt: skip
+    """Runs the exported policy for `steps` control steps on `mj_model` in C MuJoCo.
+
+    Each step: build the observation from the contract's terms and history, run the
+    policy (carrying its recurrent state), map its action to ctrl (`to_task`, then
+    `to_ctrl` at every physics substep), `mj_step` `substeps` times. Nothing here
+    knows the task: only the contract.
+
+    Args:
+      artifact: a path to an exported policy, or `export.load`'s result.
+      mj_model: the robot's model; names, sizes and timestep must match the contract.
+      steps: control steps to run (>= 1).
+      qpos, qvel: the start state (default the model's qpos0, zero velocity).
+    """
+    from mjzoo.interop import export
+
+    loaded = artifact if isinstance(artifact, export.Loaded) else export.load(artifact)
+    contract = loaded.contract
+    _check_model(contract, mj_model)
+    if isinstance(steps, bool) or not isinstance(steps, (int, np.integer)) or steps < 1:
+        raise ValueError(f"run_in_mujoco: steps={steps!r} must be an integer >= 1")
+    m, d = mj_model, mujoco.MjData(mj_model)
+    if qpos is not None:
+        d.qpos[:] = qpos
+    if qvel is not None:
+        d.qvel[:] = qvel
+    mujoco.mj_forward(m, d)
+    obs_spec, action_spec = contract["observation"], contract["action"]
+    substeps, recurrent = contract["physics"]["substeps"], contract["policy"]["recurrent"]
+    carry = np.zeros(contract["policy"]["carry_size"], np.float32) if recurrent else None
+    previous, frames = np.zeros(action_spec["size"]), []
+    log: dict[str, list] = {k: [] for k in Rollout._fields}
+    for name in ("time", "qpos", "qvel", "act"):
+        log[name].append(np.array(getattr(d, name)))
+    for _ in range(steps):
+        frames = (frames + [contracts.frame(obs_spec["terms"], m, d, previous)])[-obs_spec["history"]:]
+        obs = _history(frames, obs_spec["history"])
+        if recurrent:
+            action, carry = loaded.act(obs, carry)
+        else:
+            action = loaded.act(obs)
+        task_action = _to_task(action_spec, np.asarray(action, float))
+        for i in range(substeps):
+            d.ctrl[:] = to_ctrl(action_spec, task_action, d)
+            if i == substeps - 1:
+                log["before_qpos"].append(np.array(d.qpos))
+                log["before_qvel"].append(np.array(d.qvel))
+            mujoco.mj_step(m, d)
+        previous = task_action
+        for name, value in (("obs", obs), ("action", action), ("task_action", task_action), ("ctrl", d.ctrl),
+                            ("time", d.time), ("qpos", d.qpos), ("qvel", d.qvel), ("act", d.act),
+                            ("sensordata", d.sensordata)):  # fmt: skip
+            log[name].append(np.array(value))
+    return Rollout(**{k: np.asarray(v) for k, v in log.items()})
+
+
+# --- scoring C's states with the task's reward ------------------------------------------------------------------
+
+
+@jax.tree_util.register_dataclass
+@dataclasses.dataclass(frozen=True)
+class _FromC(physics.StandIn):
+    """Physics that returns C's state after the control step, with the poses and
+    velocities MJX's step would leave (computed from the state before its last substep)."""
+
+    model: mjx.Model
+    after: dict[str, Array]
+    before: dict[str, Array]
+
+    def substep(self, data: mjx.Data) -> mjx.Data:
+        pre = data.replace(**{k: v.astype(getattr(data, k).dtype) for k, v in self.before.items()})
+        pre = mjx.com_vel(self.model, mjx.com_pos(self.model, mjx.kinematics(self.model, pre)))
+        return pre.replace(**{k: v.astype(getattr(data, k).dtype) for k, v in self.after.items()})
+
+
+@jax.jit
+def _replay(task: Task, start: State, actions: Array, keys: Array, after: dict, before: dict):
+    def body(state: State, inputs):
+        action, key, a, b = inputs
+        state = transition(task.replace(model=_FromC(task.model, a, b)), state, action, key)
+        return state, (state.reward, state.terminated, state.truncated, state.obs)
+
+    return jax.lax.scan(body, start, (actions, keys, after, before))[1]
+
+
+def replay(task: Task, start: State, rollout: Rollout, key: Array | None = None) -> Replayed:
+    """Scores a C rollout with `task`'s own reward and terminations (JAX, one compile).
+
+    Args:
+      task: the task the policy was exported from (MJX's JAX implementation).
+      start: the task's state the rollout started from (`starts`; its qpos and qvel
+        are the rollout's first).
+      rollout: `run_in_mujoco`'s result.
+      key: the task's step keys (noise); default key(0).
+    """
+    if not np.allclose(np.asarray(start.data.qpos), rollout.qpos[0], atol=1e-5):
+        raise ValueError("replay: the rollout did not start from `start` (its qpos differ)")
+    steps = rollout.action.shape[0]
+    keys = jax.random.split(jax.random.key(0) if key is None else key, steps)
+    after = {"time": rollout.time[1:], "qpos": rollout.qpos[1:], "qvel": rollout.qvel[1:], "act": rollout.act[1:],
+             "sensordata": rollout.sensordata}  # fmt: skip
+    before = {"qpos": rollout.before_qpos, "qvel": rollout.before_qvel}
+    after, before, actions = jax.tree.map(lambda x: jnp.asarray(x, jnp.float32), (after, before, rollout.task_action))
+    rewards, terminated, truncated, obs = jax.device_get(_replay(task, start, actions, keys, after, before))
+    done = terminated | truncated
+    alive = (np.cumsum(done) - done) == 0  # up to and including the first episode end, as evaluate counts
+    length = int(alive.sum())
+    # The task's observation after step t is what the policy saw at step t + 1.
+    seen = rollout.obs[1:length]
+    error = float(np.max(np.abs(seen - obs[: length - 1]))) if length > 1 else 0.0
+    return Replayed(rewards, terminated, truncated, float(np.sum(rewards * alive)), length, error)
+
+
+def starts(task: Task, key: Array, num_envs: int) -> State:
+    """The start states of `mjzoo.learning.evaluate(task, policy, key, num_envs)`'s
+    episodes, [num_envs] leading axis: C runs from the same states as JAX's evaluation."""
+    keys = jax.random.split(key, num_envs)
+    return jax.jit(jax.vmap(lambda k: reset(task, jax.random.split(k)[0])))(keys)
