@@ -1,0 +1,186 @@
+"""mjzoo PPO against Brax PPO on MuJoCo Playground's own envs: the very same env object.
+
+For each Playground env and physics implementation: (a) raw batched stepping of the env
+(`jax.vmap(env.step)` in a `lax.scan`), (b) Brax PPO as Playground trains it
+(`brax.training.agents.ppo.train` on the env, `mujoco_playground.wrapper.wrap_for_brax_training`,
+Playground's tuned `dm_control_suite_params.brax_ppo_config`), (c) mjzoo PPO on the same env
+object through `mjzoo.interop.playground.task`, with the same hyperparameters in mjzoo's
+terms (`playground.ppo_hyperparameters`). Reported: training steps/s, their ratio to raw
+stepping, wall-clock time to `--threshold` of the better final return (compile included),
+the final evaluation return, per seed. Playground's published figure for the env, where
+the issue quotes one, is printed beside them.
+
+    python benchmarks/playground.py --envs CartpoleBalance PendulumSwingup --steps 20000000
+    python benchmarks/playground.py --envs CartpoleBalance --smoke       # tiny sizes, on a CPU
+"""
+
+from __future__ import annotations
+
+import argparse
+import functools
+import json
+import os
+import sys
+import tempfile
+import time
+from pathlib import Path
+
+import jax
+import jax.numpy as jnp
+import numpy as np
+
+sys.path.insert(0, str(Path(__file__).parent))
+from ppo_vs_brax import time_to, training_curve  # noqa: E402
+
+from mjzoo.algorithms import ppo  # noqa: E402
+from mjzoo.harness import training  # noqa: E402
+from mjzoo.interop import brax as brax_adapter  # noqa: E402
+from mjzoo.interop import playground  # noqa: E402
+
+DEFAULT_ENVS = ["CartpoleBalance", "PendulumSwingup", "CheetahRun", "WalkerWalk"]
+# Measured by the issue's author on one H100 with Playground's tuned config (JAX physics;
+# 995k steps/s on Warp): Brax PPO on CartpoleBalance returns ~993 after 9.8M steps.
+PUBLISHED = {"CartpoleBalance": {"brax_steps_per_s_jax": 734_000, "brax_steps_per_s_warp": 995_000,
+                                 "return": 993.0, "at_steps": 9_800_000}}  # fmt: skip
+SMOKE = dict(num_envs=16, batch_size=16, num_minibatches=4, num_updates_per_batch=2, num_evals=3, episode_length=50)
+
+
+def brax_config(name: str, steps: int, smoke: bool) -> dict:
+    """Playground's tuned Brax PPO config for `name`, `steps` long."""
+    from mujoco_playground.config import dm_control_suite_params
+
+    config = dm_control_suite_params.brax_ppo_config(name).to_dict()
+    config.update(num_timesteps=steps, **(SMOKE if smoke else {}))
+    return config
+
+
+def raw_steps_per_s(env, num_envs: int, steps: int = 100, repeats: int = 3) -> float:
+    """Env steps/s of `env.step` vmapped over `num_envs`, zero actions, in one jitted scan."""
+    keys = jax.random.split(jax.random.key(0), num_envs)
+    states = jax.jit(jax.vmap(env.reset))(jax.vmap(jax.random.key_data)(keys))
+    action = jnp.zeros((num_envs, env.action_size))
+
+    @jax.jit
+    def run(states):
+        return jax.lax.scan(lambda s, _: (jax.vmap(env.step)(s, action), None), states, None, length=steps)[0]
+
+    jax.block_until_ready(run(states))
+    best = np.inf
+    for _ in range(repeats):
+        start = time.perf_counter()
+        jax.block_until_ready(run(states))
+        best = min(best, time.perf_counter() - start)
+    return num_envs * steps / best
+
+
+def train_brax(env, config: dict, seed: int) -> dict:
+    """Brax PPO as Playground runs it; its curve from `progress_fn`'s reports."""
+    from brax.training.agents.ppo import networks as ppo_networks
+    from brax.training.agents.ppo import train as brax_ppo
+    from mujoco_playground import wrapper
+
+    brax_adapter.patch_brax_for_current_jax()
+    params = dict(config)
+    network = functools.partial(ppo_networks.make_ppo_networks, **params.pop("network_factory", {}))
+    reports: list[tuple[int, float, float]] = []
+    start = time.perf_counter()
+
+    def progress(step: int, metrics: dict) -> None:
+        reports.append((int(step), time.perf_counter() - start, float(metrics.get("eval/episode_reward", np.nan))))
+
+    brax_ppo.train(environment=env, wrap_env_fn=wrapper.wrap_for_brax_training, network_factory=network,
+                   progress_fn=progress, seed=seed, **params)  # fmt: skip
+    trained = [r for r in reports if r[0] > 0]
+    steps_per_s = (trained[-1][0] - trained[0][0]) / (trained[-1][1] - trained[0][1])
+    return {"steps_per_s": steps_per_s, "curve": reports, "final_return": reports[-1][2],
+            "compile_s": trained[0][1] - trained[0][0] / steps_per_s}  # fmt: skip
+
+
+def train_mjzoo(env, name: str, config: dict, seed: int) -> dict:
+    """mjzoo PPO on `playground.task(env)` with the same hyperparameters, evaluated about
+    as often as Brax's `num_evals`."""
+    fields = {**playground.ppo_hyperparameters(name), "total_steps": config["num_timesteps"]}
+    if config["num_envs"] != fields["num_envs"]:  # --smoke
+        fields.update(num_envs=config["num_envs"], unroll_length=config["unroll_length"],
+                      num_minibatches=config["num_minibatches"], num_epochs=config["num_updates_per_batch"])  # fmt: skip
+    ppo_config = ppo.Config(**fields)
+    updates = max(1, ppo_config.total_steps // ppo_config.steps_per_update)
+    per_chunk = max(1, updates // max(1, config["num_evals"] - 1))
+    with tempfile.TemporaryDirectory() as out:
+        settings = training.Settings(out_dir=Path(out), updates_per_chunk=per_chunk, eval_envs=config["num_eval_envs"],
+                                     eval_steps=config["episode_length"], video=False, progress=False,
+                                     checkpoint_every=0, seed=seed)  # fmt: skip
+        start = time.perf_counter()
+        training.run(ppo, ppo_config, playground.task(env), settings)
+        curve, steps_per_s = training_curve(Path(out) / "metrics.jsonl", time.perf_counter() - start)
+    return {"steps_per_s": steps_per_s, "curve": curve, "final_return": curve[-1][2],
+            "compile_s": curve[0][1] - ppo_config.steps_per_update / steps_per_s}  # fmt: skip
+
+
+def measure(name: str, impl: str, steps: int, seeds: int, threshold: float, smoke: bool) -> dict:
+    config = brax_config(name, steps, smoke)
+    config.setdefault("num_eval_envs", 128)
+    overrides = {"impl": impl, **({"episode_length": config["episode_length"]} if smoke else {})}
+    env = playground.load(name, **overrides)
+    raw = raw_steps_per_s(env, config["num_envs"])
+    runs = {"mjzoo": [], "brax": []}
+    for seed in range(seeds):
+        runs["mjzoo"].append(train_mjzoo(env, name, config, seed))
+        print(f"{name} ({impl}) seed {seed}: mjzoo {runs['mjzoo'][-1]['steps_per_s']:,.0f} steps/s, "
+              f"final {runs['mjzoo'][-1]['final_return']:.1f}", flush=True)  # fmt: skip
+        runs["brax"].append(train_brax(env, config, seed))
+        print(f"{name} ({impl}) seed {seed}: brax  {runs['brax'][-1]['steps_per_s']:,.0f} steps/s, "
+              f"final {runs['brax'][-1]['final_return']:.1f}", flush=True)  # fmt: skip
+    best = threshold * max(np.mean([r["final_return"] for r in rs]) for rs in runs.values())
+    row = {"env": name, "impl": impl, "raw_steps_per_s": raw, "threshold": best, "steps": steps,
+           "published": PUBLISHED.get(name)}  # fmt: skip
+    for trainer, rs in runs.items():
+        times = [time_to(r["curve"], best) for r in rs]
+        row[trainer] = {"runs": rs, "steps_per_s": float(np.mean([r["steps_per_s"] for r in rs])),
+                        "final_return": float(np.mean([r["final_return"] for r in rs])),
+                        "final_return_std": float(np.std([r["final_return"] for r in rs])),
+                        "time_to_threshold_s": None if None in times else float(np.mean(times)),
+                        "fraction_of_raw": float(np.mean([r["steps_per_s"] for r in rs])) / raw}  # fmt: skip
+    row["mjzoo_over_brax_steps_per_s"] = row["mjzoo"]["steps_per_s"] / row["brax"]["steps_per_s"]
+    return row
+
+
+def print_table(rows: list[dict]) -> None:
+    print(f"\n{'env':<16} {'impl':<5} {'trainer':<6} {'steps/s':>10} {'/raw':>5} {'to thr (s)':>10} {'final':>14}")
+    for r in rows:
+        for trainer in ("mjzoo", "brax"):
+            t = r[trainer]
+            ttt = "never" if t["time_to_threshold_s"] is None else f"{t['time_to_threshold_s']:.1f}"
+            print(f"{r['env']:<16} {r['impl']:<5} {trainer:<6} {t['steps_per_s']:>10,.0f} {t['fraction_of_raw']:>5.2f} "
+                  f"{ttt:>10} {t['final_return']:>7.1f} ± {t['final_return_std']:<5.1f}")  # fmt: skip
+        print(f"{'':<16} {r['impl']:<5} raw    {r['raw_steps_per_s']:>10,.0f}   threshold {r['threshold']:.1f}; "
+              f"mjzoo/brax steps/s {r['mjzoo_over_brax_steps_per_s']:.2f}x"
+              + (f"; published: {r['published']}" if r["published"] else ""))  # fmt: skip
+
+
+def main() -> None:
+    parser = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
+    parser.add_argument("--envs", nargs="+", default=DEFAULT_ENVS)
+    parser.add_argument("--impl", nargs="+", default=["jax"], choices=["jax", "warp"])
+    parser.add_argument("--steps", type=int, default=20_000_000, help="env steps per run (Playground's: 60M)")
+    parser.add_argument("--seeds", type=int, default=1)
+    parser.add_argument("--threshold", type=float, default=0.9, help="fraction of the better final return")
+    parser.add_argument("--smoke", action="store_true", help="tiny sizes, to check the script on a CPU")
+    parser.add_argument("--out", type=Path, default=Path(__file__).parent / "results" / "playground")
+    args = parser.parse_args()
+    device = jax.devices()[0].device_kind
+    print(f"device: {device}, jax {jax.__version__}, {args.steps:,} env steps per run", flush=True)
+    args.out.mkdir(parents=True, exist_ok=True)
+    path = args.out / f"playground_{jax.default_backend()}_{'_'.join(args.envs)}.json"
+    rows = []
+    for name in args.envs:
+        for impl in args.impl:
+            rows.append(measure(name, impl, args.steps, args.seeds, args.threshold, args.smoke))
+            path.write_text(json.dumps({"device": device, "jax": jax.__version__, "rows": rows}, indent=1))
+    print_table(rows)
+    print(f"wrote {path}", flush=True)
+
+
+if __name__ == "__main__":
+    main()
+    os._exit(0)  # Warp on a CPU may hang at interpreter exit
