@@ -86,8 +86,8 @@ class Physics:
     def data0(self) -> mjx.Data:
         """The template every reset starts from: ``qpos = qpos0``, zero velocity, nothing
         computed; on Warp, with a contact pool for one world (`mjzoo.worlds.sized` sizes it)."""
-        if self.impl == "jax":
-            return mjx.make_data(self.mj_model, impl="jax")
+        if self.impl == "jax":  # on this process's device (MJX's default is process 0's in a multi-process run)
+            return mjx.make_data(self.mj_model, device=jax.local_devices()[0], impl="jax")
         data = mjx.make_data(self.mj_model, impl="warp", naconmax=self.max_contacts, njmax=self.max_constraints)
         return data.replace(_impl=data._impl.replace(nworld=1))  # nworld: the worlds the pool is sized for
 
@@ -355,7 +355,8 @@ def of_model(
     if impl == "warp":
         _require_warp(source)
     try:
-        model = mjx.put_model(mj_model, impl=impl)
+        # On this process's device: MJX's default, jax.devices()[0], is process 0's in a multi-process run.
+        model = mjx.put_model(mj_model, device=jax.local_devices()[0] if impl == "jax" else None, impl=impl)
     except NotImplementedError as e:
         raise ValueError(f"{source}: MJX ({impl}) cannot simulate this model: {e}") from None
     if impl != "warp":

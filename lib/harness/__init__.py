@@ -2,8 +2,11 @@
 
     training      the host loop over jitted chunks of an RL algorithm's updates:
                   progress, evaluation, metrics, checkpoints, curves, video
+    contract      what `training.run` needs of an algorithm module and its config
     settings      how a run is driven: evaluation, logging and video schedules
-    devices       the env batch split over local devices, the rest replicated
+    devices       the env batch split over the devices (of every process), the rest replicated
+    distributed   several processes (hosts): jax.distributed set-up, process 0 writes
+    compilation   the persistent compilation cache; compiling ahead in the background
     metrics       metrics.jsonl and TensorBoard writers, the progress bar
     checkpoints   atomic orbax checkpoints that resume exactly
     plotting      learning curves from metrics.jsonl
@@ -23,8 +26,8 @@ TensorBoard and matplotlib, which a planner on a robot does not need.
 
 from mjzoo import lazy
 
-MODULES = ("training", "settings", "devices", "metrics", "checkpoints", "plotting", "rendering", "render_config",
-           "plan_report", "datasets", "viewer", "cli")  # fmt: skip
+MODULES = ("training", "contract", "settings", "devices", "distributed", "compilation", "metrics", "checkpoints",
+           "plotting", "rendering", "render_config", "plan_report", "datasets", "viewer", "cli")  # fmt: skip
 
 __all__ = list(MODULES)
 

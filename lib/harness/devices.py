@@ -1,5 +1,9 @@
-"""Where a run's arrays live: the env batch of a train state split over the local
-devices, everything else replicated; XLA then splits the work and averages gradients."""
+"""Where a run's arrays live: the env batch of a train state split over the devices,
+everything else replicated; XLA then splits the work and averages gradients.
+
+The devices are `jax.devices()`: in a multi-process run (`mjzoo.harness.distributed`)
+those of every process. Each process then passes the same whole value (same seed, same
+init) and keeps the shards on its own devices."""
 
 from __future__ import annotations
 
@@ -19,7 +23,9 @@ __all__ = ["shard_envs", "replicate", "template_data"]
 def shard_envs(train_state: Any, per_env_fields: Sequence[str], devices: list | None = None) -> Any:
     """Places the leaves of a train state's `per_env_fields` (an algorithm's
     `PER_ENV_FIELDS`) across devices (leading axis), the rest replicated. Under jit,
-    XLA then splits the env batch and averages gradients.
+    XLA then splits the env batch and averages gradients. Empty per-env arrays (no
+    contacts in a model) are replicated, as XLA returns them: placed otherwise, the
+    second chunk would compile again for their new sharding.
 
     On one device this commits the state to it: jit compiles separately for
     uncommitted inputs and for its own (committed) outputs, which would cost a second
@@ -37,9 +43,9 @@ def shard_envs(train_state: Any, per_env_fields: Sequence[str], devices: list | 
 
     def place(node: Any, paths: list[list[str]]) -> Any:
         if [] in paths:  # this node is per-env
-            return jax.tree.map(lambda x: jax.device_put(x, split if jnp.ndim(x) else whole), node)
+            return jax.tree.map(lambda x: _put(x, split if jnp.ndim(x) and jnp.size(x) else whole), node)
         if not paths or not dataclasses.is_dataclass(node):
-            return jax.device_put(node, whole)
+            return jax.tree.map(lambda x: _put(x, whole), node)
         return dataclasses.replace(node, **{
             f.name: place(getattr(node, f.name), [p[1:] for p in paths if p[0] == f.name])
             for f in dataclasses.fields(node)
@@ -55,7 +61,19 @@ def replicate(tree: Any, devices: list | None = None) -> Any:
     if len(devices) == 1:
         return jax.device_put(tree, devices[0])
     mesh = jax.sharding.Mesh(np.array(devices), ("envs",))
-    return jax.device_put(tree, NamedSharding(mesh, PartitionSpec()))
+    return jax.tree.map(lambda x: _put(x, NamedSharding(mesh, PartitionSpec())), tree)
+
+
+def _put(x: Any, sharding: NamedSharding) -> Any:
+    """`jax.device_put`. In a multi-process run, an array on this process's own devices
+    would be taken for a transfer between hosts (which CPUs cannot do): each process
+    places its shards of the whole value from a host copy instead (a typed PRNG key as
+    its raw data)."""
+    if sharding.is_fully_addressable or not isinstance(x, jax.Array) or not x.is_fully_addressable:
+        return jax.device_put(x, sharding)
+    if jnp.issubdtype(x.dtype, jax.dtypes.prng_key):
+        return jax.random.wrap_key_data(_put(jax.random.key_data(x), sharding), impl=jax.random.key_impl(x))
+    return jax.device_put(np.asarray(x), sharding)
 
 
 def template_data(tree: Any) -> mjx.Data | None:

@@ -23,10 +23,14 @@ class Settings:
     ends with an eval/return. Any other chunk evaluates when `eval_first_seconds` (if
     set) have passed since `run` was called and one trigger fires: its number is a
     multiple of `eval_every` (counted over the whole run, so a resumed run evaluates at
-    the same steps); `eval_every_seconds` have passed since the last evaluation began
-    (or since the launch); or it is the first chance after `eval_first_seconds` (KSim's
-    "first validation after M seconds"). Metrics lines of chunks that do not evaluate
-    lack eval/*. Evaluating with `eval_every=0` and no seconds: only at the end.
+    the same steps); with `eval_every=None` (the default), the evaluations so far and
+    one more at the last one's cost stay within `eval_budget` of the wall-clock time
+    since launch (the first chunk evaluates, to learn that cost), so evaluating never
+    slows training by more than that share; `eval_every_seconds` have passed since the
+    last evaluation began (or since the launch); or it is the first chance after
+    `eval_first_seconds` (KSim's "first validation after M seconds"). Metrics lines of
+    chunks that do not evaluate lack eval/*. Evaluating with `eval_every=0` and no
+    seconds: only at the end.
     """
 
     out_dir: Path | None = None
@@ -35,7 +39,8 @@ class Settings:
     eval_envs: int = 16
     eval_steps: int | None = None  # None: eval_seconds, else the task's own episode length, int(task.time_limit)
     eval_seconds: float | None = None  # [rollout_length_seconds] episode length in seconds (/ mjzoo.control_dt)
-    eval_every: int = 1  # [valid_every_n_steps] chunks between evaluations; 0: no count trigger
+    eval_every: int | None = None  # [valid_every_n_steps] chunks between evaluations; 0: none; None: eval_budget
+    eval_budget: float = 0.05  # with eval_every=None: the largest share of the wall-clock evaluations may take
     eval_every_seconds: float | None = None  # [valid_every_n_seconds] wall-clock trigger
     eval_first_seconds: float | None = None  # [valid_first_n_seconds] no evaluation before, the first one after
     video: bool = True  # out/eval.mp4 of the final evaluation (where an OpenGL backend works)
@@ -48,12 +53,16 @@ class Settings:
     resume: bool = False  # continue the run in out_dir from its newest intact checkpoint
     overwrite: bool = False  # replace a run already in out_dir: its files are deleted first
     progress: bool = True
+    compile_cache: bool = True  # JAX's persistent compilation cache (`mjzoo.harness.compilation.enable_cache`)
 
     def __post_init__(self):
         problems = [_problem(name, getattr(self, name)) for name in _LOWEST]
         if self.eval_steps is not None and self.eval_seconds is not None:
             problems.append(f"eval_steps={self.eval_steps!r} and eval_seconds={self.eval_seconds!r} both give the "
                             "evaluation's length; give one")  # fmt: skip
+        budget = self.eval_budget
+        if isinstance(budget, bool) or not isinstance(budget, numbers.Real) or not 0 < budget <= 1:
+            problems.append(f"eval_budget={self.eval_budget!r} must be a share of the time, in (0, 1]")
         if self.video_every and not self.video:
             problems.append(f"video_every={self.video_every!r} needs video=True")
         if not isinstance(self.render, rendering.RenderConfig):
@@ -70,7 +79,7 @@ class Settings:
 _LOWEST = {"updates_per_chunk": 1, "eval_envs": 1, "eval_steps": 1, "eval_seconds": "> 0", "eval_every": 0,
            "eval_every_seconds": "> 0", "eval_first_seconds": 0, "video_every": 0, "log_every": 1,
            "checkpoint_every": 0}  # fmt: skip
-_OPTIONAL = ("eval_steps", "eval_seconds", "eval_every_seconds", "eval_first_seconds")  # None allowed
+_OPTIONAL = ("eval_steps", "eval_seconds", "eval_every", "eval_every_seconds", "eval_first_seconds")  # None allowed
 
 
 def _problem(name: str, value: Any) -> str | None:
@@ -87,11 +96,13 @@ def _problem(name: str, value: Any) -> str | None:
 
 
 class EvalSchedule:
-    """Which chunks evaluate, by the rule in `Settings`' docstring."""
+    """Which chunks evaluate, by the rule in `Settings`' docstring; `spent` records what
+    each evaluation cost, for the budget."""
 
     def __init__(self, settings: Settings, launched: float) -> None:
         self.settings, self.launched = settings, launched
         self.last: float | None = None  # when the last evaluation of this launch began
+        self.total, self.latest = 0.0, 0.0  # seconds of all evaluations so far, and of the latest
 
     def due(self, chunk: int, final: bool, now: float) -> bool:
         """Whether chunk number `chunk` (1-based), ending at `now`, evaluates; if so,
@@ -99,8 +110,10 @@ class EvalSchedule:
         s = self.settings
         waiting = s.eval_first_seconds is not None and now - self.launched < s.eval_first_seconds
         since = now - (self.launched if self.last is None else self.last)
+        affordable = self.total + self.latest <= s.eval_budget * (now - self.launched)
         fires = (
-            (s.eval_every > 0 and chunk % s.eval_every == 0)
+            (s.eval_every is None and affordable)
+            or (bool(s.eval_every) and chunk % s.eval_every == 0)
             or (s.eval_every_seconds is not None and since >= s.eval_every_seconds)
             or (s.eval_first_seconds is not None and self.last is None)
         )
@@ -108,6 +121,10 @@ class EvalSchedule:
             self.last = now
             return True
         return False
+
+    def spent(self, seconds: float) -> None:
+        """Records that an evaluation took `seconds` (compiling included)."""
+        self.total, self.latest = self.total + seconds, seconds
 
 
 def config_dict(config: Any) -> dict[str, Any]:

@@ -3,7 +3,8 @@ updates, with evaluation, metrics, checkpoints, a progress bar, curves and a vid
 
 An algorithm is any module that satisfies `Algorithm` (`init`, `update`, `evaluate`
 and `PER_ENV_FIELDS`), run with a config that satisfies `AlgorithmConfig`
-(`num_updates`, `steps_per_update`); `run` checks both and does the rest:
+(`num_updates`, `steps_per_update`); `run` checks both and does the rest (in every
+process of a multi-process run alike, `mjzoo.harness.distributed`; process 0 writes):
 
     out/config.json       the algorithm config and the run settings
     out/metrics.jsonl     one JSON object per logged chunk: step, eval/return, losses, reward terms, perf/*
@@ -17,19 +18,21 @@ from __future__ import annotations
 
 import dataclasses
 import functools
+import io
 import json
 import shutil
+import threading
 import time
 import warnings
-from collections.abc import Sequence
 from pathlib import Path
 from types import ModuleType
-from typing import Any, Protocol
+from typing import Any
 
 import jax
 import jax.numpy as jnp
 import numpy as np
-from mjzoo.harness import checkpoints, plotting, rendering
+from mjzoo.harness import checkpoints, compilation, distributed, plotting, rendering
+from mjzoo.harness.contract import Algorithm, AlgorithmConfig, check_algorithm, check_state
 from mjzoo.harness.devices import replicate, shard_envs, template_data
 from mjzoo.harness.settings import EvalSchedule, Settings, config_dict
 from mjzoo.harness import metrics as metrics_lib
@@ -49,78 +52,6 @@ class TrainingWarning(UserWarning):
 RUN_FILES = ("config.json", "metrics.jsonl", "checkpoints", "tensorboard", "curves.png", "eval.mp4", "videos")  # `run` writes
 
 
-class AlgorithmConfig(Protocol):
-    """What `run` reads of an algorithm's config (a frozen dataclass, static under jit)."""
-
-    @property
-    def num_updates(self) -> int: ...  # updates in the whole run
-
-    @property
-    def steps_per_update(self) -> int: ...  # env steps one update collects (for the step axis)
-
-
-class Algorithm(Protocol):
-    """The contract of an algorithm module, which `run` trains.
-
-    The state `init` returns is a dataclass pytree (a checkpoint saves it whole) with
-    an int32 scalar field `updates`, the number of updates done. `run` jits `init` and
-    `evaluate` (config static; `num_envs` and `num_steps` static too), and a whole
-    chunk of `update`s as one `lax.scan`.
-
-    Attributes:
-      PER_ENV_FIELDS: names of the state's fields whose leaves have a leading
-        [num_envs] axis (env states, recurrent carries); `run` shards them over the
-        devices, and replicates the rest. ``()``: all replicated. A dotted name reaches
-        into a nested state (AMP's ``"ppo.collector"``).
-
-    Optionally ``diagnose(history) -> str | None``: given every chunk's metrics so far,
-    a warning `run` prints (once per new message) when training has gone wrong in a way
-    the numbers show (AMP: the discriminator has won).
-    """
-
-    PER_ENV_FIELDS: Sequence[str]
-
-    def init(self, config: Any, task: Task, key: jax.Array) -> Any:
-        """A fresh training state."""
-
-    def update(self, config: Any, task: Task, state: Any) -> tuple[Any, dict[str, jax.Array]]:
-        """One update; metrics are scalars (NaN: nothing to report this update)."""
-
-    def evaluate(self, config: Any, task: Task, state: Any, key: jax.Array, num_envs: int, num_steps: int) -> tuple:
-        """(mean return, per-env returns [num_envs], env 0's `mjzoo.Trajectory` or None)."""
-
-
-def check_algorithm(algorithm: Any, config: Any) -> None:
-    """Raises one TypeError naming everything `algorithm` or `config` lacks of the
-    `Algorithm` / `AlgorithmConfig` contract."""
-    missing = [f"{name}()" for name in ("init", "update", "evaluate") if not callable(getattr(algorithm, name, None))]
-    fields = getattr(algorithm, "PER_ENV_FIELDS", None)
-    if not (isinstance(fields, (tuple, list)) and all(isinstance(f, str) for f in fields)):
-        missing.append("PER_ENV_FIELDS (a tuple of the state's per-env field names; () if none)")
-    missing += [f"config.{name}" for name in ("num_updates", "steps_per_update") if not hasattr(config, name)]
-    if missing:
-        name = getattr(algorithm, "__name__", type(algorithm).__name__)
-        raise TypeError(f"training.run: {name} is not an algorithm of the training.Algorithm contract; "
-                        f"it lacks {', '.join(missing)}")  # fmt: skip
-
-
-def _check_state(algorithm: Algorithm, state: Any) -> None:
-    """The state `init` made has the fields the harness and PER_ENV_FIELDS name."""
-
-    def has(path: str) -> bool:
-        node = state
-        for name in path.split("."):
-            if not dataclasses.is_dataclass(node) or not hasattr(node, name):
-                return False
-            node = getattr(node, name)
-        return True
-
-    wrong = [n for n in ("updates", *algorithm.PER_ENV_FIELDS) if not has(n)]
-    if wrong:
-        raise TypeError(f"training.run: the state {algorithm.__name__}.init returns ({type(state).__name__}) must be "
-                        f"a dataclass with the fields {wrong} (updates, and each of PER_ENV_FIELDS)")  # fmt: skip
-
-
 def existing(out: Path, names: tuple[str, ...] = RUN_FILES) -> list[str]:
     """Which of `names` already exist in `out` (folders with a trailing slash)."""
     return [n + "/" * (out / n).is_dir() for n in names if (out / n).exists()]
@@ -133,8 +64,8 @@ def _claim(out: Path, settings: Settings) -> None:
     if found and not settings.overwrite:
         raise FileExistsError(f"training: {out} already holds a run ({', '.join(found)}); resume it "
                               "(Settings(resume=True)), choose another out_dir, or replace it (overwrite=True)")  # fmt: skip
-    for name in found:
-        path = out / name.rstrip("/")
+    distributed.barrier("mjzoo.training: out_dir checked")  # by all before it changes (the others write after chunk 1)
+    for path in [out / name.rstrip("/") for name in found] if distributed.is_primary() else []:
         shutil.rmtree(path) if path.is_dir() else path.unlink()
 
 
@@ -157,10 +88,11 @@ def _resume(out_dir: Path, state: Any) -> Any:
     not the newest), with metrics.jsonl cut back to it (lines after it would be written
     again) and the damaged newer ones set aside (saving their steps again would fail)."""
     restored, step, skipped = checkpoints.restore_newest_intact(out_dir / "checkpoints", like=state)
-    for damaged, _ in skipped:
+    distributed.barrier("mjzoo.training: restored")  # every process has read before process 0 tidies up
+    for damaged, _ in skipped if distributed.is_primary() else ():
         checkpoints.set_aside(out_dir / "checkpoints", damaged)
     metrics_path = out_dir / "metrics.jsonl"
-    if metrics_path.exists():
+    if metrics_path.exists() and distributed.is_primary():
         kept = [line for line in metrics_lib.read_metrics(metrics_path) if line["step"] <= step]
         metrics_path.write_text("".join(json.dumps(line) + "\n" for line in kept))
     return restored
@@ -229,14 +161,16 @@ class _Loop:
 
     def __init__(self, algorithm: Algorithm, config: AlgorithmConfig, task: Task, settings: Settings,
                  out: Path | None, key: jax.Array, eval_steps: int, launched: float, shown: dict[str, str]) -> None:  # fmt: skip
-        self.algorithm, self.config, self.task, self.settings = algorithm, config, task, settings
+        self.algorithm, self.config, self.settings = algorithm, config, settings
+        self.task, self.host_task = replicate(task), task  # videos are drawn by one process, from its own copy
         self.out, self.key, self.launched, self.shown = out, key, launched, shown
         self.schedule = EvalSchedule(settings, launched)
         self.chunk = _chunk_fn(algorithm, config, settings.updates_per_chunk)
         self.evaluate, self.eval_steps = _evaluate_fn(algorithm), eval_steps
         self.total_updates = -(-config.num_updates // settings.updates_per_chunk) * settings.updates_per_chunk
-        self.writer = metrics_lib.MetricsWriter(out) if out is not None else None
-        self.progress = metrics_lib.Progress(self.total_updates * config.steps_per_update, "train")
+        self.writer = metrics_lib.MetricsWriter(out) if out is not None and distributed.is_primary() else None
+        self.progress = metrics_lib.Progress(self.total_updates * config.steps_per_update, "train",
+                                             file=None if distributed.is_primary() else io.StringIO())  # fmt: skip
         self.last: dict[str, float] = {}
         self.history: list[dict[str, float]] = []
         self.warned: str | None = None
@@ -244,6 +178,7 @@ class _Loop:
         self.evaluations = 0  # in this launch, for video_every
         self.video: tuple[int, Path] | None = None  # (step, path) of the latest videos/eval_<step>.mp4
         self.pending: dict[str, float] = {}  # once-only metrics waiting for the next metrics line
+        self.ahead: threading.Thread | None = None  # the evaluation compiling in the background
         if settings.profile_memory and (silent := metrics_lib.device_memory()[1]):
             warnings.warn(f"training: profile_memory: {', '.join(silent)} report no memory statistics "
                           "(memory_stats() is None, as on XLA's CPU); nothing is recorded for them",
@@ -261,13 +196,13 @@ class _Loop:
         updates, per_chunk = int(state.updates), self.settings.updates_per_chunk
         step, number = updates * self.config.steps_per_update, updates // per_chunk
         metrics = {"perf/steps_per_s": per_chunk * self.config.steps_per_update / max(end - start, 1e-9),
-                   **{k: float(v) for k, v in chunk_metrics.items() if np.isfinite(v)}}  # fmt: skip
+                   **{k: float(v) for k, v in distributed.fetch(chunk_metrics).items() if np.isfinite(v)}}  # fmt: skip
         if not self.history:  # this launch's first chunk: compile (and init) included
             metrics["perf/first_update_s"] = self.pending["perf/first_update_s"] = end - self.launched
             self.shown["first"] = f"{end - self.launched:.1f}s"
         with self.progress.paused():  # the bar's steps/s is the training rate
-            evaluated = self.schedule.due(number, updates >= self.total_updates, end)
-            metrics.update(self._evaluate(state, step) if evaluated else {"perf/eval_s": 0.0})
+            evaluated = bool(distributed.agree(self.schedule.due(number, final := updates >= self.total_updates, end)))
+            metrics.update(self._evaluate(state, step, final) if evaluated else {"perf/eval_s": 0.0})
         metrics["perf/elapsed_s"] = _clock() - self.launched
         if self.settings.profile_memory:
             metrics.update(metrics_lib.device_memory()[0])
@@ -277,38 +212,58 @@ class _Loop:
         self.last = metrics
         self.history.append(metrics)
         _check_capacity(self.task, metrics)
-        self.warned = _diagnose(self.algorithm, self.history, self.warned)
+        self.warned = _diagnose(self.algorithm, self.history, self.warned) if distributed.is_primary() else None
         return state
 
-    def _evaluate(self, state: Any, step: int) -> dict[str, float]:
+    def compile_evaluation_ahead(self, state: Any) -> None:
+        """Compiles the evaluation on a background thread while the first chunk compiles
+        and runs: the first evaluation then waits for no compiler (`compilation.compile_ahead`).
+        Described by shapes and shardings: the chunk donates `state`'s buffers."""
+
+        def like(x: Any) -> Any:
+            if not isinstance(x, jax.Array):
+                return x
+            return jax.ShapeDtypeStruct(x.shape, x.dtype, sharding=x.sharding, weak_type=x.aval.weak_type)
+
+        key = jax.random.fold_in(self.key, 0)
+        s = self.settings
+        self.ahead = compilation.compile_ahead(self.evaluate, self.config, self.task, jax.tree.map(like, state),
+                                               like(key), s.eval_envs, self.eval_steps)  # fmt: skip
+
+    def _evaluate(self, state: Any, step: int, final: bool) -> dict[str, float]:
         """Evaluates (`settings.eval_envs` episodes) and writes a video when one is due."""
         start = _clock()
+        if self.ahead is not None:  # compiling it twice at once would waste a core
+            self.ahead.join()
+            self.ahead = None
         key = jax.random.fold_in(self.key, int(state.updates))
         s = self.settings
-        mean, _, self.trajectory = self.evaluate(self.config, self.task, state, key, s.eval_envs, self.eval_steps)
-        result = {"eval/return": float(mean), "perf/eval_s": _clock() - start}  # float(): waits for it
+        mean, _, trajectory = self.evaluate(self.config, self.task, state, key, s.eval_envs, self.eval_steps)
+        result = {"eval/return": float(distributed.fetch(mean)), "perf/eval_s": _clock() - start}  # waits for it
+        self.schedule.spent(result["perf/eval_s"])
         self.evaluations += 1
         self.shown["ret"] = f"{result['eval/return']:.1f}"
         due = s.video_every and self.evaluations % s.video_every == 0
-        if due and self.out is not None and self.trajectory is not None:
+        self.trajectory = distributed.fetch(trajectory) if self.out and (due or final and s.video) else trajectory
+        if due and self.out is not None and self.trajectory is not None and distributed.is_primary():
             start = _clock()
-            path = write_video(self.task, self.trajectory, self.out / "videos" / f"eval_{step}.mp4", s.render)
+            path = write_video(self.host_task, self.trajectory, self.out / "videos" / f"eval_{step}.mp4", s.render)
             self.video = (step, path) if path is not None else self.video
             result["perf/video_s"] = _clock() - start
         return result
 
     def _write(self, state: Any, step: int, number: int, metrics: dict[str, float], evaluated: bool) -> None:
         """The metrics line (every `log_every` chunks and at each evaluation) and the checkpoint."""
-        if self.writer is None:
+        if self.out is None:
             return
         s = self.settings
-        if evaluated or number % s.log_every == 0:
+        if self.writer is not None and (evaluated or number % s.log_every == 0):
             shared = ("eval/", "perf/", "memory/")  # what a run that logs no training metrics still writes
             kept = metrics if s.log_train_metrics else {k: v for k, v in metrics.items() if k.startswith(shared)}
             self.writer.write(step, {**self.pending, **kept})
             self.pending = {}
         if s.checkpoint_every and number % s.checkpoint_every == 0:
-            checkpoints.save(self.out / "checkpoints", step, state)
+            checkpoints.save(self.out / "checkpoints", step, state)  # by every process, as orbax needs
 
     def close(self) -> None:
         self.progress.close()
@@ -318,20 +273,22 @@ class _Loop:
 
 def _start(algorithm: Algorithm, config: AlgorithmConfig, task: Task, settings: Settings, out: Path | None,
            key: jax.Array, physics: dict[str, Any]) -> Any:  # fmt: skip
-    """The initial (or resumed) train state, with config.json written, ready for the loop."""
+    """The initial (or resumed) train state, placed on the devices, config.json written."""
     state = _init_fn(algorithm)(config, task, key)
-    _check_state(algorithm, state)
+    check_state(algorithm, state)
+    # Own every buffer once: the chunk donates the state, and XLA may hand out one buffer
+    # for equal constants (two zero arrays), which cannot be donated twice.
+    state = shard_envs(jax.tree.map(jnp.copy, state), algorithm.PER_ENV_FIELDS)
     if out is not None:
-        # Restore before writing anything: a run that cannot resume is left as it was.
+        # Restore (each process its shards) before writing anything: a run that cannot resume is left as it was.
         if settings.resume and checkpoints.latest_step(out / "checkpoints") is not None:
             state = _resume(out, state)
         out.mkdir(parents=True, exist_ok=True)
         run_info = {"algorithm": algorithm.__name__.split(".")[-1], "config": config_dict(config), "physics": physics,
                     "settings": {k: str(v) if isinstance(v, Path) else v for k, v in dataclasses.asdict(settings).items()}}  # fmt: skip
-        (out / "config.json").write_text(json.dumps(run_info, indent=2))
-    # Own every buffer once: the chunk donates the state, and XLA may hand out one buffer
-    # for equal constants (two zero arrays), which cannot be donated twice.
-    return shard_envs(jax.tree.map(jnp.copy, state), algorithm.PER_ENV_FIELDS)
+        if distributed.is_primary():
+            (out / "config.json").write_text(json.dumps(run_info, indent=2))
+    return state
 
 
 def run(algorithm: Algorithm, config: AlgorithmConfig, task: Task, settings: Settings) -> tuple[Any, dict[str, float]]:
@@ -343,6 +300,8 @@ def run(algorithm: Algorithm, config: AlgorithmConfig, task: Task, settings: Set
     (once: from this call to the end of the first chunk, compiles included),
     perf/elapsed_s (since this call)."""
     launched = _clock()
+    if settings.compile_cache:
+        compilation.enable_cache()
     check_algorithm(algorithm, config)
     eval_steps = _eval_steps(task, settings)  # a wrong length fails here, before anything is written
     out = Path(settings.out_dir) if settings.out_dir else None
@@ -351,13 +310,14 @@ def run(algorithm: Algorithm, config: AlgorithmConfig, task: Task, settings: Set
     key, physics = jax.random.key(settings.seed), physics_info(task)
     state = _start(algorithm, config, task, settings, out, key, physics)
     shown = {"physics": physics["impl"]} if physics else {}
-    loop = _Loop(algorithm, config, replicate(task), settings, out, key, eval_steps, launched, shown)
+    loop = _Loop(algorithm, config, task, settings, out, key, eval_steps, launched, shown)
+    loop.compile_evaluation_ahead(state)
     try:
         while not loop.done(state):
             state = loop.step(state)
     finally:
         loop.close()
-    if out is not None:
+    if out is not None and distributed.is_primary():
         _finish(out, loop, settings)
     return state, loop.last
 
@@ -382,7 +342,7 @@ def _finish(out: Path, loop: _Loop, settings: Settings) -> None:
     if loop.video is not None and loop.video[0] == final_step:
         shutil.copyfile(loop.video[1], out / "eval.mp4")
     else:
-        write_video(loop.task, loop.trajectory, out / "eval.mp4", settings.render)
+        write_video(loop.host_task, loop.trajectory, out / "eval.mp4", settings.render)
 
 
 def write_video(task: Task, trajectory: Any, path: Path, config: rendering.RenderConfig | None = None) -> Path | None:

@@ -104,23 +104,28 @@ LOGGING = counter(update=lambda config, task, s: (Count(s.updates + 1, s.per_env
 
 
 class FakeClock:
-    """training._clock: each chunk of updates takes 10 s; nothing else takes time."""
+    """training._clock: each chunk of updates takes 10 s, each evaluation `eval_s`;
+    nothing else takes time."""
 
-    def __init__(self, monkeypatch: pytest.MonkeyPatch) -> None:
+    def __init__(self, monkeypatch: pytest.MonkeyPatch, eval_s: float = 0.0) -> None:
         self.now = 0.0
-        real = training._chunk_fn
+        real_chunk, real_evaluate = training._chunk_fn, training._evaluate_fn
 
-        def timed(*args):
-            chunk = real(*args)
+        def timed(real, seconds):
+            def make(*args):
+                function = real(*args)
 
-            def run_chunk(task, state):
-                self.now += 10.0
-                return chunk(task, state)
+                def run(*inputs):
+                    self.now += seconds
+                    return function(*inputs)
 
-            return run_chunk
+                return run
+
+            return make
 
         monkeypatch.setattr(training, "_clock", lambda: self.now)
-        monkeypatch.setattr(training, "_chunk_fn", timed)
+        monkeypatch.setattr(training, "_chunk_fn", timed(real_chunk, 10.0))
+        monkeypatch.setattr(training, "_evaluate_fn", timed(real_evaluate, eval_s))
 
 
 def lines(tmp_path, chunks: int, **settings) -> list[dict]:
@@ -138,7 +143,8 @@ def evaluated(records: list[dict]) -> list[int]:
 @pytest.mark.parametrize(
     "settings, chunks",
     [
-        ({}, [1, 2, 3, 4, 5, 6, 7]),  # every chunk, as before
+        ({}, [1, 2, 3, 4, 5, 6, 7]),  # by the 5% budget: evaluating takes no (fake) time, so every chunk
+        ({"eval_every": 1}, [1, 2, 3, 4, 5, 6, 7]),  # every chunk
         ({"eval_every": 3}, [3, 6, 7]),  # multiples of 3; the last chunk always evaluates
         ({"eval_every": 0}, [7]),  # only at the end
         ({"eval_every": 0, "eval_every_seconds": 35}, [4, 7]),  # 40 s after launch; 80 s is past the end
@@ -154,6 +160,26 @@ def test_evaluation_schedule(tmp_path, monkeypatch, settings, chunks):
     assert evaluated(records) == chunks
     assert all(r["perf/eval_s"] == 0.0 for r in records)  # in every line; evaluating takes no fake time
     assert records[0]["perf/first_update_s"] == 10.0 and all("perf/first_update_s" not in r for r in records[1:])
+
+
+@pytest.mark.parametrize(
+    "budget, chunks",
+    [
+        # Chunks take 10 s and evaluations 2 s. Evaluated when the evaluations so far and one
+        # more fit in budget x the time since launch: 0.05: the first (to learn the cost), then
+        # at t=82 (2 + 2 <= 0.05 x 82), t=124 would be next but 12 is the last; 0.1: t >= 40,
+        # 60, 80, 100, 120; 0.2: every chunk (2 s of every 12 is 17%).
+        (0.05, [1, 8, 12]),
+        (0.1, [1, 4, 6, 8, 10, 11, 12]),
+        (0.2, list(range(1, 13))),
+    ],
+)
+def test_evaluation_by_budget_keeps_its_share_of_the_wall_clock(tmp_path, monkeypatch, budget, chunks):
+    FakeClock(monkeypatch, eval_s=2.0)
+    records = lines(tmp_path, 12, log_every=1, eval_budget=budget)
+    assert evaluated(records) == chunks
+    before_last = records[-2]  # the last chunk always evaluates, whatever the budget
+    assert sum(r["perf/eval_s"] for r in records[:-1]) <= budget * before_last["perf/elapsed_s"] + 1e-9
 
 
 def test_log_every_and_log_train_metrics_choose_what_metrics_jsonl_holds(tmp_path, monkeypatch):
@@ -260,7 +286,7 @@ def evaluate(config, task, s, key, n, steps):
 algorithm = t.counter(evaluate=evaluate)
 out = Path(sys.argv[1])
 for chunks in (5, 4):  # the final evaluation is not (5) or is (4) one of video_every's
-    settings = dataclasses.replace(t.SETTINGS, out_dir=out / str(chunks), video=True, video_every=2,
+    settings = dataclasses.replace(t.SETTINGS, out_dir=out / str(chunks), video=True, video_every=2, eval_every=1,
                                    render=rendering.RenderConfig(width=64, height=48))
     training.run(algorithm, t.CountConfig(num_updates=chunks), t.TASK, settings)
 print(json.dumps(sorted(str(p.relative_to(out)) for p in out.rglob("*.mp4"))))

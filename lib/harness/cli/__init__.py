@@ -31,9 +31,9 @@ import sys
 import warnings
 from collections.abc import Iterator
 
-import jax
 import tyro
 
+from mjzoo.harness import compilation
 from mjzoo.harness.cli.arguments import UsageError
 from mjzoo.harness.cli.commands import demo, envs, evaluate, plan, train
 from mjzoo.harness.cli.exporting import export
@@ -51,7 +51,7 @@ def main(argv: list[str] | None = None) -> None:
     stderr and exit status 2; tyro reports its own parse errors, also with status 2."""
     args = sys.argv[1:] if argv is None else list(argv)
     command = next((a for a in args if not a.startswith("-")), "")
-    _persistent_compile_cache()
+    compilation.enable_cache()  # a second launch of the same run skips most compiling
     try:
         with _one_line_warnings(command), _importable_from_cwd():
             tyro.extras.subcommand_cli_from_dict(COMMANDS, prog="mjzoo", args=args)
@@ -62,17 +62,6 @@ def main(argv: list[str] | None = None) -> None:
     except BrokenPipeError:  # `mjzoo envs | head -1`: stop quietly, as Python's docs advise
         os.dup2(os.open(os.devnull, os.O_WRONLY), sys.stdout.fileno())  # the exit's flush writes nowhere
         raise SystemExit(1) from None
-
-
-def _persistent_compile_cache() -> None:
-    """Keeps XLA's compiled programs between runs in the user's cache directory (JAX's
-    persistent compilation cache; MuJoCo Warp keeps its kernels in ~/.cache/warp), so a
-    second launch skips most compiling. JAX_COMPILATION_CACHE_DIR chooses another place;
-    MJZOO_COMPILE_CACHE=0 turns it off."""
-    if os.environ.get("MJZOO_COMPILE_CACHE") == "0" or os.environ.get("JAX_COMPILATION_CACHE_DIR"):
-        return
-    home = os.environ.get("XDG_CACHE_HOME") or os.path.join(os.path.expanduser("~"), ".cache")
-    jax.config.update("jax_compilation_cache_dir", os.path.join(home, "mjzoo", "jax"))
 
 
 @contextlib.contextmanager

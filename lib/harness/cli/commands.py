@@ -36,7 +36,10 @@ class Schedule:
     started with."""
 
     eval_every: int | None = None
-    """Chunks between evaluations (default 1); 0: none by count (the last chunk always evaluates)."""
+    """Chunks between evaluations; 0: none by count (the last chunk always evaluates). Default:
+    as often as --eval-budget of the wall-clock time allows."""
+    eval_budget: float | None = None
+    """Without --eval-every: the largest share of the wall-clock time evaluations may take (default 0.05)."""
     eval_every_seconds: float | None = None
     """Also evaluate when this many wall-clock seconds have passed since the last evaluation."""
     eval_first_seconds: float | None = None
@@ -123,6 +126,9 @@ def train(
     impl: Literal["jax", "warp"] | None = None,
     schedule: Annotated[Schedule, tyro.conf.OmitArgPrefixes] = Schedule(),
     render: RenderConfig = RenderConfig(),
+    coordinator: str | None = None,
+    num_processes: int | None = None,
+    process_id: int | None = None,
 ) -> None:
     """Train ALGORITHM on ENV (a registered env or package.module:factory), writing
     task.json, config.json, metrics.jsonl, TensorBoard events, checkpoints, curves.png
@@ -142,9 +148,17 @@ def train(
     saved settings, --seed, --eval-envs and --updates-per-chunk included unless given
     again, for the same result as an uninterrupted run. A new run's defaults: seed 0,
     eval envs 16, updates per chunk 10.
-    """
-    from mjzoo.harness import checkpoints, training
 
+    On several hosts, start the same command on each with --coordinator HOST:PORT (process
+    0's address), --num-processes N and --process-id I, or set JAX_COORDINATOR_ADDRESS,
+    JAX_NUM_PROCESSES and JAX_PROCESS_ID (SLURM's srun and Open MPI's mpirun need none):
+    each process trains its share of the envs, and process 0 writes --out, which every
+    process must reach.
+    """
+    from mjzoo.harness import checkpoints, distributed, training
+
+    with checking():  # before anything touches JAX's devices
+        distributed.initialize(coordinator, num_processes, process_id)
     with checking():
         module = algorithm_module(algorithm)
         if resume is not None:
@@ -168,12 +182,15 @@ def train(
             hint = f"continue it with --resume {out}, or choose a new --out"
             runs.refuse_existing(out, (*training.RUN_FILES, "task.json"), hint)
         settings = training.Settings(out_dir=out, video=video, resume=resume is not None, **run_settings)
-    if resume is None:
+    distributed.barrier("mjzoo train: --out checked")  # by every process, before process 0 writes there
+    if resume is None and distributed.is_primary():
         out.mkdir(parents=True, exist_ok=True)
         (out / "task.json").write_text(json.dumps({"env": env, "overrides": env_values}, indent=2))
     # resuming: only damaged checkpoints, or another network's; Warp: capacities outgrown
     with checking(checkpoints.CheckpointError, training.PhysicsCapacityError):
         _, last = module.train(cfg, task, settings)
+    if not distributed.is_primary():
+        return
     print(f"final eval/return {last.get('eval/return', float('nan')):.2f}")
     print(f"curves: {out / 'curves.png'}")
     print(f"video:  {out / 'eval.mp4'}" if (out / "eval.mp4").exists() else "video:  (not written)")

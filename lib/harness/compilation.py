@@ -1,0 +1,82 @@
+"""Starting fast: JAX's persistent compilation cache, and compiling ahead in the background.
+
+A run spends longer compiling than learning unless compiles are kept: `enable_cache`
+points JAX's persistent cache at the user's cache directory (the CLI and `train` do so
+by default), so a second launch of the same run loads its executables from disk.
+`compile_ahead` compiles a jitted function for given arguments on a background thread
+(XLA releases the GIL while it compiles), so the evaluation compiles while the first
+training chunk runs; the later call finds the executable already built.
+
+    compilation.enable_cache()                        # ~/.cache/mjzoo/jax (XDG_CACHE_HOME)
+    MJZOO_COMPILE_CACHE=0 mjzoo train ...             # off;  =/some/dir: there
+"""
+
+from __future__ import annotations
+
+import os
+import threading
+import warnings
+from collections.abc import Callable
+from pathlib import Path
+from typing import Any
+
+import jax
+from jax.experimental.compilation_cache import compilation_cache
+
+__all__ = ["cache_directory", "compile_ahead", "enable_cache"]
+
+_OFF = ("0", "off", "false", "no", "")
+
+
+def cache_directory() -> Path | None:
+    """Where mjzoo keeps compiled executables: ``$MJZOO_COMPILE_CACHE`` if set (a path,
+    or 0/off/false/no for none), else ``$XDG_CACHE_HOME/mjzoo/jax`` (``~/.cache/mjzoo/jax``)."""
+    chosen = os.environ.get("MJZOO_COMPILE_CACHE")
+    if chosen is not None:
+        return None if chosen.strip().lower() in _OFF else Path(chosen).expanduser()
+    base = os.environ.get("XDG_CACHE_HOME") or Path.home() / ".cache"
+    return Path(base) / "mjzoo" / "jax"
+
+
+def enable_cache(directory: str | Path | None = None) -> Path | None:
+    """Turns JAX's persistent compilation cache on in `directory` (default
+    `cache_directory()`), for every compile that takes over a second; returns the
+    directory in use, or None when turned off by ``MJZOO_COMPILE_CACHE=0``.
+
+    A cache directory the user already gave JAX (``JAX_COMPILATION_CACHE_DIR`` or
+    ``jax.config``) is kept as it is. Safe to call more than once."""
+    current = jax.config.jax_compilation_cache_dir
+    if current:
+        return Path(current)
+    directory = Path(directory).expanduser() if directory is not None else cache_directory()
+    if directory is None:
+        return None
+    try:
+        directory.mkdir(parents=True, exist_ok=True)
+    except OSError as error:  # a read-only home: run uncached rather than not at all
+        message = (f"compilation cache: cannot create {directory} ({error.strerror}); running without it "
+                   "(set MJZOO_COMPILE_CACHE to a writable directory, or 0 to silence this)")  # fmt: skip
+        warnings.warn(message, stacklevel=2)
+        return None
+    compilation_cache.set_cache_dir(str(directory))
+    # XLA's GPU autotuning results are worth keeping too (they are part of a cold compile).
+    jax.config.update("jax_persistent_cache_enable_xla_caches", "all")
+    return directory
+
+
+def compile_ahead(function: Callable, *args: Any, **kwargs: Any) -> threading.Thread:
+    """Starts compiling the jitted `function` for `args` (arrays or `jax.ShapeDtypeStruct`s
+    with the shardings of the later call; static arguments as in that call) on a daemon
+    thread, and returns it. A later call of `function` with matching arguments reuses
+    the executable (it still traces, which is quick). A failure here is ignored: the
+    later call compiles for itself and reports any error where it belongs."""
+
+    def work() -> None:
+        try:
+            function.lower(*args, **kwargs).compile()
+        except Exception:  # noqa: BLE001 (the real call raises it with its own context)
+            pass
+
+    thread = threading.Thread(target=work, name=f"compile-ahead-{getattr(function, '__name__', 'fn')}", daemon=True)
+    thread.start()
+    return thread

@@ -1,0 +1,74 @@
+"""Starting fast: where the persistent cache lives, and compiling ahead on a thread."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import jax
+import jax.numpy as jnp
+import pytest
+from jax import monitoring
+
+from mjzoo.harness import compilation
+
+_compiles: list[str] = []
+monitoring.register_event_duration_secs_listener(
+    lambda name, *_, **__: _compiles.append(name) if name.endswith("backend_compile_duration") else None
+)
+
+
+@pytest.mark.parametrize(
+    "environment, expected",
+    [
+        ({"MJZOO_COMPILE_CACHE": "/tmp/here"}, Path("/tmp/here")),
+        ({"MJZOO_COMPILE_CACHE": "0"}, None),
+        ({"MJZOO_COMPILE_CACHE": "off"}, None),
+        ({"XDG_CACHE_HOME": "/xdg"}, Path("/xdg/mjzoo/jax")),
+        ({"HOME": "/home/u"}, Path("/home/u/.cache/mjzoo/jax")),
+    ],
+)
+def test_the_cache_directory_follows_the_environment(monkeypatch, environment, expected):
+    for name in ("MJZOO_COMPILE_CACHE", "XDG_CACHE_HOME"):
+        monkeypatch.delenv(name, raising=False)
+    for name, value in environment.items():
+        monkeypatch.setenv(name, value)
+    assert compilation.cache_directory() == expected
+
+
+@pytest.fixture
+def cache_dir_option():
+    """jax's cache directory option, restored afterwards (these tests compile nothing)."""
+    before = jax.config.jax_compilation_cache_dir
+    yield lambda value: jax.config.update("jax_compilation_cache_dir", value)
+    jax.config.update("jax_compilation_cache_dir", before)
+
+
+def test_a_cache_the_user_gave_jax_is_kept(cache_dir_option, tmp_path):
+    cache_dir_option(str(tmp_path / "theirs"))
+    assert compilation.enable_cache(tmp_path / "ours") == tmp_path / "theirs"
+    assert not (tmp_path / "ours").exists()
+
+
+def test_turned_off_it_enables_nothing(cache_dir_option, monkeypatch):
+    cache_dir_option(None)
+    monkeypatch.setenv("MJZOO_COMPILE_CACHE", "0")
+    assert compilation.enable_cache() is None
+
+
+def test_compiling_ahead_leaves_nothing_to_compile_for_the_call():
+    function = jax.jit(lambda x, n: jnp.cumsum(jnp.sin(x)) * n, static_argnums=1)
+    x = jnp.arange(5.0)
+    compilation.compile_ahead(function, jax.ShapeDtypeStruct(x.shape, x.dtype), 3).join()
+    _compiles.clear()
+    result = function(x, 3)
+    assert _compiles == []  # the thread's executable served the call
+    function(x, 4)  # another static argument: a compile of its own
+    assert len(_compiles) == 1
+    assert jnp.allclose(result, jnp.cumsum(jnp.sin(x)) * 3)
+
+
+def test_a_failure_ahead_is_left_to_the_call():
+    function = jax.jit(lambda x: x @ x)
+    compilation.compile_ahead(function, jax.ShapeDtypeStruct((2, 3), jnp.float32)).join()  # no exception here
+    with pytest.raises(TypeError):
+        function(jnp.ones((2, 3)))
