@@ -22,6 +22,7 @@ from __future__ import annotations
 import dataclasses
 import functools
 import sys
+import warnings
 from collections.abc import Callable
 from typing import Any, Literal
 
@@ -111,6 +112,10 @@ class Config:
         need(self.max_grad_norm is None or self.max_grad_norm > 0, "max_grad_norm", "None or > 0")
         need(self.reward_scaling > 0, "reward_scaling", "> 0")
         need(self.activation in ACTIVATIONS, "activation", f"one of {sorted(ACTIVATIONS)}")
+        if self.total_steps < self.steps_per_update:  # a run is whole updates: this one is one, larger
+            warnings.warn(f"ppo.Config: total_steps={self.total_steps} is less than one update (num_envs x "
+                          f"unroll_length = {self.steps_per_update} env steps); the run trains that one update",
+                          training.TrainingWarning, stacklevel=3)  # fmt: skip
 
     @property
     def steps_per_update(self) -> int:

@@ -121,16 +121,19 @@ def measure(name: str, impl: str, steps: int, seeds: int, threshold: float, smok
     config = brax_config(name, steps, smoke)
     config.setdefault("num_eval_envs", 128)
     overrides = {"impl": impl, **({"episode_length": config["episode_length"]} if smoke else {})}
+    start = time.perf_counter()
     env = playground.load(name, **overrides)
     raw = raw_steps_per_s(env, config["num_envs"])
+    print(f"{name} ({impl}): raw stepping {raw:,.0f} steps/s (load and compile included: "
+          f"{time.perf_counter() - start:.0f} s)", flush=True)  # fmt: skip
     runs = {"mjzoo": [], "brax": []}
     for seed in range(seeds):
         runs["mjzoo"].append(train_mjzoo(env, name, config, seed))
         print(f"{name} ({impl}) seed {seed}: mjzoo {runs['mjzoo'][-1]['steps_per_s']:,.0f} steps/s, "
-              f"final {runs['mjzoo'][-1]['final_return']:.1f}", flush=True)  # fmt: skip
+              f"final {runs['mjzoo'][-1]['final_return']:.1f}, compile {runs['mjzoo'][-1]['compile_s']:.0f} s", flush=True)  # fmt: skip
         runs["brax"].append(train_brax(env, config, seed))
         print(f"{name} ({impl}) seed {seed}: brax  {runs['brax'][-1]['steps_per_s']:,.0f} steps/s, "
-              f"final {runs['brax'][-1]['final_return']:.1f}", flush=True)  # fmt: skip
+              f"final {runs['brax'][-1]['final_return']:.1f}, compile {runs['brax'][-1]['compile_s']:.0f} s", flush=True)  # fmt: skip
     best = threshold * max(np.mean([r["final_return"] for r in rs]) for rs in runs.values())
     row = {"env": name, "impl": impl, "raw_steps_per_s": raw, "threshold": best, "steps": steps,
            "published": PUBLISHED.get(name)}  # fmt: skip

@@ -23,6 +23,7 @@ import functools
 import importlib
 import inspect
 import numbers
+import warnings
 from types import ModuleType
 from typing import Any, Callable
 
@@ -31,7 +32,7 @@ import numpy as np
 from mjzoo import physics
 from mjzoo.envs import (base, cartpole, cylinder_push, humanoid_amp, joystick, locomotion, pendulum, point_mass,
                         teachers)  # fmt: skip
-from mjzoo.planning.realtime import Problem
+from mjzoo.planning.realtime import Problem, default_backend
 from mjzoo.planning.sampling import SamplingConfig
 from mjzoo.running import control_dt
 from mjzoo.types import Task
@@ -142,13 +143,16 @@ def closed_loop_problem(
     (default: the setup's, else one episode) of simulated time, on `backend` ("mjx",
     "native": C MuJoCo; "auto": native on a CPU). Registered envs run with no episode
     limit; `overrides` go to both tasks. A Playground env steps MJX itself, so it plans
-    on MJX ("auto": "mjx"; "native" is refused)."""
+    on MJX ("auto": "mjx", with a warning on a CPU; "native" is refused)."""
     setup = planning(spec)
     build = functools.partial(make, spec, **overrides)
     if _is_playground(spec):
         if backend == "native":
             raise ValueError(f"{spec}: Playground's envs step MJX themselves, which native C rollouts cannot replay; "
                              "plan with backend 'mjx'")  # fmt: skip
+        if backend == "auto" and default_backend() == "native":  # say why a CPU plans on the slower engine
+            warnings.warn(f"{spec}: planning on MJX, not native C MuJoCo (auto's choice on a CPU): Playground's envs "
+                          "step MJX themselves, which native C rollouts cannot replay", stacklevel=2)  # fmt: skip
         backend = "mjx"
     own_limit = _is_user(spec) or _is_playground(spec)  # a factory may not take episode_steps
     unlimited = {} if own_limit else {"episode_steps": 10**9}

@@ -165,9 +165,11 @@ class _Loop:
         self.task, self.host_task = replicate(task), task  # videos are drawn by one process, from its own copy
         self.out, self.key, self.launched, self.shown = out, key, launched, shown
         self.schedule = EvalSchedule(settings, launched)
-        self.chunk = _chunk_fn(algorithm, config, settings.updates_per_chunk)
+        # A run shorter than one chunk is one chunk of its own length, not rounded up to a whole one.
+        self.per_chunk = min(settings.updates_per_chunk, max(1, config.num_updates))
+        self.chunk = _chunk_fn(algorithm, config, self.per_chunk)
         self.evaluate, self.eval_steps = _evaluate_fn(algorithm), eval_steps
-        self.total_updates = -(-config.num_updates // settings.updates_per_chunk) * settings.updates_per_chunk
+        self.total_updates = -(-config.num_updates // self.per_chunk) * self.per_chunk
         self.writer = metrics_lib.MetricsWriter(out) if out is not None and distributed.is_primary() else None
         self.progress = metrics_lib.Progress(self.total_updates * config.steps_per_update, "train",
                                              file=None if distributed.is_primary() else io.StringIO())  # fmt: skip
@@ -193,7 +195,7 @@ class _Loop:
         state, chunk_metrics = self.chunk(self.task, state)
         jax.block_until_ready(state)
         end = _clock()
-        updates, per_chunk = int(state.updates), self.settings.updates_per_chunk
+        updates, per_chunk = int(state.updates), self.per_chunk
         step, number = updates * self.config.steps_per_update, updates // per_chunk
         metrics = {"perf/steps_per_s": per_chunk * self.config.steps_per_update / max(end - start, 1e-9),
                    **{k: float(v) for k, v in distributed.fetch(chunk_metrics).items() if np.isfinite(v)}}  # fmt: skip

@@ -31,26 +31,21 @@ finds none. Only the "mjx" backend: the others' pipeline states are not an mjx.D
 
 from __future__ import annotations
 
-import contextlib
-import threading
-from typing import Iterator
-
 import jax
-import jax.numpy as jnp
 from brax.envs import base as brax_base
 from brax.envs.wrappers import training as brax_training
 from mujoco import mjx
 
-from mjzoo import checks, tree
-from mjzoo.combinators import record, with_divergence_guard, with_time_limit
-from mjzoo.running import OUTCOME
-from mjzoo.types import State, Task, bind
+from mjzoo import checks
+from mjzoo.interop import _foreign
+from mjzoo.types import Task
 
 __all__ = ["task", "NAME"]
 
-Array = jax.Array
 NAME = "brax"  # the reward term's name, the info key and the metrics prefix
-_LOCK = threading.RLock()  # the model swap mutates the env: one trace of it at a time
+# Brax's State keeps the mjx.Data as pipeline_state and flags a time limit's done in info.
+_KIND = _foreign.Kind(NAME, model_attr="sys", data_field="pipeline_state", state_type=brax_base.State,
+                      truncation_key="truncation")  # fmt: skip
 # Brax's training wrappers batch, limit or reset episodes: mjzoo's algorithms and combinators do that.
 _TRAINING_WRAPPERS = (
     brax_training.VmapWrapper, brax_training.DomainRandomizationVmapWrapper, brax_training.EpisodeWrapper,
@@ -82,28 +77,14 @@ def task(env: brax_base.Env, episode_length: int | None = 1000) -> Task:
     if env.backend != "mjx":
         raise ValueError(f"brax.task: the env's backend is {env.backend!r}; only 'mjx' gives an mjx.Data to carry "
                          "(brax.envs.get_environment(name, backend='mjx'))")  # fmt: skip
-    model = getattr(env.unwrapped, "sys", None)
-    if not isinstance(model, mjx.Model):
-        raise TypeError(f"brax.task: {type(env.unwrapped).__name__}.sys is not an mjx.Model")
+    model = _foreign.env_model(_KIND, env)
     mj_model = getattr(env.unwrapped, "mj_model", None)  # `to_brax_env`'s envs: their task's
     mj_model = getattr(model, "mj_model", None) if mj_model is None else mj_model  # Brax's: sys.mj_model
     if mj_model is None:
         raise TypeError(f"brax.task: found no mujoco.MjModel for {type(env.unwrapped).__name__} (sys.mj_model)")
-    static = tree.Static(env)
-    action_size = int(env.action_size)
-    bare = Task(
-        model=_strongly_typed(model),
-        start=bind(_start, static),
-        step=bind(_step, static),
-        reward=bind(_recorded_reward),
-        terminate=bind(_recorded_terminate),
-        mj_model=mj_model,
-        action_dim=None if action_size == mj_model.nu else action_size,
-    )
-    guarded = with_divergence_guard(bare)
-    if episode_length is None:
-        return guarded
-    return with_time_limit(guarded, checks.integer("brax.task", "episode_length", episode_length))
+    if episode_length is not None:
+        episode_length = checks.integer("brax.task", "episode_length", episode_length)
+    return _foreign.task(_KIND, env, _strongly_typed(model), mj_model, episode_length)
 
 
 def _strongly_typed(model: mjx.Model) -> mjx.Model:
@@ -112,58 +93,3 @@ def _strongly_typed(model: mjx.Model) -> mjx.Model:
     the trace instead of changing the argument's type."""
     strong = lambda x: x.astype(x.dtype) if isinstance(x, jax.Array) and x.weak_type else x  # noqa: E731
     return jax.tree.map(strong, model)
-
-
-@contextlib.contextmanager
-def _holding(env: brax_base.Env, model: mjx.Model) -> Iterator[brax_base.Env]:
-    """`env` stepping `model` (the task's, maybe traced) for the duration of a call."""
-    inner = env.unwrapped
-    with _LOCK:
-        own = inner.sys
-        inner.sys = model
-        try:
-            yield env
-        finally:
-            inner.sys = own
-
-
-def _key_data(key: Array) -> Array:
-    return jax.random.key_data(key) if jnp.issubdtype(key.dtype, jax.dtypes.prng_key) else key
-
-
-def _start(env: tree.Static, model: mjx.Model, key: Array) -> State:
-    with _holding(env.value, model) as held:
-        first = held.reset(_key_data(key))
-    state = State.create(first.pipeline_state, first.obs, info={NAME: dict(first.info)})
-    return state.replace(metrics=_prefixed(first.metrics))
-
-
-def _step(env: tree.Static, model: mjx.Model, state: State, action: Array, key: Array) -> State:
-    prefix = f"{NAME}/"
-    own = brax_base.State(
-        pipeline_state=state.data, obs=state.obs, reward=state.reward, done=state.terminated.astype(jnp.float32),
-        metrics={k[len(prefix):]: v for k, v in state.metrics.items() if k.startswith(prefix)},
-        info=dict(state.info[NAME]),  # fresh dicts: Brax's envs update the ones they get in place
-    )  # fmt: skip
-    with _holding(env.value, model) as held:
-        after = held.step(own, action)
-    next_state = state.replace(
-        data=after.pipeline_state, obs=after.obs, info={**state.info, NAME: dict(after.info)},
-        metrics={**state.metrics, **_prefixed(after.metrics)},
-    )  # fmt: skip
-    done = jnp.asarray(after.done) != 0
-    limit = jnp.asarray(after.info.get("truncation", 0.0)) != 0  # Brax: this done is a time limit
-    terms = {NAME: jnp.asarray(after.reward, jnp.float32)}
-    return record(next_state, terms, done & ~limit, done & limit)
-
-
-def _prefixed(metrics: dict[str, Array]) -> dict[str, Array]:
-    return {f"{NAME}/{k}": v for k, v in metrics.items()}
-
-
-def _recorded_reward(model, state: State, action: Array, next_state: State) -> dict[str, Array]:
-    return dict(next_state.info[OUTCOME]["reward"])
-
-
-def _recorded_terminate(model, state: State) -> tuple[Array, Array]:
-    return state.info[OUTCOME]["terminated"], state.info[OUTCOME]["truncated"]

@@ -39,30 +39,23 @@ Physics defaults to MJX's JAX implementation (Playground's DM Control configs sa
 
 from __future__ import annotations
 
-import contextlib
 import difflib
 import subprocess
-import threading
-from typing import Any, Iterator
+from typing import Any
 
-import jax
-import jax.numpy as jnp
-from mujoco import mjx
 from mujoco_playground import MjxEnv, registry
 from mujoco_playground._src import dm_control_suite, locomotion, manipulation, mjx_env
 
-from mjzoo import tree
-from mjzoo.combinators import record, with_divergence_guard, with_time_limit
-from mjzoo.running import OUTCOME
-from mjzoo.types import State, Task, bind
+from mjzoo.interop import _foreign
+from mjzoo.types import Task
 
 __all__ = ["task", "load", "names", "offline_names", "needs_network", "config_defaults", "ppo_hyperparameters",
            "NAME"]  # fmt: skip
 
-Array = jax.Array
 NAME = "playground"  # the reward term's name, the info key and the metrics prefix
 DEFAULT_IMPL = "jax"  # runs on any device; Playground's DM Control configs default to Warp
-_LOCK = threading.RLock()  # the model swap mutates the env: one trace of it at a time
+# Playground's done ends an episode (its time limit is a wrapper's, which mjzoo's replaces).
+_KIND = _foreign.Kind(NAME, model_attr="_mjx_model", data_field="data", state_type=mjx_env.State)
 
 
 # --- finding and loading envs -----------------------------------------------------------
@@ -160,75 +153,9 @@ def task(env_or_name: str | MjxEnv, **config_overrides: Any) -> Task:
         raise TypeError(f"playground.task: {type(env).__name__} is a Playground wrapper; pass the bare env "
                         "(env.unwrapped) and use mjzoo's combinators (with_auto_reset, with_time_limit, "
                         "with_domain_randomization) instead")  # fmt: skip
-    if not isinstance(getattr(env, "_mjx_model", None), mjx.Model):
-        raise TypeError(f"playground.task: {type(env).__name__} keeps no mjx.Model in _mjx_model, so the task's "
-                        "model could not be handed to it")  # fmt: skip
-    static = tree.Static(env)
-    action_size = int(env.action_size)
-    bare = Task(
-        model=env.mjx_model,
-        start=bind(_start, static),
-        step=bind(_step, static),
-        reward=bind(_recorded_reward),
-        terminate=bind(_recorded_terminate),
-        mj_model=env.mj_model,
-        action_dim=None if action_size == env.mj_model.nu else action_size,
-    )
-    guarded = with_divergence_guard(bare)
     length = getattr(getattr(env, "_config", None), "episode_length", None)
-    return guarded if length is None else with_time_limit(guarded, int(length))
-
-
-@contextlib.contextmanager
-def _holding(env: MjxEnv, model: mjx.Model) -> Iterator[MjxEnv]:
-    """`env` stepping `model` (the task's, maybe traced) for the duration of a call."""
-    with _LOCK:
-        own = env._mjx_model
-        env._mjx_model = model
-        try:
-            yield env
-        finally:
-            env._mjx_model = own
-
-
-def _key_data(key: Array) -> Array:
-    return jax.random.key_data(key) if jnp.issubdtype(key.dtype, jax.dtypes.prng_key) else key
-
-
-def _start(env: tree.Static, model: mjx.Model, key: Array) -> State:
-    with _holding(env.value, model) as held:
-        first = held.reset(_key_data(key))
-    state = State.create(first.data, first.obs, info={NAME: dict(first.info)})
-    return state.replace(metrics=_prefixed(first.metrics))
-
-
-def _step(env: tree.Static, model: mjx.Model, state: State, action: Array, key: Array) -> State:
-    prefix = f"{NAME}/"
-    own = mjx_env.State(
-        data=state.data, obs=state.obs, reward=state.reward, done=state.terminated.astype(jnp.float32),
-        metrics={k[len(prefix):]: v for k, v in state.metrics.items() if k.startswith(prefix)},
-        info=dict(state.info[NAME]),  # fresh dicts: Playground's envs write into the ones they get
-    )  # fmt: skip
-    with _holding(env.value, model) as held:
-        after = held.step(own, action)
-    next_state = state.replace(
-        data=after.data, obs=after.obs, info={**state.info, NAME: dict(after.info)},
-        metrics={**state.metrics, **_prefixed(after.metrics)},
-    )  # fmt: skip
-    done = jnp.asarray(after.done) != 0
-    return record(next_state, {NAME: jnp.asarray(after.reward, jnp.float32)}, done, jnp.zeros((), bool))
-
-
-def _prefixed(metrics: dict[str, Array]) -> dict[str, Array]:
-    return {f"{NAME}/{k}": v for k, v in metrics.items()}
-
-
-def _recorded_reward(model, state: State, action: Array, next_state: State) -> dict[str, Array]:
-    return dict(next_state.info[OUTCOME]["reward"])
-
-
-def _recorded_terminate(model, state: State) -> tuple[Array, Array]:
-    return state.info[OUTCOME]["terminated"], state.info[OUTCOME]["truncated"]
+    return _foreign.task(_KIND, env, _foreign.env_model(_KIND, env), env.mj_model,
+                         None if length is None else int(length))  # fmt: skip
 
 
 # --- Playground's tuned PPO, in mjzoo's terms ------------------------------------------------

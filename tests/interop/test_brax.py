@@ -10,6 +10,7 @@ task as an argument so tasks that differ only in numbers share it.
 
 from __future__ import annotations
 
+import foreign_envs
 import jax
 import jax.numpy as jnp
 import numpy as np
@@ -254,59 +255,22 @@ def test_brax_ppo_trains_on_an_adapted_task(patched_jax):
 # --- the reverse: Brax envs as mjzoo tasks (`adapter.task`) ---------------------------------
 
 
-_TRACES = [0]
-
-
-@jax.jit
-def _rollout(task: mjzoo.Task, key: jax.Array, actions: jax.Array):
-    """mjzoo's reset of `task` from `key`, then a transition per action ([T, nu])."""
-    _TRACES[0] += 1
-    state = mjzoo.reset(task, key)
-
-    def body(state, action):
-        state = mjzoo.transition(task, state, action, jax.random.key(99))
-        return state, state
-
-    return state, jax.lax.scan(body, state, actions)[1]
-
-
 @pytest.mark.parametrize("name", ["ant", "inverted_double_pendulum"])
 def test_brax_envs_pass_check_task(name):
     import brax.envs
 
-    # An episode shorter than the rollout: the time limit is checked without a second compile.
-    task = adapter.task(brax.envs.get_environment(name, backend="mjx"), episode_length=8)
-    report = mjzoo.testing.check_task(task, num_steps=10)
-    assert "time_limit" in report.passed and "no_retrace" in report.passed and report.traces == 1
-
-
-_PENDULUM = []  # Brax's own env of the test below, read by `_brax_rollout` at trace time
-
-
-@jax.jit
-def _brax_rollout(rng: jax.Array, actions: jax.Array):
-    env = _PENDULUM[0]
-
-    def body(state, action):
-        state = env.step(state, action)
-        return state, state
-
-    return jax.lax.scan(body, env.reset(rng), actions)[1]
+    env = brax.envs.get_environment(name, backend="mjx")
+    foreign_envs.assert_passes_check_task(adapter.task(env, episode_length=8))
 
 
 def test_rewards_and_done_match_brax_own_steps():
     import brax.envs
 
     env = brax.envs.get_environment("inverted_double_pendulum", backend="mjx")
-    _PENDULUM[:] = [env]
     task = adapter.task(env, episode_length=None)
     assert task.time_limit is None and task.action_size == 1
-    key, actions = jax.random.key(11), jnp.ones((40, 1))  # pushed one way: the poles fall
-    _, ours = _rollout(task, key, actions)
-    own = _brax_rollout(jax.random.key_data(key), actions)
-    np.testing.assert_allclose(ours.obs, own.obs, rtol=1e-5, atol=1e-5)
-    np.testing.assert_allclose(ours.reward, own.reward, rtol=1e-5, atol=1e-5)
-    np.testing.assert_allclose(ours.metrics["reward/brax"], own.reward, rtol=1e-5, atol=1e-5)
+    actions = jnp.ones((40, 1))  # pushed one way: the poles fall
+    ours, own = foreign_envs.assert_agrees_with_own(task, env, "brax", jax.random.key(11), actions, tol=1e-5)
     assert own.done.any() and not own.done.all()  # both kinds of steps were compared
     np.testing.assert_array_equal(ours.terminated, own.done == 1)  # done, with no truncation flag: terminated
     assert not np.asarray(ours.truncated).any()
@@ -318,7 +282,7 @@ def test_round_trip_gives_the_tasks_own_rewards_and_flags():
     task = mjzoo.envs.make("cartpole_balance", episode_steps=L)
     back = adapter.task(adapter.to_brax_env(task), episode_length=L)
     key, actions = jax.random.key(7), _actions(2)
-    first, b = _rollout(back, key, actions)
+    first, b = foreign_envs.rollout(back, key, actions)
     _, state, _, m = _both(task, jax.random.key_data(key), actions)
     np.testing.assert_array_equal(first.obs, state.obs)
     np.testing.assert_allclose(b.reward, m.reward, rtol=1e-6, atol=1e-6)
@@ -328,13 +292,8 @@ def test_round_trip_gives_the_tasks_own_rewards_and_flags():
     np.testing.assert_array_equal(b.truncated, m.truncated)  # info["truncation"]: truncated, not terminated
     np.testing.assert_array_equal(b.terminated, m.terminated)
     assert bool(m.truncated[-1]) and not np.asarray(m.terminated).any()
-    # The Brax env steps the task's model (its `sys` is swapped in while tracing): an edit
-    # changes the motion, under the same trace.
-    before = _TRACES[0]
-    heavy = back.replace(model=back.model.replace(body_mass=back.model.body_mass * 3.0))
-    _, heavy_states = _rollout(heavy, key, actions)
-    assert _TRACES[0] == before
-    assert not np.allclose(b.data.qvel, heavy_states.data.qvel)
+    # The Brax env steps the task's model (its `sys` is swapped in while tracing).
+    foreign_envs.assert_model_edits_apply(back, key, actions, b)
 
 
 def test_brax_envs_that_cannot_be_tasks_are_refused():

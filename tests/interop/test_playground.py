@@ -10,6 +10,7 @@ each compile here costs seconds to a minute on a CPU, so this file compiles five
 from __future__ import annotations
 
 import sys
+import warnings
 
 import jax
 import jax.numpy as jnp
@@ -18,6 +19,7 @@ import pytest
 
 pytest.importorskip("mujoco_playground")
 
+import foreign_envs  # noqa: E402
 from mujoco_playground._src.dm_control_suite import pendulum  # noqa: E402
 
 import mjzoo  # noqa: E402
@@ -28,34 +30,12 @@ from mjzoo.interop import playground
 L = 6  # episode length in these tests
 
 
-# --- the contract --------------------------------------------------------------------------
+# --- the contract and agreement with Playground's own env ------------------------------------
 
 
 @pytest.mark.parametrize("name", ["CartpoleBalance", "PendulumSwingup"])
 def test_cheap_dm_control_envs_pass_check_task(name):
-    # An episode shorter than the rollout: the time limit is checked without a second compile.
-    task = playground.task(name, episode_length=8)
-    report = mjzoo.testing.check_task(task, num_steps=10)
-    assert "time_limit" in report.passed and "no_retrace" in report.passed and report.traces == 1
-
-
-# --- agreement with Playground's own env ----------------------------------------------------
-
-
-_TRACES = [0]
-
-
-@jax.jit
-def _rollout(task: mjzoo.Task, key: jax.Array, actions: jax.Array):
-    """mjzoo's reset of `task` from `key`, then a transition per action ([T, nu])."""
-    _TRACES[0] += 1
-    state = mjzoo.reset(task, key)
-
-    def body(state, action):
-        state = mjzoo.transition(task, state, action, jax.random.key(99))
-        return state, state
-
-    return state, jax.lax.scan(body, state, actions)[1]
+    foreign_envs.assert_passes_check_task(playground.task(name, episode_length=8))
 
 
 @pytest.fixture(scope="module")
@@ -64,38 +44,14 @@ def cartpole():
     return env, playground.task(env)
 
 
-@jax.jit
-def _playground_rollout(key, actions):
-    """Playground's own reset and steps of the cartpole fixture's env (a module global)."""
-    own = _ENV[0].reset(jax.random.key_data(key))
-
-    def body(state, action):
-        state = _ENV[0].step(state, action)
-        return state, state
-
-    return own, jax.lax.scan(body, own, actions)[1]
-
-
-_ENV = [None]
-
-
 def test_rewards_metrics_and_truncation_match_playground(cartpole):
     env, task = cartpole
     key = jax.random.key(3)
     actions = jax.random.uniform(jax.random.key(4), (L, 1), minval=-1.0, maxval=1.0)
-    first, ours = _rollout(task, key, actions)
-    _ENV[0] = env
-    own_first, own = _playground_rollout(key, actions)
-    np.testing.assert_array_equal(first.obs, own_first.obs)
-    np.testing.assert_array_equal(first.data.qpos, own_first.data.qpos)
-    np.testing.assert_allclose(ours.obs, own.obs, rtol=1e-6, atol=1e-6)
-    np.testing.assert_allclose(ours.reward, own.reward, rtol=1e-6, atol=1e-6)
+    ours, own = foreign_envs.assert_agrees_with_own(task, env, "playground", key, actions, tol=1e-6)
     assert np.all(np.asarray(own.reward) > 0.5)  # balancing: a real reward was compared
-    np.testing.assert_allclose(ours.metrics["reward/playground"], own.reward, rtol=1e-6, atol=1e-6)
-    for term in ("upright", "centered", "small_control", "small_velocity"):  # the env's own components
-        np.testing.assert_allclose(ours.metrics[f"playground/reward/{term}"], own.metrics[f"reward/{term}"],
-                                   rtol=1e-6, atol=1e-6)  # fmt: skip
-    assert sorted(mjzoo.reward_terms(ours)) == ["playground"]
+    components = {f"playground/reward/{t}" for t in ("upright", "centered", "small_control", "small_velocity")}
+    assert components <= set(ours.metrics)  # the env's own reward components, compared above
     np.testing.assert_array_equal(ours.info["playground"]["rng"], own.info["rng"])
     # Playground's done never fires here; the episode is truncated exactly at episode_length.
     np.testing.assert_array_equal(ours.truncated, [False] * (L - 1) + [True])
@@ -106,13 +62,8 @@ def test_rewards_metrics_and_truncation_match_playground(cartpole):
 def test_model_edits_apply_without_recompiling(cartpole):
     _, task = cartpole
     key, actions = jax.random.key(5), jnp.ones((L, 1))
-    _, light_states = _rollout(task, key, actions)
-    before = _TRACES[0]
-    heavy = task.replace(model=task.model.replace(body_mass=task.model.body_mass * 3.0))
-    _, heavy_states = _rollout(heavy, key, actions)
-    assert _TRACES[0] == before
-    assert not np.allclose(light_states.data.qvel, heavy_states.data.qvel)  # the env stepped the task's model
-    assert mjzoo.params(task) == {}  # the env's own numbers are trace constants, not named leaves
+    _, states = foreign_envs.rollout(task, key, actions)
+    foreign_envs.assert_model_edits_apply(task, key, actions, states)
 
 
 class _EndsOnPush(pendulum.SwingUp):
@@ -135,7 +86,7 @@ def test_done_is_terminated_and_a_dict_observation_trains_with_ppo():
 
     env = _EndsOnPush(config=pendulum.default_config(), config_overrides={"impl": "jax", "episode_length": L})
     task = playground.task(env)
-    _, states = _rollout(task, jax.random.key(0), jnp.array([[0.0], [0.9], [-0.3], [0.2]]))
+    _, states = foreign_envs.rollout(task, jax.random.key(0), jnp.array([[0.0], [0.9], [-0.3], [0.2]]))
     np.testing.assert_array_equal(states.terminated, [False, True, False, False])  # no auto-reset: steps on
     assert not np.asarray(states.truncated).any()
     assert set(states.obs) == {"state", "privileged_state"} and states.obs["privileged_state"].shape == (4, 6)
@@ -171,10 +122,17 @@ def test_playground_specs_resolve():
     assert mjzoo.envs.hyperparameters("playground:PendulumSwingup", "mppi")["horizon_steps"] == 50
     with pytest.raises(KeyError, match="did you mean CartpoleBalance"):
         mjzoo.envs.make("playground:CartpolBalance")
-    with pytest.raises(ValueError, match="native C rollouts cannot replay"):
-        from mjzoo.algorithms import mppi
+    from mjzoo.algorithms import mppi
+    from mjzoo.planning import realtime
 
+    with pytest.raises(ValueError, match="native C rollouts cannot replay"):
         mjzoo.envs.closed_loop_problem("playground:PendulumSwingup", mppi, mppi.Config(), backend="native")
+    # "auto" plans on MJX, saying why where it would have picked native C MuJoCo (a CPU).
+    with warnings.catch_warnings(record=True) as caught:
+        warnings.simplefilter("always")
+        problem = mjzoo.envs.closed_loop_problem("playground:PendulumSwingup", mppi, mppi.Config(), seconds=1.0)
+    noted = any("planning on MJX, not native C MuJoCo" in str(w.message) for w in caught)
+    assert problem.backend == "mjx" and noted == (realtime.default_backend() == "native")
 
 
 def test_a_missing_playground_is_one_line(monkeypatch):
