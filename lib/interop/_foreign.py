@@ -40,7 +40,7 @@ from mjzoo.combinators import record, with_divergence_guard, with_time_limit
 from mjzoo.running import OUTCOME
 from mjzoo.types import State, Task, bind
 
-__all__ = ["Kind", "task", "env_model"]
+__all__ = ["Kind", "task", "env_model", "key_data"]
 
 Array = jax.Array
 _LOCK = threading.RLock()  # the model swap mutates the env: one trace of one env at a time
@@ -107,14 +107,15 @@ def _holding(kind: Kind, env: Any, model: mjx.Model) -> Iterator[Any]:
             setattr(inner, kind.model_attr, own)
 
 
-def _key_data(key: Array) -> Array:
+def key_data(key: Array) -> Array:
+    """The raw uint32 data of a typed PRNG key (what both libraries' envs take); raw keys as given."""
     return jax.random.key_data(key) if jnp.issubdtype(key.dtype, jax.dtypes.prng_key) else key
 
 
 def _start(kind: tree.Static, env: tree.Static, model: mjx.Model, key: Array) -> State:
     kind = kind.value
     with _holding(kind, env.value, model) as held:
-        first = held.reset(_key_data(key))
+        first = held.reset(key_data(key))
     state = State.create(getattr(first, kind.data_field), first.obs, info={kind.name: dict(first.info)})
     return state.replace(metrics=_prefixed(kind, first.metrics))
 

@@ -45,6 +45,7 @@ from brax.envs import base as brax_base
 from brax.envs.wrappers import training as brax_training
 
 from mjzoo import tree
+from mjzoo.interop import _foreign
 from mjzoo.interop.brax_envs import task
 from mjzoo.running import reset as mjzoo_reset
 from mjzoo.running import transition
@@ -106,7 +107,7 @@ class MjzooBraxEnv(brax_base.Env):
     def reset(self, rng: Array) -> brax_base.State:
         """Starts an episode with ``mjzoo.reset(task, split(rng)[1])``; keeps
         ``split(rng)[0]`` as ``info["rng"]``. `rng`: uint32 key data (Brax) or a typed key."""
-        rng, reset_key = jax.random.split(_key_data(rng))
+        rng, reset_key = jax.random.split(_foreign.key_data(rng))
         state = mjzoo_reset(self.task, jax.random.wrap_key_data(reset_key))
         rest = _rest(state)
         info = {"rng": rng, KEY: {"state": rest, "first": rest, "time": state.data.time}}
@@ -157,12 +158,6 @@ class MjzooBraxEnv(brax_base.Env):
 def _rest(state: State) -> State:
     """The mjzoo State without what Brax keeps itself (data, obs)."""
     return state.replace(data=None, obs=None)
-
-
-def _key_data(rng: Array) -> Array:
-    if jnp.issubdtype(rng.dtype, jax.dtypes.prng_key):
-        return jax.random.key_data(rng)
-    return rng
 
 
 # --- training wrappers --------------------------------------------------------------

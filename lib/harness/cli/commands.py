@@ -157,9 +157,8 @@ def train(
     """
     from mjzoo.harness import checkpoints, distributed, training
 
-    with checking():  # before anything touches JAX's devices
-        distributed.initialize(coordinator, num_processes, process_id)
     with checking():
+        distributed.initialize(coordinator, num_processes, process_id)  # before anything touches JAX's devices
         module = algorithm_module(algorithm)
         if resume is not None:
             out, env_values, config_values, run_settings = _resumed(resume, out, env, algorithm, env_overrides,
