@@ -77,6 +77,10 @@ class Config:
     policy_hidden_sizes: tuple[int, ...] = (64, 64)
     value_hidden_sizes: tuple[int, ...] = (64, 64)
     activation: Literal["swish", "tanh", "relu", "elu"] = "swish"
+    # "bfloat16": mixed precision in the default networks' hidden layers (params, output
+    # layers, gradients and the optimizer stay float32); the learner's matmuls and
+    # activations then move half the bytes.
+    compute_dtype: Literal["float32", "bfloat16"] = "float32"
     recurrent: bool = False
     gru_hidden_size: int = 64
     # A dict observation: the entry each network sees (Brax's names; e.g. the value
@@ -112,6 +116,7 @@ class Config:
         need(self.max_grad_norm is None or self.max_grad_norm > 0, "max_grad_norm", "None or > 0")
         need(self.reward_scaling > 0, "reward_scaling", "> 0")
         need(self.activation in ACTIVATIONS, "activation", f"one of {sorted(ACTIVATIONS)}")
+        need(self.compute_dtype in ("float32", "bfloat16"), "compute_dtype", "float32 or bfloat16")
         if self.total_steps < self.steps_per_update:  # a run is whole updates: this one is one, larger
             warnings.warn(f"ppo.Config: total_steps={self.total_steps} is less than one update (num_envs x "
                           f"unroll_length = {self.steps_per_update} env steps); the run trains that one update",
@@ -154,13 +159,15 @@ PER_ENV_FIELDS = ("collector",)  # the harness shards these over devices (traini
 
 def _networks(config: Config, task: Task):
     activation = ACTIVATIONS[config.activation]
+    dtype = jnp.dtype(config.compute_dtype)
     policy_net = config.policy_network
     if policy_net is None and config.recurrent:
         policy_net = networks.gru_mlp(2 * task.action_size, config.gru_hidden_size, config.policy_hidden_sizes,
                                       activation=activation, output_scale=0.01)  # fmt: skip
     elif policy_net is None:
-        policy_net = networks.mlp(2 * task.action_size, config.policy_hidden_sizes, activation, output_scale=0.01)
-    value_net = config.value_network or networks.mlp(1, config.value_hidden_sizes, activation)
+        policy_net = networks.mlp(2 * task.action_size, config.policy_hidden_sizes, activation, output_scale=0.01,
+                                  compute_dtype=dtype)  # fmt: skip
+    value_net = config.value_network or networks.mlp(1, config.value_hidden_sizes, activation, compute_dtype=dtype)
     return policy_net, value_net
 
 

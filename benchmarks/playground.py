@@ -10,7 +10,8 @@ stepping, wall-clock time to `--threshold` of the better final return (compile i
 the final evaluation return, per seed. Playground's published figure for the env, where
 the issue quotes one, is printed beside them.
 
-    python benchmarks/playground.py --envs CartpoleBalance PendulumSwingup --steps 20000000
+    python benchmarks/playground.py --envs CartpoleBalance PendulumSwingup
+    python benchmarks/playground.py --envs CheetahRun --trainers brax      # merges into the JSON
     python benchmarks/playground.py --envs CartpoleBalance --smoke       # tiny sizes, on a CPU
 """
 
@@ -34,6 +35,7 @@ from ppo_vs_brax import time_to, training_curve  # noqa: E402
 
 from mjzoo.algorithms import ppo  # noqa: E402
 from mjzoo.harness import training  # noqa: E402
+from mjzoo.harness.cli import arguments  # noqa: E402
 from mjzoo.interop import brax as brax_adapter  # noqa: E402
 from mjzoo.interop import playground  # noqa: E402
 
@@ -96,89 +98,133 @@ def train_brax(env, config: dict, seed: int) -> dict:
             "compile_s": trained[0][1] - trained[0][0] / steps_per_s}  # fmt: skip
 
 
-def train_mjzoo(env, name: str, config: dict, seed: int) -> dict:
-    """mjzoo PPO on `playground.task(env)` with the same hyperparameters, evaluated about
-    as often as Brax's `num_evals`."""
-    fields = {**playground.ppo_hyperparameters(name), "total_steps": config["num_timesteps"]}
+def brax_env_steps(config: dict) -> int:
+    """The env steps Brax PPO actually trains for `config`: whole epochs of
+    `num_resets_per_eval` training steps between `num_evals - 1` evaluations, rounded up
+    (Playground's 60M-step DM Control config trains 88.5M)."""
+    per_step = config["batch_size"] * config["unroll_length"] * config["num_minibatches"] * config.get("action_repeat", 1)
+    evals = max(config["num_evals"] - 1, 1)
+    resets = max(config.get("num_resets_per_eval", 0), 1)
+    return evals * resets * per_step * int(np.ceil(config["num_timesteps"] / (evals * per_step * resets)))
+
+
+def train_mjzoo(env, name: str, config: dict, seed: int, overrides: dict) -> dict:
+    """mjzoo PPO on `playground.task(env)` with the same hyperparameters (and
+    `overrides` of `ppo.Config`), for as many env steps as Brax trains, evaluated about as
+    often as Brax's `num_evals`."""
+    fields = {**playground.ppo_hyperparameters(name), "total_steps": brax_env_steps(config), **overrides}
     if config["num_envs"] != fields["num_envs"]:  # --smoke
         fields.update(num_envs=config["num_envs"], unroll_length=config["unroll_length"],
                       num_minibatches=config["num_minibatches"], num_epochs=config["num_updates_per_batch"])  # fmt: skip
     ppo_config = ppo.Config(**fields)
-    updates = max(1, ppo_config.total_steps // ppo_config.steps_per_update)
-    per_chunk = max(1, updates // max(1, config["num_evals"] - 1))
+    per_chunk = max(1, ppo_config.num_updates // max(1, config["num_evals"] - 1))
     with tempfile.TemporaryDirectory() as out:
         settings = training.Settings(out_dir=Path(out), updates_per_chunk=per_chunk, eval_envs=config["num_eval_envs"],
-                                     eval_steps=config["episode_length"], video=False, progress=False,
+                                     eval_steps=config["episode_length"], eval_every=1, video=False, progress=False,
                                      checkpoint_every=0, seed=seed)  # fmt: skip
         start = time.perf_counter()
         training.run(ppo, ppo_config, playground.task(env), settings)
         curve, steps_per_s = training_curve(Path(out) / "metrics.jsonl", time.perf_counter() - start)
-    return {"steps_per_s": steps_per_s, "curve": curve, "final_return": curve[-1][2],
+    return {"steps_per_s": steps_per_s, "curve": curve, "final_return": curve[-1][2], "overrides": overrides,
             "compile_s": curve[0][1] - ppo_config.steps_per_update / steps_per_s}  # fmt: skip
 
 
-def measure(name: str, impl: str, steps: int, seeds: int, threshold: float, smoke: bool) -> dict:
+TRAINERS = {"mjzoo": train_mjzoo, "brax": lambda env, name, config, seed, overrides: train_brax(env, config, seed)}
+
+
+def measure(name: str, impl: str, steps: int, seeds: int, trainers: list[str], smoke: bool, overrides: dict) -> dict:
+    """Raw stepping and each of `trainers` over `seeds` seeds on Playground's `name`."""
     config = brax_config(name, steps, smoke)
     config.setdefault("num_eval_envs", 128)
-    overrides = {"impl": impl, **({"episode_length": config["episode_length"]} if smoke else {})}
     start = time.perf_counter()
-    env = playground.load(name, **overrides)
+    env = playground.load(name, impl=impl, **({"episode_length": config["episode_length"]} if smoke else {}))
     raw = raw_steps_per_s(env, config["num_envs"])
     print(f"{name} ({impl}): raw stepping {raw:,.0f} steps/s (load and compile included: "
           f"{time.perf_counter() - start:.0f} s)", flush=True)  # fmt: skip
-    runs = {"mjzoo": [], "brax": []}
-    for seed in range(seeds):
-        runs["mjzoo"].append(train_mjzoo(env, name, config, seed))
-        print(f"{name} ({impl}) seed {seed}: mjzoo {runs['mjzoo'][-1]['steps_per_s']:,.0f} steps/s, "
-              f"final {runs['mjzoo'][-1]['final_return']:.1f}, compile {runs['mjzoo'][-1]['compile_s']:.0f} s", flush=True)  # fmt: skip
-        runs["brax"].append(train_brax(env, config, seed))
-        print(f"{name} ({impl}) seed {seed}: brax  {runs['brax'][-1]['steps_per_s']:,.0f} steps/s, "
-              f"final {runs['brax'][-1]['final_return']:.1f}, compile {runs['brax'][-1]['compile_s']:.0f} s", flush=True)  # fmt: skip
-    best = threshold * max(np.mean([r["final_return"] for r in rs]) for rs in runs.values())
-    row = {"env": name, "impl": impl, "raw_steps_per_s": raw, "threshold": best, "steps": steps,
+    row = {"env": name, "impl": impl, "raw_steps_per_s": raw, "steps": brax_env_steps(config),
            "published": PUBLISHED.get(name)}  # fmt: skip
-    for trainer, rs in runs.items():
-        times = [time_to(r["curve"], best) for r in rs]
-        row[trainer] = {"runs": rs, "steps_per_s": float(np.mean([r["steps_per_s"] for r in rs])),
-                        "final_return": float(np.mean([r["final_return"] for r in rs])),
-                        "final_return_std": float(np.std([r["final_return"] for r in rs])),
-                        "time_to_threshold_s": None if None in times else float(np.mean(times)),
-                        "fraction_of_raw": float(np.mean([r["steps_per_s"] for r in rs])) / raw}  # fmt: skip
-    row["mjzoo_over_brax_steps_per_s"] = row["mjzoo"]["steps_per_s"] / row["brax"]["steps_per_s"]
+    for trainer in trainers:
+        runs = []
+        for seed in range(seeds):
+            runs.append(TRAINERS[trainer](env, name, config, seed, overrides))
+            print(f"{name} ({impl}) seed {seed}: {trainer} {runs[-1]['steps_per_s']:,.0f} steps/s, final "
+                  f"{runs[-1]['final_return']:.1f}, compile {runs[-1]['compile_s']:.0f} s, "
+                  f"{time.perf_counter() - start:.0f} s so far", flush=True)  # fmt: skip
+        row[trainer] = {"runs": runs}
+    return row
+
+
+def summarize(row: dict, threshold: float) -> dict:
+    """Adds each trainer's means, its time to `threshold` of the better final return and
+    the steps/s ratio, from the trainers' runs present in `row`."""
+    trainers = [t for t in TRAINERS if t in row]
+    finals = {t: float(np.mean([r["final_return"] for r in row[t]["runs"]])) for t in trainers}
+    row["threshold"] = threshold * max(finals.values())
+    for t in trainers:
+        rs = row[t]["runs"]
+        times = [time_to(r["curve"], row["threshold"]) for r in rs]
+        speed = float(np.mean([r["steps_per_s"] for r in rs]))
+        row[t].update(steps_per_s=speed, final_return=finals[t], fraction_of_raw=speed / row["raw_steps_per_s"],
+                      final_return_std=float(np.std([r["final_return"] for r in rs])), seeds=len(rs),
+                      time_to_threshold_s=None if None in times else float(np.mean(times)))  # fmt: skip
+    if len(trainers) == 2:
+        row["mjzoo_over_brax_steps_per_s"] = row["mjzoo"]["steps_per_s"] / row["brax"]["steps_per_s"]
     return row
 
 
 def print_table(rows: list[dict]) -> None:
-    print(f"\n{'env':<16} {'impl':<5} {'trainer':<6} {'steps/s':>10} {'/raw':>5} {'to thr (s)':>10} {'final':>14}")
+    print(f"\n{'env':<16} {'impl':<5} {'trainer':<6} {'seeds':>5} {'steps/s':>10} {'/raw':>5} {'to thr (s)':>10} "
+          f"{'final':>16}")  # fmt: skip
     for r in rows:
-        for trainer in ("mjzoo", "brax"):
+        for trainer in (t for t in TRAINERS if t in r):
             t = r[trainer]
             ttt = "never" if t["time_to_threshold_s"] is None else f"{t['time_to_threshold_s']:.1f}"
-            print(f"{r['env']:<16} {r['impl']:<5} {trainer:<6} {t['steps_per_s']:>10,.0f} {t['fraction_of_raw']:>5.2f} "
-                  f"{ttt:>10} {t['final_return']:>7.1f} ± {t['final_return_std']:<5.1f}")  # fmt: skip
-        print(f"{'':<16} {r['impl']:<5} raw    {r['raw_steps_per_s']:>10,.0f}   threshold {r['threshold']:.1f}; "
-              f"mjzoo/brax steps/s {r['mjzoo_over_brax_steps_per_s']:.2f}x"
+            print(f"{r['env']:<16} {r['impl']:<5} {trainer:<6} {t['seeds']:>5} {t['steps_per_s']:>10,.0f} "
+                  f"{t['fraction_of_raw']:>5.2f} {ttt:>10} {t['final_return']:>7.1f} ± {t['final_return_std']:<6.1f}")  # fmt: skip
+        ratio = r.get("mjzoo_over_brax_steps_per_s")
+        print(f"{'':<16} {r['impl']:<5} raw    {'':>5} {r['raw_steps_per_s']:>10,.0f}   threshold {r['threshold']:.1f}"
+              + (f"; mjzoo/brax steps/s {ratio:.2f}x" if ratio else "")
               + (f"; published: {r['published']}" if r["published"] else ""))  # fmt: skip
+
+
+def merged(old: list[dict], row: dict) -> list[dict]:
+    """`old` rows with `row`'s trainers merged into the row of the same env and physics
+    (so each trainer may be measured in its own process)."""
+    same = next((r for r in old if (r["env"], r["impl"]) == (row["env"], row["impl"])), None)
+    if same is None:
+        return [*old, row]
+    keep = {t: same[t] for t in TRAINERS if t in same and t not in row}
+    return [{**row, **keep} if r is same else r for r in old]
 
 
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     parser.add_argument("--envs", nargs="+", default=DEFAULT_ENVS)
     parser.add_argument("--impl", nargs="+", default=["jax"], choices=["jax", "warp"])
-    parser.add_argument("--steps", type=int, default=20_000_000, help="env steps per run (Playground's: 60M)")
+    parser.add_argument("--trainers", nargs="+", default=list(TRAINERS), choices=list(TRAINERS),
+                        help="measure only these; their rows merge into the JSON's rows of the same env")
+    parser.add_argument("--steps", type=int, default=60_000_000,
+                        help="Brax's num_timesteps (Playground's: 60M, which Brax rounds up to 88.5M); mjzoo trains "
+                             "as many env steps as Brax does")  # fmt: skip
     parser.add_argument("--seeds", type=int, default=1)
+    parser.add_argument("--set", nargs="*", default=[], metavar="FIELD=VALUE",
+                        help="ppo.Config overrides for mjzoo (e.g. compute_dtype=bfloat16)")
     parser.add_argument("--threshold", type=float, default=0.9, help="fraction of the better final return")
     parser.add_argument("--smoke", action="store_true", help="tiny sizes, to check the script on a CPU")
     parser.add_argument("--out", type=Path, default=Path(__file__).parent / "results" / "playground")
+    parser.add_argument("--name", default=None, help="the JSON's name (default: playground_BACKEND.json)")
     args = parser.parse_args()
+    overrides = arguments.parse_assignments(tuple(args.set), "--set")
     device = jax.devices()[0].device_kind
-    print(f"device: {device}, jax {jax.__version__}, {args.steps:,} env steps per run", flush=True)
+    print(f"device: {device}, jax {jax.__version__}, Brax's num_timesteps {args.steps:,}", flush=True)
     args.out.mkdir(parents=True, exist_ok=True)
-    path = args.out / f"playground_{jax.default_backend()}_{'_'.join(args.envs)}.json"
-    rows = []
+    path = args.out / (args.name or f"playground_{jax.default_backend()}.json")
+    rows = json.loads(path.read_text())["rows"] if path.exists() else []
     for name in args.envs:
         for impl in args.impl:
-            rows.append(measure(name, impl, args.steps, args.seeds, args.threshold, args.smoke))
+            row = measure(name, impl, args.steps, args.seeds, args.trainers, args.smoke, overrides)
+            rows = merged(rows, row)
+            rows = [summarize(r, args.threshold) for r in rows]
             path.write_text(json.dumps({"device": device, "jax": jax.__version__, "rows": rows}, indent=1))
     print_table(rows)
     print(f"wrote {path}", flush=True)

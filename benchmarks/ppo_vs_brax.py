@@ -27,6 +27,7 @@ JAX's for raw stepping, each trainer's steps/s and time to its threshold.
 from __future__ import annotations
 
 import argparse
+import dataclasses
 import json
 import os
 import sys
@@ -44,6 +45,7 @@ from task_overhead import add_impl_argument, impls, inputs, ratio, raw_steps_per
 import mjzoo  # noqa: E402
 import mjzoo.envs  # noqa: E402
 from mjzoo.harness import metrics, training  # noqa: E402
+from mjzoo.harness.cli import arguments  # noqa: E402
 from mjzoo.algorithms import ppo  # noqa: E402
 
 HYPER = dict(num_envs=2048, batch_size=1024, unroll_length=30, num_minibatches=32, num_updates_per_batch=16,
@@ -64,13 +66,13 @@ def mjzoo_config(total_steps: int) -> ppo.Config:
     )  # fmt: skip
 
 
-def train_mjzoo(task: mjzoo.Task, total_steps: int, episode_length: int) -> dict:
-    config = mjzoo_config(total_steps)
+def train_mjzoo(task: mjzoo.Task, total_steps: int, episode_length: int, seed: int = 0, **overrides) -> dict:
+    config = dataclasses.replace(mjzoo_config(total_steps), **overrides)
     with tempfile.TemporaryDirectory() as out:
         # Evaluate about as often as Brax does with num_evals=20 (every ~2M steps); Brax
         # writes no checkpoints, so neither do we here.
         settings = training.Settings(out_dir=Path(out), updates_per_chunk=2, eval_envs=128, eval_steps=episode_length,
-                                     video=False, progress=False, checkpoint_every=0)  # fmt: skip
+                                     video=False, progress=False, checkpoint_every=0, seed=seed)  # fmt: skip
         start = time.perf_counter()
         training.run(ppo, config, task, settings)
         curve, steps_per_s = training_curve(Path(out) / "metrics.jsonl", time.perf_counter() - start)
@@ -83,7 +85,8 @@ def training_curve(metrics_path: Path, total_s: float) -> tuple[list, float]:
     the first chunk) of a harness run that took `total_s` in all."""
     lines = metrics.read_metrics(metrics_path)
     offset = total_s - lines[-1]["perf/elapsed_s"]  # init before the loop's clock started
-    curve = [(line["step"], line["perf/elapsed_s"] + offset, line["eval/return"]) for line in lines]
+    curve = [(line["step"], line["perf/elapsed_s"] + offset, line["eval/return"]) for line in lines
+             if "eval/return" in line]  # the harness evaluates within its wall-clock budget, not every chunk
     steady = [line["perf/steps_per_s"] for line in lines[1:]] or [lines[0]["perf/steps_per_s"]]
     return curve, float(np.median(steady))
 
@@ -92,7 +95,7 @@ def time_to(curve: list, threshold: float) -> float | None:
     return next((seconds for _, seconds, ret in curve if ret >= threshold), None)
 
 
-def train_peer(task: mjzoo.Task, total_steps: int, episode_length: int) -> dict:
+def train_peer(task: mjzoo.Task, total_steps: int, episode_length: int, seed: int = 0) -> dict:
     """Brax PPO's result, or ``{"error": why}`` where it cannot train `task` (Brax's
     wrappers on Warp's physics state)."""
     try:
@@ -100,30 +103,68 @@ def train_peer(task: mjzoo.Task, total_steps: int, episode_length: int) -> dict:
         epoch = HYPER["batch_size"] * HYPER["unroll_length"] * HYPER["num_minibatches"]
         num_evals = min(20, max(3, total_steps // epoch + 1))
         return train_brax_ppo(task, num_timesteps=total_steps, episode_length=episode_length, num_evals=num_evals,
-                              **HYPER)  # fmt: skip
+                              seed=seed, **HYPER)  # fmt: skip
     except Exception as e:  # noqa: BLE001  # recorded in the JSON: the run goes on
         return {"error": f"{type(e).__name__}: {e}"[:2000]}
 
 
-def measure(env: str, impl: str, total_steps: int, threshold: float) -> dict:
-    """One row: raw stepping, mjzoo PPO and Brax PPO on `env` with `impl` physics."""
+def mean_of(runs: list[dict]) -> dict:
+    """Several seeds' results as one: the means of steps/s, final return and compile time
+    (and the final returns' spread), each seed's result under "runs"."""
+    if any("error" in r for r in runs):
+        return next(r for r in runs if "error" in r)
+    mean = {k: float(np.mean([r[k] for r in runs])) for k in runs[0] if isinstance(runs[0][k], (int, float))}
+    return {**mean, "final_return_std": float(np.std([r["final_return"] for r in runs])), "seeds": len(runs),
+            "runs": runs}  # fmt: skip
+
+
+def measure(env: str, impl: str, total_steps: int, seeds: int, trainers: list[str], overrides: dict) -> dict:
+    """One row: raw stepping, then mjzoo PPO (with `overrides` of its config) and Brax PPO
+    on `env` with `impl` physics, over `seeds` seeds each (`summarize` adds the rest)."""
     task = mjzoo.envs.make(env, impl=impl)
     episode_length = mjzoo.envs.defaults(env)["episode_steps"]
     raw = raw_steps_per_s(task, env, *inputs(task, HYPER["num_envs"], 100), repeats=3)
-    ours = train_mjzoo(task, total_steps, episode_length)
-    print(f"{env} ({impl}): mjzoo done {ours['steps_per_s']:,.0f} steps/s final {ours['final_return']:.1f}", flush=True)
-    peer = train_peer(task, total_steps, episode_length)
-    if "error" in peer:
-        print(f"{env} ({impl}): brax PPO could not run: {peer['error'][:500]}", flush=True)
-    else:
-        print(f"{env} ({impl}): brax done {peer['steps_per_s']:,.0f} steps/s final {peer['final_return']:.1f}", flush=True)
-    results = {"mjzoo": ours, "brax": peer}
-    best = threshold * max(r["final_return"] for r in results.values() if "error" not in r)
-    row = {"env": env, "impl": impl, "raw_steps_per_s": raw, "threshold": best, **results}
+    print(f"{env} ({impl}): raw stepping {raw:,.0f} steps/s", flush=True)
+    train = {"mjzoo": lambda seed: train_mjzoo(task, total_steps, episode_length, seed, **overrides),
+             "brax": lambda seed: train_peer(task, total_steps, episode_length, seed)}  # fmt: skip
+    results = {}
+    for name in trainers:
+        runs = []
+        for seed in range(seeds):
+            runs.append(train[name](seed))
+            if "error" in runs[-1]:
+                print(f"{env} ({impl}): {name} PPO could not run: {runs[-1]['error'][:500]}", flush=True)
+                break
+            print(f"{env} ({impl}) seed {seed}: {name} {runs[-1]['steps_per_s']:,.0f} steps/s, final "
+                  f"{runs[-1]['final_return']:.1f}, compile {runs[-1]['compile_s']:.0f} s", flush=True)  # fmt: skip
+        results[name] = mean_of(runs)
+    return {"env": env, "impl": impl, "raw_steps_per_s": raw, "mjzoo_overrides": overrides, **results}
+
+
+def summarize(row: dict, threshold: float) -> dict:
+    """Adds the threshold (`threshold` of the better final return), each trainer's time
+    to it (the mean over seeds; None if a seed never got there) and its fraction of raw
+    stepping, from the trainers' results in `row`."""
+    results = {name: row[name] for name in ("mjzoo", "brax") if name in row}
+    row["threshold"] = threshold * max(r["final_return"] for r in results.values() if "error" not in r)
     for name, r in results.items():
-        row[f"{name}_time_to_threshold_s"] = None if "error" in r else time_to(r["curve"], best)
-        row[f"{name}_fraction_of_raw"] = None if "error" in r else r["steps_per_s"] / raw
+        if "error" in r:
+            row[f"{name}_time_to_threshold_s"] = row[f"{name}_fraction_of_raw"] = None
+            continue
+        times = [time_to(run["curve"], row["threshold"]) for run in r.get("runs", [r])]
+        row[f"{name}_time_to_threshold_s"] = None if None in times else float(np.mean(times))
+        row[f"{name}_fraction_of_raw"] = r["steps_per_s"] / row["raw_steps_per_s"]
     return row
+
+
+def merged(old: list[dict], row: dict) -> list[dict]:
+    """`old` rows with `row` in place of the one of the same env and physics, keeping
+    that one's trainers `row` did not measure (each trainer may run in its own process)."""
+    same = next((r for r in old if (r["env"], r["impl"]) == (row["env"], row["impl"])), None)
+    if same is None:
+        return [*old, row]
+    kept = {name: same[name] for name in ("mjzoo", "brax") if name in same and name not in row}
+    return [{**row, **kept} if r is same else r for r in old]
 
 
 def warp_vs_jax(env: str, warp: dict, jax_: dict) -> dict:
@@ -135,17 +176,24 @@ def warp_vs_jax(env: str, warp: dict, jax_: dict) -> dict:
                for name in ("mjzoo", "brax")}}  # fmt: skip
 
 
+def warp_vs_jax_rows(rows: list[dict]) -> list[dict]:
+    """`warp_vs_jax` of each env with both physics measured by both trainers."""
+    complete = [r for r in rows if "mjzoo" in r and "brax" in r]
+    by_env = {r["env"]: {q["impl"]: q for q in complete if q["env"] == r["env"]} for r in complete}
+    return [warp_vs_jax(env, both["warp"], both["jax"]) for env, both in by_env.items() if len(both) == 2]
+
+
 def print_table(rows: list[dict]) -> None:
     print(f"\n{'env':<18} {'impl':<5} {'trainer':<7} {'steps/s':>11} {'/raw':>6} {'to thr (s)':>10} {'final':>8} {'compile s':>9}")
     for r in rows:
-        for name in ("mjzoo", "brax"):
+        for name in (n for n in ("mjzoo", "brax") if n in r):
             res, ttt = r[name], r[f"{name}_time_to_threshold_s"]
             if "error" in res:
                 print(f"{r['env']:<18} {r['impl']:<5} {name:<7} did not run: {res['error'][:200]}")
                 continue
             print(f"{r['env']:<18} {r['impl']:<5} {name:<7} {res['steps_per_s']:>11,.0f} {r[f'{name}_fraction_of_raw']:>6.2f} "
                   f"{'never' if ttt is None else f'{ttt:.1f}':>10} {res['final_return']:>8.1f} {res['compile_s']:>9.1f}")  # fmt: skip
-        peer = r["brax"].get("steps_per_s")
+        peer = r.get("brax", {}).get("steps_per_s") if "mjzoo" in r else None
         print(f"{'':<18} {r['impl']:<5} raw     {r['raw_steps_per_s']:>11,.0f}   threshold {r['threshold']:.1f}"
               + (f"; mjzoo/brax steps/s = {r['mjzoo']['steps_per_s'] / peer:.2f}x" if peer else ""))
 
@@ -158,21 +206,27 @@ def main() -> None:
     parser.add_argument("--out", type=Path, default=Path(__file__).parent / "results")
     parser.add_argument("--smoke", action="store_true", help="tiny sizes, to check the script on a CPU")
     parser.add_argument("--tag", default="", help="suffix of the JSON file")
+    parser.add_argument("--merge", action="store_true",
+                        help="merge into the JSON's rows (the trainers measured now replace theirs; others stay)")
+    parser.add_argument("--seeds", type=int, default=1)
+    parser.add_argument("--trainers", nargs="+", default=["mjzoo", "brax"], choices=["mjzoo", "brax"])
+    parser.add_argument("--set", nargs="*", default=[], metavar="FIELD=VALUE",
+                        help="ppo.Config overrides for mjzoo (e.g. compute_dtype=bfloat16)")
     add_impl_argument(parser)
     args = parser.parse_args()
+    overrides = arguments.parse_assignments(tuple(args.set), "--set")
     if args.smoke:
         HYPER.update(num_envs=16, batch_size=16, num_minibatches=4, num_updates_per_batch=2)
     device = jax.devices()[0].device_kind
     print(f"device: {device}, jax {jax.__version__}, {args.steps:,} env steps per run", flush=True)
-    rows, ratios = [], []
     args.out.mkdir(parents=True, exist_ok=True)
     path = args.out / f"ppo_vs_brax_{jax.default_backend()}{'_' + args.tag if args.tag else ''}.json"
+    rows = json.loads(path.read_text())["rows"] if args.merge and path.exists() else []
     for env in args.envs:
-        by_impl = {}
         for impl in impls(args.impl):
-            rows.append(by_impl.setdefault(impl, measure(env, impl, args.steps, args.threshold)))
-            if len(by_impl) == 2:
-                ratios.append(warp_vs_jax(env, by_impl["warp"], by_impl["jax"]))
+            row = measure(env, impl, args.steps, args.seeds, args.trainers, overrides)
+            rows = [summarize(r, args.threshold) for r in merged(rows, row)]
+            ratios = warp_vs_jax_rows(rows)
             # After each row: a later one that runs out of time leaves these.
             path.write_text(json.dumps({"device": device, "jax": jax.__version__, "hyper": HYPER, "rows": rows,
                                         "warp_vs_jax": ratios}, indent=2))  # fmt: skip

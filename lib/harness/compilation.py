@@ -2,13 +2,14 @@
 
 A run spends longer compiling than learning unless compiles are kept: `enable_cache`
 points JAX's persistent cache at the user's cache directory (the CLI and `train` do so
-by default), so a second launch of the same run loads its executables from disk.
+by default on a CPU; on a GPU when asked, see `enable_cache`), so a second launch of
+the same run loads its executables from disk.
 `compile_ahead` compiles a jitted function for given arguments on a background thread
 (XLA releases the GIL while it compiles), so the evaluation compiles while the first
 training chunk runs; the later call finds the executable already built.
 
-    compilation.enable_cache()                        # ~/.cache/mjzoo/jax (XDG_CACHE_HOME)
-    MJZOO_COMPILE_CACHE=0 mjzoo train ...             # off;  =/some/dir: there
+    compilation.enable_cache()                        # ~/.cache/mjzoo/jax (XDG_CACHE_HOME), on a CPU
+    MJZOO_COMPILE_CACHE=0 mjzoo train ...             # off;  =/some/dir: there (a GPU too)
 """
 
 from __future__ import annotations
@@ -41,13 +42,20 @@ def cache_directory() -> Path | None:
 def enable_cache(directory: str | Path | None = None) -> Path | None:
     """Turns JAX's persistent compilation cache on in `directory` (default
     `cache_directory()`), for every compile that takes over a second; returns the
-    directory in use, or None when turned off by ``MJZOO_COMPILE_CACHE=0``.
+    directory in use, or None when it stays off.
 
-    A cache directory the user already gave JAX (``JAX_COMPILATION_CACHE_DIR`` or
-    ``jax.config``) is kept as it is. Safe to call more than once."""
+    Off by default on an accelerator: there, with JAX 0.11, programs run from the cache
+    crashed now and then (CUDA_ERROR_ILLEGAL_INSTRUCTION on an H100, in mjzoo's and in
+    Brax's programs alike), so a GPU run uses it only when `directory` or
+    ``$MJZOO_COMPILE_CACHE`` names one. A cache directory the user already gave JAX
+    (``JAX_COMPILATION_CACHE_DIR`` or ``jax.config``) is kept as it is. Safe to call more
+    than once; it initializes JAX's backends (call `jax.distributed.initialize` first)."""
     current = jax.config.jax_compilation_cache_dir
     if current:
         return Path(current)
+    chosen = directory is not None or os.environ.get("MJZOO_COMPILE_CACHE") is not None
+    if not chosen and jax.default_backend() != "cpu":
+        return None
     directory = Path(directory).expanduser() if directory is not None else cache_directory()
     if directory is None:
         return None
@@ -59,8 +67,9 @@ def enable_cache(directory: str | Path | None = None) -> Path | None:
         warnings.warn(message, stacklevel=2)
         return None
     compilation_cache.set_cache_dir(str(directory))
-    # XLA's GPU autotuning results are worth keeping too (they are part of a cold compile).
-    jax.config.update("jax_persistent_cache_enable_xla_caches", "all")
+    # Executables only, not XLA's own caches (autotuning results, kernels): with two
+    # compiles at once (`compile_ahead`) sharing them, programs crashed on an H100.
+    jax.config.update("jax_persistent_cache_enable_xla_caches", "none")
     return directory
 
 

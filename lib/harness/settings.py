@@ -53,7 +53,7 @@ class Settings:
     resume: bool = False  # continue the run in out_dir from its newest intact checkpoint
     overwrite: bool = False  # replace a run already in out_dir: its files are deleted first
     progress: bool = True
-    compile_cache: bool = True  # JAX's persistent compilation cache (`mjzoo.harness.compilation.enable_cache`)
+    compile_cache: bool = True  # JAX's persistent compilation cache (`compilation.enable_cache`: a CPU by default)
 
     def __post_init__(self):
         problems = [_problem(name, getattr(self, name)) for name in _LOWEST]

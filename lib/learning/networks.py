@@ -81,6 +81,7 @@ def mlp(
     hidden_sizes: Sequence[int] = (256, 256),
     activation: Callable[[Array], Array] = jax.nn.swish,
     output_scale: float = 1.0,
+    compute_dtype: Any = jnp.float32,
 ) -> Network:
     """A multi-layer perceptron: dense layers with `activation` between them, none after
     the last.
@@ -93,10 +94,14 @@ def mlp(
       hidden_sizes: sizes of the hidden layers, in order; () gives a linear map.
       activation: applied elementwise after each hidden layer.
       output_scale: factor on the output layer's initial weights.
+      compute_dtype: the dtype of the hidden layers' arithmetic. `jnp.bfloat16` is mixed
+        precision: params stay float32 (so do gradients and the optimizer), the input
+        and hidden weights are cast, and the output layer runs in float32, so a value
+        head of large returns keeps its resolution.
 
     Returns:
-      A `Network` whose apply maps [..., in] -> [..., output_size], for any leading
-      batch dims.
+      A `Network` whose apply maps [..., in] -> [..., output_size] (float32), for any
+      leading batch dims.
     """
     _check_positive("mlp", "output_size", output_size)
     _check_positive("mlp", "hidden_sizes", hidden_sizes)
@@ -114,9 +119,10 @@ def mlp(
         expected = params[0]["kernel"].shape[0]
         if jnp.ndim(x) < 1 or jnp.shape(x)[-1] != expected:
             raise ValueError(f"mlp.apply: input shape {jnp.shape(x)} must end in the input size {expected}")
+        x = x.astype(compute_dtype)
         for layer in params[:-1]:
-            x = activation(_dense(layer, x))
-        return _dense(params[-1], x)
+            x = activation(_dense(jax.tree.map(lambda p: p.astype(compute_dtype), layer), x))
+        return _dense(params[-1], x.astype(jnp.float32))
 
     return Network(init=init, apply=apply)
 

@@ -3,6 +3,8 @@ exact resume, multi-device equivalence, vmapped seeds, user networks and optimiz
 
 from __future__ import annotations
 
+import dataclasses
+
 import json
 import os
 import subprocess
@@ -33,6 +35,7 @@ SMALL = ppo.Config(num_envs=8, unroll_length=8, num_minibatches=2, num_epochs=1,
         ("discount", 1.5, "discount=1.5 is invalid; expected in \\[0, 1\\]"),
         ("activation", "gelu", "activation='gelu' is invalid"),
         ("lr_schedule", "step", "lr_schedule='step' is invalid"),
+        ("compute_dtype", "float16", "compute_dtype='float16' is invalid; expected float32 or bfloat16"),
     ],
 )
 def test_config_errors_name_the_field(field, value, message):
@@ -77,6 +80,21 @@ def test_update_changes_parameters_and_normalizer(pendulum, small_update):
     moved = jax.tree.map(lambda a, b: float(jnp.max(jnp.abs(a - b))), state.params, new.params)
     assert max(jax.tree.leaves(moved)) > 0
     assert float(new.obs_stats.count) == SMALL.num_envs * SMALL.unroll_length
+
+
+def test_a_bfloat16_update_keeps_float32_state_and_moves_like_float32(pendulum):
+    """Mixed precision: the train state stays float32, and one update's step on the
+    params is the float32 update's to within bfloat16's rounding."""
+    states = {}
+    for dtype in ("float32", "bfloat16"):
+        config = dataclasses.replace(SMALL, compute_dtype=dtype)
+        state = ppo.init(config, pendulum, jax.random.key(2))
+        states[dtype] = (state, jax.jit(ppo.update, static_argnums=0)(config, pendulum, state)[0])
+    (before, f32), (_, bf16) = states["float32"], states["bfloat16"]
+    assert all(x.dtype == jnp.float32 for x in jax.tree.leaves(bf16.params))
+    steps = [jax.tree.leaves(jax.tree.map(jnp.subtract, s.params, before.params)) for s in (f32, bf16)]
+    cosine = [float(jnp.vdot(a, b) / (jnp.linalg.norm(a) * jnp.linalg.norm(b) + 1e-12)) for a, b in zip(*steps)]
+    assert min(cosine) > 0.9, cosine
 
 
 def test_deployable_policy_acts_within_ctrlrange(pendulum):

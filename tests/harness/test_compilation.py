@@ -55,6 +55,16 @@ def test_turned_off_it_enables_nothing(cache_dir_option, monkeypatch):
     assert compilation.enable_cache() is None
 
 
+def test_on_an_accelerator_it_is_on_only_when_asked(cache_dir_option, monkeypatch, tmp_path):
+    cache_dir_option(None)
+    monkeypatch.delenv("MJZOO_COMPILE_CACHE", raising=False)
+    monkeypatch.setattr(jax, "default_backend", lambda: "gpu")
+    assert compilation.enable_cache() is None
+    monkeypatch.setenv("MJZOO_COMPILE_CACHE", str(tmp_path / "asked"))
+    assert compilation.enable_cache() == tmp_path / "asked"
+    assert jax.config.jax_persistent_cache_enable_xla_caches == "none"
+
+
 def test_compiling_ahead_leaves_nothing_to_compile_for_the_call():
     function = jax.jit(lambda x, n: jnp.cumsum(jnp.sin(x)) * n, static_argnums=1)
     x = jnp.arange(5.0)

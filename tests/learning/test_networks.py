@@ -52,6 +52,23 @@ def test_mlp_matches_numpy_forward():
     np.testing.assert_allclose(net.apply(params, jnp.asarray(x)), np_mlp(params, x), rtol=1e-5, atol=1e-6)
 
 
+def test_bfloat16_compute_is_mixed_precision():
+    """Hidden layers in bfloat16 (about 3 significant digits), the output layer, the
+    output, the params and their gradients in float32."""
+    net = mlp(2, (16, 16), compute_dtype=jnp.bfloat16)
+    params = net.init(KEY, jnp.zeros(4))
+    x = np.random.default_rng(1).normal(size=(32, 4)).astype(np.float32)
+    out = net.apply(params, jnp.asarray(x))
+    assert out.dtype == jnp.float32
+    exact = np_mlp(params, x)
+    np.testing.assert_allclose(out, exact, rtol=0.05, atol=0.05 * np.abs(exact).max())
+    assert not np.allclose(out, exact, rtol=1e-6, atol=1e-7)  # it did compute in bfloat16
+    big = {**params[-1], "bias": params[-1]["bias"] + 1000.0}  # a value head's large returns
+    np.testing.assert_allclose(net.apply([*params[:-1], big], x) - out, 1000.0, rtol=0, atol=1e-3)
+    grads = jax.grad(lambda p: jnp.sum(net.apply(p, x)))(params)
+    assert all(g.dtype == jnp.float32 for g in jax.tree.leaves(grads))
+
+
 def test_mlp_with_no_hidden_layers_is_linear():
     net = mlp(2, ())
     params = net.init(KEY, jnp.zeros(3))

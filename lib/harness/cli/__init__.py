@@ -51,7 +51,8 @@ def main(argv: list[str] | None = None) -> None:
     stderr and exit status 2; tyro reports its own parse errors, also with status 2."""
     args = sys.argv[1:] if argv is None else list(argv)
     command = next((a for a in args if not a.startswith("-")), "")
-    compilation.enable_cache()  # a second launch of the same run skips most compiling
+    if command != "train":  # train's run enables it, after jax.distributed starts (if it does)
+        compilation.enable_cache()  # a second launch of the same run skips most compiling
     try:
         with _one_line_warnings(command), _importable_from_cwd():
             tyro.extras.subcommand_cli_from_dict(COMMANDS, prog="mjzoo", args=args)

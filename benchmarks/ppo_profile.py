@@ -1,0 +1,126 @@
+"""Where one PPO update's time goes: the rollout (physics and acting) against the learner
+(GAE and the epochs of minibatch steps), each jitted and timed alone, for each
+`ppo.Config` variant asked for, with MuJoCo Playground's DM Control hyperparameters
+(2048 envs, 983,040 env steps and 512 minibatch steps of 30,720 samples per update).
+
+A variant is ``NAME=FIELD:VALUE,...`` over `ppo.Config` (e.g. ``bf16=compute_dtype:bfloat16``);
+``base`` is the config unchanged. The matmul precision of float32 (JAX's default on recent
+GPUs is TF32) is the variant field ``precision`` (``float32`` / ``tensorfloat32`` /
+``bfloat16``), set with `jax.default_matmul_precision` around compiling and running.
+
+    python benchmarks/ppo_profile.py --envs cartpole_balance playground:CartpoleBalance \\
+        --variants base bf16=compute_dtype:bfloat16 f32=precision:float32
+    python benchmarks/ppo_profile.py --envs cartpole_balance --smoke        # on a CPU
+"""
+
+from __future__ import annotations
+
+import argparse
+import contextlib
+import dataclasses
+import json
+import os
+import sys
+import time
+from pathlib import Path
+
+import jax
+import numpy as np
+
+sys.path.insert(0, str(Path(__file__).parent))
+from ppo_vs_brax import mjzoo_config  # noqa: E402
+
+import mjzoo.envs  # noqa: E402
+from mjzoo.algorithms import ppo  # noqa: E402
+
+SMOKE = dict(num_envs=16, unroll_length=8, num_minibatches=4, num_epochs=2)
+
+
+def parse_variant(text: str) -> tuple[str, dict[str, str]]:
+    name, _, fields = text.partition("=")
+    pairs = [f.split(":", 1) for f in fields.split(",") if f]
+    if any(len(p) != 2 for p in pairs):
+        raise SystemExit(f"ppo_profile: variant {text!r} must be NAME=FIELD:VALUE,...")
+    return name, dict(pairs)
+
+
+def typed(config: ppo.Config, field: str, value: str):
+    current = getattr(config, field)
+    return type(current)(value) if isinstance(current, (int, float)) and not isinstance(current, bool) else value
+
+
+def best_of(fn, *args, repeats: int) -> float:
+    jax.block_until_ready(fn(*args))
+    times = []
+    for _ in range(repeats):
+        start = time.perf_counter()
+        jax.block_until_ready(fn(*args))
+        times.append(time.perf_counter() - start)
+    return float(np.median(times))
+
+
+def profile(env: str, base: ppo.Config, fields: dict[str, str], repeats: int) -> dict:
+    fields = dict(fields)
+    precision = fields.pop("precision", None)
+    config = dataclasses.replace(base, **{f: typed(base, f, v) for f, v in fields.items()})
+    task = mjzoo.envs.make(env)
+    scope = jax.default_matmul_precision(precision) if precision else contextlib.nullcontext()
+    with scope:
+        state = ppo.init(config, task, jax.random.key(0))
+        rollout = jax.jit(lambda s, k: ppo.rollout(config, task, s, k)[1])
+        improve = jax.jit(lambda s, d, k: ppo.improve(config, task, s, d, k)[0])
+        update = jax.jit(lambda s: ppo.update(config, task, s)[0])
+        key = jax.random.key(1)
+        start = time.perf_counter()
+        data = jax.block_until_ready(rollout(state, key))
+        compile_rollout = time.perf_counter() - start
+        start = time.perf_counter()
+        jax.block_until_ready(improve(state, data, key))
+        compile_improve = time.perf_counter() - start
+        t_rollout = best_of(rollout, state, key, repeats=repeats)
+        t_improve = best_of(improve, state, data, key, repeats=repeats)
+        t_update = best_of(update, state, repeats=repeats)
+        defaults = mjzoo.envs.defaults(env)
+        steps = defaults.get("episode_steps") or defaults.get("episode_length", 1000)
+        evaluate = jax.jit(lambda s, k: ppo.evaluate(config, task, s, k, 128, steps)[0])
+        t_evaluate = best_of(evaluate, state, key, repeats=1)
+    sgd_steps = config.num_epochs * config.num_minibatches
+    return {"env": env, "config": {**fields, **({"precision": precision} if precision else {})},
+            "rollout_s": t_rollout, "improve_s": t_improve, "update_s": t_update, "evaluate_128_envs_s": t_evaluate,
+            "evaluate_steps": steps,
+            "sgd_step_ms": 1e3 * t_improve / sgd_steps, "steps_per_s": config.steps_per_update / t_update,
+            "compile_rollout_s": compile_rollout, "compile_improve_s": compile_improve}  # fmt: skip
+
+
+def main() -> None:
+    parser = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
+    parser.add_argument("--envs", nargs="+", default=["cartpole_balance"])
+    parser.add_argument("--variants", nargs="+", default=["base"])
+    parser.add_argument("--repeats", type=int, default=5)
+    parser.add_argument("--smoke", action="store_true", help="tiny sizes, to check the script on a CPU")
+    parser.add_argument("--out", type=Path, default=Path(__file__).parent / "results" / "ppo_profile")
+    args = parser.parse_args()
+    base = mjzoo_config(total_steps=10**9)
+    if args.smoke:
+        base = dataclasses.replace(base, **SMOKE)
+    device = jax.devices()[0].device_kind
+    print(f"device: {device}, jax {jax.__version__}; per update: {base.steps_per_update:,} env steps, "
+          f"{base.num_epochs * base.num_minibatches} minibatch steps", flush=True)  # fmt: skip
+    rows = []
+    args.out.mkdir(parents=True, exist_ok=True)
+    path = args.out / f"ppo_profile_{jax.default_backend()}.json"
+    print(f"{'env':<28} {'variant':<10} {'rollout s':>9} {'improve s':>9} {'update s':>9} {'sgd ms':>7} {'steps/s':>11} {'eval s':>7}")
+    for env in args.envs:
+        for name, fields in map(parse_variant, args.variants):
+            row = {"variant": name, **profile(env, base, fields, args.repeats)}
+            rows.append(row)
+            print(f"{env:<28} {name:<10} {row['rollout_s']:>9.3f} {row['improve_s']:>9.3f} {row['update_s']:>9.3f} "
+                  f"{row['sgd_step_ms']:>7.2f} {row['steps_per_s']:>11,.0f} {row['evaluate_128_envs_s']:>7.2f}",
+                  flush=True)  # fmt: skip
+            path.write_text(json.dumps({"device": device, "jax": jax.__version__, "rows": rows}, indent=1))
+    print(f"wrote {path}", flush=True)
+
+
+if __name__ == "__main__":
+    main()
+    os._exit(0)
