@@ -41,7 +41,9 @@ def write(out: Path, problem: Problem, result: Result, stats: dict[str, float], 
                "backend": problem.physics,
                **{k: float(np.mean(v)) for k, v in states.metrics.items() if k.startswith("physics/")},
                **{k: float(v) for k, v in stats.items()}}  # fmt: skip
-    (out / "summary.json").write_text(json.dumps(summary, indent=2))
+    # null, not NaN, for what was not measured (plan_physics_ms on MJX): strict JSON readers reject NaN.
+    summary = {k: None if isinstance(v, float) and not np.isfinite(v) else v for k, v in summary.items()}
+    (out / "summary.json").write_text(json.dumps(summary, indent=2, allow_nan=False))
     _plot(out / "plan.png", time_s, costs, controls, problem.sim_task)
     if video:
         mj = problem.sim_task.mj_model

@@ -118,8 +118,10 @@ def test_playground_specs_resolve():
     assert mjzoo.envs.defaults("playground:CartpoleBalance")["episode_length"] == 1000
     tuned = mjzoo.envs.hyperparameters("playground:CartpoleBalance", "ppo")  # Playground's, in mjzoo's terms
     assert (tuned["num_envs"], tuned["unroll_length"], tuned["num_epochs"], tuned["discount"]) == (2048, 480, 16, 0.995)
-    assert mjzoo.envs.planning("playground:PendulumSwingup") is mjzoo.envs.PLAYGROUND_PLANNING
-    assert mjzoo.envs.hyperparameters("playground:PendulumSwingup", "mppi")["horizon_steps"] == 50
+    assert mjzoo.envs.planning("playground:CartpoleBalance") == mjzoo.envs.PLAYGROUND_PLANNING
+    assert mjzoo.envs.hyperparameters("playground:CartpoleBalance", "mppi")["horizon_steps"] == 50
+    pendulum = mjzoo.envs.hyperparameters("playground:PendulumSwingup", "mppi")  # the swing-up searches wider
+    assert (pendulum["horizon_steps"], pendulum["noise_scale"], pendulum["temperature"]) == (100, 1.0, 0.1)
     with pytest.raises(KeyError, match="did you mean CartpoleBalance"):
         mjzoo.envs.make("playground:CartpolBalance")
     from mjzoo.algorithms import mppi
