@@ -31,7 +31,7 @@ import jax.numpy as jnp
 import numpy as np
 
 sys.path.insert(0, str(Path(__file__).parent))
-from ppo_vs_brax import time_to, training_curve  # noqa: E402
+from ppo_vs_brax import merged, time_to, training_curve  # noqa: E402
 
 from mjzoo.algorithms import ppo  # noqa: E402
 from mjzoo.harness import training  # noqa: E402
@@ -185,16 +185,6 @@ def print_table(rows: list[dict]) -> None:
         print(f"{'':<16} {r['impl']:<5} raw    {'':>5} {r['raw_steps_per_s']:>10,.0f}   threshold {r['threshold']:.1f}"
               + (f"; mjzoo/brax steps/s {ratio:.2f}x" if ratio else "")
               + (f"; published: {r['published']}" if r["published"] else ""))  # fmt: skip
-
-
-def merged(old: list[dict], row: dict) -> list[dict]:
-    """`old` rows with `row`'s trainers merged into the row of the same env and physics
-    (so each trainer may be measured in its own process)."""
-    same = next((r for r in old if (r["env"], r["impl"]) == (row["env"], row["impl"])), None)
-    if same is None:
-        return [*old, row]
-    keep = {t: same[t] for t in TRAINERS if t in same and t not in row}
-    return [{**row, **keep} if r is same else r for r in old]
 
 
 def main() -> None:

@@ -32,6 +32,7 @@ from ppo_vs_brax import mjzoo_config  # noqa: E402
 
 import mjzoo.envs  # noqa: E402
 from mjzoo.algorithms import ppo  # noqa: E402
+from mjzoo.harness.cli import arguments  # noqa: E402
 
 SMOKE = dict(num_envs=16, unroll_length=8, num_minibatches=4, num_epochs=2)
 
@@ -42,11 +43,6 @@ def parse_variant(text: str) -> tuple[str, dict[str, str]]:
     if any(len(p) != 2 for p in pairs):
         raise SystemExit(f"ppo_profile: variant {text!r} must be NAME=FIELD:VALUE,...")
     return name, dict(pairs)
-
-
-def typed(config: ppo.Config, field: str, value: str):
-    current = getattr(config, field)
-    return type(current)(value) if isinstance(current, (int, float)) and not isinstance(current, bool) else value
 
 
 def best_of(fn, *args, repeats: int) -> float:
@@ -62,7 +58,8 @@ def best_of(fn, *args, repeats: int) -> float:
 def profile(env: str, base: ppo.Config, fields: dict[str, str], repeats: int) -> dict:
     fields = dict(fields)
     precision = fields.pop("precision", None)
-    config = dataclasses.replace(base, **{f: typed(base, f, v) for f, v in fields.items()})
+    values = arguments.parse_assignments(tuple(f"{f}={v}" for f, v in fields.items()), "--variants")
+    config = dataclasses.replace(base, **values)
     task = mjzoo.envs.make(env)
     scope = jax.default_matmul_precision(precision) if precision else contextlib.nullcontext()
     with scope:

@@ -26,6 +26,8 @@ import tempfile
 import time
 from pathlib import Path
 
+sys.path.insert(0, str(Path(__file__).parent))  # the worker's ppo_vs_brax
+
 THRESHOLDS = {"humanoid_walk": 6000.0, "ant": 3000.0, "cartpole_balance": 450.0}
 SMOKE = dict(num_minibatches=4, num_epochs=1, unroll_length=8)
 
@@ -41,11 +43,11 @@ def gpu_count() -> int:
 def worker(env: str, devices: int, envs_per_device: int, steps: int, smoke: bool, result: Path) -> None:
     """One device count, in this process: train and write the figures to `result`."""
     import jax
-    import numpy as np
+    from ppo_vs_brax import training_curve
 
     import mjzoo.envs
     from mjzoo.algorithms import ppo
-    from mjzoo.harness import metrics, training
+    from mjzoo.harness import training
 
     assert jax.local_device_count() == devices, (jax.local_devices(), devices)
     fields = {**mjzoo.envs.hyperparameters(env, "ppo"), "num_envs": envs_per_device * devices, "total_steps": steps}
@@ -57,15 +59,11 @@ def worker(env: str, devices: int, envs_per_device: int, steps: int, smoke: bool
                                      eval_envs=16 if smoke else 256, updates_per_chunk=2 if smoke else 10)  # fmt: skip
         start = time.perf_counter()
         training.run(ppo, config, mjzoo.envs.make(env), settings)
-        total = time.perf_counter() - start
-        lines = metrics.read_metrics(Path(out) / "metrics.jsonl")
-    offset = total - lines[-1]["perf/elapsed_s"]  # setup before the harness's clock started
-    curve = [(line["step"], line["perf/elapsed_s"] + offset, line["eval/return"]) for line in lines if "eval/return" in line]
-    rates = [line["perf/steps_per_s"] for line in lines[1:]] or [lines[0]["perf/steps_per_s"]]
+        curve, steps_per_s = training_curve(Path(out) / "metrics.jsonl", time.perf_counter() - start)
     threshold = THRESHOLDS.get(env, float("inf"))
     result.write_text(json.dumps({
         "devices": devices, "device_kind": jax.devices()[0].device_kind, "num_envs": config.num_envs,
-        "steps_per_s": float(np.median(rates)), "curve": curve, "final_return": curve[-1][2],
+        "steps_per_s": steps_per_s, "curve": curve, "final_return": curve[-1][2],
         "time_to_threshold_s": next((t for _, t, r in curve if r >= threshold), None), "threshold": threshold,
     }))  # fmt: skip
 

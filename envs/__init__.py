@@ -19,7 +19,6 @@ physics; overrides change weights, targets, episode length and physics options
 from __future__ import annotations
 
 import dataclasses
-
 import difflib
 import functools
 import importlib
