@@ -34,7 +34,7 @@ import numpy as np
 from mjzoo.harness import checkpoints, compilation, distributed, plotting, rendering
 from mjzoo.harness.contract import Algorithm, AlgorithmConfig, check_algorithm, check_state
 from mjzoo.harness.devices import replicate, shard_envs, template_data
-from mjzoo.harness.settings import EvalSchedule, Settings, config_dict
+from mjzoo.harness.settings import EvalSchedule, Settings, checkpoint_due, config_dict
 from mjzoo.harness import metrics as metrics_lib
 from mjzoo.running import control_dt
 from mjzoo.types import Task
@@ -181,6 +181,7 @@ class _Loop:
         self.video: tuple[int, Path] | None = None  # (step, path) of the latest videos/eval_<step>.mp4
         self.pending: dict[str, float] = {}  # once-only metrics waiting for the next metrics line
         self.ahead: threading.Thread | None = None  # the evaluation compiling in the background
+        self.saved = launched  # when the last checkpoint was written
         if settings.profile_memory and (silent := metrics_lib.device_memory()[1]):
             warnings.warn(f"training: profile_memory: {', '.join(silent)} report no memory statistics "
                           "(memory_stats() is None, as on XLA's CPU); nothing is recorded for them",
@@ -208,7 +209,7 @@ class _Loop:
         metrics["perf/elapsed_s"] = _clock() - self.launched
         if self.settings.profile_memory:
             metrics.update(metrics_lib.device_memory()[0])
-        self._write(state, step, number, metrics, evaluated)
+        self._write(state, step, number, metrics, evaluated, final)
         if self.settings.progress:
             self.progress.update(step, **self.shown, sps=f"{metrics['perf/steps_per_s']:,.0f}")
         self.last = metrics
@@ -254,7 +255,8 @@ class _Loop:
             result["perf/video_s"] = _clock() - start
         return result
 
-    def _write(self, state: Any, step: int, number: int, metrics: dict[str, float], evaluated: bool) -> None:
+    def _write(self, state: Any, step: int, number: int, metrics: dict[str, float], evaluated: bool,
+               final: bool) -> None:  # fmt: skip
         """The metrics line (every `log_every` chunks and at each evaluation) and the checkpoint."""
         if self.out is None:
             return
@@ -264,8 +266,9 @@ class _Loop:
             kept = metrics if s.log_train_metrics else {k: v for k, v in metrics.items() if k.startswith(shared)}
             self.writer.write(step, {**self.pending, **kept})
             self.pending = {}
-        if s.checkpoint_every and number % s.checkpoint_every == 0:
+        if distributed.agree(checkpoint_due(s, number, final, _clock() - self.saved)):  # process 0's clock
             checkpoints.save(self.out / "checkpoints", step, state)  # by every process, as orbax needs
+            self.saved = _clock()
 
     def close(self) -> None:
         self.progress.close()

@@ -242,7 +242,8 @@ COUNTER.PER_ENV_FIELDS = ()
 def test_training_resumes_from_the_newest_intact_checkpoint(tmp_path):
     """A resume skips a damaged newest checkpoint (warning), sets it aside, cuts
     metrics.jsonl back and trains on to the same end, saving that step anew."""
-    settings = training.Settings(out_dir=tmp_path, updates_per_chunk=1, eval_steps=1, video=False, progress=False)
+    settings = training.Settings(out_dir=tmp_path, updates_per_chunk=1, eval_steps=1, video=False, progress=False,
+                                 checkpoint_every=1)  # fmt: skip
     training.run(COUNTER, CountConfig(num_updates=3), {}, settings)
     damage(tmp_path / "checkpoints", 30)
     with pytest.warns(checkpoints.DamagedCheckpointWarning, match="checkpoint 30 is damaged .*restored checkpoint 20"):
@@ -319,11 +320,13 @@ def test_schedule_and_render_flags_reach_the_settings_and_a_resume_keeps_them(tm
     monkeypatch.setattr(ppo, "train", lambda config, task, settings: (seen.append(settings), configs.append(config), (None, {}))[2])
     run = tmp_path / "run"
     cli.main(["train", "ppo", ENV, "--out", str(run), "--rollout-seconds", "0.5", "--eval-every", "3", "--eval-seconds", "0.5", "--log-every", "2",
-              "--no-log-train-metrics", "--video-every", "4", "--profile-memory", "--render.width", "64",
+              "--no-log-train-metrics", "--video-every", "4", "--profile-memory", "--checkpoint-every-seconds", "300",
+              "--render.width", "64",
               "--render.contact-points", "--render.lookat", "0", "0", "1"])  # fmt: skip
     new = seen[-1]
     assert configs[-1].unroll_length == 25  # KSim's rollout_length_seconds: 0.5 s of 0.02 s control steps
     assert (new.eval_every, new.eval_seconds, new.log_every, new.log_train_metrics, new.video_every) == (3, 0.5, 2, False, 4)
+    assert (new.checkpoint_every_seconds, new.checkpoint_every) == (300.0, None)
     assert new.profile_memory and new.render == rendering.RenderConfig(width=64, contact_points=True, lookat=(0, 0, 1))
     info = json.loads((write_run(tmp_path / "resumed") / "config.json").read_text())
     info["settings"] = json.loads(json.dumps({k: v for k, v in dataclasses.asdict(new).items() if k != "out_dir"}))

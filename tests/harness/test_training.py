@@ -182,6 +182,26 @@ def test_evaluation_by_budget_keeps_its_share_of_the_wall_clock(tmp_path, monkey
     assert sum(r["perf/eval_s"] for r in records[:-1]) <= budget * before_last["perf/elapsed_s"] + 1e-9
 
 
+@pytest.mark.parametrize(
+    "settings, chunks",
+    [
+        ({}, [6, 7]),  # once a minute (chunks take 10 s), and the last chunk
+        ({"checkpoint_every": 1}, [1, 2, 3, 4, 5, 6, 7]),
+        ({"checkpoint_every": 0}, []),  # never, not even at the end
+        ({"checkpoint_every": 3, "checkpoint_every_seconds": None}, [3, 6, 7]),
+        ({"checkpoint_every_seconds": 15}, [2, 4, 6, 7]),  # 20 s after launch, then 20 s after each save
+        ({"checkpoint_every": 5, "checkpoint_every_seconds": 25}, [3, 5, 7]),  # either trigger; the clock restarts at 5
+    ],
+)
+def test_checkpoint_schedule(tmp_path, monkeypatch, settings, chunks):
+    FakeClock(monkeypatch)
+    saved = []
+    monkeypatch.setattr(training.checkpoints, "save", lambda directory, step, state: saved.append(step))
+    run = dataclasses.replace(SETTINGS, out_dir=tmp_path, **settings)
+    training.run(LOGGING, CountConfig(num_updates=7), TASK, run)
+    assert saved == [10 * c for c in chunks]
+
+
 def test_log_every_and_log_train_metrics_choose_what_metrics_jsonl_holds(tmp_path, monkeypatch):
     FakeClock(monkeypatch)
     records = lines(tmp_path, 6, eval_every=3, log_every=2)

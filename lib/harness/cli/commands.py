@@ -56,6 +56,10 @@ class Schedule:
     """Log training metrics (losses, rewards); off: only eval/*, perf/* (and memory/*)."""
     profile_memory: bool = False
     """Record each device's memory in use and its peak as memory/*."""
+    checkpoint_every: int | None = None
+    """Also save a checkpoint every N chunks; 0: never, not even at the end."""
+    checkpoint_every_seconds: float | None = None
+    """Wall-clock seconds between checkpoints (default 60); the last chunk always saves one."""
 
 
 def envs() -> None:
