@@ -246,6 +246,36 @@ def test_auto_reset_state_is_a_fresh_reset():
     np.testing.assert_allclose(s.info["auto_reset"]["final_obs"][1:, 0], q[:-1] + 0.01, rtol=1e-5)
 
 
+_RESETS: list[int] = []
+
+
+def _counted_reset(p: Params, model, key):
+    jax.debug.callback(lambda: _RESETS.append(1))  # runs only where a reset is computed
+    return _reset(p, model, key)
+
+
+def test_a_batch_resets_only_on_steps_where_an_env_ended():
+    """Under vmap the new episodes are computed only on steps where some env ended (one
+    branch for the batch), and every env's states equal its own unbatched run."""
+    inner = make_task(threshold=0.05)
+    task = mjzoo.with_auto_reset(inner.replace(start=bind(_counted_reset, inner.start.args[0])))
+    keys = jax.random.split(KEY, 3)
+    states = jax.vmap(reset, in_axes=(None, 0))(task, keys)
+    calm = jnp.zeros((3, T, 1))  # no env ends
+    pushed = calm.at[1].set(1.0)  # env 1 is pushed past the threshold at its 3rd step (then every 3rd)
+    batched = jax.jit(jax.vmap(run, in_axes=(None, 0, 0, 0)))
+    for actions, resets_expected in ((calm, False), (pushed, True)):
+        jax.block_until_ready(batched(task, states, actions, keys))  # compiled (and warmed) first
+        _RESETS.clear()
+        _, s = jax.block_until_ready(batched(task, states, actions, keys))
+        jax.effects_barrier()
+        assert bool(_RESETS) == resets_expected, (len(_RESETS), resets_expected)
+        for env in range(3):
+            _, alone = run(task, jax.tree.map(lambda x: x[env], states), actions[env], keys[env])
+            chex.assert_trees_all_equal(jax.tree.map(lambda x: x[env], s), alone)
+    np.testing.assert_array_equal(s.terminated[1], [False, False, True, False, False, True])
+
+
 # --- with_action_repeat -------------------------------------------------------------------
 
 
