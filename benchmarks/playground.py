@@ -47,12 +47,12 @@ PUBLISHED = {"CartpoleBalance": {"brax_steps_per_s_jax": 734_000, "brax_steps_pe
 SMOKE = dict(num_envs=16, batch_size=16, num_minibatches=4, num_updates_per_batch=2, num_evals=3, episode_length=50)
 
 
-def brax_config(name: str, steps: int, smoke: bool) -> dict:
-    """Playground's tuned Brax PPO config for `name`, `steps` long."""
+def brax_config(name: str, steps: int, smoke: bool, evals: int | None = None) -> dict:
+    """Playground's tuned Brax PPO config for `name`, `steps` long (`evals` evaluations)."""
     from mujoco_playground.config import dm_control_suite_params
 
     config = dm_control_suite_params.brax_ppo_config(name).to_dict()
-    config.update(num_timesteps=steps, **(SMOKE if smoke else {}))
+    config.update(num_timesteps=steps, **({"num_evals": evals} if evals else {}), **(SMOKE if smoke else {}))
     return config
 
 
@@ -132,9 +132,10 @@ def train_mjzoo(env, name: str, config: dict, seed: int, overrides: dict) -> dic
 TRAINERS = {"mjzoo": train_mjzoo, "brax": lambda env, name, config, seed, overrides: train_brax(env, config, seed)}
 
 
-def measure(name: str, impl: str, steps: int, seeds: int, trainers: list[str], smoke: bool, overrides: dict) -> dict:
+def measure(name: str, impl: str, steps: int, seeds: int, trainers: list[str], smoke: bool, overrides: dict,
+            evals: int | None = None) -> dict:  # fmt: skip
     """Raw stepping and each of `trainers` over `seeds` seeds on Playground's `name`."""
-    config = brax_config(name, steps, smoke)
+    config = brax_config(name, steps, smoke, evals)
     config.setdefault("num_eval_envs", 128)
     start = time.perf_counter()
     env = playground.load(name, impl=impl, **({"episode_length": config["episode_length"]} if smoke else {}))
@@ -196,6 +197,9 @@ def main() -> None:
     parser.add_argument("--steps", type=int, default=60_000_000,
                         help="Brax's num_timesteps (Playground's: 60M, which Brax rounds up to 88.5M); mjzoo trains "
                              "as many env steps as Brax does")  # fmt: skip
+    parser.add_argument("--evals", type=int, default=None,
+                        help="Brax's num_evals (Playground's: 10); fewer make the whole epochs Brax rounds up to "
+                             "shorter (4 evaluations: 29.5M steps, not 88.5M)")  # fmt: skip
     parser.add_argument("--seeds", type=int, default=1)
     parser.add_argument("--set", nargs="*", default=[], metavar="FIELD=VALUE",
                         help="ppo.Config overrides for mjzoo (e.g. compute_dtype=bfloat16)")
@@ -212,7 +216,7 @@ def main() -> None:
     rows = json.loads(path.read_text())["rows"] if path.exists() else []
     for name in args.envs:
         for impl in args.impl:
-            row = measure(name, impl, args.steps, args.seeds, args.trainers, args.smoke, overrides)
+            row = measure(name, impl, args.steps, args.seeds, args.trainers, args.smoke, overrides, args.evals)
             rows = merged(rows, row)
             rows = [summarize(r, args.threshold) for r in rows]
             path.write_text(json.dumps({"device": device, "jax": jax.__version__, "rows": rows}, indent=1))

@@ -65,25 +65,27 @@ def measure(env: str, steps: int, eval_steps: int, smoke: bool, timeout: float) 
         print(f"{env}: cold launch to first update {cold['launch_to_first_update_s']:.1f} s", flush=True)
         warm = launch(env, scratch / "warm", cache, steps, no_eval, smoke, timeout)
         print(f"{env}: warm launch to first update {warm['launch_to_first_update_s']:.1f} s", flush=True)
-        budget = launch(env, scratch / "budget", cache, eval_steps, (), smoke, timeout)
-    lines = budget["lines"]
-    elapsed = lines[-1]["perf/elapsed_s"]
-    first = lines[0]["perf/first_update_s"]
-    evaluating = sum(line.get("perf/eval_s", 0.0) for line in lines[:-1])  # the last always evaluates
-    training_rates = [line["perf/steps_per_s"] for line in lines[1:]] or [lines[0]["perf/steps_per_s"]]
-    overall = (lines[-1]["step"] - lines[0]["step"]) / max(elapsed - first, 1e-9)
+        budget = launch(env, scratch / "budget", cache, eval_steps, (), smoke, timeout) if eval_steps else None
     row = {
         "env": env,
         "cold_launch_to_first_update_s": cold["launch_to_first_update_s"],
         "warm_launch_to_first_update_s": warm["launch_to_first_update_s"],
         "cold_first_update_s": cold["lines"][0]["perf/first_update_s"],
         "warm_first_update_s": warm["lines"][0]["perf/first_update_s"],
-        "budget_run": {"steps": lines[-1]["step"], "evaluations": sum("eval/return" in line for line in lines),
+    }
+    if budget is None:
+        return row
+    lines = budget["lines"]
+    elapsed = lines[-1]["perf/elapsed_s"]
+    first = lines[0]["perf/first_update_s"]
+    evaluating = sum(line.get("perf/eval_s", 0.0) for line in lines[:-1])  # the last always evaluates
+    training_rates = [line["perf/steps_per_s"] for line in lines[1:]] or [lines[0]["perf/steps_per_s"]]
+    overall = (lines[-1]["step"] - lines[0]["step"]) / max(elapsed - first, 1e-9)
+    row["budget_run"] = {"steps": lines[-1]["step"], "evaluations": sum("eval/return" in line for line in lines),
                        "eval_share_before_last": evaluating / elapsed, "elapsed_s": elapsed,
                        "training_steps_per_s": sum(training_rates) / len(training_rates),
                        "overall_steps_per_s_after_first": overall,
-                       "final_return": lines[-1].get("eval/return")},  # fmt: skip
-    }
+                       "final_return": lines[-1].get("eval/return")}  # fmt: skip
     print(f"{env}: budget run: {row['budget_run']['evaluations']} evaluations, "
           f"{100 * row['budget_run']['eval_share_before_last']:.1f}% of {elapsed:.0f} s evaluating; training "
           f"{row['budget_run']['training_steps_per_s']:,.0f} steps/s, overall {overall:,.0f}", flush=True)  # fmt: skip
@@ -94,16 +96,17 @@ def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     parser.add_argument("--envs", nargs="+", default=["cartpole_balance", "humanoid_walk"])
     parser.add_argument("--steps", type=int, default=2_000_000, help="env steps of the cold and warm launches")
-    parser.add_argument("--eval-run-steps", type=int, default=20_000_000, help="env steps of the budget run")
+    parser.add_argument("--eval-run-steps", type=int, default=20_000_000, help="env steps of the budget run; 0: none")
     parser.add_argument("--smoke", action="store_true", help="tiny sizes, to check the script on a CPU")
     parser.add_argument("--timeout", type=float, default=900.0)
     parser.add_argument("--out", type=Path, default=Path(__file__).parent / "results" / "startup")
+    parser.add_argument("--name-envs", action="store_true", help="name the JSON after the envs too")
     args = parser.parse_args()
     import jax  # after the children's launch settings are read: only to name the device
 
     device = jax.devices()[0].device_kind
     args.out.mkdir(parents=True, exist_ok=True)
-    path = args.out / f"startup_{jax.default_backend()}.json"
+    path = args.out / f"startup_{jax.default_backend()}{'_' + '_'.join(args.envs) if args.name_envs else ''}.json"
     rows = []
     for env in args.envs:
         eval_steps = args.steps if args.smoke else args.eval_run_steps
@@ -111,10 +114,10 @@ def main() -> None:
         path.write_text(json.dumps({"device": device, "rows": rows}, indent=1))
     print(f"\n{'env':<18} {'cold (s)':>9} {'warm (s)':>9} {'eval share':>10} {'train/s':>12} {'overall/s':>12}")
     for r in rows:
-        b = r["budget_run"]
+        b = r.get("budget_run")
         print(f"{r['env']:<18} {r['cold_launch_to_first_update_s']:>9.1f} {r['warm_launch_to_first_update_s']:>9.1f} "
-              f"{100 * b['eval_share_before_last']:>9.1f}% {b['training_steps_per_s']:>12,.0f} "
-              f"{b['overall_steps_per_s_after_first']:>12,.0f}")  # fmt: skip
+              + (f"{100 * b['eval_share_before_last']:>9.1f}% {b['training_steps_per_s']:>12,.0f} "
+                 f"{b['overall_steps_per_s_after_first']:>12,.0f}" if b else "  (no budget run)"))  # fmt: skip
     print(f"wrote {path}")
 
 

@@ -186,34 +186,25 @@ def resets_itself(task: Task) -> bool:
 def _auto_reset_step(inner: Task, model, state: State, action: Array, key: Array) -> State:
     inner = inner.replace(model=model)
     ended, terms = transition_with_terms(inner, state, action, key)
-    done = ended.terminated | ended.truncated
-    if model.impl == mjx.Impl.WARP:  # its shared contact pool: the plain per-world select
-        data, obs, info = _restarted_select(inner, done, key, ended)
-    else:
-        data, obs, info = _restarted(inner, done, key, ended)
-    chosen = ended.replace(data=data, obs=obs, info={**info, "auto_reset": {"final_obs": ended.obs}})
+    restart = _restarted_select if model.impl == mjx.Impl.WARP else _restarted  # Warp: its shared contact pool
+    chosen = restart(inner, ended.terminated | ended.truncated, key, ended)
+    chosen = chosen.replace(info={**chosen.info, "auto_reset": {"final_obs": ended.obs}})
     return record(chosen, terms, ended.terminated, ended.truncated)
 
 
-def _fresh(inner: Task, key: Array, ended: State) -> tuple:
-    """(data, obs, info) of a new episode, its info with `ended`'s entries it lacks as zeros."""
+def _restarted_select(inner: Task, done: Array, key: Array, ended: State) -> State:
+    """`ended` with a new episode's data, obs and info where `done` (its info holding
+    `ended`'s entries it lacks, as zeros)."""
     fresh = reset(inner, jax.random.fold_in(key, RESET_STREAM))
-    return fresh.data, fresh.obs, tree.fill_missing(fresh.info, ended.info)
-
-
-def _restarted_select(inner: Task, done: Array, key: Array, ended: State) -> tuple:
-    """(data, obs, info) to go on from: a new episode's where `done`, else `ended`'s."""
-    data, obs, info = _fresh(inner, key, ended)
-    return worlds.where(done, data, ended.data), tree.where(done, obs, ended.obs), tree.where(done, info, ended.info)
+    return _select(done, fresh.replace(info=tree.fill_missing(fresh.info, ended.info)), ended)
 
 
 @jax.custom_batching.custom_vmap
-def _restarted(inner: Task, done: Array, key: Array, ended: State) -> tuple:
+def _restarted(inner: Task, done: Array, key: Array, ended: State) -> State:
     """`_restarted_select`, batched so that the new episodes are computed only when some
     env ended: under `jax.vmap` a per-env choice computes both sides for every env, and a
     reset can cost hundreds of steps (Playground's cheetah settles for 200)."""
-    return jax.lax.cond(done, lambda: _restarted_select(inner, True, key, ended),
-                        lambda: (ended.data, ended.obs, ended.info))  # fmt: skip
+    return jax.lax.cond(done, lambda: _restarted_select(inner, True, key, ended), lambda: ended)
 
 
 @_restarted.def_vmap
@@ -223,10 +214,9 @@ def _restarted_batch(axis_size: int, in_batched: list, inner: Task, done: Array,
     axes = [0 if b else None for b in jax.tree.leaves(in_batched[0])]
     batched = lambda x, b: x if b else jnp.broadcast_to(x, (axis_size, *jnp.shape(x)))  # noqa: E731
     done, key, ended = (jax.tree.map(batched, x, b) for x, b in zip((done, key, ended), in_batched[1:]))
-    inners = lambda leaves: jax.tree.unflatten(treedef, leaves)  # noqa: E731
-    fresh_all = jax.vmap(lambda leaves, d, k, e: _restarted_select(inners(leaves), d, k, e), in_axes=(axes, 0, 0, 0))
-    as_ended = lambda *_: (ended.data, ended.obs, ended.info)  # noqa: E731
-    out = jax.lax.cond(jnp.any(done), fresh_all, as_ended, leaves, done, key, ended)  # one branch for the batch
+    restart = lambda leaves, *args: _restarted_select(jax.tree.unflatten(treedef, leaves), *args)  # noqa: E731
+    restart_all = jax.vmap(restart, in_axes=(axes, 0, 0, 0))
+    out = jax.lax.cond(jnp.any(done), restart_all, lambda *_: ended, leaves, done, key, ended)  # one branch for all
     return out, jax.tree.map(lambda _: True, out)
 
 

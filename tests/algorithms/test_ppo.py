@@ -144,7 +144,7 @@ def test_user_network_and_optimizer(pendulum):
 def _train(tmp_path, name: str, resume: bool = False):
     config = ppo.Config(num_envs=8, unroll_length=8, num_minibatches=2, num_epochs=2, total_steps=8 * 8 * 4)
     settings = training.Settings(out_dir=tmp_path / name, updates_per_chunk=2, eval_envs=2, eval_steps=20, eval_every=1,
-                                 video=False, resume=resume, progress=False)  # fmt: skip
+                                 checkpoint_every=1, video=False, resume=resume, progress=False)  # fmt: skip
     return ppo.train(config, mjzoo.envs.make("cartpole_balance"), settings)
 
 

@@ -37,7 +37,8 @@ XML = """
 SPEC = "tests.harness.test_distributed:block_task"
 FLAGS = ["--config", "num_envs=8", "unroll_length=8", "num_minibatches=2", "num_epochs=1",
          "policy_hidden_sizes=(16,)", "value_hidden_sizes=(16,)", "--updates-per-chunk", "2", "--eval-envs", "2",
-         "--eval-every", "1", "--no-video"]  # fmt: skip (every chunk evaluates, whatever the clocks say)
+         "--eval-every", "1", "--checkpoint-every", "1", "--no-video"]  # fmt: skip (every chunk evaluates and
+# saves, whatever the clocks say)
 STEPS_PER_CHUNK = 2 * 8 * 8
 RTOL, ATOL = 1e-5, 1e-6  # the runs agree to the bit here; this allows another order of summing
 
