@@ -204,12 +204,14 @@ class _Loop:
             metrics["perf/first_update_s"] = self.pending["perf/first_update_s"] = end - self.launched
             self.shown["first"] = f"{end - self.launched:.1f}s"
         with self.progress.paused():  # the bar's steps/s is the training rate
-            evaluated = bool(distributed.agree(self.schedule.due(number, final := updates >= self.total_updates, end)))
+            final = updates >= self.total_updates
+            due = (self.schedule.due(number, final, end), checkpoint_due(self.settings, number, final, end - self.saved))
+            evaluated, save = (bool(x) for x in distributed.agree(due))  # process 0's clock: one collective for both
             metrics.update(self._evaluate(state, step, final) if evaluated else {"perf/eval_s": 0.0})
         metrics["perf/elapsed_s"] = _clock() - self.launched
         if self.settings.profile_memory:
             metrics.update(metrics_lib.device_memory()[0])
-        self._write(state, step, number, metrics, evaluated, final)
+        self._write(state, step, number, metrics, evaluated, save)
         if self.settings.progress:
             self.progress.update(step, **self.shown, sps=f"{metrics['perf/steps_per_s']:,.0f}")
         self.last = metrics
@@ -256,7 +258,7 @@ class _Loop:
         return result
 
     def _write(self, state: Any, step: int, number: int, metrics: dict[str, float], evaluated: bool,
-               final: bool) -> None:  # fmt: skip
+               save: bool) -> None:  # fmt: skip
         """The metrics line (every `log_every` chunks and at each evaluation) and the checkpoint."""
         if self.out is None:
             return
@@ -266,7 +268,7 @@ class _Loop:
             kept = metrics if s.log_train_metrics else {k: v for k, v in metrics.items() if k.startswith(shared)}
             self.writer.write(step, {**self.pending, **kept})
             self.pending = {}
-        if distributed.agree(checkpoint_due(s, number, final, _clock() - self.saved)):  # process 0's clock
+        if save:
             checkpoints.save(self.out / "checkpoints", step, state)  # by every process, as orbax needs
             self.saved = _clock()
 
