@@ -98,7 +98,7 @@ def actuated_pose(mj_model: mujoco.MjModel) -> np.ndarray:
 
 
 def _reset(p: Params, model: mjx.Model, key: Array) -> State:
-    data = mjx.forward(model, p.data0.replace(qpos=p.qpos0))
+    data = physics_lib.forward(model, p.data0.replace(qpos=p.qpos0))
     state = State.create(data, jnp.zeros((0,), jnp.float32))
     return state.replace(obs=p.observe(model, state))
 

@@ -154,7 +154,7 @@ def _start(spec: Spec, p: dict, model: mjx.Model, key: Array) -> State:
         out = item(p, model, data, item_key)
         data, written = out if isinstance(out, tuple) else (out, {})
         info.update(written)
-    state = State.create(mjx.forward(model, data), jnp.zeros((0,), jnp.float32), info)
+    state = State.create(physics_lib.forward(model, data), jnp.zeros((0,), jnp.float32), info)
     return state.replace(obs=spec.observe(p, model, state))
 
 

@@ -34,10 +34,10 @@ import mujoco
 import numpy as np
 from mujoco import mjx
 
-from mjzoo.worlds import clear_overflow
+from mjzoo.worlds import clear_overflow, probe_capacity
 
 __all__ = [
-    "Physics", "load", "of_model", "step", "substep", "StandIn", "OPTIONS", "IMPLS", "default_impl", "probe_capacity",
+    "Physics", "load", "of_model", "step", "substep", "forward", "StandIn", "OPTIONS", "IMPLS", "default_impl",
     "check_differentiable",
 ]  # fmt: skip
 
@@ -160,7 +160,7 @@ def load(
         CUDA kernels, several times faster on a GPU, no derivatives); default
         `default_impl()`.
       max_contacts: Warp only: contacts per simulated world the shared pool holds;
-        default: measured by a probe rollout (`probe_capacity`).
+        default: measured by a probe rollout (`mjzoo.worlds.probe_capacity`).
       max_constraints: Warp only: constraint rows per world (MuJoCo Warp's njmax);
         default: measured by the same probe.
 
@@ -216,7 +216,21 @@ def substep(model: mjx.Model, data: mjx.Data) -> mjx.Data:
         return model.substep(data)
     if data.impl == mjx.Impl.WARP:
         return _warp_step(model, data)
-    return mjx.step(model, data)
+    return _jax_step(model, data)
+
+
+def forward(model: mjx.Model, data: mjx.Data) -> mjx.Data:
+    """`mjx.forward`: positions, velocities and forces of `data`'s state, without stepping."""
+    if isinstance(model, StandIn):
+        return mjx.forward(model, data)
+    return _forward(model, data)
+
+
+# Jitted so that JAX traces the physics once per model layout and reuses it: a task's
+# construction checks and every program that resets or steps it (rollout, evaluation,
+# planner) would otherwise each trace MJX anew, and a humanoid's forward takes ~2 s to trace.
+_jax_step = jax.jit(mjx.step)
+_forward = jax.jit(mjx.forward)
 
 
 @jax.custom_jvp
@@ -368,28 +382,3 @@ def of_model(
         source=source, mj_model=mj_model, model=model, n_substeps=n_substeps, impl=impl,
         max_contacts=max_contacts or contacts, max_constraints=max_constraints or constraints,
     )  # fmt: skip
-
-
-def probe_capacity(mj_model: mujoco.MjModel, seconds: float = 3.0, seeds: int = 4) -> tuple[int, int]:
-    """(contacts, constraint rows) per world to allocate for Warp: twice the most that C
-    MuJoCo sees in `seeds` rollouts of `seconds` under uniformly random controls from
-    qpos0 with random velocities (a robot thrashing, falling and lying down), plus room
-    for Warp's own collision routines, which may report a few more contacts per pair."""
-    data = mujoco.MjData(mj_model)
-    steps = max(1, round(seconds / mj_model.opt.timestep))
-    low, high = mj_model.actuator_ctrlrange.T if mj_model.nu else (np.zeros(0), np.zeros(0))
-    limited = mj_model.actuator_ctrllimited.astype(bool)
-    low, high = np.where(limited, low, -1.0), np.where(limited, high, 1.0)
-    most_contacts, most_rows = 0, 0
-    for seed in range(seeds):
-        rng = np.random.default_rng(seed)
-        mujoco.mj_resetData(mj_model, data)
-        data.qvel[:] = rng.normal(0.0, 1.0, mj_model.nv)
-        for i in range(steps):
-            if i % 10 == 0:
-                data.ctrl[:] = rng.uniform(low, high)
-            mujoco.mj_step(mj_model, data)
-            if not np.all(np.isfinite(data.qacc)):
-                break
-            most_contacts, most_rows = max(most_contacts, data.ncon), max(most_rows, data.nefc)
-    return 2 * most_contacts + 8, 2 * most_rows + 8 * 6 + mj_model.neq * 6 + mj_model.njnt

@@ -5,8 +5,8 @@ MuJoCo Warp keeps the contacts of every world of one vmapped call in one pool, w
 size is static: whoever forms a batch of B worlds sizes it first (`sized`), and code
 that merges, indexes or compares batched states uses `where` and `own`, which know what
 is shared and what is each world's. `contacts` and `overflow` read one world's contacts
-and Warp's overflow flags. On MJX's JAX implementation every function here is the plain
-operation (or the identity).
+and Warp's overflow flags; `probe_capacity` sizes one world's share at load time. On
+MJX's JAX implementation every batch function here is the plain operation (or the identity).
 """
 
 from __future__ import annotations
@@ -23,7 +23,7 @@ from mujoco import mjx
 from mjzoo.tree import where as leafwise_where
 
 __all__ = [
-    "sized", "own", "where", "Contacts", "contacts", "overflow", "clear_overflow", "OVERFLOW_CAPACITY",
+    "sized", "own", "where", "Contacts", "contacts", "overflow", "clear_overflow", "probe_capacity", "OVERFLOW_CAPACITY",
     "OVERFLOW_SOLVER",
 ]  # fmt: skip
 
@@ -162,3 +162,28 @@ def clear_overflow(data: mjx.Data) -> mjx.Data:
     if data.impl != mjx.Impl.WARP:
         return data
     return data.replace(_impl=data._impl.replace(overflow=jnp.zeros_like(data._impl.overflow)))
+
+
+def probe_capacity(mj_model: mujoco.MjModel, seconds: float = 3.0, seeds: int = 4) -> tuple[int, int]:
+    """(contacts, constraint rows) per world to allocate for Warp: twice the most that C
+    MuJoCo sees in `seeds` rollouts of `seconds` under uniformly random controls from
+    qpos0 with random velocities (a robot thrashing, falling and lying down), plus room
+    for Warp's own collision routines, which may report a few more contacts per pair."""
+    data = mujoco.MjData(mj_model)
+    steps = max(1, round(seconds / mj_model.opt.timestep))
+    low, high = mj_model.actuator_ctrlrange.T if mj_model.nu else (np.zeros(0), np.zeros(0))
+    limited = mj_model.actuator_ctrllimited.astype(bool)
+    low, high = np.where(limited, low, -1.0), np.where(limited, high, 1.0)
+    most_contacts, most_rows = 0, 0
+    for seed in range(seeds):
+        rng = np.random.default_rng(seed)
+        mujoco.mj_resetData(mj_model, data)
+        data.qvel[:] = rng.normal(0.0, 1.0, mj_model.nv)
+        for i in range(steps):
+            if i % 10 == 0:
+                data.ctrl[:] = rng.uniform(low, high)
+            mujoco.mj_step(mj_model, data)
+            if not np.all(np.isfinite(data.qacc)):
+                break
+            most_contacts, most_rows = max(most_contacts, data.ncon), max(most_rows, data.nefc)
+    return 2 * most_contacts + 8, 2 * most_rows + 8 * 6 + mj_model.neq * 6 + mj_model.njnt

@@ -213,7 +213,7 @@ def test_catalog_contacts_read_what_they_read_before(settled_box):
 def test_probe_capacity_leaves_room_for_twice_what_c_mujoco_sees(settled_box):
     box, mj_data, _ = settled_box
     assert mj_data.ncon >= 4  # the box's corners
-    most_contacts, most_rows = physics.probe_capacity(box.mj_model)
+    most_contacts, most_rows = worlds.probe_capacity(box.mj_model)
     assert most_contacts >= max(2 * mj_data.ncon, 8)
     assert most_rows >= 2 * mj_data.nefc
 

@@ -45,7 +45,7 @@ import mujoco
 import numpy as np
 from mujoco import mjx
 
-from mjzoo import checks, motion, names
+from mjzoo import checks, motion, names, physics
 from mjzoo.types import State, Task, bind
 
 __all__ = [
@@ -98,7 +98,7 @@ def _reset(reset_fn, items, observe, model: mjx.Model, key: Array) -> State:
     for item, item_key in zip(items, jax.random.split(jax.random.fold_in(key, RESETS_STREAM), len(items))):
         data, written = _data_and_info(item(model, data, item_key))
         info.update(written)
-    state = state.replace(data=mjx.forward(model, data), info=info)
+    state = state.replace(data=physics.forward(model, data), info=info)
     return state.replace(obs=observe(model, state))
 
 
