@@ -2,13 +2,15 @@
 
 For each env: `mjzoo train ppo ENV` is launched twice in fresh processes with one new
 persistent compilation cache (cold, then warm), and the time from launch to its first
-update is read off (the first metrics line appears when the first chunk ends: the runs
-here evaluate only at the end). Then one run with the default evaluation schedule
-(`Settings.eval_budget`, 5% of the wall-clock) reports the share of its wall-clock spent
-evaluating, and its overall rate against the training rate.
+update is read off: the first metrics line's arrival, less what the run did after the
+first chunk ended (its clock's ``perf/elapsed_s`` minus ``perf/first_update_s``: the
+final evaluation, when the first chunk is also the last). Then one run with the default
+evaluation schedule (`Settings.eval_budget`, 5% of the wall-clock) reports the share of
+its wall-clock spent evaluating, and its overall rate against the training rate.
 
     python benchmarks/startup.py --envs cartpole_balance humanoid_walk
     python benchmarks/startup.py --envs cartpole_balance --steps 20000 --smoke   # on a CPU
+    python benchmarks/startup.py --envs humanoid_walk --eval-run-steps 0 --logs  # where the start goes
 
 Writes JSON to --out and prints a table.
 """
@@ -28,12 +30,12 @@ SMOKE_CONFIG = ("num_envs=32", "unroll_length=8", "num_minibatches=2", "num_epoc
 
 
 def launch(env: str, out: Path, cache: Path, steps: int, extra: tuple[str, ...], smoke: bool,
-           timeout: float) -> dict:  # fmt: skip
+           timeout: float, keep: Path | None = None) -> dict:  # fmt: skip
     """Runs `mjzoo train ppo env` to the end; returns launch-to-first-update seconds (the
     first metrics line's arrival), the total wall-clock, and the metrics lines."""
     command = [sys.executable, "-m", "mjzoo", "train", "ppo", env, "--out", str(out), "--total-steps", str(steps),
                "--no-video", *extra, *(("--config", *SMOKE_CONFIG, "--eval-envs", "4") if smoke else ())]  # fmt: skip
-    environment = {**os.environ, "MJZOO_COMPILE_CACHE": str(cache)}
+    environment = {**os.environ, "MJZOO_COMPILE_CACHE": str(cache), **({"JAX_LOG_COMPILES": "1"} if keep else {})}
     metrics = out / "metrics.jsonl"
     log = open(out.parent / f"{out.name}.log", "w+")  # not a pipe: a full one would stall the child's progress bar
     start = time.perf_counter()
@@ -50,20 +52,25 @@ def launch(env: str, out: Path, cache: Path, steps: int, extra: tuple[str, ...],
     log.seek(0)
     output = log.read()
     log.close()
+    if keep is not None:
+        (keep / f"{env}_{out.name}.log").write_text(output)
     if process.returncode != 0:
         raise RuntimeError(f"{' '.join(command)} failed:\n{output[-3000:]}")
     lines = [json.loads(line) for line in metrics.read_text().splitlines()]
+    # The first line is written after its chunk's evaluation, if one was due (always when
+    # the first chunk is the last): the run's own clock says how long that took.
+    first -= lines[0]["perf/elapsed_s"] - lines[0]["perf/first_update_s"]
     return {"launch_to_first_update_s": first, "wall_s": total, "lines": lines}
 
 
-def measure(env: str, steps: int, eval_steps: int, smoke: bool, timeout: float) -> dict:
+def measure(env: str, steps: int, eval_steps: int, smoke: bool, timeout: float, keep: Path | None) -> dict:
     with tempfile.TemporaryDirectory() as scratch:
         scratch = Path(scratch)
         cache = scratch / "cache"
         no_eval = ("--eval-every", "0")
-        cold = launch(env, scratch / "cold", cache, steps, no_eval, smoke, timeout)
+        cold = launch(env, scratch / "cold", cache, steps, no_eval, smoke, timeout, keep)
         print(f"{env}: cold launch to first update {cold['launch_to_first_update_s']:.1f} s", flush=True)
-        warm = launch(env, scratch / "warm", cache, steps, no_eval, smoke, timeout)
+        warm = launch(env, scratch / "warm", cache, steps, no_eval, smoke, timeout, keep)
         print(f"{env}: warm launch to first update {warm['launch_to_first_update_s']:.1f} s", flush=True)
         budget = launch(env, scratch / "budget", cache, eval_steps, (), smoke, timeout) if eval_steps else None
     row = {
@@ -101,6 +108,8 @@ def main() -> None:
     parser.add_argument("--timeout", type=float, default=900.0)
     parser.add_argument("--out", type=Path, default=Path(__file__).parent / "results" / "startup")
     parser.add_argument("--name-envs", action="store_true", help="name the JSON after the envs too")
+    parser.add_argument("--logs", action="store_true",
+                        help="keep the cold and warm launches' logs in OUT/logs, with JAX's compile steps timed")
     args = parser.parse_args()
     import jax  # after the children's launch settings are read: only to name the device
 
@@ -110,7 +119,10 @@ def main() -> None:
     rows = []
     for env in args.envs:
         eval_steps = args.steps if args.smoke else args.eval_run_steps
-        rows.append(measure(env, args.steps, eval_steps, args.smoke, args.timeout))
+        keep = args.out / "logs" if args.logs else None
+        if keep is not None:
+            keep.mkdir(exist_ok=True)
+        rows.append(measure(env, args.steps, eval_steps, args.smoke, args.timeout, keep))
         path.write_text(json.dumps({"device": device, "rows": rows}, indent=1))
     print(f"\n{'env':<18} {'cold (s)':>9} {'warm (s)':>9} {'eval share':>10} {'train/s':>12} {'overall/s':>12}")
     for r in rows:

@@ -193,7 +193,10 @@ class _Loop:
     def step(self, state: Any) -> Any:
         """Trains one chunk and does its bookkeeping; returns the new state."""
         start = _clock()
+        shapes = _described(state) if not self.history else None  # before the chunk donates it
         state, chunk_metrics = self.chunk(self.task, state)
+        if shapes is not None:  # while this launch's first chunk runs, not while it traces: one GIL for both
+            self.compile_evaluation_ahead(shapes)
         jax.block_until_ready(state)
         end = _clock()
         updates, per_chunk = int(state.updates), self.per_chunk
@@ -221,19 +224,14 @@ class _Loop:
         return state
 
     def compile_evaluation_ahead(self, state: Any) -> None:
-        """Compiles the evaluation on a background thread while the first chunk compiles
-        and runs: the first evaluation then waits for no compiler (`compilation.compile_ahead`).
-        Described by shapes and shardings: the chunk donates `state`'s buffers."""
-
-        def like(x: Any) -> Any:
-            if not isinstance(x, jax.Array):
-                return x
-            return jax.ShapeDtypeStruct(x.shape, x.dtype, sharding=x.sharding, weak_type=x.aval.weak_type)
-
+        """Compiles the evaluation on a background thread while the first chunk runs: the
+        first evaluation then waits for no compiler (`compilation.compile_ahead`). `state`
+        is described by shapes and shardings (`_described`); the key is a real one, as a
+        key's description lowers to another program."""
         key = jax.random.fold_in(self.key, 0)
         s = self.settings
-        self.ahead = compilation.compile_ahead(self.evaluate, self.config, self.task, jax.tree.map(like, state),
-                                               like(key), s.eval_envs, self.eval_steps)  # fmt: skip
+        self.ahead = compilation.compile_ahead(self.evaluate, self.config, self.task, state, key, s.eval_envs,
+                                               self.eval_steps)  # fmt: skip
 
     def _evaluate(self, state: Any, step: int, final: bool) -> dict[str, float]:
         """Evaluates (`settings.eval_envs` episodes) and writes a video when one is due."""
@@ -318,7 +316,6 @@ def run(algorithm: Algorithm, config: AlgorithmConfig, task: Task, settings: Set
     state = _start(algorithm, config, task, settings, out, key, physics)
     shown = {"physics": physics["impl"]} if physics else {}
     loop = _Loop(algorithm, config, task, settings, out, key, eval_steps, launched, shown)
-    loop.compile_evaluation_ahead(state)
     try:
         while not loop.done(state):
             state = loop.step(state)
@@ -327,6 +324,17 @@ def run(algorithm: Algorithm, config: AlgorithmConfig, task: Task, settings: Set
     if out is not None and distributed.is_primary():
         _finish(out, loop, settings)
     return state, loop.last
+
+
+def _described(tree: Any) -> Any:
+    """`tree` with its arrays replaced by `jax.ShapeDtypeStruct`s of their shapes and shardings."""
+
+    def like(x: Any) -> Any:
+        if not isinstance(x, jax.Array):
+            return x
+        return jax.ShapeDtypeStruct(x.shape, x.dtype, sharding=x.sharding, weak_type=x.aval.weak_type)
+
+    return jax.tree.map(like, tree)
 
 
 def _diagnose(algorithm: Algorithm, history: list[dict[str, float]], warned: str | None) -> str | None:
