@@ -38,7 +38,7 @@ from mjzoo.worlds import clear_overflow, probe_capacity
 
 __all__ = [
     "Physics", "load", "of_model", "step", "substep", "forward", "StandIn", "OPTIONS", "IMPLS", "default_impl",
-    "check_differentiable",
+    "check_differentiable", "quiet",
 ]  # fmt: skip
 
 SOLVERS = {"cg": mujoco.mjtSolver.mjSOL_CG, "newton": mujoco.mjtSolver.mjSOL_NEWTON}
@@ -244,6 +244,15 @@ def _warp_step_jvp(primals, tangents):
     raise AssertionError  # unreachable
 
 
+def quiet(model: mjx.Model) -> mjx.Model:
+    """`model` with MuJoCo Warp's overflow prints off: a device printf per world and step
+    that hits a solver or capacity limit, which slows a batch down; mjzoo counts them in
+    metrics instead (`mjzoo.worlds.overflow`). A JAX model is returned as it is."""
+    if model.impl != mjx.Impl.WARP:
+        return model
+    return model.replace(opt=model.opt.replace(_impl=model.opt._impl.replace(warn_overflow=0)))
+
+
 def check_differentiable(data: mjx.Data, who: str) -> None:
     """Raises a clear error when `data` comes from Warp physics, which has no derivatives."""
     if data.impl == mjx.Impl.WARP:
@@ -375,8 +384,7 @@ def of_model(
         raise ValueError(f"{source}: MJX ({impl}) cannot simulate this model: {e}") from None
     if impl != "warp":
         return Physics(source=source, mj_model=mj_model, model=model, n_substeps=n_substeps)
-    # Overflows are counted in metrics (`mjzoo.worlds.overflow`) instead of printed per world and step.
-    model = model.replace(opt=model.opt.replace(_impl=model.opt._impl.replace(warn_overflow=0)))
+    model = quiet(model)
     contacts, constraints = probe_capacity(mj_model)
     return Physics(
         source=source, mj_model=mj_model, model=model, n_substeps=n_substeps, impl=impl,

@@ -46,6 +46,7 @@ from typing import Any
 from mujoco_playground import MjxEnv, registry
 from mujoco_playground._src import dm_control_suite, locomotion, manipulation, mjx_env
 
+from mjzoo import physics
 from mjzoo.interop import _foreign
 from mjzoo.types import Task
 
@@ -104,7 +105,8 @@ def _flattened(config: dict, prefix: str = "") -> dict[str, Any]:
 
 def load(name: str, **config_overrides: Any) -> MjxEnv:
     """Playground's env `name` with its default config and `config_overrides` (flat keys,
-    "vision_config.nworld" for nested ones); ``impl`` defaults to "jax".
+    "vision_config.nworld" for nested ones); ``impl`` defaults to "jax". On Warp, its
+    model's overflow prints are off (`mjzoo.physics.quiet`), for mjzoo and any other trainer.
 
     Raises KeyError for an unknown env (naming near ones), TypeError for an unknown
     override or one of the wrong type, RuntimeError when robot assets cannot be fetched.
@@ -115,12 +117,14 @@ def load(name: str, **config_overrides: Any) -> MjxEnv:
         raise TypeError(f"playground:{name}: unknown config override(s) {unknown}; its config: {sorted(allowed)}")
     overrides = {**({"impl": DEFAULT_IMPL} if "impl" in allowed else {}), **config_overrides}
     try:
-        return registry.load(name, config_overrides=overrides)
+        env = registry.load(name, config_overrides=overrides)
     except subprocess.CalledProcessError as error:  # locomotion and manipulation clone their robots
         raise RuntimeError(f"playground:{name}: could not fetch its robot assets (mujoco_menagerie, cloned from "
                            f"GitHub at first use): {error}") from error  # fmt: skip
     except (TypeError, ValueError) as error:  # ConfigDict's type check names the field
         raise TypeError(f"playground:{name}: config override rejected: {error}") from error
+    env._mjx_model = physics.quiet(env._mjx_model)  # for whoever steps it: mjzoo, Brax
+    return env
 
 
 # --- the adapter --------------------------------------------------------------------------
@@ -154,7 +158,7 @@ def task(env_or_name: str | MjxEnv, **config_overrides: Any) -> Task:
                         "(env.unwrapped) and use mjzoo's combinators (with_auto_reset, with_time_limit, "
                         "with_domain_randomization) instead")  # fmt: skip
     length = getattr(getattr(env, "_config", None), "episode_length", None)
-    return _foreign.task(_KIND, env, _foreign.env_model(_KIND, env), env.mj_model,
+    return _foreign.task(_KIND, env, physics.quiet(_foreign.env_model(_KIND, env)), env.mj_model,
                          None if length is None else int(length))  # fmt: skip
 
 
