@@ -24,6 +24,7 @@ import os
 import sys
 import tempfile
 import time
+from collections.abc import Iterator
 from pathlib import Path
 
 import jax
@@ -133,8 +134,9 @@ TRAINERS = {"mjzoo": train_mjzoo, "brax": lambda env, name, config, seed, overri
 
 
 def measure(name: str, impl: str, steps: int, seeds: int, trainers: list[str], smoke: bool, overrides: dict,
-            evals: int | None = None) -> dict:  # fmt: skip
-    """Raw stepping and each of `trainers` over `seeds` seeds on Playground's `name`."""
+            evals: int | None = None) -> Iterator[dict]:  # fmt: skip
+    """Raw stepping and each of `trainers` over `seeds` seeds on Playground's `name`: the
+    row so far after each trainer (a run cut off keeps what it measured)."""
     config = brax_config(name, steps, smoke, evals)
     config.setdefault("num_eval_envs", 128)
     start = time.perf_counter()
@@ -152,7 +154,7 @@ def measure(name: str, impl: str, steps: int, seeds: int, trainers: list[str], s
                   f"{runs[-1]['final_return']:.1f}, compile {runs[-1]['compile_s']:.0f} s, "
                   f"{time.perf_counter() - start:.0f} s so far", flush=True)  # fmt: skip
         row[trainer] = {"runs": runs}
-    return row
+        yield dict(row)
 
 
 def summarize(row: dict, threshold: float) -> dict:
@@ -198,8 +200,8 @@ def main() -> None:
                         help="Brax's num_timesteps (Playground's: 60M, which Brax rounds up to 88.5M); mjzoo trains "
                              "as many env steps as Brax does")  # fmt: skip
     parser.add_argument("--evals", type=int, default=None,
-                        help="Brax's num_evals (Playground's: 10); fewer make the whole epochs Brax rounds up to "
-                             "shorter (4 evaluations: 29.5M steps, not 88.5M)")  # fmt: skip
+                        help="Brax's num_evals (Playground's: 10). Brax trains whole epochs between evaluations: "
+                             "with --steps 20000000, 4 evaluations train 29.5M steps where 10 train 88.5M")  # fmt: skip
     parser.add_argument("--seeds", type=int, default=1)
     parser.add_argument("--set", nargs="*", default=[], metavar="FIELD=VALUE",
                         help="ppo.Config overrides for mjzoo (e.g. compute_dtype=bfloat16)")
@@ -216,10 +218,9 @@ def main() -> None:
     rows = json.loads(path.read_text())["rows"] if path.exists() else []
     for name in args.envs:
         for impl in args.impl:
-            row = measure(name, impl, args.steps, args.seeds, args.trainers, args.smoke, overrides, args.evals)
-            rows = merged(rows, row)
-            rows = [summarize(r, args.threshold) for r in rows]
-            path.write_text(json.dumps({"device": device, "jax": jax.__version__, "rows": rows}, indent=1))
+            for row in measure(name, impl, args.steps, args.seeds, args.trainers, args.smoke, overrides, args.evals):
+                rows = [summarize(r, args.threshold) for r in merged(rows, row)]
+                path.write_text(json.dumps({"device": device, "jax": jax.__version__, "rows": rows}, indent=1))
     print_table(rows)
     print(f"wrote {path}", flush=True)
 

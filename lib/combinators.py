@@ -186,7 +186,8 @@ def resets_itself(task: Task) -> bool:
 def _auto_reset_step(inner: Task, model, state: State, action: Array, key: Array) -> State:
     inner = inner.replace(model=model)
     ended, terms = transition_with_terms(inner, state, action, key)
-    restart = _restarted_select if model.impl == mjx.Impl.WARP else _restarted  # Warp: its shared contact pool
+    # Warp keeps the per-env choice: a custom_vmap over its Data leaks the shared contact pool's tracers.
+    restart = _restarted_select if model.impl == mjx.Impl.WARP else _restarted
     chosen = restart(inner, ended.terminated | ended.truncated, key, ended)
     chosen = chosen.replace(info={**chosen.info, "auto_reset": {"final_obs": ended.obs}})
     return record(chosen, terms, ended.terminated, ended.truncated)
