@@ -31,8 +31,9 @@ SMOKE_CONFIG = ("num_envs=32", "unroll_length=8", "num_minibatches=2", "num_epoc
 
 def launch(env: str, out: Path, cache: Path, steps: int, extra: tuple[str, ...], smoke: bool,
            timeout: float, keep: Path | None = None) -> dict:  # fmt: skip
-    """Runs `mjzoo train ppo env` to the end; returns launch-to-first-update seconds (the
-    first metrics line's arrival), the total wall-clock, and the metrics lines."""
+    """Runs `mjzoo train ppo env` to the end; returns launch-to-first-update seconds, the
+    total wall-clock, and the metrics lines; with `keep`, its log (JAX's compile steps
+    timed) goes there."""
     command = [sys.executable, "-m", "mjzoo", "train", "ppo", env, "--out", str(out), "--total-steps", str(steps),
                "--no-video", *extra, *(("--config", *SMOKE_CONFIG, "--eval-envs", "4") if smoke else ())]  # fmt: skip
     environment = {**os.environ, "MJZOO_COMPILE_CACHE": str(cache), **({"JAX_LOG_COMPILES": "1"} if keep else {})}

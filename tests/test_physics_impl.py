@@ -257,11 +257,22 @@ def test_training_stops_when_warp_outgrew_its_capacity():
 # --- Warp itself (developers: Warp installed, MJZOO_WARP_ON_CPU=1) ----------------------
 
 
-@pytest.mark.skipif(
+needs_warp = pytest.mark.skipif(
     importlib.util.find_spec("warp") is None or os.environ.get(physics.WARP_ON_CPU) != "1",
     reason=f"needs MuJoCo Warp installed and {physics.WARP_ON_CPU}=1 (Warp's slow CPU backend; "
     "benchmarks/warp_conformance.py checks every env on a GPU)",
 )
+
+
+@needs_warp
+def test_playground_envs_on_warp_print_no_solver_warnings():
+    playground = pytest.importorskip("mjzoo.interop.playground")
+    env = playground.load("CartpoleBalance", impl="warp")
+    assert env.mjx_model.opt._impl.warn_overflow == 0  # for Brax stepping the same env too
+    assert playground.task(env).model.opt._impl.warn_overflow == 0
+
+
+@needs_warp
 def test_cartpole_conforms_on_warp():
     report = check_task(mjzoo.envs.make("cartpole_balance", impl="warp", episode_steps=6), num_steps=10)
     assert report.skipped == {}
