@@ -186,7 +186,8 @@ def resets_itself(task: Task) -> bool:
 def _auto_reset_step(inner: Task, model, state: State, action: Array, key: Array) -> State:
     inner = inner.replace(model=model)
     ended, terms = transition_with_terms(inner, state, action, key)
-    # Warp keeps the per-env choice: a custom_vmap over its Data leaks the shared contact pool's tracers.
+    # Warp keeps the per-env choice: its shared contact pool stays unbatched under vmap, and
+    # `_restarted_batch` broadcasting it leaks tracers; passing those leaves through would fix it.
     restart = _restarted_select if model.impl == mjx.Impl.WARP else _restarted
     chosen = restart(inner, ended.terminated | ended.truncated, key, ended)
     chosen = chosen.replace(info={**chosen.info, "auto_reset": {"final_obs": ended.obs}})
