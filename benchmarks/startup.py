@@ -117,12 +117,12 @@ def main() -> None:
     device = jax.devices()[0].device_kind
     args.out.mkdir(parents=True, exist_ok=True)
     path = args.out / f"startup_{jax.default_backend()}{'_' + '_'.join(args.envs) if args.name_envs else ''}.json"
+    keep = args.out / "logs" if args.logs else None
+    if keep is not None:
+        keep.mkdir(exist_ok=True)
     rows = []
     for env in args.envs:
         eval_steps = args.steps if args.smoke else args.eval_run_steps
-        keep = args.out / "logs" if args.logs else None
-        if keep is not None:
-            keep.mkdir(exist_ok=True)
         rows.append(measure(env, args.steps, eval_steps, args.smoke, args.timeout, keep))
         path.write_text(json.dumps({"device": device, "rows": rows}, indent=1))
     print(f"\n{'env':<18} {'cold (s)':>9} {'warm (s)':>9} {'eval share':>10} {'train/s':>12} {'overall/s':>12}")

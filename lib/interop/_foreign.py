@@ -35,7 +35,7 @@ import jax.numpy as jnp
 import mujoco
 from mujoco import mjx
 
-from mjzoo import tree
+from mjzoo import physics, tree
 from mjzoo.combinators import record, with_divergence_guard, with_time_limit
 from mjzoo.running import OUTCOME
 from mjzoo.types import State, Task, bind
@@ -78,11 +78,12 @@ def env_model(kind: Kind, env: Any) -> mjx.Model:
 def task(kind: Kind, env: Any, model: mjx.Model, mj_model: mujoco.MjModel, episode_length: int | None) -> Task:
     """`env` as a Task stepping `model`: action ``[env.action_size]``, the env's observation,
     one reward term, guarded against divergence and, unless `episode_length` is None,
-    truncated after that many control steps. The caller has checked `env` and the length."""
+    truncated after that many control steps. The caller has checked `env` and the length.
+    On Warp, the model's overflow prints are off (`mjzoo.physics.quiet`)."""
     static_kind, static_env = tree.Static(kind), tree.Static(env)
     action_size = int(env.action_size)
     bare = Task(
-        model=model,
+        model=physics.quiet(model),
         start=bind(_start, static_kind, static_env),
         step=bind(_step, static_kind, static_env),
         reward=bind(_recorded_reward),

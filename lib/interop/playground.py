@@ -158,7 +158,7 @@ def task(env_or_name: str | MjxEnv, **config_overrides: Any) -> Task:
                         "(env.unwrapped) and use mjzoo's combinators (with_auto_reset, with_time_limit, "
                         "with_domain_randomization) instead")  # fmt: skip
     length = getattr(getattr(env, "_config", None), "episode_length", None)
-    return _foreign.task(_KIND, env, physics.quiet(_foreign.env_model(_KIND, env)), env.mj_model,
+    return _foreign.task(_KIND, env, _foreign.env_model(_KIND, env), env.mj_model,
                          None if length is None else int(length))  # fmt: skip
 
 
