@@ -186,10 +186,7 @@ def resets_itself(task: Task) -> bool:
 def _auto_reset_step(inner: Task, model, state: State, action: Array, key: Array) -> State:
     inner = inner.replace(model=model)
     ended, terms = transition_with_terms(inner, state, action, key)
-    # Warp keeps the per-env choice: its shared contact pool stays unbatched under vmap, and
-    # `_restarted_batch` broadcasting it leaks tracers; passing those leaves through would fix it.
-    restart = _restarted_select if model.impl == mjx.Impl.WARP else _restarted
-    chosen = restart(inner, ended.terminated | ended.truncated, key, ended)
+    chosen = _restarted(inner, ended.terminated | ended.truncated, key, ended)
     chosen = chosen.replace(info={**chosen.info, "auto_reset": {"final_obs": ended.obs}})
     return record(chosen, terms, ended.terminated, ended.truncated)
 
@@ -211,15 +208,35 @@ def _restarted(inner: Task, done: Array, key: Array, ended: State) -> State:
 
 @_restarted.def_vmap
 def _restarted_batch(axis_size: int, in_batched: list, inner: Task, done: Array, key: Array, ended: State):
-    """`_restarted` of a batch ([axis_size, ...]; unbatched arguments are broadcast)."""
-    leaves, treedef = jax.tree.flatten(inner)
-    axes = [0 if b else None for b in jax.tree.leaves(in_batched[0])]
-    batched = lambda x, b: x if b else jnp.broadcast_to(x, (axis_size, *jnp.shape(x)))  # noqa: E731
-    done, key, ended = (jax.tree.map(batched, x, b) for x, b in zip((done, key, ended), in_batched[1:]))
-    restart = lambda leaves, *args: _restarted_select(jax.tree.unflatten(treedef, leaves), *args)  # noqa: E731
-    restart_all = jax.vmap(restart, in_axes=(axes, 0, 0, 0))
-    out = jax.lax.cond(jnp.any(done), restart_all, lambda *_: ended, leaves, done, key, ended)  # one branch for all
-    return out, jax.tree.map(lambda _: True, out)
+    """`_restarted` of a batch ([axis_size, ...]). Unbatched arguments are broadcast, but for
+    Warp's shared contact pool: MJX keeps it unbatched under vmap and `_select` takes it
+    from `ended`, so it passes through untouched (broadcasting it leaks its tracers)."""
+    task_leaves, task_def = jax.tree.flatten(inner)
+    task_batched = jax.tree.leaves(in_batched[0])
+    ended_leaves, ended_def = jax.tree.flatten(ended)
+    ended_batched = jax.tree.leaves(in_batched[3])
+    kept = [s and not b for s, b in zip(jax.tree.leaves(worlds.shared(ended)), ended_batched)]
+    widen = lambda x, b: x if b else jnp.broadcast_to(x, (axis_size, *jnp.shape(x)))  # noqa: E731
+    done, key = (widen(x, b) for x, b in zip((done, key), in_batched[1:3]))
+    moving = [widen(x, b) for x, b, k in zip(ended_leaves, ended_batched, kept) if not k]
+    mapped = [x for x, b in zip(task_leaves, task_batched) if b]
+
+    def restart(mapped: list, done: Array, key: Array, moving: list) -> list:
+        # The unmapped leaves (the task's constants, the shared pool) are closed over.
+        task = jax.tree.unflatten(task_def, _merge(task_leaves, [not b for b in task_batched], mapped))
+        state = jax.tree.unflatten(ended_def, _merge(ended_leaves, kept, moving))
+        out = jax.tree.leaves(_restarted_select(task, done, key, state))
+        return [x for x, k in zip(out, kept) if not k]
+
+    fresh = jax.lax.cond(jnp.any(done), jax.vmap(restart), lambda *_: moving, mapped, done, key, moving)  # one branch for all
+    out = jax.tree.unflatten(ended_def, _merge(ended_leaves, kept, fresh))
+    return out, jax.tree.unflatten(ended_def, [not k for k in kept])
+
+
+def _merge(leaves: list, fixed: list, others: list) -> list:
+    """`leaves` where `fixed`, else the next of `others` in order."""
+    others = iter(others)
+    return [x if f else next(others) for x, f in zip(leaves, fixed)]
 
 
 # --- action repeat ------------------------------------------------------------------

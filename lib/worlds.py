@@ -23,7 +23,7 @@ from mujoco import mjx
 from mjzoo.tree import where as leafwise_where
 
 __all__ = [
-    "sized", "own", "where", "Contacts", "contacts", "overflow", "clear_overflow", "probe_capacity", "OVERFLOW_CAPACITY",
+    "sized", "own", "shared", "where", "Contacts", "contacts", "overflow", "clear_overflow", "probe_capacity", "OVERFLOW_CAPACITY",
     "OVERFLOW_SOLVER",
 ]  # fmt: skip
 
@@ -78,6 +78,24 @@ def _own_fields(data: mjx.Data) -> mjx.Data:
     shared = {f.name: None for f in dataclasses.fields(data._impl)
               if f.name in dropped and isinstance(getattr(data._impl, f.name), jax.Array)}  # fmt: skip
     return data.replace(_impl=data._impl.replace(**shared))
+
+
+def shared(tree: Any) -> Any:
+    """`tree` with a bool for each leaf: True for the contact pool and counters that the
+    worlds of a Warp batch share (MJX keeps them unbatched under `jax.vmap`)."""
+    is_data = lambda x: isinstance(x, mjx.Data)  # noqa: E731
+
+    def mark(x: Any) -> Any:
+        flags = jax.tree.map(lambda _: False, x)
+        if not is_data(x) or x.impl != mjx.Impl.WARP:
+            return flags
+        from mujoco.mjx.warp.types import DATA_NON_VMAP
+
+        pool = {f.name: True for f in dataclasses.fields(x._impl)
+                if f.name in DATA_NON_VMAP and isinstance(getattr(x._impl, f.name), jax.Array)}  # fmt: skip
+        return flags.replace(_impl=flags._impl.replace(**pool))
+
+    return jax.tree.map(mark, tree, is_leaf=is_data)
 
 
 def where(cond: jax.Array, on_true: mjx.Data, on_false: mjx.Data) -> mjx.Data:

@@ -276,3 +276,27 @@ def test_playground_envs_on_warp_print_no_solver_warnings():
 def test_cartpole_conforms_on_warp():
     report = check_task(mjzoo.envs.make("cartpole_balance", impl="warp", episode_steps=6), num_steps=10)
     assert report.skipped == {}
+
+
+@needs_warp
+def test_a_warp_batch_resets_as_each_env_would(monkeypatch):
+    """The batched auto-reset (one branch for the batch, Warp's shared contact pool passed
+    through unbatched) gives the same states as choosing per env, bit for bit."""
+    from mjzoo import combinators
+
+    def rollout() -> tuple:
+        task = worlds.sized(mjzoo.with_auto_reset(mjzoo.envs.make("cartpole_balance", impl="warp", episode_steps=6)), 4)
+        states = jax.vmap(lambda k: running.reset(task, k))(jax.random.split(jax.random.key(0), 4))
+        actions = jnp.linspace(-1.0, 1.0, 4)[:, None] * jnp.ones((4, task.action_size))
+
+        def body(states, key):
+            states = jax.vmap(lambda s, a, k: running.transition(task, s, a, k))(states, actions, jax.random.split(key, 4))
+            return states, (states.obs, states.data.qpos, states.truncated)
+
+        return jax.jit(lambda s: jax.lax.scan(body, s, jax.random.split(jax.random.key(1), 14))[1])(states)
+
+    batched = rollout()
+    monkeypatch.setattr(combinators, "_restarted", combinators._restarted_select)
+    chosen_per_env = rollout()
+    assert int(batched[2].sum()) == 2 * 4  # every env restarted twice in 14 steps
+    jax.tree.map(np.testing.assert_array_equal, batched, chosen_per_env)
