@@ -82,3 +82,20 @@ def test_a_failure_ahead_is_left_to_the_call():
     compilation.compile_ahead(function, jax.ShapeDtypeStruct((2, 3), jnp.float32)).join()  # no exception here
     with pytest.raises(TypeError):
         function(jnp.ones((2, 3)))
+
+
+def test_the_train_state_is_owned_by_one_program_whatever_its_shapes():
+    """Training copies its initial state so that each leaf owns its buffer (the chunk donates
+    them): one compile for the tree, not one per leaf shape, and aliased leaves part."""
+    from mjzoo.harness import training
+
+    zeros = jnp.zeros(7)
+    tree = {"a": zeros, "b": zeros, "c": jnp.ones((3, 7)), "d": jnp.arange(11), "key": jax.random.key(0)}
+    _compiles.clear()
+    owned = training._owned(tree)
+    assert len(_compiles) == 1
+    pointers = [x.unsafe_buffer_pointer() for x in jax.tree.leaves(jax.random.key_data(owned.pop("key")))]
+    pointers += [x.unsafe_buffer_pointer() for x in jax.tree.leaves(owned)]
+    assert len(set(pointers)) == len(pointers) == 5
+    assert pointers[1] != zeros.unsafe_buffer_pointer()
+    jax.tree.map(lambda x, y: jnp.array_equal(x, y) or pytest.fail("a copy differs"), owned, {k: tree[k] for k in owned})
