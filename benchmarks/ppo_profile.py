@@ -6,7 +6,12 @@
 A variant is ``NAME=FIELD:VALUE,...`` over `ppo.Config` (e.g. ``bf16=compute_dtype:bfloat16``);
 ``base`` is the config unchanged. The matmul precision of float32 (JAX's default on recent
 GPUs is TF32) is the variant field ``precision`` (``float32`` / ``tensorfloat32`` /
-``bfloat16``), set with `jax.default_matmul_precision` around compiling and running.
+``bfloat16``), set with `jax.default_matmul_precision` around compiling and running;
+``flat_adam:1`` makes the optimizer one Adam update over the parameters concatenated
+(`optax.flatten`). Each row also counts the kernels one minibatch step launches, read off
+the compiled program. XLA's own options go in ``XLA_FLAGS`` (a run per setting, ``--tag``
+naming its JSON), e.g. CUDA graphs around the minibatch loop:
+``XLA_FLAGS=--xla_gpu_enable_command_buffer=FUSION,CUBLAS,CUBLASLT,CUSTOM_CALL,CUDNN,WHILE,CONDITIONAL``.
 
     python benchmarks/ppo_profile.py --envs cartpole_balance playground:CartpoleBalance \\
         --variants base bf16=compute_dtype:bfloat16 f32=precision:float32
@@ -20,12 +25,14 @@ import contextlib
 import dataclasses
 import json
 import os
+import re
 import sys
 import time
 from pathlib import Path
 
 import jax
 import numpy as np
+import optax
 
 sys.path.insert(0, str(Path(__file__).parent))
 from ppo_vs_brax import mjzoo_config  # noqa: E402
@@ -45,6 +52,13 @@ def parse_variant(text: str) -> tuple[str, dict[str, str]]:
     return name, dict(pairs)
 
 
+def loop_kernels(hlo: str) -> int:
+    """Kernel launches in one minibatch step: the fusions and library calls (cuBLAS, ...)
+    of the compiled program's busiest computation, which is the minibatch loop's body."""
+    computations = re.split(r"\n(?=[%A-Z][^\n]*\{\n)", hlo)
+    return max(len(re.findall(r"= \S+ (?:fusion|custom-call)\(", c)) for c in computations)
+
+
 def best_of(fn, *args, repeats: int) -> float:
     jax.block_until_ready(fn(*args))
     times = []
@@ -58,8 +72,11 @@ def best_of(fn, *args, repeats: int) -> float:
 def profile(env: str, base: ppo.Config, fields: dict[str, str], repeats: int) -> dict:
     fields = dict(fields)
     precision = fields.pop("precision", None)
+    flat_adam = fields.pop("flat_adam", None) == "1"
     values = arguments.parse_assignments(tuple(f"{f}={v}" for f, v in fields.items()), "--variants")
     config = dataclasses.replace(base, **values)
+    if flat_adam:  # one Adam update over all parameters concatenated, instead of one per array
+        config = dataclasses.replace(config, optimizer=optax.flatten(optax.adam(config.learning_rate)))
     task = mjzoo.envs.make(env)
     scope = jax.default_matmul_precision(precision) if precision else contextlib.nullcontext()
     with scope:
@@ -74,6 +91,7 @@ def profile(env: str, base: ppo.Config, fields: dict[str, str], repeats: int) ->
         start = time.perf_counter()
         jax.block_until_ready(improve(state, data, key))
         compile_improve = time.perf_counter() - start
+        kernels = loop_kernels(improve.lower(state, data, key).compile().as_text())
         t_rollout = best_of(rollout, state, key, repeats=repeats)
         t_improve = best_of(improve, state, data, key, repeats=repeats)
         t_update = best_of(update, state, repeats=repeats)
@@ -85,7 +103,7 @@ def profile(env: str, base: ppo.Config, fields: dict[str, str], repeats: int) ->
     return {"env": env, "config": {**fields, **({"precision": precision} if precision else {})},
             "rollout_s": t_rollout, "improve_s": t_improve, "update_s": t_update, "evaluate_128_envs_s": t_evaluate,
             "evaluate_steps": steps,
-            "sgd_step_ms": 1e3 * t_improve / sgd_steps, "steps_per_s": config.steps_per_update / t_update,
+            "sgd_step_ms": 1e3 * t_improve / sgd_steps, "sgd_step_kernels": kernels, "steps_per_s": config.steps_per_update / t_update,
             "compile_rollout_s": compile_rollout, "compile_improve_s": compile_improve}  # fmt: skip
 
 
@@ -96,6 +114,7 @@ def main() -> None:
     parser.add_argument("--repeats", type=int, default=5)
     parser.add_argument("--smoke", action="store_true", help="tiny sizes, to check the script on a CPU")
     parser.add_argument("--out", type=Path, default=Path(__file__).parent / "results" / "ppo_profile")
+    parser.add_argument("--tag", default="", help="added to the JSON's name (e.g. for a run under other XLA_FLAGS)")
     args = parser.parse_args()
     base = mjzoo_config(total_steps=10**9)
     if args.smoke:
@@ -105,16 +124,16 @@ def main() -> None:
           f"{base.num_epochs * base.num_minibatches} minibatch steps", flush=True)  # fmt: skip
     rows = []
     args.out.mkdir(parents=True, exist_ok=True)
-    path = args.out / f"ppo_profile_{jax.default_backend()}.json"
-    print(f"{'env':<28} {'variant':<10} {'rollout s':>9} {'improve s':>9} {'update s':>9} {'sgd ms':>7} {'steps/s':>11} {'eval s':>7}")
+    path = args.out / f"ppo_profile_{jax.default_backend()}{'_' + args.tag if args.tag else ''}.json"
+    print(f"{'env':<28} {'variant':<10} {'rollout s':>9} {'improve s':>9} {'update s':>9} {'sgd ms':>7} {'kernels':>7} {'steps/s':>11} {'eval s':>7}")
     for env in args.envs:
         for name, fields in map(parse_variant, args.variants):
             row = {"variant": name, **profile(env, base, fields, args.repeats)}
             rows.append(row)
             print(f"{env:<28} {name:<10} {row['rollout_s']:>9.3f} {row['improve_s']:>9.3f} {row['update_s']:>9.3f} "
-                  f"{row['sgd_step_ms']:>7.2f} {row['steps_per_s']:>11,.0f} {row['evaluate_128_envs_s']:>7.2f}",
+                  f"{row['sgd_step_ms']:>7.2f} {row['sgd_step_kernels']:>7} {row['steps_per_s']:>11,.0f} {row['evaluate_128_envs_s']:>7.2f}",
                   flush=True)  # fmt: skip
-            path.write_text(json.dumps({"device": device, "jax": jax.__version__, "rows": rows}, indent=1))
+            path.write_text(json.dumps({"device": device, "jax": jax.__version__, "xla_flags": os.environ.get("XLA_FLAGS", ""), "rows": rows}, indent=1))
     print(f"wrote {path}", flush=True)
 
 

@@ -26,16 +26,9 @@ from mjzoo.running import OUTCOME, complete, reset, reward_terms, transition_wit
 from mjzoo.types import State, Task, bind
 
 __all__ = [
-    "with_observation",
-    "with_time_limit",
-    "with_auto_reset",
-    "with_action_repeat",
-    "with_reward",
-    "with_reward_clip",
-    "with_divergence_guard",
-    "runs_transitions",
-    "record",
-]
+    "with_observation", "with_time_limit", "with_auto_reset", "with_action_repeat", "with_reward",
+    "with_reward_clip", "with_divergence_guard", "runs_transitions", "record",
+]  # fmt: skip
 
 Array = jax.Array
 RESET_STREAM = 0x5E7  # fold_in tag: combinators pass keys through and derive their own
@@ -384,18 +377,6 @@ def _revert_physics(ok: Array, new: mjx.Data, old: mjx.Data) -> mjx.Data:
     return zeroed.replace(**restored)
 
 
-def _overflow_metrics(data: mjx.Data) -> dict[str, Array]:
-    """On Warp: whether this step outgrew the contact / constraint capacities (its physics
-    dropped some) or stopped the solver at its iteration limit; nothing on JAX."""
-    if data.impl != mjx.Impl.WARP:
-        return {}
-    flags = worlds.overflow(data)
-    return {
-        "physics/capacity_overflow": ((flags & worlds.OVERFLOW_CAPACITY) != 0).astype(jnp.float32),
-        "physics/solver_limit": ((flags & worlds.OVERFLOW_SOLVER) != 0).astype(jnp.float32),
-    }
-
-
 def _guard_step(max_qvel, inner: Task, model, state: State, action: Array, key: Array) -> State:
     inner = inner.replace(model=model)
     next_state, terms = transition_with_terms(inner, state, action, key)
@@ -409,7 +390,7 @@ def _guard_step(max_qvel, inner: Task, model, state: State, action: Array, key: 
         info=tree.where(ok, next_state.info, state.info),
     )
     metrics = jax.tree.map(lambda v: jnp.where(jnp.isfinite(v), v, 0.0), next_state.metrics)
-    metrics = {**metrics, "diverged": (~ok).astype(jnp.float32), **_overflow_metrics(data)}
+    metrics = {**metrics, "diverged": (~ok).astype(jnp.float32), **worlds.overflow_metrics(data)}
     safe = safe.replace(metrics=metrics)
     terms = {k: jnp.where(ok, v, 0.0) for k, v in terms.items()}
     return record(safe, terms, next_state.terminated | ~ok, next_state.truncated & ok)

@@ -23,8 +23,8 @@ from mujoco import mjx
 from mjzoo.tree import where as leafwise_where
 
 __all__ = [
-    "sized", "own", "shared", "where", "Contacts", "contacts", "overflow", "clear_overflow", "probe_capacity", "OVERFLOW_CAPACITY",
-    "OVERFLOW_SOLVER",
+    "sized", "own", "shared", "where", "Contacts", "contacts", "overflow", "overflow_metrics", "clear_overflow",
+    "probe_capacity", "OVERFLOW_CAPACITY", "OVERFLOW_SOLVER",
 ]  # fmt: skip
 
 # MuJoCo Warp's overflow bits (mujoco_warp OverflowType): capacities a run outgrew (its
@@ -173,6 +173,17 @@ def overflow(data: mjx.Data) -> jax.Array:
     if data.impl != mjx.Impl.WARP:
         return jnp.zeros((), jnp.int32)
     return jnp.asarray(data._impl.overflow).reshape(()).astype(jnp.int32)
+
+
+def overflow_metrics(data: mjx.Data) -> dict[str, jax.Array]:
+    """On Warp, [] float32 flags: whether this step outgrew the contact / constraint
+    capacities (its physics dropped some) or stopped the solver at its iteration limit;
+    nothing on JAX."""
+    if data.impl != mjx.Impl.WARP:
+        return {}
+    flags = overflow(data)
+    return {"physics/capacity_overflow": ((flags & OVERFLOW_CAPACITY) != 0).astype(jnp.float32),
+            "physics/solver_limit": ((flags & OVERFLOW_SOLVER) != 0).astype(jnp.float32)}  # fmt: skip
 
 
 def clear_overflow(data: mjx.Data) -> mjx.Data:
