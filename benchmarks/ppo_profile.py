@@ -2,6 +2,9 @@
 (GAE and the epochs of minibatch steps), each jitted and timed alone, for each
 `ppo.Config` variant asked for, with MuJoCo Playground's DM Control hyperparameters
 (2048 envs, 983,040 env steps and 512 minibatch steps of 30,720 samples per update).
+A whole update is timed three ways: from one state again and again, fed its own output
+(episodes end and restart), and inside the harness's chunk (`training.run`'s scan of
+updates over a donated state), so that what the harness costs shows beside the rest.
 
 A variant is ``NAME=FIELD:VALUE,...`` over `ppo.Config` (e.g. ``bf16=compute_dtype:bfloat16``);
 ``base`` is the config unchanged. The matmul precision of float32 (JAX's default on recent
@@ -39,8 +42,11 @@ from ppo_vs_brax import mjzoo_config  # noqa: E402
 
 import mjzoo.envs  # noqa: E402
 from mjzoo.algorithms import ppo  # noqa: E402
+from mjzoo.harness import training  # noqa: E402
 from mjzoo.harness.cli import arguments  # noqa: E402
+from mjzoo.harness.devices import replicate  # noqa: E402
 
+CHUNK = 5  # updates per harness chunk timed (`training.run` scans its chunks the same way)
 SMOKE = dict(num_envs=16, unroll_length=8, num_minibatches=4, num_epochs=2)
 
 
@@ -66,6 +72,18 @@ def best_of(fn, *args, repeats: int) -> float:
         start = time.perf_counter()
         jax.block_until_ready(fn(*args))
         times.append(time.perf_counter() - start)
+    return float(np.median(times))
+
+
+def per_update(run, state, updates: int, repeats: int) -> float:
+    """Median seconds per update of `run` (`updates` of them per call) fed its own output,
+    so that the envs move on and episodes end and restart, as in training."""
+    state = jax.block_until_ready(run(training._owned(state)))  # compiled; the harness donates its state
+    times = []
+    for _ in range(repeats):
+        start = time.perf_counter()
+        state = jax.block_until_ready(run(state))
+        times.append((time.perf_counter() - start) / updates)
     return float(np.median(times))
 
 
@@ -95,13 +113,15 @@ def profile(env: str, base: ppo.Config, fields: dict[str, str], repeats: int) ->
         t_rollout = best_of(rollout, state, key, repeats=repeats)
         t_improve = best_of(improve, state, data, key, repeats=repeats)
         t_update = best_of(update, state, repeats=repeats)
+        t_onward = per_update(update, state, 1, repeats)
+        t_chunk = per_update(lambda s: training._chunk_fn(ppo, config, CHUNK)(replicate(task), s)[0], state, CHUNK, repeats)
         defaults = mjzoo.envs.defaults(env)
         steps = defaults.get("episode_steps") or defaults.get("episode_length", 1000)
         evaluate = jax.jit(lambda s, k: ppo.evaluate(config, task, s, k, 128, steps)[0])
         t_evaluate = best_of(evaluate, state, key, repeats=1)
     sgd_steps = config.num_epochs * config.num_minibatches
     return {"env": env, "config": {**fields, **({"precision": precision} if precision else {})},
-            "rollout_s": t_rollout, "improve_s": t_improve, "update_s": t_update, "evaluate_128_envs_s": t_evaluate,
+            "rollout_s": t_rollout, "improve_s": t_improve, "update_s": t_update, "update_onward_s": t_onward, "chunk_update_s": t_chunk, "evaluate_128_envs_s": t_evaluate,
             "evaluate_steps": steps,
             "sgd_step_ms": 1e3 * t_improve / sgd_steps, "sgd_step_kernels": kernels, "steps_per_s": config.steps_per_update / t_update,
             "compile_rollout_s": compile_rollout, "compile_improve_s": compile_improve}  # fmt: skip
@@ -125,12 +145,12 @@ def main() -> None:
     rows = []
     args.out.mkdir(parents=True, exist_ok=True)
     path = args.out / f"ppo_profile_{jax.default_backend()}{'_' + args.tag if args.tag else ''}.json"
-    print(f"{'env':<28} {'variant':<10} {'rollout s':>9} {'improve s':>9} {'update s':>9} {'sgd ms':>7} {'kernels':>7} {'steps/s':>11} {'eval s':>7}")
+    print(f"{'env':<28} {'variant':<10} {'rollout s':>9} {'improve s':>9} {'update s':>9} {'onward s':>8} {'chunk s':>8} {'sgd ms':>7} {'kernels':>7} {'steps/s':>11} {'eval s':>7}")
     for env in args.envs:
         for name, fields in map(parse_variant, args.variants):
             row = {"variant": name, **profile(env, base, fields, args.repeats)}
             rows.append(row)
-            print(f"{env:<28} {name:<10} {row['rollout_s']:>9.3f} {row['improve_s']:>9.3f} {row['update_s']:>9.3f} "
+            print(f"{env:<28} {name:<10} {row['rollout_s']:>9.3f} {row['improve_s']:>9.3f} {row['update_s']:>9.3f} {row['update_onward_s']:>8.3f} {row['chunk_update_s']:>8.3f} "
                   f"{row['sgd_step_ms']:>7.2f} {row['sgd_step_kernels']:>7} {row['steps_per_s']:>11,.0f} {row['evaluate_128_envs_s']:>7.2f}",
                   flush=True)  # fmt: skip
             path.write_text(json.dumps({"device": device, "jax": jax.__version__, "xla_flags": os.environ.get("XLA_FLAGS", ""), "rows": rows}, indent=1))
