@@ -134,26 +134,25 @@ def offline(
                     "realtime_factor": problem.seconds / wall, "compile_s": compile_s}  # fmt: skip
 
 
-def realtime(
-    problem: Problem, key: jax.Array, plan_hz: float | None = None, clock: str = "wall"
-) -> tuple[Result, dict[str, float]]:
-    """Simulates `problem.seconds` of wall-clock time, replanning at `plan_hz` (default:
-    every `replan_every` simulation steps' worth of time) or as fast as planning allows.
-    ``clock="simulated"``: the simulation waits for each replan instead and nothing
-    sleeps (the planner's rate in simulated time, its latency measured as a busy loop
-    measures it, as Judo's simulated-time runs do).
+@dataclasses.dataclass
+class _Compiled:
+    """`realtime`'s loop, compiled: replan and simulation step over packed states, the
+    states themselves (packed) and the keys, every argument committed to the device."""
 
-    Returns the run and where its time went: the achieved ``plan_hz``, each replan's
-    latency (median, p95), of which ``plan_physics_ms`` was C MuJoCo's rollouts on the
-    native backend, the simulation's cost per control step (``sim_step_ms``), the busy
-    share of the wall clock and the real-time factor."""
-    if clock not in ("wall", "simulated"):
-        raise ValueError(f"realtime: clock must be 'wall' or 'simulated', got {clock!r}")
+    replan: Callable
+    step: Callable
+    after_rollout: Callable
+    sims: Packing
+    plans: Packing
+    sim_state: Any
+    planner_state: Any
+    step_keys: list
+    plan_keys: list
+
+
+def _compiled(problem: Problem, key: jax.Array, total_steps: int) -> _Compiled:
     planner, config, hooks, value = problem.planner, problem.config, problem.hooks, problem.terminal_value
-    sim_task, plan_task = problem.tasks  # before sim_dt: a native simulation knows its step
-    sim_dt = problem.sim_dt
-    period = 1.0 / plan_hz if plan_hz else sim_dt * problem.replan_every
-    total_steps = round(problem.seconds / sim_dt)
+    sim_task, plan_task = problem.tasks
     reset_key, plan_key, key = jax.random.split(key, 3)
     # Every argument committed to the device like the jit outputs it alternates with: an
     # uncommitted one would compile the function again, mid-run.
@@ -183,6 +182,39 @@ def realtime(
                            step(planner_state, sim_state, step_keys[-1])))  # fmt: skip
     if hooks.post_rollout is not None:
         jax.block_until_ready(after_rollout(sim_state, planner_state))
+    return _Compiled(replan, step, after_rollout, sims, plans, sim_state, planner_state, step_keys, plan_keys)
+
+
+def _timings(wall: float, latencies: list, step_seconds: list, physics_seconds: list, simulated_s: float) -> dict:
+    """`realtime`'s report of where the `wall` seconds went (see there)."""
+    ms = lambda xs, q=50: 1e3 * float(np.percentile(xs, q)) if xs else float("nan")  # noqa: E731
+    return {"plan_hz": len(latencies) / wall, "plan_latency_ms": ms(latencies), "plan_latency_p95_ms": ms(latencies, 95),
+            "plan_physics_ms": ms(physics_seconds), "sim_step_ms": ms(step_seconds),
+            "busy": (sum(latencies) + sum(step_seconds)) / wall, "realtime_factor": simulated_s / wall}  # fmt: skip
+
+
+def realtime(
+    problem: Problem, key: jax.Array, plan_hz: float | None = None, clock: str = "wall"
+) -> tuple[Result, dict[str, float]]:
+    """Simulates `problem.seconds` of wall-clock time, replanning at `plan_hz` (default:
+    every `replan_every` simulation steps' worth of time) or as fast as planning allows.
+    ``clock="simulated"``: the simulation waits for each replan instead and nothing
+    sleeps (the planner's rate in simulated time, its latency measured as a busy loop
+    measures it, as Judo's simulated-time runs do).
+
+    Returns the run and where its time went: the achieved ``plan_hz``, each replan's
+    latency (median, p95), of which ``plan_physics_ms`` was C MuJoCo's rollouts on the
+    native backend, the simulation's cost per control step (``sim_step_ms``), the busy
+    share of the wall clock and the real-time factor."""
+    if clock not in ("wall", "simulated"):
+        raise ValueError(f"realtime: clock must be 'wall' or 'simulated', got {clock!r}")
+    plan_task = problem.tasks[1]  # before sim_dt: a native simulation knows its step
+    sim_dt = problem.sim_dt
+    period = 1.0 / plan_hz if plan_hz else sim_dt * problem.replan_every
+    total_steps = round(problem.seconds / sim_dt)
+    loop = _compiled(problem, key, total_steps)
+    replan, step, hooks, value = loop.replan, loop.step, problem.hooks, problem.terminal_value
+    sim_state, planner_state = loop.sim_state, loop.planner_state
     physics_seconds = plan_task.engine.seconds if isinstance(plan_task, Native) else []
     physics_seconds.clear()
 
@@ -194,7 +226,7 @@ def realtime(
         nonlocal sim_state
         while len(states) < min(total_steps, due):
             tick = time.perf_counter()
-            sim_state, control = jax.block_until_ready(step(plan, sim_state, step_keys[len(states)]))
+            sim_state, control = jax.block_until_ready(step(plan, sim_state, loop.step_keys[len(states)]))
             step_seconds.append(time.perf_counter() - tick)
             states.append(sim_state)
             controls.append(control)
@@ -202,14 +234,14 @@ def realtime(
     due_at = lambda wall: int((wall - begin) / sim_dt)  # noqa: E731  steps due by a wall time
     while len(states) < total_steps:
         tick = time.perf_counter()
-        replan_key = plan_keys[len(latencies) % total_steps]
+        replan_key = loop.plan_keys[len(latencies) % total_steps]
         new_plan = jax.block_until_ready(replan(planner_state, sim_state, replan_key, value))
         latencies.append(time.perf_counter() - tick)
         if not simulated:
             advance_to(due_at(time.perf_counter()), planner_state)  # the world did not wait
         planner_state = new_plan
         if hooks.post_rollout is not None:
-            sim_state = after_rollout(sim_state, planner_state)
+            sim_state = loop.after_rollout(sim_state, planner_state)
         plan_states.append(planner_state)
         if simulated:  # the world waits for each replan: one period of steps follows it
             advance_to(round(len(latencies) * period / sim_dt), planner_state)
@@ -218,10 +250,6 @@ def realtime(
             time.sleep(max(0.0, tick + period - time.perf_counter()))
     wall = time.perf_counter() - begin
     stack = lambda packing, xs: jax.jit(packing.unpack)(jax.tree.map(lambda *x: jnp.stack(x), *xs))  # noqa: E731
-    stacked, plan_states = stack(sims, states), stack(plans, plan_states)
-    result = Result(stacked, jnp.stack(controls), -stacked.reward, plan_states.cost, plans.unpack(planner_state))
-    ms = lambda xs, q=50: 1e3 * float(np.percentile(xs, q)) if xs else float("nan")  # noqa: E731
-    return result, {"plan_hz": len(latencies) / wall, "plan_latency_ms": ms(latencies),
-                    "plan_latency_p95_ms": ms(latencies, 95), "plan_physics_ms": ms(physics_seconds),
-                    "sim_step_ms": ms(step_seconds), "busy": (sum(latencies) + sum(step_seconds)) / wall,
-                    "realtime_factor": total_steps * sim_dt / wall}  # fmt: skip
+    stacked, plan_states = stack(loop.sims, states), stack(loop.plans, plan_states)
+    result = Result(stacked, jnp.stack(controls), -stacked.reward, plan_states.cost, loop.plans.unpack(planner_state))
+    return result, _timings(wall, latencies, step_seconds, physics_seconds, total_steps * sim_dt)
