@@ -10,7 +10,7 @@ A variant is ``NAME=FIELD:VALUE,...`` over `ppo.Config` (e.g. ``bf16=compute_dty
 ``base`` is the config unchanged. The matmul precision of float32 (JAX's default on recent
 GPUs is TF32) is the variant field ``precision`` (``float32`` / ``tensorfloat32`` /
 ``bfloat16``), set with `jax.default_matmul_precision` around compiling and running;
-``flat_adam:1`` makes the optimizer one Adam update over the parameters concatenated
+``flat_adam:1`` runs the config's optimizer over the parameters concatenated
 (`optax.flatten`). Each row also counts the kernels one minibatch step launches, read off
 the compiled program. XLA's own options go in ``XLA_FLAGS`` (a run per setting, ``--tag``
 naming its JSON), e.g. CUDA graphs around the minibatch loop:
@@ -93,8 +93,8 @@ def profile(env: str, base: ppo.Config, fields: dict[str, str], repeats: int) ->
     flat_adam = fields.pop("flat_adam", None) == "1"
     values = arguments.parse_assignments(tuple(f"{f}={v}" for f, v in fields.items()), "--variants")
     config = dataclasses.replace(base, **values)
-    if flat_adam:  # one Adam update over all parameters concatenated, instead of one per array
-        config = dataclasses.replace(config, optimizer=optax.flatten(optax.adam(config.learning_rate)))
+    if flat_adam:  # the config's own optimizer over all parameters concatenated, not one update per array
+        config = dataclasses.replace(config, optimizer=optax.flatten(ppo._optimizer(config)))
     task = mjzoo.envs.make(env)
     scope = jax.default_matmul_precision(precision) if precision else contextlib.nullcontext()
     with scope:
@@ -114,7 +114,8 @@ def profile(env: str, base: ppo.Config, fields: dict[str, str], repeats: int) ->
         t_improve = best_of(improve, state, data, key, repeats=repeats)
         t_update = best_of(update, state, repeats=repeats)
         t_onward = per_update(update, state, 1, repeats)
-        t_chunk = per_update(lambda s: training._chunk_fn(ppo, config, CHUNK)(replicate(task), s)[0], state, CHUNK, repeats)
+        chunk, placed_task = training._chunk_fn(ppo, config, CHUNK), replicate(task)  # as `training.run` holds them
+        t_chunk = per_update(lambda s: chunk(placed_task, s)[0], state, CHUNK, repeats)
         defaults = mjzoo.envs.defaults(env)
         steps = defaults.get("episode_steps") or defaults.get("episode_length", 1000)
         evaluate = jax.jit(lambda s, k: ppo.evaluate(config, task, s, k, 128, steps)[0])

@@ -74,10 +74,14 @@ def _own_fields(data: mjx.Data) -> mjx.Data:
         return data
     from mujoco.mjx.warp.types import DATA_NON_VMAP
 
-    dropped = DATA_NON_VMAP | _WARP_SCRATCH
-    shared = {f.name: None for f in dataclasses.fields(data._impl)
-              if f.name in dropped and isinstance(getattr(data._impl, f.name), jax.Array)}  # fmt: skip
-    return data.replace(_impl=data._impl.replace(**shared))
+    dropped = dict.fromkeys(_array_fields(data, DATA_NON_VMAP | _WARP_SCRATCH))
+    return data.replace(_impl=data._impl.replace(**dropped))
+
+
+def _array_fields(data: mjx.Data, names: set[str]) -> list[str]:
+    """The fields of Warp's `data._impl` among `names` that hold arrays (not None)."""
+    return [f.name for f in dataclasses.fields(data._impl)
+            if f.name in names and isinstance(getattr(data._impl, f.name), jax.Array)]  # fmt: skip
 
 
 def shared(tree: Any) -> Any:
@@ -91,9 +95,7 @@ def shared(tree: Any) -> Any:
             return flags
         from mujoco.mjx.warp.types import DATA_NON_VMAP
 
-        pool = {f.name: True for f in dataclasses.fields(x._impl)
-                if f.name in DATA_NON_VMAP and isinstance(getattr(x._impl, f.name), jax.Array)}  # fmt: skip
-        return flags.replace(_impl=flags._impl.replace(**pool))
+        return flags.replace(_impl=flags._impl.replace(**dict.fromkeys(_array_fields(x, DATA_NON_VMAP), True)))
 
     return jax.tree.map(mark, tree, is_leaf=is_data)
 
