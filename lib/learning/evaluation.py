@@ -76,23 +76,28 @@ def evaluate(
     num_steps = episode_steps(task) if num_steps is None else checks.integer("evaluate", "num_steps", num_steps)
 
     task = worlds.sized(task, num_envs)  # Warp: a contact pool for every env
+    # Each env's keys as a lone env's would be: a reset key, then one key per step.
+    reset_keys, run_keys = jnp.moveaxis(jax.vmap(jax.random.split)(jax.random.split(key, num_envs)), 1, 0)
+    step_keys = jnp.swapaxes(jax.vmap(lambda k: jax.random.split(k, num_steps))(run_keys), 0, 1)  # [num_steps, num_envs]
+    states = jax.vmap(reset, in_axes=(None, 0))(task, reset_keys)
+    carries = jax.tree.map(lambda x: jnp.broadcast_to(x, (num_envs, *jnp.shape(x))), carry)
 
-    def one(key: Array):
-        reset_key, key = jax.random.split(key)
-        state = reset(task, reset_key)
+    def one(state, carry, start, key):
+        act_key, step_key = jax.random.split(key)
+        carry, action, _ = policy(carry, state.obs, start, act_key)
+        return transition(task, state, action, step_key), carry, action
 
-        def body(inputs, key):
-            state, carry, start = inputs
-            act_key, step_key = jax.random.split(key)
-            carry, action, _ = policy(carry, state.obs, start, act_key)
-            next_state = transition(task, state, action, step_key)
-            return (next_state, carry, jnp.zeros((), bool)), Trajectory(state.obs, action, next_state)
+    # The batch steps inside the scan and only env 0's states are stacked: stacking every
+    # env's (as a scan per env would) wrote num_envs x num_steps physics states, which
+    # tripled the time of an evaluation of 128 envs on an H100.
+    def body(inputs, keys):
+        states, carries, start = inputs
+        next_states, carries, actions = jax.vmap(one, in_axes=(0, 0, None, 0))(states, carries, start, keys)
+        first = jax.tree.map(lambda x: x[0], worlds.own(Trajectory(states.obs, actions, next_states)))
+        done = next_states.terminated | next_states.truncated
+        return (next_states, carries, jnp.zeros((), bool)), (next_states.reward, done, first)
 
-        inputs = (state, carry, jnp.ones((), bool))
-        _, trajectory = jax.lax.scan(body, inputs, jax.random.split(key, num_steps))
-        done = trajectory.next_state.terminated | trajectory.next_state.truncated
-        alive = (jnp.cumsum(done) - done) == 0  # up to and including the first episode end
-        return jnp.sum(trajectory.next_state.reward * alive), jnp.sum(alive, dtype=jnp.int32), trajectory
-
-    returns, lengths, trajectories = jax.vmap(one)(jax.random.split(key, num_envs))
-    return Evaluation(returns, lengths, jax.tree.map(lambda x: x[0], worlds.own(trajectories)))
+    _, (rewards, done, trajectory) = jax.lax.scan(body, (states, carries, jnp.ones((), bool)), step_keys)
+    alive = (jnp.cumsum(done, axis=0) - done) == 0  # [num_steps, num_envs]: up to and including the first episode end
+    returns = jnp.sum(rewards * alive, axis=0)
+    return Evaluation(returns, jnp.sum(alive, axis=0, dtype=jnp.int32), trajectory)
