@@ -35,7 +35,6 @@ from typing import Any
 import jax
 import jax.numpy as jnp
 import numpy as np
-import orbax.checkpoint as ocp
 
 __all__ = ["save", "restore", "restore_newest_intact", "set_aside", "latest_step", "all_steps",
            "CheckpointError", "DamagedCheckpointWarning"]
@@ -47,6 +46,14 @@ _MAX_REASON = 400  # characters of a read error kept in messages (tensorstore's 
 # What orbax and tensorstore raise on reading a damaged checkpoint: a missing file
 # (FileNotFoundError), bad JSON or bytes (ValueError), a missing item (KeyError).
 _READ_ERRORS = (OSError, ValueError, KeyError)
+
+
+def _orbax():
+    """orbax.checkpoint, imported when first needed: it costs a launch ~0.4 s, before
+    its first checkpoint is due."""
+    import orbax.checkpoint
+
+    return orbax.checkpoint
 
 
 class CheckpointError(ValueError):
@@ -78,6 +85,7 @@ def save(directory: str | Path, step: int, tree: PyTree, *, keep: int = 3) -> Pa
         if _size(leaf):  # orbax refuses empty arrays; their shape in `leaves` is all they hold
             arrays[str(i)] = _storable(leaf)
         leaves.append(dict(path=path, **_describe(leaf)))
+    ocp = _orbax()
     options = ocp.CheckpointManagerOptions(
         max_to_keep=keep,
         enable_async_checkpointing=False,  # callers reuse (donate) the buffers right after
@@ -140,6 +148,7 @@ def restore(directory: str | Path, like: PyTree, step: int | None = None) -> PyT
 
     template, treedef = jax.tree_util.tree_flatten_with_path(like)
     template = [(jax.tree_util.keystr(path), leaf) for path, leaf in template]
+    ocp = _orbax()
     with _reader(directory) as manager:
         saved = manager.restore(step, args=ocp.args.Composite(**{_TREE: ocp.args.JsonRestore()}))[_TREE]
         index = _match(saved["leaves"], template, f"checkpoint {step} in {directory}")
@@ -232,8 +241,9 @@ def _quiet_abandoned_reads() -> None:
     warnings.filterwarnings("ignore", r"coroutine '[\w.<>]+' was never awaited", RuntimeWarning)
 
 
-def _reader(directory: str | Path) -> ocp.CheckpointManager:
+def _reader(directory: str | Path) -> Any:  # orbax.checkpoint.CheckpointManager
     # create=False: looking for checkpoints must not make directories.
+    ocp = _orbax()
     return ocp.CheckpointManager(Path(directory).absolute(), options=ocp.CheckpointManagerOptions(create=False))
 
 

@@ -21,8 +21,6 @@ from collections.abc import Sequence
 from pathlib import Path
 
 import numpy as np
-from matplotlib.backends.backend_agg import FigureCanvasAgg
-from matplotlib.figure import Figure
 from mjzoo.harness.metrics import read_metrics
 from mjzoo.harness.render_config import RenderConfig
 
@@ -61,6 +59,9 @@ def plot_curves(
     rows = max(1, math.ceil(len(panels) / _COLUMNS))
     columns = min(max(len(panels), 1), _COLUMNS)
     width, height = config.plot_figsize
+    from matplotlib.backends.backend_agg import FigureCanvasAgg  # here: importing matplotlib costs a launch ~0.8 s
+    from matplotlib.figure import Figure
+
     figure = Figure(figsize=(width * columns, height * rows), layout="constrained")
     FigureCanvasAgg(figure)  # attaches itself: this figure renders with Agg, whatever pyplot's backend
     if not panels:
