@@ -29,7 +29,19 @@ import mjzoo
 import mjzoo.envs
 from mjzoo.interop import brax as adapter
 
-__all__ = ["train_brax_ppo"]
+__all__ = ["train_brax_ppo", "wall_steps_per_s"]
+
+
+def wall_steps_per_s(curve: list) -> float | None:
+    """Env steps per wall-clock second from the first to the last evaluation after
+    training began, of a curve ``[(env_steps, wall_seconds, eval_return), ...]``: what a
+    trainer delivers, its own evaluations in between included. The first compile stays
+    out of it. None with fewer than two such evaluations."""
+    trained = [point for point in curve if point[0] > 0]
+    if len(trained) < 2:
+        return None
+    (first_step, first_t, _), (last_step, last_t, _) = trained[0], trained[-1]
+    return (last_step - first_step) / (last_t - first_t)
 
 
 def train_brax_ppo(
@@ -108,9 +120,9 @@ def train_brax_ppo(
 
     trained = [r for r in reports if r[0] > 0]  # reports after training epochs
     (first_step, first_t, first_m), (last_step, last_t, last_m) = trained[0], trained[-1]
-    steps_per_s = (last_step - first_step) / (last_t - first_t)
-    train_seconds = last_m["training/walltime"] - first_m["training/walltime"]
     curve = [(step, t, float(m.get("eval/episode_reward", math.nan))) for step, t, m in reports]
+    steps_per_s = wall_steps_per_s(curve)
+    train_seconds = last_m["training/walltime"] - first_m["training/walltime"]
     return {
         "steps_per_s": steps_per_s,
         "train_steps_per_s": (last_step - first_step) / train_seconds,

@@ -12,12 +12,17 @@ three measurements per implementation; Brax PPO runs on Warp where it can (it vm
 env itself: the task's contact pool is sized for its batches first), else the reason is
 recorded and printed.
 
-Prints a table (training steps/s, ratio to raw stepping, wall-clock time to a return
-threshold, final return) and writes JSON: ``rows`` holds one row per (env, impl), its
-``"impl"`` naming the physics, with the old keys' meanings (old files, without
-``"impl"``, are JAX) plus ``mjzoo_fraction_of_raw`` / ``brax_fraction_of_raw`` (training
-steps/s over raw stepping's); a trainer that could not run has ``{"error": why}`` in
-place of its result. ``warp_vs_jax`` holds, per env measured on both, Warp's figure over
+Two rates per trainer, each measured the same way for both: ``steps_per_s``, env steps
+over the wall-clock from its first to its last evaluation after training began (its own
+evaluations included: Brax's 20, mjzoo's default budget of 5% of the wall-clock), and
+``train_steps_per_s``, training alone (mjzoo: the median chunk; Brax: its
+``training/walltime``). Prints a table (both rates, training's share of raw stepping,
+wall-clock time to a return threshold, final return) and writes JSON: ``rows`` holds one
+row per (env, impl), its ``"impl"`` naming the physics, with the old keys' meanings (old
+files, without ``"impl"``, are JAX) plus ``mjzoo_fraction_of_raw`` /
+``brax_fraction_of_raw`` (training alone over raw stepping) and the ratios
+``mjzoo_over_brax_steps_per_s`` / ``mjzoo_over_brax_train_steps_per_s``; a trainer that
+could not run has ``{"error": why}`` in place of its result. ``warp_vs_jax`` holds, per env measured on both, Warp's figure over
 JAX's for raw stepping, each trainer's steps/s and time to its threshold.
 
     python benchmarks/ppo_vs_brax.py --envs cartpole_balance cylinder_push --steps 20000000
@@ -39,7 +44,7 @@ import jax
 import numpy as np
 
 sys.path.insert(0, str(Path(__file__).parent))
-from brax_peer import train_brax_ppo  # noqa: E402
+from brax_peer import train_brax_ppo, wall_steps_per_s  # noqa: E402
 from task_overhead import add_impl_argument, impls, inputs, ratio, raw_steps_per_s  # noqa: E402
 
 import mjzoo  # noqa: E402
@@ -75,9 +80,9 @@ def train_mjzoo(task: mjzoo.Task, total_steps: int, episode_length: int, seed: i
                                      video=False, progress=False, checkpoint_every=0, seed=seed)  # fmt: skip
         start = time.perf_counter()
         training.run(ppo, config, task, settings)
-        curve, steps_per_s = training_curve(Path(out) / "metrics.jsonl", time.perf_counter() - start)
-    return {"steps_per_s": steps_per_s, "curve": curve, "final_return": curve[-1][2],
-            "compile_s": curve[0][1] - config.steps_per_update / steps_per_s}  # fmt: skip
+        curve, train_steps_per_s = training_curve(Path(out) / "metrics.jsonl", time.perf_counter() - start)
+    return {"steps_per_s": wall_steps_per_s(curve), "train_steps_per_s": train_steps_per_s, "curve": curve,
+            "final_return": curve[-1][2], "compile_s": curve[0][1] - config.steps_per_update / train_steps_per_s}  # fmt: skip
 
 
 def training_curve(metrics_path: Path, total_s: float) -> tuple[list, float]:
@@ -153,7 +158,10 @@ def summarize(row: dict, threshold: float) -> dict:
             continue
         times = [time_to(run["curve"], row["threshold"]) for run in r.get("runs", [r])]
         row[f"{name}_time_to_threshold_s"] = None if None in times else float(np.mean(times))
-        row[f"{name}_fraction_of_raw"] = r["steps_per_s"] / row["raw_steps_per_s"]
+        row[f"{name}_fraction_of_raw"] = r["train_steps_per_s"] / row["raw_steps_per_s"]
+    if all(name in results and "error" not in results[name] for name in ("mjzoo", "brax")):
+        for rate in ("steps_per_s", "train_steps_per_s"):
+            row[f"mjzoo_over_brax_{rate}"] = ratio(results["mjzoo"][rate], results["brax"][rate])
     return row
 
 
@@ -184,18 +192,20 @@ def warp_vs_jax_rows(rows: list[dict]) -> list[dict]:
 
 
 def print_table(rows: list[dict]) -> None:
-    print(f"\n{'env':<18} {'impl':<5} {'trainer':<7} {'steps/s':>11} {'/raw':>6} {'to thr (s)':>10} {'final':>8} {'compile s':>9}")
+    print(f"\n{'env':<18} {'impl':<5} {'trainer':<7} {'steps/s':>11} {'training':>11} {'/raw':>6} {'to thr (s)':>10} "
+          f"{'final':>8} {'compile s':>9}")  # fmt: skip
     for r in rows:
         for name in (n for n in ("mjzoo", "brax") if n in r):
             res, ttt = r[name], r[f"{name}_time_to_threshold_s"]
             if "error" in res:
                 print(f"{r['env']:<18} {r['impl']:<5} {name:<7} did not run: {res['error'][:200]}")
                 continue
-            print(f"{r['env']:<18} {r['impl']:<5} {name:<7} {res['steps_per_s']:>11,.0f} {r[f'{name}_fraction_of_raw']:>6.2f} "
+            print(f"{r['env']:<18} {r['impl']:<5} {name:<7} {res['steps_per_s'] or 0:>11,.0f} {res['train_steps_per_s']:>11,.0f} "
+                  f"{r[f'{name}_fraction_of_raw']:>6.2f} "
                   f"{'never' if ttt is None else f'{ttt:.1f}':>10} {res['final_return']:>8.1f} {res['compile_s']:>9.1f}")  # fmt: skip
-        peer = r.get("brax", {}).get("steps_per_s") if "mjzoo" in r else None
+        wall, train = r.get("mjzoo_over_brax_steps_per_s"), r.get("mjzoo_over_brax_train_steps_per_s")
         print(f"{'':<18} {r['impl']:<5} raw     {r['raw_steps_per_s']:>11,.0f}   threshold {r['threshold']:.1f}"
-              + (f"; mjzoo/brax steps/s = {r['mjzoo']['steps_per_s'] / peer:.2f}x" if peer else ""))
+              + (f"; mjzoo/brax steps/s = {wall:.2f}x (training alone {train:.2f}x)" if wall and train else ""))
 
 
 def main() -> None:
