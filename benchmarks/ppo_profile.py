@@ -120,10 +120,13 @@ def profile(env: str, base: ppo.Config, fields: dict[str, str], repeats: int) ->
         steps = defaults.get("episode_steps") or defaults.get("episode_length", 1000)
         evaluate = jax.jit(lambda s, k: ppo.evaluate(config, task, s, k, 128, steps)[0])
         t_evaluate = best_of(evaluate, state, key, repeats=1)
+        # As the harness runs it: the task an argument, every result (env 0's trajectory too) returned.
+        in_loop = training._evaluate_fn(ppo)
+        t_in_loop = best_of(lambda s, k: in_loop(config, placed_task, s, k, 128, steps), state, key, repeats=1)
     sgd_steps = config.num_epochs * config.num_minibatches
     return {"env": env, "config": {**fields, **({"precision": precision} if precision else {})},
             "rollout_s": t_rollout, "improve_s": t_improve, "update_s": t_update, "update_onward_s": t_onward, "chunk_update_s": t_chunk, "evaluate_128_envs_s": t_evaluate,
-            "evaluate_steps": steps,
+            "evaluate_in_loop_s": t_in_loop, "evaluate_steps": steps,
             "sgd_step_ms": 1e3 * t_improve / sgd_steps, "sgd_step_kernels": kernels, "steps_per_s": config.steps_per_update / t_update,
             "compile_rollout_s": compile_rollout, "compile_improve_s": compile_improve}  # fmt: skip
 
@@ -146,13 +149,13 @@ def main() -> None:
     rows = []
     args.out.mkdir(parents=True, exist_ok=True)
     path = args.out / f"ppo_profile_{jax.default_backend()}{'_' + args.tag if args.tag else ''}.json"
-    print(f"{'env':<28} {'variant':<10} {'rollout s':>9} {'improve s':>9} {'update s':>9} {'onward s':>8} {'chunk s':>8} {'sgd ms':>7} {'kernels':>7} {'steps/s':>11} {'eval s':>7}")
+    print(f"{'env':<28} {'variant':<10} {'rollout s':>9} {'improve s':>9} {'update s':>9} {'onward s':>8} {'chunk s':>8} {'sgd ms':>7} {'kernels':>7} {'steps/s':>11} {'eval s':>7} {'in loop':>7}")
     for env in args.envs:
         for name, fields in map(parse_variant, args.variants):
             row = {"variant": name, **profile(env, base, fields, args.repeats)}
             rows.append(row)
             print(f"{env:<28} {name:<10} {row['rollout_s']:>9.3f} {row['improve_s']:>9.3f} {row['update_s']:>9.3f} {row['update_onward_s']:>8.3f} {row['chunk_update_s']:>8.3f} "
-                  f"{row['sgd_step_ms']:>7.2f} {row['sgd_step_kernels']:>7} {row['steps_per_s']:>11,.0f} {row['evaluate_128_envs_s']:>7.2f}",
+                  f"{row['sgd_step_ms']:>7.2f} {row['sgd_step_kernels']:>7} {row['steps_per_s']:>11,.0f} {row['evaluate_128_envs_s']:>7.2f} {row['evaluate_in_loop_s']:>7.2f}",
                   flush=True)  # fmt: skip
             path.write_text(json.dumps({"device": device, "jax": jax.__version__, "xla_flags": os.environ.get("XLA_FLAGS", ""), "rows": rows}, indent=1))
     print(f"wrote {path}", flush=True)
