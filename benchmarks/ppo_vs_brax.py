@@ -22,8 +22,9 @@ row per (env, impl), its ``"impl"`` naming the physics, with the old keys' meani
 files, without ``"impl"``, are JAX) plus ``mjzoo_fraction_of_raw`` /
 ``brax_fraction_of_raw`` (training alone over raw stepping) and the ratios
 ``mjzoo_over_brax_steps_per_s`` / ``mjzoo_over_brax_train_steps_per_s``; a trainer that
-could not run has ``{"error": why}`` in place of its result. ``warp_vs_jax`` holds, per env measured on both, Warp's figure over
-JAX's for raw stepping, each trainer's steps/s and time to its threshold.
+could not run has ``{"error": why}`` in place of its result. ``warp_vs_jax`` holds, per
+env measured on both, Warp's figure over JAX's for raw stepping, each trainer's steps/s
+and time to its threshold.
 
     python benchmarks/ppo_vs_brax.py --envs cartpole_balance cylinder_push --steps 20000000
     python benchmarks/ppo_vs_brax.py --envs cartpole_balance --steps 4000000 --impl warp jax
@@ -161,7 +162,7 @@ def summarize(row: dict, threshold: float) -> dict:
         row[f"{name}_fraction_of_raw"] = r["train_steps_per_s"] / row["raw_steps_per_s"]
     if all(name in results and "error" not in results[name] for name in ("mjzoo", "brax")):
         for rate in ("steps_per_s", "train_steps_per_s"):
-            row[f"mjzoo_over_brax_{rate}"] = ratio(results["mjzoo"][rate], results["brax"][rate])
+            row[f"mjzoo_over_brax_{rate}"] = ratio(results["mjzoo"].get(rate), results["brax"].get(rate))
     return row
 
 
