@@ -160,14 +160,15 @@ class _Loop:
     metrics line, checkpoint, show progress, check capacity and diagnose."""
 
     def __init__(self, algorithm: Algorithm, config: AlgorithmConfig, task: Task, settings: Settings,
-                 out: Path | None, key: jax.Array, eval_steps: int, launched: float, shown: dict[str, str]) -> None:  # fmt: skip
+                 out: Path | None, key: jax.Array, eval_steps: int, launched: float, shown: dict[str, str],
+                 chunk_ahead: threading.Thread | None = None) -> None:  # fmt: skip
         self.algorithm, self.config, self.settings = algorithm, config, settings
         self.task, self.host_task = replicate(task), task  # videos are drawn by one process, from its own copy
         self.out, self.key, self.launched, self.shown = out, key, launched, shown
         self.schedule = EvalSchedule(settings, launched)
-        # A run shorter than one chunk is one chunk of its own length, not rounded up to a whole one.
-        self.per_chunk = min(settings.updates_per_chunk, max(1, config.num_updates))
+        self.per_chunk = _per_chunk(config, settings)
         self.chunk = _chunk_fn(algorithm, config, self.per_chunk)
+        self.chunk_ahead = chunk_ahead  # the chunk compiling while init ran (`_compile_chunk_ahead`)
         self.evaluate, self.eval_steps = _evaluate_fn(algorithm), eval_steps
         self.total_updates = -(-config.num_updates // self.per_chunk) * self.per_chunk
         self.writer = metrics_lib.MetricsWriter(out) if out is not None and distributed.is_primary() else None
@@ -194,6 +195,9 @@ class _Loop:
         """Trains one chunk and does its bookkeeping; returns the new state."""
         start = _clock()
         shapes = _described(state) if not self.history else None  # before the chunk donates it
+        if self.chunk_ahead is not None:  # compiling it twice at once would waste a core
+            self.chunk_ahead.join()
+            self.chunk_ahead = None
         state, chunk_metrics = self.chunk(self.task, state)
         if shapes is not None:  # while this launch's first chunk runs, not while it traces: one GIL for both
             self.compile_evaluation_ahead(shapes)
@@ -319,9 +323,10 @@ def run(algorithm: Algorithm, config: AlgorithmConfig, task: Task, settings: Set
     if out is not None:
         _claim(out, settings)
     key, physics = jax.random.key(settings.seed), physics_info(task)
+    chunk_ahead = _compile_chunk_ahead(algorithm, config, task, settings, key)
     state = _start(algorithm, config, task, settings, out, key, physics)
     shown = {"physics": physics["impl"]} if physics else {}
-    loop = _Loop(algorithm, config, task, settings, out, key, eval_steps, launched, shown)
+    loop = _Loop(algorithm, config, task, settings, out, key, eval_steps, launched, shown, chunk_ahead)
     try:
         while not loop.done(state):
             state = loop.step(state)
@@ -330,6 +335,30 @@ def run(algorithm: Algorithm, config: AlgorithmConfig, task: Task, settings: Set
     if out is not None and distributed.is_primary():
         _finish(out, loop, settings)
     return state, loop.last
+
+
+def _per_chunk(config: AlgorithmConfig, settings: Settings) -> int:
+    """Updates per chunk. A run shorter than one chunk is one chunk of its own length,
+    not rounded up to a whole one."""
+    return min(settings.updates_per_chunk, max(1, config.num_updates))
+
+
+def _compile_chunk_ahead(algorithm: Algorithm, config: AlgorithmConfig, task: Task, settings: Settings,
+                         key: jax.Array) -> threading.Thread | None:  # fmt: skip
+    """Starts compiling the training chunk on a background thread, from the shapes of
+    the state init will return (`eval_shape`, which init's own call then reuses), so
+    that init and the chunk compile at once rather than one after the other (XLA
+    releases the GIL): the joystick stack's cold compiles were init 15 s, then the chunk
+    46 s. On one device only, where the placed state's sharding is that device's
+    (`shard_envs`); with several, the chunk compiles at its first call as before."""
+    devices = jax.devices()
+    if len(devices) != 1:
+        return None
+    shapes = _init_fn(algorithm).eval_shape(config, task, key)
+    place = jax.sharding.SingleDeviceSharding(devices[0])
+    state = jax.tree.map(lambda x: jax.ShapeDtypeStruct(x.shape, x.dtype, sharding=place, weak_type=x.weak_type), shapes)
+    chunk = _chunk_fn(algorithm, config, _per_chunk(config, settings))
+    return compilation.compile_ahead(chunk, replicate(task), state)
 
 
 def _described(tree: Any) -> Any:

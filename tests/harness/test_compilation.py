@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import dataclasses
 from pathlib import Path
 
 import jax
@@ -99,3 +100,35 @@ def test_the_train_state_is_owned_by_one_program_whatever_its_shapes():
     assert len(set(pointers)) == len(pointers) == 5
     assert pointers[1] != zeros.unsafe_buffer_pointer()
     jax.tree.map(lambda x, y: jnp.array_equal(x, y) or pytest.fail("a copy differs"), owned, {k: tree[k] for k in owned})
+
+
+@dataclasses.dataclass(frozen=True)
+class Updates:
+    num_updates: int
+
+
+def test_the_chunk_compiled_ahead_from_inits_shapes_serves_the_first_chunk():
+    """`training.run` compiles its chunk on a thread while init compiles, from the shapes
+    init will return: the described state (weak types, PRNG keys, the device's sharding)
+    must be the placed state exactly, or the first chunk compiles again."""
+    import types
+
+    from mjzoo.harness import devices, training
+
+    algorithm = types.ModuleType("stepper")
+    algorithm.PER_ENV_FIELDS = ("per_env",)
+    algorithm.init = lambda config, task, key: {"updates": jnp.zeros((), jnp.int32), "per_env": jnp.zeros(4),
+                                                "scale": jnp.asarray(1.0), "key": key}  # fmt: skip
+    algorithm.update = lambda config, task, s: ({**s, "updates": s["updates"] + 1, "per_env": s["per_env"] * s["scale"],
+                                                 "key": jax.random.fold_in(s["key"], 1)}, {})  # fmt: skip
+    config = Updates(num_updates=4)
+    settings = training.Settings(updates_per_chunk=2, video=False, progress=False)
+    task, key = {"gain": jnp.ones(3)}, jax.random.key(0)
+    ahead = training._compile_chunk_ahead(algorithm, config, task, settings, key)
+    assert ahead is not None  # one device
+    ahead.join()
+    state = devices.shard_envs(training._owned(training._init_fn(algorithm)(config, task, key)), algorithm.PER_ENV_FIELDS)
+    _compiles.clear()
+    state, _ = training._chunk_fn(algorithm, config, 2)(devices.replicate(task), state)
+    assert _compiles == []
+    assert int(state["updates"]) == 2
