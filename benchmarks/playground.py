@@ -15,6 +15,7 @@ the issue quotes one, is printed beside them.
 
     python benchmarks/playground.py --envs CartpoleBalance PendulumSwingup
     python benchmarks/playground.py --envs CheetahRun --trainers brax      # merges into the JSON
+    python benchmarks/playground.py --envs CheetahRun --first-seed 1      # a second seed beside the first
     python benchmarks/playground.py --envs CartpoleBalance --smoke       # tiny sizes, on a CPU
 """
 
@@ -142,7 +143,7 @@ def train_mjzoo(env, name: str, config: dict, seed: int, overrides: dict) -> dic
 TRAINERS = {"mjzoo": train_mjzoo, "brax": lambda env, name, config, seed, overrides: train_brax(env, config, seed)}
 
 
-def measure(name: str, impl: str, steps: int, seeds: int, trainers: list[str], smoke: bool, overrides: dict,
+def measure(name: str, impl: str, steps: int, seeds: range, trainers: list[str], smoke: bool, overrides: dict,
             evals: int | None = None) -> Iterator[dict]:  # fmt: skip
     """Raw stepping and each of `trainers` over `seeds` seeds on Playground's `name`: the
     row so far after each trainer (a run cut off keeps what it measured)."""
@@ -157,13 +158,27 @@ def measure(name: str, impl: str, steps: int, seeds: int, trainers: list[str], s
            "published": PUBLISHED.get(name)}  # fmt: skip
     for trainer in trainers:
         runs = []
-        for seed in range(seeds):
-            runs.append(TRAINERS[trainer](env, name, config, seed, overrides))
+        for seed in seeds:
+            runs.append({**TRAINERS[trainer](env, name, config, seed, overrides), "seed": seed})
             print(f"{name} ({impl}) seed {seed}: {trainer} {runs[-1]['steps_per_s']:,.0f} steps/s, final "
                   f"{runs[-1]['final_return']:.1f}, compile {runs[-1]['compile_s']:.0f} s, "
                   f"{time.perf_counter() - start:.0f} s so far", flush=True)  # fmt: skip
         row[trainer] = {"runs": runs}
         yield dict(row)
+
+
+def with_earlier_seeds(rows: list[dict], row: dict) -> dict:
+    """`row` with the runs that `rows` hold for its env, physics and trainers of seeds it
+    did not run (`--first-seed` adds seeds to a row; a run without a seed is seed 0, 1, ...
+    in order)."""
+    same = next((r for r in rows if (r["env"], r["impl"]) == (row["env"], row["impl"])), None)
+    row = dict(row)
+    for trainer in (t for t in TRAINERS if t in row and same is not None and t in same):
+        ran = {r["seed"] for r in row[trainer]["runs"]}
+        earlier = [{"seed": i, **r} for i, r in enumerate(same[trainer]["runs"])]
+        runs = [r for r in earlier if r["seed"] not in ran] + row[trainer]["runs"]
+        row[trainer] = {"runs": sorted(runs, key=lambda r: r["seed"])}
+    return row
 
 
 def summarize(row: dict, threshold: float) -> dict:
@@ -214,6 +229,7 @@ def main() -> None:
                         help="Brax's num_evals (Playground's: 10). Brax trains whole epochs between evaluations: "
                              "with --steps 20000000, 4 evaluations train 29.5M steps where 10 train 88.5M")  # fmt: skip
     parser.add_argument("--seeds", type=int, default=1)
+    parser.add_argument("--first-seed", type=int, default=0, help="seeds FIRST .. FIRST+SEEDS-1, added to the row's others")
     parser.add_argument("--set", nargs="*", default=[], metavar="FIELD=VALUE",
                         help="ppo.Config overrides for mjzoo (e.g. compute_dtype=bfloat16)")
     parser.add_argument("--threshold", type=float, default=0.9, help="fraction of the better final return")
@@ -229,8 +245,9 @@ def main() -> None:
     rows = json.loads(path.read_text())["rows"] if path.exists() else []
     for name in args.envs:
         for impl in args.impl:
-            for row in measure(name, impl, args.steps, args.seeds, args.trainers, args.smoke, overrides, args.evals):
-                rows = [summarize(r, args.threshold) for r in merged(rows, row)]
+            seeds = range(args.first_seed, args.first_seed + args.seeds)
+            for row in measure(name, impl, args.steps, seeds, args.trainers, args.smoke, overrides, args.evals):
+                rows = [summarize(r, args.threshold) for r in merged(rows, with_earlier_seeds(rows, row))]
                 path.write_text(json.dumps({"device": device, "jax": jax.__version__, "rows": rows}, indent=1))
     print_table(rows)
     print(f"wrote {path}", flush=True)
