@@ -190,15 +190,22 @@ def summarize(row: dict, threshold: float) -> dict:
     for t in trainers:
         rs = row[t]["runs"]
         times = [time_to(r["curve"], row["threshold"]) for r in rs]
-        speed, training = (float(np.mean([r[rate] for r in rs])) for rate in ("steps_per_s", "train_steps_per_s"))
+        speed, training = (_mean([r.get(rate) for r in rs]) for rate in ("steps_per_s", "train_steps_per_s"))
         row[t].update(steps_per_s=speed, train_steps_per_s=training, final_return=finals[t],
-                      fraction_of_raw=training / row["raw_steps_per_s"],
+                      fraction_of_raw=None if training is None else training / row["raw_steps_per_s"],
                       final_return_std=float(np.std([r["final_return"] for r in rs])), seeds=len(rs),
                       time_to_threshold_s=None if None in times else float(np.mean(times)))  # fmt: skip
     if len(trainers) == 2:
         for rate in ("steps_per_s", "train_steps_per_s"):
-            row[f"mjzoo_over_brax_{rate}"] = row["mjzoo"][rate] / row["brax"][rate]
+            mjzoo, brax = row["mjzoo"][rate], row["brax"][rate]
+            row[f"mjzoo_over_brax_{rate}"] = None if mjzoo is None or brax is None else mjzoo / brax
     return row
+
+
+def _mean(values: list[float | None]) -> float | None:
+    """The mean, or None where a run did not record the figure (Brax's training-alone
+    rate, before the script read it)."""
+    return None if None in values else float(np.mean(values))
 
 
 def print_table(rows: list[dict]) -> None:
@@ -208,11 +215,14 @@ def print_table(rows: list[dict]) -> None:
         for trainer in (t for t in TRAINERS if t in r):
             t = r[trainer]
             ttt = "never" if t["time_to_threshold_s"] is None else f"{t['time_to_threshold_s']:.1f}"
-            print(f"{r['env']:<16} {r['impl']:<5} {trainer:<6} {t['seeds']:>5} {t['steps_per_s']:>10,.0f} {t['train_steps_per_s']:>10,.0f} "
-                  f"{t['fraction_of_raw']:>5.2f} {ttt:>10} {t['final_return']:>7.1f} ± {t['final_return_std']:<6.1f}")  # fmt: skip
+            training, fraction = (("-", "-") if t["train_steps_per_s"] is None else
+                                  (f"{t['train_steps_per_s']:,.0f}", f"{t['fraction_of_raw']:.2f}"))  # fmt: skip
+            print(f"{r['env']:<16} {r['impl']:<5} {trainer:<6} {t['seeds']:>5} {t['steps_per_s']:>10,.0f} {training:>10} "
+                  f"{fraction:>5} {ttt:>10} {t['final_return']:>7.1f} ± {t['final_return_std']:<6.1f}")  # fmt: skip
         wall, train = r.get("mjzoo_over_brax_steps_per_s"), r.get("mjzoo_over_brax_train_steps_per_s")
         print(f"{'':<16} {r['impl']:<5} raw    {'':>5} {r['raw_steps_per_s']:>10,.0f}   threshold {r['threshold']:.1f}"
-              + (f"; mjzoo/brax steps/s {wall:.2f}x (training alone {train:.2f}x)" if wall and train else "")
+              + (f"; mjzoo/brax steps/s {wall:.2f}x" if wall else "")
+              + (f" (training alone {train:.2f}x)" if train else "")
               + (f"; published: {r['published']}" if r["published"] else ""))  # fmt: skip
 
 

@@ -345,12 +345,10 @@ def _per_chunk(config: AlgorithmConfig, settings: Settings) -> int:
 
 def _compile_chunk_ahead(algorithm: Algorithm, config: AlgorithmConfig, task: Task, settings: Settings,
                          key: jax.Array) -> threading.Thread | None:  # fmt: skip
-    """Starts compiling the training chunk on a background thread, from the shapes of
-    the state init will return (`eval_shape`, which init's own call then reuses), so
-    that init and the chunk compile at once rather than one after the other (XLA
-    releases the GIL): the joystick stack's cold compiles were init 15 s, then the chunk
-    46 s. On one device only, where the placed state's sharding is that device's
-    (`shard_envs`); with several, the chunk compiles at its first call as before."""
+    """Starts compiling the training chunk on a thread, from the shapes init will return
+    (`eval_shape`, whose trace init's call reuses): init and the chunk compile at once, not
+    one after the other (the joystick's init 15 s, then its chunk 46 s). One device only,
+    where the placed state's sharding is known; with several, the first call compiles."""
     devices = jax.devices()
     if len(devices) != 1:
         return None
