@@ -98,12 +98,15 @@ def log_prob(loc: Array, scale: Array, raw: Array) -> Array:
 
 
 def entropy(loc: Array, scale: Array, raw: Array) -> Array:
-    """One-sample estimate of the squashed distribution's entropy.
+    """One-sample estimate of the squashed distribution's entropy, with the pathwise gradient.
 
     The entropy of a = tanh(u) is H[u] + E_u[log|det J_tanh(u)|]; it has no closed
     form, so the expectation is replaced by its value at the one sample `raw`. The
-    estimate is unbiased when raw ~ N(loc, scale) but noisy; note that with raw fixed
-    its gradient reaches only the Gaussian part (through `scale`).
+    sample is reparameterized at the given loc and scale (u = loc + scale * eps, eps
+    held fixed), so the gradient also reaches the log-det term: it penalizes pushing u
+    into tanh's flat tails, which a fixed `raw` would not (its gradient would only grow
+    the scale, without bound, into bang-bang actions). The value equals the estimate
+    at `raw`.
 
     Args:
       loc, scale: [..., A].
@@ -113,8 +116,9 @@ def entropy(loc: Array, scale: Array, raw: Array) -> Array:
       [...] entropy estimate, summed over the action axis.
     """
     _check_shapes(loc, scale, raw)
+    eps = jax.lax.stop_gradient((raw - loc) / scale)
     gaussian = jnp.sum(0.5 + (_HALF_LOG_2PI + jnp.log(scale)), axis=-1)
-    return gaussian + _squash_log_det(raw)
+    return gaussian + _squash_log_det(loc + scale * eps)
 
 
 def mode(loc: Array) -> Array:

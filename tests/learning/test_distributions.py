@@ -121,6 +121,32 @@ def test_entropy_hand_checked_and_unbiased():
     assert float(est.mean()) < gaussian_entropy(scale)
 
 
+def test_entropy_gradient_is_the_true_entropys_gradient():
+    # The squashed entropy by Gauss-Hermite quadrature, one dimension:
+    # H = 0.5 ln(2 pi e) + ln s + E_z[ln(1 - tanh(m + s z)^2)], z ~ N(0, 1).
+    z, w = np.polynomial.hermite_e.hermegauss(80)
+    w = w / w.sum()
+
+    def log_sech2(u):  # ln(1 - tanh(u)^2), finite in the tails
+        return 2 * (math.log(2) - u - np.logaddexp(0, -2 * u))
+
+    def true_entropy(m, s):
+        return 0.5 * math.log(2 * math.pi * math.e) + math.log(s) + np.sum(w * log_sech2(m + s * z))
+
+    m, s, h = 0.7, 1.3, 1e-4
+    expected = [(true_entropy(m + h, s) - true_entropy(m - h, s)) / (2 * h),
+                (true_entropy(m, s + h) - true_entropy(m, s - h)) / (2 * h)]  # fmt: skip
+    # Averaged over samples, the estimate's gradient is the true gradient; both parts
+    # are far from zero here (squashing pulls loc towards 0 and caps the scale).
+    n = 100_000
+    loc, scale = jnp.full((n, 1), m), jnp.full((n, 1), s)
+    _, raw = sample(loc, scale, jax.random.key(6))
+    grad = jax.grad(lambda p: jnp.mean(entropy(p[0], p[1], raw)))((loc, scale))
+    got = [float(jnp.sum(grad[0])), float(jnp.sum(grad[1]))]
+    assert abs(expected[0]) > 0.3 and abs(expected[1]) > 0.1, expected
+    np.testing.assert_allclose(got, expected, rtol=0.03)
+
+
 def gaussian_entropy(scale):
     return float(jnp.sum(0.5 * jnp.log(2 * jnp.pi * jnp.e) + jnp.log(scale)))
 
