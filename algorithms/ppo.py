@@ -74,10 +74,6 @@ class Config:
     reward_scaling: float = 1.0
     normalize_observations: bool = True
     normalize_advantages: bool = True
-    # None: GAE once per update, before learning. L: Brax's scheme, the unroll cut into
-    # L-step sequences, whole sequences per minibatch, GAE redone in each minibatch with
-    # the current value function (one more value pass, over next observations).
-    advantage_window: int | None = None
     policy_hidden_sizes: tuple[int, ...] = (64, 64)
     value_hidden_sizes: tuple[int, ...] = (64, 64)
     activation: Literal["swish", "tanh", "relu", "elu"] = "swish"
@@ -109,11 +105,6 @@ class Config:
              f"a divisor of num_envs * unroll_length = {self.num_envs * self.unroll_length}")  # fmt: skip
         need(not self.recurrent or self.num_envs % self.num_minibatches == 0, "num_minibatches",
              "a divisor of num_envs (recurrent minibatches split whole sequences)")  # fmt: skip
-        window = self.advantage_window
-        need(window is None or (isinstance(window, int) and window >= 1 and self.unroll_length % window == 0
-                                and self.unroll_length // window * self.num_envs % self.num_minibatches == 0),
-             "advantage_window", "None or a divisor L of unroll_length with num_minibatches dividing "
-             "num_envs * unroll_length / L")  # fmt: skip
         need(self.learning_rate > 0, "learning_rate", "> 0")
         need(self.lr_schedule in ("constant", "linear", "cosine"), "lr_schedule", "constant, linear or cosine")
         for field in ("discount", "gae_lambda"):
@@ -294,8 +285,9 @@ def policy(config: Config, task: Task, deterministic: bool = True) -> Callable[[
 # --- update -------------------------------------------------------------------------
 
 
-def _loss(config: Config, task: Task, params, stats, batch) -> tuple[jax.Array, dict[str, jax.Array]]:
-    """PPO loss on one minibatch: [T, n, ...] sequences (recurrent) or [n, ...] samples."""
+def _loss(config: Config, task: Task, params, stats, batch, key) -> tuple[jax.Array, dict[str, jax.Array]]:
+    """PPO loss on one minibatch: [T, n, ...] sequences (recurrent) or [n, ...] samples;
+    `key` draws the entropy estimate's fresh sample."""
     policy_net, value_net = _networks(config, task)
     obs, value_obs = _inputs(config, stats, batch["obs"])
     if _is_recurrent(policy_net):
@@ -308,34 +300,16 @@ def _loss(config: Config, task: Task, params, stats, batch) -> tuple[jax.Array, 
         out = policy_net.apply(params["policy"], obs)
     loc, scale = distributions.split_params(out)
     log_prob = distributions.log_prob(loc, scale, batch["raw"])
-    entropy = jnp.mean(distributions.entropy(loc, scale, batch["raw"]))
-    values = value_net.apply(params["value"], value_obs)[..., 0]
-    if config.advantage_window:  # GAE from the current value function, not differentiated
-        next_values = value_net.apply(params["value"], _inputs(config, stats, batch["next_obs"])[1])[..., 0]
-        adv, returns = _advantages(config, jax.lax.stop_gradient(values), jax.lax.stop_gradient(next_values), batch)
-    else:
-        adv, returns = batch["advantages"], batch["returns"]
-    adv = losses.normalize_advantages(adv) if config.normalize_advantages else adv
+    entropy = jnp.mean(distributions.entropy(loc, scale, jax.random.normal(key, loc.shape)))
+    adv = losses.normalize_advantages(batch["advantages"]) if config.normalize_advantages else batch["advantages"]
     policy_loss, aux = losses.clipped_surrogate_loss(log_prob, batch["log_prob"], adv, config.clip_epsilon)
+    values = value_net.apply(params["value"], value_obs)[..., 0]
     old_values = batch["values"] if config.value_clip_epsilon else None
-    v_loss = losses.value_loss(values, returns, old_values, config.value_clip_epsilon)
+    v_loss = losses.value_loss(values, batch["returns"], old_values, config.value_clip_epsilon)
     total = policy_loss + config.value_coef * v_loss - config.entropy_coef * entropy
     return total, {"loss/policy": policy_loss, "loss/value": v_loss, "loss/entropy": entropy,
                    "loss/total": total, "loss/approx_kl": aux["approx_kl"],
                    "loss/clip_fraction": aux["clip_fraction"]}  # fmt: skip
-
-
-def _advantages(config: Config, values: jax.Array, next_values: jax.Array, data) -> tuple[jax.Array, jax.Array]:
-    """GAE (advantages, returns), [T, N], of `data`'s reward, terminated and truncated."""
-    return learning.gae(data["reward"] * config.reward_scaling, values, next_values, data["terminated"],
-                        data["truncated"], config.discount, config.gae_lambda)  # fmt: skip
-
-
-def _windows(length: int, x: jax.Array) -> jax.Array:
-    """[T, N, ...] -> [length, T / length * N, ...]: each env's unroll cut into sequences."""
-    t, n = x.shape[:2]
-    x = x.reshape((t // length, length, n) + x.shape[2:])
-    return jnp.moveaxis(x, 0, 1).reshape((length, t // length * n) + x.shape[3:])
 
 
 def rollout(config: Config, task: Task, train_state: TrainState, key: jax.Array):
@@ -365,25 +339,25 @@ def improve(config: Config, task: Task, train_state: TrainState, data: learning.
         return value_net.apply(ts.params["value"], _inputs(config, stats, obs)[1])[..., 0]
 
     values = value_of(data.obs)
-    batch = {"obs": data.obs, "start": data.start, **data.extras, "values": values, "reward": data.reward,
-             "terminated": data.terminated, "truncated": data.truncated}  # fmt: skip
-    if config.advantage_window:  # the loss does GAE, in sequences cut from the unroll
-        batch = jax.tree.map(functools.partial(_windows, config.advantage_window), {**batch, "next_obs": data.next_obs})
-    else:
-        batch.update(zip(("advantages", "returns"), _advantages(config, values, value_of(data.next_obs), batch)))
+    adv, returns = learning.gae(data.reward * config.reward_scaling, values, value_of(data.next_obs),
+                                data.terminated, data.truncated, config.discount, config.gae_lambda)  # fmt: skip
+    batch = {"obs": data.obs, "start": data.start, **data.extras, "advantages": adv, "returns": returns,
+             "values": values}  # fmt: skip
 
     optimizer = _optimizer(config)
-    grad_fn = jax.grad(lambda p, b: _loss(config, task, p, stats, b), has_aux=True)
+    grad_fn = jax.grad(lambda p, b, k: _loss(config, task, p, stats, b, k), has_aux=True)
 
     def sgd_step(carry, minibatch):
-        params, opt_state = carry
-        grads, metrics = grad_fn(params, minibatch)
+        params, opt_state, key = carry
+        key, entropy_key = jax.random.split(key)
+        grads, metrics = grad_fn(params, minibatch, entropy_key)
         updates, opt_state = optimizer.update(grads, opt_state, params)
-        return (optax.apply_updates(params, updates), opt_state), metrics
+        return (optax.apply_updates(params, updates), opt_state, key), metrics
 
-    (params, opt_state), metrics = learning.learn(
-        sgd_step, (ts.params, ts.opt_state), batch, key, num_epochs=config.num_epochs,
-        num_minibatches=config.num_minibatches, sequences=_is_recurrent(policy_net) or bool(config.advantage_window),
+    shuffle_key, entropy_key = jax.random.split(key)
+    (params, opt_state, _), metrics = learning.learn(
+        sgd_step, (ts.params, ts.opt_state, entropy_key), batch, shuffle_key, num_epochs=config.num_epochs,
+        num_minibatches=config.num_minibatches, sequences=_is_recurrent(policy_net),
     )  # fmt: skip
     return ts.replace(params=params, opt_state=opt_state, obs_stats=stats), metrics
 

@@ -97,28 +97,28 @@ def log_prob(loc: Array, scale: Array, raw: Array) -> Array:
     return jnp.sum(_gaussian_log_prob(loc, scale, raw), axis=-1) - _squash_log_det(raw)
 
 
-def entropy(loc: Array, scale: Array, raw: Array) -> Array:
-    """One-sample estimate of the squashed distribution's entropy, with the pathwise gradient.
+def entropy(loc: Array, scale: Array, noise: Array) -> Array:
+    """One-sample estimate of the squashed distribution's entropy, at u = loc + scale * noise.
 
     The entropy of a = tanh(u) is H[u] + E_u[log|det J_tanh(u)|]; it has no closed
-    form, so the expectation is replaced by its value at the one sample `raw`. The
-    sample is reparameterized at the given loc and scale (u = loc + scale * eps, eps
-    held fixed), so the gradient also reaches the log-det term: it penalizes pushing u
-    into tanh's flat tails, which a fixed `raw` would not (its gradient would only grow
-    the scale, without bound, into bang-bang actions). The value equals the estimate
-    at `raw`.
+    form, so the expectation is replaced by its value at one reparameterized sample.
+    Draw `noise` afresh for each estimate (as PPO does per minibatch): then the
+    estimate and its gradient are unbiased, and the gradient reaches the log-det term,
+    which caps the scale near 1 and pulls the loc out of tanh's flat tails. (Reusing the
+    action's recorded pre-tanh value instead goes wrong once the parameters move: that
+    stale sample makes the estimate grow without bound with the scale, and Adam follows
+    it to bang-bang actions in one PPO update.)
 
     Args:
       loc, scale: [..., A].
-      raw: [..., A] a pre-tanh sample, usually the one the action was taken with.
+      noise: [..., A] standard normal draws.
 
     Returns:
       [...] entropy estimate, summed over the action axis.
     """
-    _check_shapes(loc, scale, raw)
-    eps = jax.lax.stop_gradient((raw - loc) / scale)
+    _check_shapes(loc, scale, noise)
     gaussian = jnp.sum(0.5 + (_HALF_LOG_2PI + jnp.log(scale)), axis=-1)
-    return gaussian + _squash_log_det(loc + scale * eps)
+    return gaussian + _squash_log_det(loc + scale * noise)
 
 
 def mode(loc: Array) -> Array:

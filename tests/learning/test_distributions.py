@@ -11,6 +11,7 @@ import distrax
 import jax
 import jax.numpy as jnp
 import numpy as np
+import optax
 import pytest
 
 from mjzoo.learning.distributions import entropy, log_prob, mode, sample, split_params
@@ -76,7 +77,7 @@ def test_log_prob_stable_where_tanh_saturates():
     assert all(bool(jnp.all(jnp.isfinite(g))) for g in grads)
     # d/du [log N(u) - log(1 - tanh^2 u)] = -(u - loc)/scale^2 + 2 tanh(u) -> -20 + 2, 20 - 2.
     np.testing.assert_allclose(grads[2], [-18.0, 18.0], rtol=1e-5)
-    ent = entropy(jnp.zeros(2), jnp.ones(2), jnp.array([20.0, -20.0]))
+    ent = entropy(jnp.zeros(2), jnp.ones(2), jnp.array([20.0, -20.0]))  # u = +-20
     assert bool(jnp.isfinite(ent))
 
 
@@ -100,11 +101,11 @@ def test_sample_statistics_and_determinism():
 
 
 def test_entropy_hand_checked_and_unbiased():
-    # At raw = 0 the Jacobian term is ln(1 - 0) = 0: the Gaussian entropy
+    # At u = loc + scale * noise = 0 the Jacobian term is ln(1 - 0) = 0: the Gaussian entropy
     # 0.5 ln(2 pi e) + ln scale per dimension, here scales 1 and 2.
     gaussian = 2 * (0.5 * math.log(2 * math.pi * math.e)) + math.log(2.0)
     np.testing.assert_allclose(entropy(jnp.zeros(2), jnp.array([1.0, 2.0]), jnp.zeros(2)), gaussian, rtol=1e-6)
-    # At raw = [1, 0] the estimate adds ln(1 - tanh(1)^2) = ln sech(1)^2.
+    # At u = [1, 0] (noise [1, 0]) the estimate adds ln(1 - tanh(1)^2) = ln sech(1)^2.
     np.testing.assert_allclose(
         entropy(jnp.zeros(2), jnp.array([1.0, 2.0]), jnp.array([1.0, 0.0])),
         gaussian + math.log(1.0 - math.tanh(1.0) ** 2),
@@ -114,7 +115,7 @@ def test_entropy_hand_checked_and_unbiased():
     loc, scale = jnp.array([0.3, -0.8]), jnp.array([0.5, 1.2])
     n = 20000
     _, raw = sample(jnp.broadcast_to(loc, (n, 2)), jnp.broadcast_to(scale, (n, 2)), jax.random.key(4))
-    est = entropy(jnp.broadcast_to(loc, (n, 2)), jnp.broadcast_to(scale, (n, 2)), raw)
+    est = entropy(jnp.broadcast_to(loc, (n, 2)), jnp.broadcast_to(scale, (n, 2)), (raw - loc) / scale)
     nll = -log_prob(jnp.broadcast_to(loc, (n, 2)), jnp.broadcast_to(scale, (n, 2)), raw)
     np.testing.assert_allclose(est.mean(), nll.mean(), atol=0.03)
     # Squashing into (-1, 1) can only lower the entropy: the Jacobian term is <= 0.
@@ -136,15 +137,38 @@ def test_entropy_gradient_is_the_true_entropys_gradient():
     m, s, h = 0.7, 1.3, 1e-4
     expected = [(true_entropy(m + h, s) - true_entropy(m - h, s)) / (2 * h),
                 (true_entropy(m, s + h) - true_entropy(m, s - h)) / (2 * h)]  # fmt: skip
-    # Averaged over samples, the estimate's gradient is the true gradient; both parts
-    # are far from zero here (squashing pulls loc towards 0 and caps the scale).
+    # Averaged over fresh noise, the estimate's gradient is the true gradient; both
+    # parts are far from zero here (squashing pulls loc towards 0 and caps the scale).
     n = 100_000
     loc, scale = jnp.full((n, 1), m), jnp.full((n, 1), s)
-    _, raw = sample(loc, scale, jax.random.key(6))
-    grad = jax.grad(lambda p: jnp.mean(entropy(p[0], p[1], raw)))((loc, scale))
+    noise = jax.random.normal(jax.random.key(6), (n, 1))
+    grad = jax.grad(lambda p: jnp.mean(entropy(p[0], p[1], noise)))((loc, scale))
     got = [float(jnp.sum(grad[0])), float(jnp.sum(grad[1]))]
     assert abs(expected[0]) > 0.3 and abs(expected[1]) > 0.1, expected
     np.testing.assert_allclose(got, expected, rtol=0.03)
+
+
+def test_maximizing_the_entropy_estimate_settles_at_the_squashed_maximum():
+    """Adam on the estimate with fresh noise per step (PPO's use): the scale settles
+    where the squashed entropy peaks (~0.87 at loc 0, by the quadrature above) and loc
+    stays at 0, instead of growing without bound."""
+    params = {"loc": jnp.zeros(1), "scale": jnp.zeros(1)}  # scale = softplus(.) + 1e-3
+    optimizer = optax.adam(1e-2)
+
+    def negative(p, key):
+        loc, scale = jnp.broadcast_to(p["loc"], (4096, 1)), jnp.broadcast_to(split_params(jnp.stack(
+            [p["loc"], p["scale"]], -1))[1], (4096, 1))  # fmt: skip
+        return -jnp.mean(entropy(loc, scale, jax.random.normal(key, (4096, 1))))
+
+    @jax.jit
+    def step(carry, key):
+        p, state = carry
+        updates, state = optimizer.update(jax.grad(negative)(p, key), state)
+        return (optax.apply_updates(p, updates), state), None
+
+    (params, _), _ = jax.lax.scan(step, (params, optimizer.init(params)), jax.random.split(jax.random.key(7), 1500))
+    scale = float(split_params(jnp.stack([params["loc"], params["scale"]], -1))[1][0, 0])
+    assert abs(float(params["loc"][0])) < 0.05 and 0.8 < scale < 0.95, (params, scale)
 
 
 def gaussian_entropy(scale):
