@@ -48,12 +48,17 @@ def main() -> None:
     args = parser.parse_args()
     runs = {impl: trajectories(args.env, impl, args.envs, args.steps) for impl in args.impl}
     for impl, r in runs.items():
-        print(f"{args.env} ({impl}): adapter - bare env: max |reward| {np.abs(r['reward'] - r['bare_reward']).max():.3g}, "
-              f"max |obs| {np.abs(r['obs'] - r['bare_obs']).max():.3g}; returns {r['reward'].sum(0).round(2).tolist()}")  # fmt: skip
+        print(f"{args.env} ({impl}): adapter - bare env: {_max_gaps(r, r, 'bare_')}; "
+              f"returns {r['reward'].sum(0).round(2).tolist()}")  # fmt: skip
     if len(runs) == 2:
         a, b = runs.values()
-        print(f"{args.env}: {' - '.join(runs)}: max |reward| {np.abs(a['bare_reward'] - b['bare_reward']).max():.3g}, "
-              f"max |obs| {np.abs(a['bare_obs'] - b['bare_obs']).max():.3g}")  # fmt: skip
+        print(f"{args.env}: {' - '.join(runs)}: {_max_gaps(a, b, 'bare_', 'bare_')}")
+
+
+def _max_gaps(a: dict, b: dict, a_prefix: str = "", b_prefix: str = "") -> str:
+    """The largest reward and observation differences between two `trajectories` entries."""
+    reward, obs = (np.abs(a[a_prefix + k] - b[b_prefix + k]).max() for k in ("reward", "obs"))
+    return f"max |reward| {reward:.3g}, max |obs| {obs:.3g}"
 
 
 if __name__ == "__main__":
