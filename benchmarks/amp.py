@@ -119,6 +119,7 @@ def train(label: str, algorithm: types.ModuleType, config, task: mjzoo.Task, sty
     episodes: list = []
     settings = training.Settings(out_dir=out / label, updates_per_chunk=1 if quick else 10,
                                  eval_envs=2 if quick else 16, eval_steps=50 if quick else 1000, checkpoint_every=0,
+                                 eval_every=1,  # every chunk, to time the first walk in style: not the default budget
                                  video=False, overwrite=True, progress=False)  # fmt: skip
     start = time.perf_counter()
     training.run(recording(algorithm, episodes), config, task, settings)

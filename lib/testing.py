@@ -31,7 +31,8 @@ PyTree = Any
 PROPERTIES = {
     "traces": "the task's reset and transition trace",
     "jit_vmap": "a reset and a rollout, vmapped over keys, compile under jax.jit and run",
-    "reset_matches_transition": "a reset state has the pytree structure, shapes and dtypes of every later state",
+    "reset_matches_transition": "a reset state has the pytree structure, shapes and dtypes (weak types too) of every "
+    "later state",
     "scalars": "reward (float32), terminated and truncated (bool), reward terms and metrics are scalars; "
     "observations are floating",
     "reward_terms": "the reward equals the sum of the terms recorded in metrics",
@@ -115,7 +116,10 @@ def check_task(
         raise TaskCheckError(failures, skipped) from error
 
     states = trajectory.next_state
-    step_0 = lambda x: jax.ShapeDtypeStruct(x.shape[:1] + x.shape[2:], x.dtype)  # noqa: E731 (types only: no compile)
+
+    def step_0(x):  # types only (no compile), weak types too: a jitted loop compiles twice for one
+        return jax.ShapeDtypeStruct(x.shape[:1] + x.shape[2:], x.dtype, weak_type=jax.typeof(x).weak_type)
+
     check("reset_matches_transition", lambda: _differences(first, jax.tree.map(step_0, states)))
     check("scalars", lambda: _scalar_problems(states, num_envs, num_steps))
     check("reward_terms", lambda: _reward_terms_problem(states))
@@ -340,9 +344,12 @@ def _blame(task: Task, key: jax.Array) -> tuple[str, str | None]:
 
 
 def _type(x, batch_dims: int = 0) -> str:
-    """dtype[shape] of an array or a `jax.ShapeDtypeStruct`, less its leading batch axes."""
+    """dtype[shape] of an array or a `jax.ShapeDtypeStruct`, less its leading batch axes,
+    and whether it is weakly typed (a Python number's type, which a jitted loop fed its
+    own output compiles for twice)."""
     dtype = x.dtype if hasattr(x, "dtype") else jnp.result_type(x)
-    return f"{jnp.dtype(dtype).name}{list(np.shape(x)[batch_dims:])}"
+    weak = " (weakly typed)" if getattr(x, "weak_type", False) else ""  # a key array has none
+    return f"{jnp.dtype(dtype).name}{list(np.shape(x)[batch_dims:])}{weak}"
 
 
 def _listed(problems: list[str], most: int = 6) -> str | None:

@@ -9,7 +9,7 @@ from typing import Any
 import jax
 import jax.numpy as jnp
 
-__all__ = ["Packing", "Static", "where", "all_finite", "fill_missing", "zeros_like_shape"]
+__all__ = ["Packing", "Static", "where", "all_finite", "fill_missing", "strongly_typed", "zeros_like_shape"]
 
 PyTree = Any
 
@@ -39,6 +39,20 @@ def all_finite(tree: PyTree) -> jax.Array:
         if jnp.issubdtype(jnp.asarray(leaf).dtype, jnp.inexact)
     ]
     return jnp.all(jnp.stack(checks)) if checks else jnp.array(True)
+
+
+def strongly_typed(tree: PyTree) -> PyTree:
+    """`tree` with each Python number and weakly typed array (a Python number's type, as
+    ``data.replace(time=0.0)`` leaves it) made a strongly typed array of its dtype; other
+    leaves as they are. A jitted loop fed its own output compiles once only if its first
+    input's types match its outputs', weak types included, and a scan's carry is strong."""
+
+    def strong(x: Any) -> Any:
+        if isinstance(x, (int, float, complex)) or (isinstance(x, jax.Array) and jax.typeof(x).weak_type):
+            return jax.lax.convert_element_type(x, jnp.result_type(x))
+        return x
+
+    return jax.tree.map(strong, tree)
 
 
 def zeros_like_shape(shape: PyTree) -> PyTree:

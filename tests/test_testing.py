@@ -51,9 +51,9 @@ def _terminate(p: Params, model, state):
     return jnp.abs(state.data.qpos[0]) > 100.0, jnp.zeros((), bool)
 
 
-def make(step=_step, reward=_reward, limit: int | None = 4, weight=1.0) -> Task:
+def make(step=_step, reward=_reward, limit: int | None = 4, weight=1.0, start=_start) -> Task:
     p = Params(jnp.float32(0.5), weight if isinstance(weight, tree.Static) else jnp.float32(weight))
-    task = Task(model=BLOCK.model, start=bind(_start, p), step=bind(step, p), reward=bind(reward, p),
+    task = Task(model=BLOCK.model, start=bind(start, p), step=bind(step, p), reward=bind(reward, p),
                 terminate=bind(_terminate, p), mj_model=BLOCK.mj_model)  # fmt: skip
     return task if limit is None else mjzoo.with_time_limit(task, limit)
 
@@ -89,6 +89,18 @@ def test_reset_observation_unlike_a_transitions_is_named():
     assert list(failures) == ["reset_matches_transition"]
     assert "float32[2]" in failures["reset_matches_transition"]
     assert "float32[3]" in failures["reset_matches_transition"]
+
+
+def _start_at_time_zero(p: Params, model, key) -> State:
+    state = _start(p, model, key)  # as Playground's CheetahRun starts: its time a Python number
+    return state.replace(data=state.data.replace(time=0.0))
+
+
+def test_a_weakly_typed_reset_leaf_is_named():
+    """A jitted loop fed its own output compiled twice for it (the second training chunk)."""
+    failures = failures_of(make(start=_start_at_time_zero))
+    assert list(failures) == ["reset_matches_transition"]
+    assert failures["reset_matches_transition"] == ".data.time: reset float32[2] (weakly typed), transition float32[2]"
 
 
 def _host_noise():

@@ -1,4 +1,4 @@
-"""`mjzoo.tree.Packing`: a pytree as one flat array per dtype, and back."""
+"""`mjzoo.tree`: `Packing` (a pytree as one flat array per dtype, and back) and `strongly_typed`."""
 
 from __future__ import annotations
 
@@ -7,7 +7,7 @@ import jax.numpy as jnp
 import numpy as np
 import pytest
 
-from mjzoo.tree import Packing
+from mjzoo.tree import Packing, strongly_typed
 
 
 def _tree():
@@ -53,3 +53,15 @@ def test_a_changed_structure_or_shape_is_named():
         packing.pack({**_tree(), "extra": jnp.zeros(())})
     with pytest.raises(ValueError, match=r"shape changed: \(3,\) \(was \(2,\)\)"):
         packing.pack({**_tree(), "flags": [jnp.zeros((0,)), jnp.zeros((3,), bool)]})
+
+
+def test_strongly_typed_makes_python_numbers_and_weak_arrays_strong_and_keeps_the_rest():
+    tree = {"time": 0.0, "count": 3, "weak": jnp.asarray(2.0), "strong": jnp.float32(1.5), "key": jax.random.key(1),
+            "half": jnp.ones(2, jnp.bfloat16)}  # fmt: skip
+    for strong in (strongly_typed(tree), jax.jit(strongly_typed)(tree)):  # eagerly, and as a jit traces it
+        assert {k: (x.dtype, jax.typeof(x).weak_type) for k, x in strong.items()} == {
+            "time": (jnp.float32, False), "count": (jnp.int32, False), "weak": (jnp.float32, False),
+            "strong": (jnp.float32, False), "key": (tree["key"].dtype, False), "half": (jnp.bfloat16, False),
+        }  # fmt: skip
+        assert float(strong["time"]) == 0.0 and int(strong["count"]) == 3 and float(strong["weak"]) == 2.0
+    assert strongly_typed(tree)["strong"] is tree["strong"]  # nothing to do: the same array

@@ -25,8 +25,9 @@ class Settings:
     multiple of `eval_every` (counted over the whole run, so a resumed run evaluates at
     the same steps); with `eval_every=None` (the default), the evaluations so far and
     one more at the last one's cost stay within `eval_budget` of the wall-clock time
-    since launch (the first chunk evaluates, to learn that cost), so evaluating never
-    slows training by more than that share; `eval_every_seconds` have passed since the
+    since launch (the first chunk evaluates, to learn that cost; waiting for the
+    evaluation's compile, a one-off, is not counted), so evaluating never slows training
+    by more than that share; `eval_every_seconds` have passed since the
     last evaluation began (or since the launch); or it is the first chance after
     `eval_first_seconds` (KSim's "first validation after M seconds"). Metrics lines of
     chunks that do not evaluate lack eval/*. Evaluating with `eval_every=0` and no
@@ -140,7 +141,7 @@ class EvalSchedule:
         return False
 
     def spent(self, seconds: float) -> None:
-        """Records that an evaluation took `seconds` (compiling included)."""
+        """Records that an evaluation took `seconds` (not counting the wait for its compile)."""
         self.total, self.latest = self.total + seconds, seconds
 
 

@@ -118,7 +118,9 @@ def _start(kind: tree.Static, env: tree.Static, model: mjx.Model, key: Array) ->
     with _holding(kind, env.value, model) as held:
         first = held.reset(key_data(key))
     state = State.create(getattr(first, kind.data_field), first.obs, info={kind.name: dict(first.info)})
-    return state.replace(metrics=_prefixed(kind, first.metrics))
+    # Strongly typed, as is a step: a jitted loop fed its own output would compile twice. Playground's
+    # CheetahRun resets `data.time` to a Python 0.0; Brax's ant steps metrics to one.
+    return tree.strongly_typed(state.replace(metrics=_prefixed(kind, first.metrics)))
 
 
 def _step(kind: tree.Static, env: tree.Static, model: mjx.Model, state: State, action: Array, key: Array) -> State:
@@ -141,7 +143,7 @@ def _step(kind: tree.Static, env: tree.Static, model: mjx.Model, state: State, a
     if kind.truncation_key is not None:
         limit = jnp.asarray(after.info.get(kind.truncation_key, 0.0)) != 0
     terms = {kind.name: jnp.asarray(after.reward, jnp.float32)}
-    return record(next_state, terms, done & ~limit, done & limit)
+    return tree.strongly_typed(record(next_state, terms, done & ~limit, done & limit))
 
 
 def _prefixed(kind: Kind, metrics: dict[str, Array]) -> dict[str, Array]:

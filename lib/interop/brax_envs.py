@@ -31,12 +31,10 @@ finds none. Only the "mjx" backend: the others' pipeline states are not an mjx.D
 
 from __future__ import annotations
 
-import jax
 from brax.envs import base as brax_base
 from brax.envs.wrappers import training as brax_training
-from mujoco import mjx
 
-from mjzoo import checks
+from mjzoo import checks, tree
 from mjzoo.interop import _foreign
 from mjzoo.types import Task
 
@@ -84,12 +82,7 @@ def task(env: brax_base.Env, episode_length: int | None = 1000) -> Task:
         raise TypeError(f"brax.task: found no mujoco.MjModel for {type(env.unwrapped).__name__} (sys.mj_model)")
     if episode_length is not None:
         episode_length = checks.integer("brax.task", "episode_length", episode_length)
-    return _foreign.task(_KIND, env, _strongly_typed(model), mj_model, episode_length)
+    # Brax's System keeps viscosity and density weakly typed: as float32 arrays like every
+    # other number, an edit to them shares the trace instead of changing the argument's type.
+    return _foreign.task(_KIND, env, tree.strongly_typed(model), mj_model, episode_length)
 
-
-def _strongly_typed(model: mjx.Model) -> mjx.Model:
-    """`model` with its weakly typed scalars (Brax's System keeps viscosity and density so)
-    as float32 arrays: an edit to them, a float32 like every other number, then shares
-    the trace instead of changing the argument's type."""
-    strong = lambda x: x.astype(x.dtype) if isinstance(x, jax.Array) and x.weak_type else x  # noqa: E731
-    return jax.tree.map(strong, model)
