@@ -45,7 +45,8 @@ def strongly_typed(tree: PyTree) -> PyTree:
     """`tree` with each Python number and weakly typed array (a Python number's type, as
     ``data.replace(time=0.0)`` leaves it) made a strongly typed array of its dtype; other
     leaves as they are. A jitted loop fed its own output compiles once only if its first
-    input's types match its outputs', weak types included, and a scan's carry is strong."""
+    input's types match its outputs', weak types included; a step computes such a leaf
+    from strongly typed ones (``time + timestep``) and returns it strong."""
 
     def strong(x: Any) -> Any:
         if isinstance(x, (int, float, complex)) or (isinstance(x, jax.Array) and jax.typeof(x).weak_type):
