@@ -243,10 +243,11 @@ class _Loop:
         if self.ahead is not None:  # compiling it twice at once would waste a core
             self.ahead.join()
             self.ahead = None
-        compiled, key, s = _clock(), jax.random.fold_in(self.key, int(state.updates)), self.settings
+        compiled = _clock()  # the budget is for evaluating: waiting for the compile is a one-off
+        key, s = jax.random.fold_in(self.key, int(state.updates)), self.settings
         mean, _, trajectory = self.evaluate(self.config, self.task, state, key, s.eval_envs, self.eval_steps)
         result = {"eval/return": float(distributed.fetch(mean)), "perf/eval_s": _clock() - start}  # waits for it
-        self.schedule.spent(_clock() - compiled)  # the budget is for evaluating: the compile is a one-off
+        self.schedule.spent(_clock() - compiled)
         self.evaluations += 1
         self.shown["ret"] = f"{result['eval/return']:.1f}"
         due = s.video_every and self.evaluations % s.video_every == 0
