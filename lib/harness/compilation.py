@@ -6,7 +6,8 @@ by default on a CPU; on a GPU when asked, see `enable_cache`), so a second launc
 the same run loads its executables from disk.
 `compile_ahead` compiles a jitted function for given arguments on a background thread
 (XLA releases the GIL while it compiles), so the evaluation compiles while the first
-training chunk runs; the later call finds the executable already built.
+training chunk runs, and the chunk while init compiles; the later call finds the
+executable already built.
 
     compilation.enable_cache()                        # ~/.cache/mjzoo/jax (XDG_CACHE_HOME), on a CPU
     MJZOO_COMPILE_CACHE=0 mjzoo train ...             # off;  =/some/dir: there (a GPU too)
@@ -78,11 +79,16 @@ def compile_ahead(function: Callable, *args: Any, **kwargs: Any) -> threading.Th
     with the shardings of the later call; static arguments as in that call) on a daemon
     thread, and returns it. A later call of `function` with matching arguments reuses
     the executable (it still traces, which is quick). A failure here is ignored: the
-    later call compiles for itself and reports any error where it belongs."""
+    later call compiles for itself and reports any error where it belongs.
+
+    `function` may instead be a `jax.stages.Lowered` (no arguments), traced and lowered
+    by the caller: tracing holds the GIL, so where the caller goes on to trace something
+    else, tracing on two threads at once would only slow both."""
 
     def work() -> None:
         try:
-            function.lower(*args, **kwargs).compile()
+            lowered = function if isinstance(function, jax.stages.Lowered) else function.lower(*args, **kwargs)
+            lowered.compile()
         except Exception:  # noqa: BLE001 (the real call raises it with its own context)
             pass
 

@@ -338,25 +338,25 @@ def run(algorithm: Algorithm, config: AlgorithmConfig, task: Task, settings: Set
 
 
 def _per_chunk(config: AlgorithmConfig, settings: Settings) -> int:
-    """Updates per chunk. A run shorter than one chunk is one chunk of its own length,
-    not rounded up to a whole one."""
+    """Updates per chunk; a run shorter than one chunk is one chunk of its own length."""
     return min(settings.updates_per_chunk, max(1, config.num_updates))
 
 
 def _compile_chunk_ahead(algorithm: Algorithm, config: AlgorithmConfig, task: Task, settings: Settings,
                          key: jax.Array) -> threading.Thread | None:  # fmt: skip
-    """Starts compiling the training chunk on a thread, from the shapes init will return
-    (`eval_shape`, whose trace init's call reuses): init and the chunk compile at once, not
-    one after the other (the joystick's init 15 s, then its chunk 46 s). One device only,
-    where the placed state's sharding is known; with several, the first call compiles."""
-    devices = jax.devices()
-    if len(devices) != 1:
+    """Starts compiling the training chunk on a thread (or loading it from the cache) from
+    the shapes init will return (`eval_shape`, whose trace init's call reuses) while init
+    compiles. Traced here: tracing holds the GIL. One device (a known sharding) only."""
+    if len(devices := jax.devices()) != 1:
         return None
     shapes = _init_fn(algorithm).eval_shape(config, task, key)
     place = jax.sharding.SingleDeviceSharding(devices[0])
     state = jax.tree.map(lambda x: jax.ShapeDtypeStruct(x.shape, x.dtype, sharding=place), shapes)  # strong: `_owned`
     chunk = _chunk_fn(algorithm, config, _per_chunk(config, settings))
-    return compilation.compile_ahead(chunk, replicate(task), state)
+    try:
+        return compilation.compile_ahead(chunk.lower(replicate(task), state))
+    except Exception:  # noqa: BLE001 (the chunk's own call raises it where it belongs)
+        return None
 
 
 def _described(state: Any) -> Any:

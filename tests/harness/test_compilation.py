@@ -7,6 +7,7 @@ from pathlib import Path
 
 import jax
 import jax.numpy as jnp
+import numpy as np
 import pytest
 from jax import monitoring
 
@@ -76,6 +77,18 @@ def test_compiling_ahead_leaves_nothing_to_compile_for_the_call():
     function(x, 4)  # another static argument: a compile of its own
     assert len(_compiles) == 1
     assert jnp.allclose(result, jnp.cumsum(jnp.sin(x)) * 3)
+
+
+def test_a_function_lowered_by_the_caller_compiles_ahead_for_the_call():
+    """The training chunk is traced on the caller's thread (tracing holds the GIL) and only
+    compiled on the thread."""
+    function = jax.jit(lambda x: jnp.tanh(x) @ x.T)
+    x = jnp.ones((3, 2))
+    compilation.compile_ahead(function.lower(jax.ShapeDtypeStruct(x.shape, x.dtype))).join()
+    _compiles.clear()
+    result = function(x)
+    assert _compiles == []
+    assert jnp.allclose(result, jnp.full((3, 3), 2 * np.tanh(1.0)))
 
 
 def test_a_failure_ahead_is_left_to_the_call():
