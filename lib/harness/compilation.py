@@ -16,6 +16,7 @@ executable already built.
 from __future__ import annotations
 
 import os
+import sys
 import threading
 import warnings
 from collections.abc import Callable
@@ -25,7 +26,7 @@ from typing import Any
 import jax
 from jax.experimental.compilation_cache import compilation_cache
 
-__all__ = ["cache_directory", "compile_ahead", "enable_cache"]
+__all__ = ["cache_directory", "compile_ahead", "enable_cache", "wait"]
 
 _OFF = ("0", "off", "false", "no", "")
 
@@ -95,3 +96,15 @@ def compile_ahead(function: Callable, *args: Any, **kwargs: Any) -> threading.Th
     thread = threading.Thread(target=work, name=f"compile-ahead-{getattr(function, '__name__', 'fn')}", daemon=True)
     thread.start()
     return thread
+
+
+def wait(thread: threading.Thread | None, what: str, patience: float = 30.0) -> None:
+    """Joins a `compile_ahead` thread (None: nothing to wait for), saying on stderr what
+    the run waits for once that takes over `patience` seconds: a paused progress bar
+    would not show why (a cold compile takes minutes on a GPU)."""
+    if thread is None:
+        return
+    thread.join(patience)
+    if thread.is_alive():
+        print(f"{what}: still compiling after {patience:.0f} s; waiting for it", file=sys.stderr, flush=True)
+        thread.join()

@@ -195,9 +195,8 @@ class _Loop:
         """Trains one chunk and does its bookkeeping; returns the new state."""
         start = _clock()
         shapes = _described(state) if not self.history else None  # before the chunk donates it
-        if self.chunk_ahead is not None:  # compiling it twice at once would waste a core
-            self.chunk_ahead.join()
-            self.chunk_ahead = None
+        compilation.wait(self.chunk_ahead, "training: the chunk")  # compiling it twice at once would waste a core
+        self.chunk_ahead = None
         state, chunk_metrics = self.chunk(self.task, state)
         if shapes is not None:  # while this launch's first chunk runs, not while it traces: one GIL for both
             self.compile_evaluation_ahead(shapes)
@@ -240,9 +239,8 @@ class _Loop:
     def _evaluate(self, state: Any, step: int, final: bool) -> dict[str, float]:
         """Evaluates (`settings.eval_envs` episodes) and writes a video when one is due."""
         start = _clock()
-        if self.ahead is not None:  # compiling it twice at once would waste a core
-            self.ahead.join()
-            self.ahead = None
+        compilation.wait(self.ahead, "training: the evaluation")  # compiling it twice at once would waste a core
+        self.ahead = None
         compiled = _clock()  # the budget is for evaluating: waiting for the compile is a one-off
         key, s = jax.random.fold_in(self.key, int(state.updates)), self.settings
         mean, _, trajectory = self.evaluate(self.config, self.task, state, key, s.eval_envs, self.eval_steps)

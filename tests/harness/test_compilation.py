@@ -3,6 +3,8 @@
 from __future__ import annotations
 
 import dataclasses
+import threading
+import time
 from pathlib import Path
 
 import jax
@@ -89,6 +91,17 @@ def test_a_function_lowered_by_the_caller_compiles_ahead_for_the_call():
     result = function(x)
     assert _compiles == []
     assert jnp.allclose(result, jnp.full((3, 3), 2 * np.tanh(1.0)))
+
+
+def test_waiting_long_for_a_compile_says_what_for(capsys):
+    slow, quick = threading.Thread(target=time.sleep, args=(0.3,)), threading.Thread(target=time.sleep, args=(0.0,))
+    slow.start(), quick.start()
+    compilation.wait(slow, "training: the evaluation", patience=0.05)
+    assert not slow.is_alive()  # waited to the end, not only `patience`
+    assert capsys.readouterr().err == "training: the evaluation: still compiling after 0 s; waiting for it\n"
+    compilation.wait(quick, "training: the chunk", patience=5.0)
+    compilation.wait(None, "nothing")
+    assert capsys.readouterr().err == ""
 
 
 def test_a_failure_ahead_is_left_to_the_call():
