@@ -127,7 +127,8 @@ class FakeClock:
         monkeypatch.setattr(training, "_chunk_fn", timed(real_chunk, 10.0))
         monkeypatch.setattr(training, "_evaluate_fn", timed(real_evaluate, eval_s))
         if eval_compile_s:  # the first evaluation waits that long for its compile on a thread
-            waiting = types.SimpleNamespace(join=lambda: setattr(self, "now", self.now + eval_compile_s))
+            waiting = types.SimpleNamespace(join=lambda *patience: setattr(self, "now", self.now + eval_compile_s),
+                                            is_alive=lambda: False)  # fmt: skip
             ahead = lambda loop, state: setattr(loop, "ahead", waiting)  # noqa: E731
             monkeypatch.setattr(training._Loop, "compile_evaluation_ahead", ahead)
 
