@@ -133,14 +133,14 @@ def evaluate(config: ppo.Config, task: mjzoo.Task, train_state, num_envs: int, n
 def render(task: mjzoo.Task, qpos: np.ndarray, path: Path) -> None:
     """The video of an episode's qpos [T, nq] of `task` at its control rate."""
     config = rendering.with_model_camera(rendering.RenderConfig(), task.mj_model)
-    rendering.render_video(task.mj_model, qpos, path, dt=mjzoo.control_dt(task), config=config)
-    print(f"wrote {path}")
+    if rendering.render_video(task.mj_model, qpos, path, dt=mjzoo.control_dt(task), config=config) is not None:
+        print(f"wrote {path}")  # else rendering said why not
 
 
 def render_saved(out: Path) -> None:
     """Videos of the final episodes saved under `out`/<task>/final_policy.npz."""
     for saved in sorted(out.glob("*/final_policy.npz")):
-        name = saved.parent.name.removesuffix("_warp")  # rendered by C MuJoCo either way
+        name = saved.parent.name.split("_seed")[0].removesuffix("_warp")  # rendered by C MuJoCo either way
         render(SPECS[name].eval_task("jax"), np.load(saved)["qpos"], saved.with_suffix(".mp4"))
 
 
@@ -152,9 +152,10 @@ def launch_seconds() -> float:
 
 
 def run_task(name: str, total_steps: int | None, out: Path, eval_envs: int, smoke: bool, video: bool,
-             impl: str = "jax", final_eval: bool = True, first_in_process: bool = False) -> dict:  # fmt: skip
+             impl: str = "jax", final_eval: bool = True, first_in_process: bool = False,
+             seed: int = 0) -> dict:  # fmt: skip
     spec = SPECS[name]
-    run_dir = out / (name if impl == "jax" else f"{name}_{impl}")
+    run_dir = out / (name + ("" if impl == "jax" else f"_{impl}") + (f"_seed{seed}" if seed else ""))
     fields = mjzoo.envs.hyperparameters(name, "ppo")
     if total_steps:
         fields["total_steps"] = total_steps
@@ -167,7 +168,7 @@ def run_task(name: str, total_steps: int | None, out: Path, eval_envs: int, smok
     # Every chunk evaluates (not the default 5% budget), to time the stated return.
     settings = training.Settings(out_dir=run_dir, updates_per_chunk=1 if smoke else 10,
                                  eval_envs=16 if smoke else 128, eval_steps=episode, checkpoint_every=0, eval_every=1,
-                                 video=video, overwrite=True)  # fmt: skip  # a new measurement replaces the last
+                                 video=video, overwrite=True, seed=seed)  # fmt: skip  # a new measurement replaces the last
     launched = launch_seconds()
     start = time.perf_counter()
     train_state, _ = ppo.train(config, spec.train_task(impl), settings)
@@ -176,7 +177,7 @@ def run_task(name: str, total_steps: int | None, out: Path, eval_envs: int, smok
     eval_task = spec.eval_task(impl)
     raw = raw_steps_per_s(eval_task, name, *inputs(eval_task, config.num_envs, 20 if smoke else 100), repeats=3)
     print(f"{name} ({impl}): raw stepping {raw:,.0f} steps/s at {config.num_envs} envs", flush=True)
-    row = {"task": name, "impl": impl, "config": training.config_dict(config), "raw_steps_per_s": raw,
+    row = {"task": name, "impl": impl, "seed": seed, "config": training.config_dict(config), "raw_steps_per_s": raw,
            "steps_per_s": steps_per_s, "fraction_of_raw": steps_per_s / raw, "train_s": total,
            "threshold": spec.threshold, "time_to_threshold_s": time_to(curve, spec.threshold),
            "first_update_s": curve[0][1],
@@ -223,6 +224,7 @@ def main() -> None:
     parser.add_argument("--render", action="store_true", help="only render the saved final episodes under --out")
     parser.add_argument("--no-final-eval", action="store_true", help="skip (c), the final evaluation (minutes to compile)")
     parser.add_argument("--tag", default="", help="suffix of the JSON file")
+    parser.add_argument("--seed", type=int, default=0, help="training seed (not 0: named in the run directories)")
     add_impl_argument(parser)
     args = parser.parse_args()
     if args.render:
@@ -231,13 +233,13 @@ def main() -> None:
     print(f"device: {device}, jax {jax.__version__}", flush=True)
     rows, ratios = [], []
     args.out.mkdir(parents=True, exist_ok=True)
-    tag = "_".join(args.tasks) + (f"_{args.tag}" if args.tag else "")
+    tag = "_".join(args.tasks) + (f"_{args.tag}" if args.tag else "") + (f"_seed{args.seed}" if args.seed else "")
     path = args.out / f"locomotion_{jax.default_backend()}_{tag}.json"
     for name in args.tasks:
         by_impl = {}
         for impl in impls(args.impl):
             row = run_task(name, args.steps, args.out, args.eval_envs, args.smoke, not args.no_video, impl,
-                           final_eval=not args.no_final_eval, first_in_process=not rows)  # fmt: skip
+                           final_eval=not args.no_final_eval, first_in_process=not rows, seed=args.seed)  # fmt: skip
             rows.append(by_impl.setdefault(impl, row))
             print(summary(row), flush=True)
             if len(by_impl) == 2:

@@ -153,7 +153,8 @@ def measure(name: str, impl: str, steps: int, seeds: range, trainers: list[str],
     env = playground.load(name, impl=impl, **({"episode_length": config["episode_length"]} if smoke else {}))
     raw = raw_steps_per_s(env, config["num_envs"])
     print(f"{name} ({impl}): raw stepping {raw:,.0f} steps/s (load and compile included: "
-          f"{time.perf_counter() - start:.0f} s)", flush=True)  # fmt: skip
+          f"{time.perf_counter() - start:.0f} s); each trainer trains {brax_env_steps(config):,} env steps",
+          flush=True)  # fmt: skip
     row = {"env": name, "impl": impl, "raw_steps_per_s": raw, "steps": brax_env_steps(config),
            "published": PUBLISHED.get(name)}  # fmt: skip
     for trainer in trainers:

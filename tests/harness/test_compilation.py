@@ -15,10 +15,17 @@ from jax import monitoring
 
 from mjzoo.harness import compilation
 
-_compiles: list[str] = []
-monitoring.register_event_duration_secs_listener(
-    lambda name, *_, **__: _compiles.append(name) if name.endswith("backend_compile_duration") else None
-)
+_compiles: list[str] = []  # and the threads that compiled them
+_threads: list[str] = []
+
+
+def _compiled(name: str, *_, **__) -> None:
+    if name.endswith("backend_compile_duration"):
+        _compiles.append(name)
+        _threads.append(threading.current_thread().name)
+
+
+monitoring.register_event_duration_secs_listener(_compiled)
 
 
 @pytest.mark.parametrize(
@@ -162,3 +169,27 @@ def test_the_chunk_compiled_ahead_from_inits_shapes_serves_every_chunk():
     state, _ = training._chunk_fn(algorithm, config, 2)(devices.replicate(task), state)
     assert _compiles == []
     assert int(state["updates"]) == 4
+
+
+def test_the_evaluation_compiled_ahead_serves_the_first_evaluation(monkeypatch):
+    """`training.run` traces the evaluation while the chunk compiles and compiles it on a
+    thread while the first chunk runs: the first evaluation's call compiles nothing more."""
+    from mjzoo.harness import training
+
+    from tests.harness.test_training import TASK, CountConfig, counter
+
+    algorithm = counter(evaluate=lambda config, task, s, key, n, steps: (s.per_env.sum() * steps, jnp.zeros(n), None))
+    during = []  # the main thread's compiles while the first evaluation ran
+
+    def evaluate(loop, *args):
+        before = _threads.count("MainThread")
+        result = evaluate_for_real(loop, *args)
+        during.append(_threads.count("MainThread") - before)
+        return result
+
+    evaluate_for_real = training._Loop._evaluate
+    monkeypatch.setattr(training._Loop, "_evaluate", evaluate)
+    settings = training.Settings(updates_per_chunk=1, eval_every=1, eval_steps=3, video=False, progress=False)
+    _, last = training.run(algorithm, CountConfig(num_updates=2), TASK, settings)
+    assert last["eval/return"] == 4 * 2.0 * 3  # four envs at 2.0, times 3 steps
+    assert during == [0, 0]
