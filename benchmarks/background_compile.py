@@ -1,7 +1,9 @@
 """Does XLA compile slower beside work on the GPU? The harness compiles the evaluation on
 a thread while the first training chunk runs (`mjzoo.harness.compilation.compile_ahead`).
-On an H100, Playground's WalkerWalk waited over 75 s for that compile, the GPU idle (a
-compile of 26 s on a 2-core CPU; `results/playground/walker_jax_eval_compile_stall/`).
+On an H100, one run of Playground's WalkerWalk waited over 75 s for that compile, the GPU
+idle (a compile of 26 s on a 2-core CPU; `results/playground/walker_jax_eval_compile_stall/`).
+On another H100 this found no such effect: 22-24 s all four ways, and a re-run of that
+training compiled it in 21 s (`results/playground/background_compile_gpu_WalkerWalk.json`).
 
 This times the evaluation's compile for one Playground env four ways: alone, and on a
 thread while a training chunk runs on the device, each with XLA's GPU autotuner on and
