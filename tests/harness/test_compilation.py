@@ -15,8 +15,8 @@ from jax import monitoring
 
 from mjzoo.harness import compilation
 
-_compiles: list[str] = []  # and the threads that compiled them
-_threads: list[str] = []
+_compiles: list[str] = []
+_threads: list[str] = []  # the threads that compiled them
 
 
 def _compiled(name: str, *_, **__) -> None:
@@ -172,14 +172,14 @@ def test_the_chunk_compiled_ahead_from_inits_shapes_serves_every_chunk():
 
 
 def test_the_evaluation_compiled_ahead_serves_the_first_evaluation(monkeypatch):
-    """`training.run` traces the evaluation while the chunk compiles and compiles it on a
-    thread while the first chunk runs: the first evaluation's call compiles nothing more."""
+    """`training.run` traces and compiles the evaluation on a thread while the first chunk
+    runs: the first evaluation's call compiles nothing more on the main thread."""
     from mjzoo.harness import training
 
     from tests.harness.test_training import TASK, CountConfig, counter
 
     algorithm = counter(evaluate=lambda config, task, s, key, n, steps: (s.per_env.sum() * steps, jnp.zeros(n), None))
-    during = []  # the main thread's compiles while the first evaluation ran
+    during = []  # the main thread's compiles during each evaluation
 
     def evaluate(loop, *args):
         before = _threads.count("MainThread")
