@@ -27,6 +27,7 @@ from pathlib import Path
 import jax
 
 from mjzoo.algorithms import ppo
+from mjzoo.harness import training
 from mjzoo.interop import playground
 
 VARIANTS = [("alone", {}), ("alone", {"xla_gpu_autotune_level": 0}),
@@ -49,14 +50,14 @@ def main() -> None:
         fields.update(num_envs=16, num_minibatches=2, num_epochs=1, unroll_length=4)
         args.updates, args.eval_envs, args.eval_steps = 2, 4, 20
     config = ppo.Config(**fields)
-    state = jax.jit(ppo.init, static_argnums=0)(config, task, jax.random.key(0))
+    state = training._init_fn(ppo)(config, task, jax.random.key(0))
 
     @jax.jit  # the harness's chunk (`training._chunk_fn`) donates its state; this one runs from `state` again
     def chunk(task, state):  # `args.updates` updates in one program
         return jax.lax.scan(lambda s, _: ppo.update(config, task, s), state, None, length=args.updates)[0]
 
     jax.block_until_ready(chunk(task, state))  # compiled and run once: the timed runs only execute it
-    evaluate = jax.jit(ppo.evaluate, static_argnums=(0, 4, 5))
+    evaluate = training._evaluate_fn(ppo)  # the very function the harness compiles ahead
 
     rows = []
     for i, (where, options) in enumerate(VARIANTS):
