@@ -81,8 +81,14 @@ def raw_steps_per_s(env, num_envs: int, steps: int = 100, repeats: int = 3) -> f
     return num_envs * steps / best
 
 
-def train_brax(env, config: dict, seed: int) -> dict:
-    """Brax PPO as Playground runs it; its curve from `progress_fn`'s reports."""
+class _OutOfTime(Exception):
+    """Raised from Brax's `progress_fn` to end a run at an evaluation (`--brax-time-limit`)."""
+
+
+def train_brax(env, config: dict, seed: int, time_limit: float | None = None) -> dict:
+    """Brax PPO as Playground runs it; its curve from `progress_fn`'s reports, each also
+    printed (a run killed midway leaves its curve in the log). With `time_limit`, the run
+    ends at its first evaluation after that many seconds (and two epochs), and says at which step."""
     from brax.training.agents.ppo import networks as ppo_networks
     from brax.training.agents.ppo import train as brax_ppo
     from mujoco_playground import wrapper
@@ -92,20 +98,29 @@ def train_brax(env, config: dict, seed: int) -> dict:
     network = functools.partial(ppo_networks.make_ppo_networks, **params.pop("network_factory", {}))
     reports: list[tuple[int, float, float]] = []
     trained_s: list[tuple[int, float]] = []  # (step, Brax's training/walltime) after each training epoch
+    total = brax_env_steps(config)
     start = time.perf_counter()
 
     def progress(step: int, metrics: dict) -> None:
         reports.append((int(step), time.perf_counter() - start, float(metrics.get("eval/episode_reward", np.nan))))
+        print(f"  brax: step {step:,}, {reports[-1][1]:.0f} s, return {reports[-1][2]:.1f}", flush=True)
         if step > 0:
             trained_s.append((int(step), float(metrics["training/walltime"])))
+        if time_limit is not None and reports[-1][1] > time_limit and len(trained_s) > 1 and step < total:
+            raise _OutOfTime
 
-    brax_ppo.train(environment=env, wrap_env_fn=wrapper.wrap_for_brax_training, network_factory=network,
-                   progress_fn=progress, seed=seed, **params)  # fmt: skip
+    try:
+        brax_ppo.train(environment=env, wrap_env_fn=wrapper.wrap_for_brax_training, network_factory=network,
+                       progress_fn=progress, seed=seed, **params)  # fmt: skip
+        cut_off = None
+    except _OutOfTime:
+        cut_off = reports[-1][0]
     (first_step, first_s), (last_step, last_s) = trained_s[0], trained_s[-1]
     steps_per_s = wall_steps_per_s(reports)
     first_report = next(t for step, t, _ in reports if step > 0)
     return {"steps_per_s": steps_per_s, "train_steps_per_s": (last_step - first_step) / (last_s - first_s),
-            "curve": reports, "final_return": reports[-1][2], "compile_s": first_report - first_step / steps_per_s}  # fmt: skip
+            "curve": reports, "final_return": reports[-1][2], "compile_s": first_report - first_step / steps_per_s,
+            **({"cut_off_at_step": cut_off} if cut_off is not None else {})}  # fmt: skip
 
 
 def brax_env_steps(config: dict) -> int:
@@ -140,11 +155,12 @@ def train_mjzoo(env, name: str, config: dict, seed: int, overrides: dict) -> dic
             "compile_s": curve[0][1] - ppo_config.steps_per_update / train_steps_per_s}  # fmt: skip
 
 
-TRAINERS = {"mjzoo": train_mjzoo, "brax": lambda env, name, config, seed, overrides: train_brax(env, config, seed)}
+TRAINERS = {"mjzoo": train_mjzoo,
+            "brax": lambda env, name, config, seed, overrides, time_limit=None: train_brax(env, config, seed, time_limit)}
 
 
 def measure(name: str, impl: str, steps: int, seeds: range, trainers: list[str], smoke: bool, overrides: dict,
-            evals: int | None = None) -> Iterator[dict]:  # fmt: skip
+            evals: int | None = None, brax_time_limit: float | None = None) -> Iterator[dict]:  # fmt: skip
     """Raw stepping and each of `trainers` over `seeds` seeds on Playground's `name`: the
     row so far after each trainer (a run cut off keeps what it measured)."""
     config = brax_config(name, steps, smoke, evals)
@@ -160,10 +176,12 @@ def measure(name: str, impl: str, steps: int, seeds: range, trainers: list[str],
     for trainer in trainers:
         runs = []
         for seed in seeds:
-            runs.append({**TRAINERS[trainer](env, name, config, seed, overrides), "seed": seed})
+            limit = {"time_limit": brax_time_limit} if trainer == "brax" else {}
+            runs.append({**TRAINERS[trainer](env, name, config, seed, overrides, **limit), "seed": seed})
             print(f"{name} ({impl}) seed {seed}: {trainer} {runs[-1]['steps_per_s']:,.0f} steps/s, final "
                   f"{runs[-1]['final_return']:.1f}, compile {runs[-1]['compile_s']:.0f} s, "
-                  f"{time.perf_counter() - start:.0f} s so far", flush=True)  # fmt: skip
+                  + (f"cut off at step {runs[-1]['cut_off_at_step']:,}, " if "cut_off_at_step" in runs[-1] else "")
+                  + f"{time.perf_counter() - start:.0f} s so far", flush=True)  # fmt: skip
         row[trainer] = {"runs": runs}
         yield dict(row)
 
@@ -239,6 +257,9 @@ def main() -> None:
     parser.add_argument("--evals", type=int, default=None,
                         help="Brax's num_evals (Playground's: 10). Brax trains whole epochs between evaluations: "
                              "with --steps 20000000, 4 evaluations train 29.5M steps where 10 train 88.5M")  # fmt: skip
+    parser.add_argument("--brax-time-limit", type=float, default=None, metavar="SECONDS",
+                        help="end each Brax run at its first evaluation after SECONDS (a run longer than one device "
+                             "call); the run's final return is then that evaluation's, and `cut_off_at_step` says so")  # fmt: skip
     parser.add_argument("--seeds", type=int, default=1)
     parser.add_argument("--first-seed", type=int, default=0, help="seeds FIRST .. FIRST+SEEDS-1, added to the row's others")
     parser.add_argument("--set", nargs="*", default=[], metavar="FIELD=VALUE",
@@ -257,7 +278,8 @@ def main() -> None:
     for name in args.envs:
         for impl in args.impl:
             seeds = range(args.first_seed, args.first_seed + args.seeds)
-            for row in measure(name, impl, args.steps, seeds, args.trainers, args.smoke, overrides, args.evals):
+            for row in measure(name, impl, args.steps, seeds, args.trainers, args.smoke, overrides, args.evals,
+                               args.brax_time_limit):  # fmt: skip
                 rows = [summarize(r, args.threshold) for r in merged(rows, with_earlier_seeds(rows, row))]
                 path.write_text(json.dumps({"device": device, "jax": jax.__version__, "rows": rows}, indent=1))
     print_table(rows)
