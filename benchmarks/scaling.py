@@ -7,10 +7,15 @@ the env's registered PPO hyperparameters and ``num_envs = envs_per_device x devi
 the harness shards the env batch over every local device and XLA averages the
 gradients (`mjzoo.harness.devices`). Reported per count: the median training steps/s
 after the first chunk, its speedup over one device and its share of linear scaling,
-the time to the threshold (compile included) and the final evaluation return. Goal
-(issue 19): >= 1.85x on 2 GPUs and >= 3.5x on 4.
+the time to the threshold (compile included; every chunk of about 3.3M env steps is
+evaluated) and the final evaluation return. Goal (issue 19): >= 1.85x on 2 GPUs and
+>= 3.5x on 4. On MuJoCo Warp (`--impl warp`) each device steps its own worlds with its
+own contact pool (`mjzoo.worlds.vmap_transition`). With `--processes`, each device
+gets a process of its own, joined by `jax.distributed` on localhost, as on several hosts
+(how Warp must run on several GPUs: one process driving two crashed XLA's compiler).
 
-    python benchmarks/scaling.py --devices 1 2 4 --steps 100000000        # humanoid_walk
+    python benchmarks/scaling.py --devices 1 2 4 --steps 40000000 --impl jax    # humanoid_walk
+    python benchmarks/scaling.py --devices 1 2 --steps 40000000 --impl warp --processes
     python benchmarks/scaling.py --env cartpole_balance --devices 1 2 --smoke   # on a CPU
 """
 
@@ -20,6 +25,7 @@ import argparse
 import json
 import os
 import shutil
+import socket
 import subprocess
 import sys
 import tempfile
@@ -40,51 +46,97 @@ def gpu_count() -> int:
     return sum(line.startswith("GPU ") for line in listed.splitlines())
 
 
-def worker(env: str, devices: int, envs_per_device: int, steps: int, smoke: bool, result: Path) -> None:
-    """One device count, in this process: train and write the figures to `result`."""
+def worker(env: str, devices: int, envs_per_device: int, steps: int, smoke: bool, impl: str | None,
+           result: Path, joined: tuple[str, int] | None = None) -> None:  # fmt: skip
+    """One device count, in this process (or, `joined` = (coordinator, process id), in
+    one of `devices` processes of a device each): train and write the figures to `result`."""
     import jax
     from ppo_vs_brax import training_curve
 
     import mjzoo.envs
     from mjzoo.algorithms import ppo
-    from mjzoo.harness import training
+    from mjzoo.harness import distributed, training
 
-    assert jax.local_device_count() == devices, (jax.local_devices(), devices)
+    if joined is not None:
+        distributed.initialize(joined[0], devices, joined[1])
+    assert jax.device_count() == devices, (jax.devices(), devices)
     fields = {**mjzoo.envs.hyperparameters(env, "ppo"), "num_envs": envs_per_device * devices, "total_steps": steps}
     if smoke:  # two chunks of two updates at any count, so the steady rate is measured
         fields.update(SMOKE, total_steps=fields["num_envs"] * SMOKE["unroll_length"] * 4)
     config = ppo.Config(**fields)
-    with tempfile.TemporaryDirectory() as out:
-        settings = training.Settings(out_dir=Path(out), video=False, progress=False, checkpoint_every=0,
-                                     eval_envs=16 if smoke else 256, updates_per_chunk=2 if smoke else 10)  # fmt: skip
+    with tempfile.TemporaryDirectory() as out:  # one host: the processes' run directory is process 0's
+        out = str(result.parent / "run") if joined is not None else out
+        # Chunks of the same env steps at every count (10 updates on one device), each evaluated.
+        settings = training.Settings(out_dir=Path(out), video=False, progress=False, checkpoint_every=0, eval_every=1,
+                                     eval_envs=16 if smoke else 256, updates_per_chunk=2 if smoke else max(1, 10 // devices))  # fmt: skip
+        task = mjzoo.envs.make(env, **({"impl": impl} if impl else {}))
         start = time.perf_counter()
-        training.run(ppo, config, mjzoo.envs.make(env), settings)
+        training.run(ppo, config, task, settings)
+        if not distributed.is_primary():  # process 0 writes the metrics and the result
+            return
         curve, steps_per_s = training_curve(Path(out) / "metrics.jsonl", time.perf_counter() - start)
     threshold = THRESHOLDS.get(env, float("inf"))
     result.write_text(json.dumps({
-        "devices": devices, "device_kind": jax.devices()[0].device_kind, "num_envs": config.num_envs,
+        "devices": devices, "processes": jax.process_count(), "device_kind": jax.devices()[0].device_kind, "num_envs": config.num_envs,
+        "impl": training.physics_info(task).get("impl"),
         "steps_per_s": steps_per_s, "curve": curve, "final_return": curve[-1][2],
         "time_to_threshold_s": next((t for _, t, r in curve if r >= threshold), None), "threshold": threshold,
     }))  # fmt: skip
 
 
 def run_count(args: argparse.Namespace, devices: int, log: Path) -> dict:
-    """Runs `worker` for `devices` devices in a fresh process; its output goes to `log`."""
-    environment = dict(os.environ)
-    if args.cpu:
-        flags = environment.get("XLA_FLAGS", "")
-        environment.update(JAX_PLATFORMS="cpu", XLA_FLAGS=f"{flags} --xla_force_host_platform_device_count={devices}")
-    else:
-        environment["CUDA_VISIBLE_DEVICES"] = ",".join(map(str, range(devices)))
+    """Runs `worker` for `devices` devices in a fresh process (`--processes`: one per
+    device); the output goes to `log` (process I > 0: `log` with suffix .I.log)."""
     with tempfile.TemporaryDirectory() as tmp:
         result = Path(tmp) / "result.json"
         command = [sys.executable, __file__, "--worker", str(devices), "--env", args.env, "--steps", str(args.steps),
-                   "--envs-per-device", str(args.envs_per_device), "--result", str(result)] + (["--smoke"] if args.smoke else [])  # fmt: skip
-        with log.open("w") as out:  # a file, not a pipe: a full pipe would stall the child
-            code = subprocess.run(command, env=environment, stdout=out, stderr=subprocess.STDOUT, check=False).returncode
-        if code != 0:
-            return {"devices": devices, "error": f"exit {code}; see {log}"}
+                   "--envs-per-device", str(args.envs_per_device), "--result", str(result)] + (["--smoke"] if args.smoke else [])
+        command += ["--impl", args.impl] if args.impl else []  # fmt: skip
+        if args.processes and devices > 1:
+            port = _free_port()
+            launches = [(command + ["--coordinator", f"localhost:{port}", "--process-id", str(i)], _visible(args, [i]))
+                        for i in range(devices)]  # fmt: skip
+        else:
+            launches = [(command, _visible(args, list(range(devices))))]
+        logs = [log] + [log.with_suffix(f".{i}.log") for i in range(1, len(launches))]
+        codes = _run_all([(c, e, path) for (c, e), path in zip(launches, logs)])
+        if any(codes):
+            return {"devices": devices, "error": f"exit {codes}; see {log}"}
         return json.loads(result.read_text())
+
+
+def _visible(args: argparse.Namespace, devices: list[int]) -> dict[str, str]:
+    """The environment of a process that sees `devices` (GPU numbers; on a CPU, as many devices)."""
+    environment = dict(os.environ)
+    if args.cpu:
+        flags = environment.get("XLA_FLAGS", "")
+        environment.update(JAX_PLATFORMS="cpu", XLA_FLAGS=f"{flags} --xla_force_host_platform_device_count={len(devices)}")
+    else:
+        environment["CUDA_VISIBLE_DEVICES"] = ",".join(map(str, devices))
+    return environment
+
+
+def _run_all(launches: list[tuple[list[str], dict[str, str], Path]]) -> list[int]:
+    """Starts every (command, environment, log) at once; their exit codes. Output goes to
+    files, not pipes: a full pipe would stall a child."""
+    running = []
+    for command, environment, log in launches:
+        with log.open("w") as out:
+            running.append(subprocess.Popen(command, env=environment, stdout=out, stderr=subprocess.STDOUT))
+    codes = [proc.wait() for proc in running[:1]]
+    for proc in running[1:]:  # process 0 is done: the others end with it, or are stuck without it
+        try:
+            codes.append(proc.wait(timeout=60))
+        except subprocess.TimeoutExpired:
+            proc.kill()
+            codes.append(proc.wait())
+    return codes
+
+
+def _free_port() -> int:
+    with socket.socket() as s:
+        s.bind(("localhost", 0))
+        return s.getsockname()[1]
 
 
 def main() -> None:
@@ -93,13 +145,18 @@ def main() -> None:
     parser.add_argument("--devices", nargs="+", type=int, default=[1, 2, 4])
     parser.add_argument("--envs-per-device", type=int, default=None, help="default: the env's num_envs (smoke: 16)")
     parser.add_argument("--steps", type=int, default=None, help="env steps per run (default: the env's total_steps)")
+    parser.add_argument("--impl", choices=["jax", "warp"], default=None, help="physics (default: the env's default)")
+    parser.add_argument("--processes", action="store_true", help="one process per device (jax.distributed on localhost)")
     parser.add_argument("--smoke", action="store_true", help="tiny sizes on CPU devices, to check the script")
     parser.add_argument("--out", type=Path, default=Path(__file__).parent / "results" / "scaling")
     parser.add_argument("--worker", type=int, help=argparse.SUPPRESS)
     parser.add_argument("--result", type=Path, help=argparse.SUPPRESS)
+    parser.add_argument("--coordinator", help=argparse.SUPPRESS)
+    parser.add_argument("--process-id", type=int, help=argparse.SUPPRESS)
     args = parser.parse_args()
     if args.worker:
-        worker(args.env, args.worker, args.envs_per_device, args.steps, args.smoke, args.result)
+        joined = (args.coordinator, args.process_id) if args.coordinator else None
+        worker(args.env, args.worker, args.envs_per_device, args.steps, args.smoke, args.impl, args.result, joined)
         return
     import mjzoo.envs
 
@@ -112,19 +169,22 @@ def main() -> None:
     if not wanted:
         raise SystemExit(f"scaling: this host has {available} GPU(s); --devices {args.devices} needs more")
     args.out.mkdir(parents=True, exist_ok=True)
-    path = args.out / f"scaling_{args.env}_{'cpu' if args.cpu else 'gpu'}.json"
+    name = f"scaling_{args.env}_{'cpu' if args.cpu else 'gpu'}" + (f"_{args.impl}" if args.impl else "")
+    name += "_processes" if args.processes else ""
+    path = args.out / f"{name}.json"
     rows = []
     print(f"{args.env}: {args.envs_per_device} envs per device, "
           f"{'smoke sizes' if args.smoke else f'{args.steps:,} env steps per run'}", flush=True)
     for devices in wanted:
-        rows.append(run_count(args, devices, args.out / f"scaling_{args.env}_{devices}.log"))
-        base = rows[0].get("steps_per_s")
+        rows.append(run_count(args, devices, args.out / f"{name}_{devices}.log"))
+        base = next((row["steps_per_s"] for row in rows if row["devices"] == 1 and "steps_per_s" in row), None)
         for row in rows:
             if "steps_per_s" in row and base:
                 row.update(speedup=row["steps_per_s"] / base, efficiency=row["steps_per_s"] / base / row["devices"])
         row = rows[-1]
+        speedup = f" ({row['speedup']:.2f}x)" if "speedup" in row else ""
         print(f"{devices} device(s): " + (row["error"] if "error" in row else
-              f"{row['steps_per_s']:,.0f} steps/s ({row['speedup']:.2f}x), to {row['threshold']:g}: "
+              f"{row['steps_per_s']:,.0f} steps/s{speedup}, to {row['threshold']:g}: "
               f"{'never' if row['time_to_threshold_s'] is None else format(row['time_to_threshold_s'], '.1f') + ' s'}, final return {row['final_return']:.1f}"), flush=True)  # fmt: skip
         path.write_text(json.dumps({"env": args.env, "envs_per_device": args.envs_per_device, "steps": args.steps,
                                     "rows": rows}, indent=1))  # fmt: skip

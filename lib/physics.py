@@ -86,9 +86,11 @@ class Physics:
     def data0(self) -> mjx.Data:
         """The template every reset starts from: ``qpos = qpos0``, zero velocity, nothing
         computed; on Warp, with a contact pool for one world (`mjzoo.worlds.sized` sizes it)."""
-        if self.impl == "jax":  # on this process's device (MJX's default is process 0's in a multi-process run)
-            return mjx.make_data(self.mj_model, device=jax.local_devices()[0], impl="jax")
-        data = mjx.make_data(self.mj_model, impl="warp", naconmax=self.max_contacts, njmax=self.max_constraints)
+        device = jax.local_devices()[0]  # this process's (MJX's default is process 0's in a multi-process run)
+        if self.impl == "jax":
+            return mjx.make_data(self.mj_model, device=device, impl="jax")
+        data = mjx.make_data(self.mj_model, device=device, impl="warp", naconmax=self.max_contacts,
+                             njmax=self.max_constraints)  # fmt: skip
         return data.replace(_impl=data._impl.replace(nworld=1))  # nworld: the worlds the pool is sized for
 
     @property
@@ -378,8 +380,9 @@ def of_model(
     if impl == "warp":
         _require_warp(source)
     try:
-        # On this process's device: MJX's default, jax.devices()[0], is process 0's in a multi-process run.
-        model = mjx.put_model(mj_model, device=jax.local_devices()[0] if impl == "jax" else None, impl=impl)
+        # On this process's device: MJX's default (the first device, or the first GPU for Warp) is
+        # process 0's in a multi-process run.
+        model = mjx.put_model(mj_model, device=jax.local_devices()[0], impl=impl)
     except NotImplementedError as e:
         raise ValueError(f"{source}: MJX ({impl}) cannot simulate this model: {e}") from None
     if impl != "warp":

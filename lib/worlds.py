@@ -20,10 +20,12 @@ import mujoco
 import numpy as np
 from mujoco import mjx
 
+from jax.sharding import PartitionSpec
+
 from mjzoo.tree import where as leafwise_where
 
 __all__ = [
-    "sized", "own", "shared", "where", "Contacts", "contacts", "overflow", "overflow_metrics", "clear_overflow",
+    "AXIS", "sized", "own", "shared", "where", "partition", "vmap_transition", "Contacts", "contacts", "overflow", "overflow_metrics", "clear_overflow",
     "probe_capacity", "OVERFLOW_CAPACITY", "OVERFLOW_SOLVER",
 ]  # fmt: skip
 
@@ -32,6 +34,7 @@ __all__ = [
 OVERFLOW_CAPACITY = 1 | 2 | 4 | 8 | 16 | 32 | 64 | 128 | 256 | 4096  # nefc, nnz, broad/narrowphase, ccd, ...
 OVERFLOW_SOLVER = 512 | 1024  # iterations, line-search iterations
 _WARP_SCRATCH = {"actuator_moment", "moment_colind", "moment_rowadr"}  # sparse, filled in atomic order
+AXIS = "envs"  # the mesh axis a batch of worlds is split along (mjzoo.harness.devices)
 
 
 def sized(tree: Any, worlds: int) -> Any:
@@ -50,13 +53,27 @@ def _sized(data: mjx.Data, worlds: int) -> mjx.Data:
     if data.impl != mjx.Impl.WARP or impl.nworld == worlds:
         return data
     per_world = impl.naconmax // impl.nworld
-    pool = {}
-    for f in dataclasses.fields(impl):
-        value = getattr(impl, f.name)
-        if f.name.startswith("contact__") and np.shape(value)[0] == impl.naconmax:
-            pool[f.name] = jnp.zeros((per_world * worlds,) + value.shape[1:], value.dtype)
+    pool = {name: jnp.zeros((per_world * worlds,) + value.shape[1:], value.dtype)
+            for name, value in _pool(data).items()}  # fmt: skip
+    return _counted(data.replace(_impl=impl.replace(**pool)), worlds)
+
+
+def _pool(data: mjx.Data) -> dict[str, jax.Array]:
+    """Warp's contact pool: the fields of `data._impl` with a row per contact slot."""
+    impl = data._impl
+    return {f.name: getattr(impl, f.name) for f in dataclasses.fields(impl)
+            if f.name.startswith("contact__") and np.shape(getattr(impl, f.name))[:1] == (impl.naconmax,)}  # fmt: skip
+
+
+def _counted(data: mjx.Data, worlds: int) -> mjx.Data:
+    """`data` with Warp's static counts (worlds, pool slots) said for `worlds` worlds; the
+    arrays untouched (the caller gives them that size)."""
+    impl = data._impl
+    if data.impl != mjx.Impl.WARP or impl.nworld == worlds:
+        return data
+    naconmax = impl.naconmax // impl.nworld * worlds
     naccdmax = impl.naccdmax // impl.nworld * worlds if impl.naccdmax else impl.naccdmax
-    return data.replace(_impl=impl.replace(**pool, naconmax=per_world * worlds, naccdmax=naccdmax, nworld=worlds))
+    return data.replace(_impl=impl.replace(naconmax=naconmax, naccdmax=naccdmax, nworld=worlds))
 
 
 def own(tree: Any) -> Any:
@@ -118,6 +135,78 @@ def where(cond: jax.Array, on_true: mjx.Data, on_false: mjx.Data) -> mjx.Data:
     public = {f.name: pick(getattr(on_true, f.name), getattr(on_false, f.name))
               for f in dataclasses.fields(on_false) if f.name != "_impl"}  # fmt: skip
     return on_false.replace(**public, _impl=on_false._impl.replace(**impl))
+
+
+def partition(tree: Any, axis: str = AXIS) -> Any:
+    """A `PartitionSpec` for each leaf of a batch of worlds (leading axis: the worlds), to
+    split it over the devices of mesh axis `axis`: each world's leaves along that axis,
+    and Warp's contact pool too (a device's share of the slots serves its own worlds; a
+    step refills them); scalars and the rest of what Warp's worlds share whole.
+
+    Returns:
+      a pytree of `tree`'s structure with a PartitionSpec per leaf.
+    """
+    split, whole = PartitionSpec(axis), PartitionSpec()
+    leaf = lambda x: split if jnp.ndim(x) else whole  # noqa: E731
+
+    def data_specs(data: mjx.Data) -> mjx.Data:
+        if data.impl != mjx.Impl.WARP:
+            return jax.tree.map(leaf, data)
+        from mujoco.mjx.warp.types import DATA_NON_VMAP
+
+        pool = _pool(data)
+
+        def spec(path: tuple, x: Any) -> PartitionSpec:
+            name = path[-1].name if len(path) == 2 and path[0].name == "_impl" else None
+            if name in DATA_NON_VMAP:  # shared by the batch: split only the pool's slots
+                return split if name in pool else whole
+            return leaf(x)
+
+        return jax.tree_util.tree_map_with_path(spec, data)
+
+    return jax.tree.map(lambda x: data_specs(x) if _is_data(x) else leaf(x), tree, is_leaf=_is_data)
+
+
+def vmap_transition(step: Any, task: Any, states: Any, *per_world: Any) -> Any:
+    """``jax.vmap(step, in_axes=(None, 0, 0, ...))(task, states, *per_world)`` for a
+    `step` that returns states of `states`' structure (`mjzoo.transition`).
+
+    Under a mesh with axis `AXIS` over several devices (``jax.set_mesh``, or the abstract
+    mesh the training harness sets) and on Warp, it runs under `jax.shard_map`: XLA cannot
+    split Warp's one foreign call over the batch, so each device steps its own worlds with
+    its share of the contact pool, and the pool's counters are summed over the devices.
+    `states` must then be split as `partition` says (`mjzoo.harness.devices.shard_envs`)."""
+    batched = jax.vmap(step, in_axes=(None,) + (0,) * (1 + len(per_world)))
+    mesh = jax.sharding.get_abstract_mesh()
+    devices = 1 if mesh.empty or AXIS not in mesh.axis_names else mesh.shape[AXIS]
+    warp = [x for x in jax.tree.leaves(states, is_leaf=_is_data) if _is_data(x) and x.impl == mjx.Impl.WARP]
+    if devices == 1 or not warp:
+        return batched(task, states, *per_world)
+    worlds = warp[0]._impl.nworld
+    if worlds % devices:
+        raise ValueError(f"vmap_transition: a batch of {worlds} worlds does not split over {devices} devices")
+
+    def counted(tree: Any, n: int) -> Any:  # Warp's static counts said for n worlds
+        return jax.tree.map(lambda x: _counted(x, n) if _is_data(x) else x, tree, is_leaf=_is_data)
+
+    def summed(data: mjx.Data) -> mjx.Data:  # the pool's counters, as one call over the whole batch counts
+        if data.impl != mjx.Impl.WARP:
+            return data
+        names = _array_fields(data, {"nacon", "ncollision"})
+        return data.replace(_impl=data._impl.replace(**{n: jax.lax.psum(getattr(data._impl, n), AXIS) for n in names}))
+
+    def local(task: Any, states: Any, *per_world: Any) -> Any:
+        out = counted(batched(task, counted(states, worlds // devices), *per_world), worlds)
+        return jax.tree.map(lambda x: summed(x) if _is_data(x) else x, out, is_leaf=_is_data)
+
+    specs = partition(states)
+    whole = jax.tree.map(lambda _: PartitionSpec(), task)
+    return jax.shard_map(local, in_specs=(whole, specs, *map(partition, per_world)), out_specs=specs,
+                         check_vma=False)(task, states, *per_world)  # fmt: skip
+
+
+def _is_data(x: Any) -> bool:
+    return isinstance(x, mjx.Data)
 
 
 class Contacts(NamedTuple):

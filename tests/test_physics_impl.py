@@ -9,6 +9,8 @@ from __future__ import annotations
 
 import importlib.util
 import os
+import subprocess
+import sys
 import types
 
 import catalog_tasks
@@ -140,6 +142,31 @@ def test_sized_and_own_leave_jax_data_alone():
         assert all(a is b for a, b in zip(jax.tree.leaves(changed), jax.tree.leaves(task), strict=True))
 
 
+def test_partition_splits_each_worlds_leaves_and_keeps_scalars_whole():
+    task = mjzoo.envs.make("cartpole_balance")
+    states = jax.vmap(lambda k: running.reset(task, k))(jax.random.split(jax.random.key(0), 4))
+    tree = {"states": states, "count": jnp.zeros(())}
+    specs = worlds.partition(tree)
+    split, whole = jax.sharding.PartitionSpec(worlds.AXIS), jax.sharding.PartitionSpec()
+    assert jax.tree.leaves(specs["count"]) == [whole]
+    leaves, specs = jax.tree.leaves(states), jax.tree.leaves(specs["states"])
+    assert len(leaves) == len(specs) and all(spec == split for spec in specs)
+
+
+def test_vmap_transition_is_jax_vmap_on_jax_physics_under_a_mesh():
+    """On MJX-JAX, XLA splits the batch by itself: no shard_map, the plain vmap's result."""
+    task = mjzoo.envs.make("cartpole_balance")
+    keys = jax.random.split(jax.random.key(0), 4)
+    states = jax.vmap(lambda k: running.reset(task, k))(keys)
+    actions = jnp.linspace(-1.0, 1.0, 4)[:, None] * jnp.ones((4, task.action_size))
+    plain = jax.vmap(running.transition, in_axes=(None, 0, 0, 0))(task, states, actions, keys)
+    with jax.sharding.use_abstract_mesh(jax.sharding.AbstractMesh((2,), (worlds.AXIS,))):  # traced only
+        jaxpr = jax.make_jaxpr(lambda s: worlds.vmap_transition(running.transition, task, s, actions, keys))(states)
+    assert "shard_map" not in str(jaxpr) and "dot_general" in str(jaxpr)
+    mapped = worlds.vmap_transition(running.transition, task, states, actions, keys)
+    jax.tree.map(np.testing.assert_array_equal, mapped, plain)
+
+
 @pytest.mark.parametrize("cond", [True, False])
 def test_where_is_leafwise_jnp_where_on_jax(cond):
     a, b = _two_states()
@@ -254,6 +281,21 @@ def test_training_stops_when_warp_outgrew_its_capacity():
         training._check_capacity(task, {"env/physics/capacity_overflow": 0.01})
 
 
+def test_warp_on_several_gpus_of_one_process_is_refused_with_the_ways_out(monkeypatch):
+    """It crashed XLA's GPU compiler (benchmarks/results/scaling/): one clear error instead."""
+    from mjzoo.harness import devices as placement
+
+    monkeypatch.setattr(placement, "template_data", lambda tree: types.SimpleNamespace(impl=mjx.Impl.WARP))
+    gpus = [types.SimpleNamespace(process_index=jax.process_index(), platform="gpu") for _ in range(2)]
+    with pytest.raises(NotImplementedError, match=r"2 GPUs in one process.*impl='jax'.*--num-processes"):
+        placement.shard_envs({"collector": jnp.zeros(4)}, ["collector"], gpus)
+    monkeypatch.setattr(placement, "template_data", lambda tree: types.SimpleNamespace(impl=mjx.Impl.JAX))
+    placement._check_warp_gpus({}, gpus)  # MJX-JAX on the same GPUs: allowed
+    other = [types.SimpleNamespace(process_index=jax.process_index() + 1 + i, platform="gpu") for i in range(2)]
+    monkeypatch.setattr(placement, "template_data", lambda tree: types.SimpleNamespace(impl=mjx.Impl.WARP))
+    placement._check_warp_gpus({}, gpus[:1] + other)  # one GPU per process: allowed
+
+
 # --- Warp itself (developers: Warp installed, MJZOO_WARP_ON_CPU=1) ----------------------
 
 
@@ -300,3 +342,43 @@ def test_a_warp_batch_resets_as_each_env_would(monkeypatch):
     chosen_per_env = rollout()
     assert int(batched[2].sum()) == 2 * 4  # every env restarted twice in 14 steps
     jax.tree.map(np.testing.assert_array_equal, batched, chosen_per_env)
+
+
+WARP_TWO_DEVICES = """
+import os, sys
+import jax, numpy as np
+import mjzoo.envs
+from mjzoo.algorithms import ppo
+from mjzoo.harness import devices as placement
+assert jax.device_count() == 2
+config = ppo.Config(num_envs=8, unroll_length=4, num_minibatches=2, num_epochs=1, total_steps=64)
+task = mjzoo.envs.make("hopper", impl="warp")
+init, update = jax.jit(ppo.init, static_argnums=0), jax.jit(lambda t, s: ppo.update(config, t, s))
+states = []
+for devices in (jax.devices()[:1], jax.devices()):
+    state = placement.shard_envs(init(config, task, jax.random.key(0)), ppo.PER_ENV_FIELDS, devices)
+    with jax.set_mesh(placement.env_mesh(devices)):  # Warp's physics splits over it
+        for _ in range(2):
+            state, _ = update(placement.replicate(task, devices), state)
+    states.append(state)
+assert len(states[1].collector.env_state.data.qpos.sharding.device_set) == 2
+one, two = (jax.device_get(s.collector.env_state.data) for s in states)
+print("max qpos difference", np.max(np.abs(one.qpos - two.qpos)), "contacts", one._impl.nacon, two._impl.nacon)
+np.testing.assert_allclose(one.qpos, two.qpos, atol=1e-5)
+assert int(one._impl.nacon[0]) == int(two._impl.nacon[0]) > 0  # each device's count, summed
+sys.stdout.flush()
+os._exit(0)  # Warp's CPU backend can keep the interpreter from exiting
+"""
+
+
+@needs_warp
+def test_warp_training_on_two_devices_matches_one_device():
+    """Each device steps its own worlds with its share of Warp's contact pool
+    (`worlds.vmap_transition` under the mesh): two updates of PPO on the hopper give one
+    device's states, and the devices' contact counts add up to one device's."""
+    env = {**os.environ, "XLA_FLAGS": os.environ.get("XLA_FLAGS", "") + " --xla_force_host_platform_device_count=2",
+           "JAX_PLATFORMS": "cpu"}  # fmt: skip
+    result = subprocess.run([sys.executable, "-c", WARP_TWO_DEVICES], env=env, capture_output=True, text=True,
+                            timeout=900)  # fmt: skip
+    assert result.returncode == 0, result.stderr[-3000:]
+    assert "max qpos difference" in result.stdout

@@ -7,7 +7,9 @@ init) and keeps the shards on its own devices."""
 
 from __future__ import annotations
 
+import contextlib
 import dataclasses
+import os
 from collections.abc import Sequence
 from typing import Any
 
@@ -17,15 +19,20 @@ import numpy as np
 from jax.sharding import NamedSharding, PartitionSpec
 from mujoco import mjx
 
-__all__ = ["shard_envs", "replicate", "template_data"]
+from mjzoo import worlds
+
+WARP_GPUS = "MJZOO_WARP_SEVERAL_GPUS"  # =1: let one process train Warp physics on several GPUs
+
+__all__ = ["shard_envs", "replicate", "env_mesh", "env_mesh_scope", "template_data"]
 
 
 def shard_envs(train_state: Any, per_env_fields: Sequence[str], devices: list | None = None) -> Any:
     """Places the leaves of a train state's `per_env_fields` (an algorithm's
     `PER_ENV_FIELDS`) across devices (leading axis), the rest replicated. Under jit,
-    XLA then splits the env batch and averages gradients. Empty per-env arrays (no
-    contacts in a model) are replicated, as XLA returns them: placed otherwise, the
-    second chunk would compile again for their new sharding.
+    XLA then splits the env batch and averages gradients (and, on Warp, each device
+    steps its own worlds: `mjzoo.worlds.partition`). Empty per-env arrays (no contacts
+    in a model) are replicated, as XLA returns them: placed otherwise, the second chunk
+    would compile again for their new sharding.
 
     On one device this commits the state to it: jit compiles separately for
     uncommitted inputs and for its own (committed) outputs, which would cost a second
@@ -33,19 +40,15 @@ def shard_envs(train_state: Any, per_env_fields: Sequence[str], devices: list | 
     devices = devices or jax.devices()
     if len(devices) == 1:
         return jax.device_put(train_state, devices[0])
-    if (data := template_data(train_state)) is not None and data.impl == mjx.Impl.WARP:
-        raise NotImplementedError(
-            f"training on {len(devices)} devices needs impl='jax' for now: MuJoCo Warp's contact pool "
-            "belongs to one call on one device, and splitting it is not supported yet"
-        )
-    mesh = jax.sharding.Mesh(np.array(devices), ("envs",))
-    split, whole = NamedSharding(mesh, PartitionSpec("envs")), NamedSharding(mesh, PartitionSpec())
+    _check_warp_gpus(train_state, devices)
+    mesh = env_mesh(devices)
 
     def place(node: Any, paths: list[list[str]]) -> Any:
         if [] in paths:  # this node is per-env
-            return jax.tree.map(lambda x: _put(x, split if jnp.ndim(x) and jnp.size(x) else whole), node)
+            return jax.tree.map(lambda x, spec: _put(x, NamedSharding(mesh, spec if jnp.size(x) else PartitionSpec())),
+                                node, worlds.partition(node))  # fmt: skip
         if not paths or not dataclasses.is_dataclass(node):
-            return jax.tree.map(lambda x: _put(x, whole), node)
+            return jax.tree.map(lambda x: _put(x, NamedSharding(mesh, PartitionSpec())), node)
         return dataclasses.replace(node, **{
             f.name: place(getattr(node, f.name), [p[1:] for p in paths if p[0] == f.name])
             for f in dataclasses.fields(node)
@@ -54,14 +57,43 @@ def shard_envs(train_state: Any, per_env_fields: Sequence[str], devices: list | 
     return place(train_state, [path.split(".") for path in per_env_fields])
 
 
+def _check_warp_gpus(train_state: Any, devices: list) -> None:
+    """Refuses Warp physics on several GPUs of one process: compiling the chunk crashed
+    XLA (a segfault, JAX 0.11.2 and mujoco-mjx 3.17 on two H200s; the same program runs
+    on CPU devices). One process per GPU is how Warp's JAX interop is reported to work."""
+    local = [d for d in devices if d.process_index == jax.process_index() and d.platform == "gpu"]
+    data = template_data(train_state)
+    if len(local) > 1 and data is not None and data.impl == mjx.Impl.WARP and os.environ.get(WARP_GPUS) != "1":
+        raise NotImplementedError(
+            f"training on MuJoCo Warp with {len(local)} GPUs in one process crashed XLA's GPU compiler "
+            "(JAX 0.11.2, mujoco-mjx 3.17): use impl='jax', or one process per GPU (`mjzoo train ... "
+            f"--num-processes N --process-id I` with CUDA_VISIBLE_DEVICES=I); {WARP_GPUS}=1 tries it anyway"
+        )
+
+
+def env_mesh(devices: list | None = None) -> jax.sharding.Mesh:
+    """The one-axis mesh (`mjzoo.worlds.AXIS`) that env batches are split along."""
+    devices = devices or jax.devices()
+    return jax.sharding.Mesh(np.array(devices), (worlds.AXIS,), axis_types=(jax.sharding.AxisType.Auto,))
+
+
+def env_mesh_scope(devices: list | None = None) -> contextlib.AbstractContextManager:
+    """While a jitted function traces, `env_mesh` as the abstract mesh (for
+    `mjzoo.worlds.vmap_transition`); nothing on one device. Outside jit,
+    ``jax.set_mesh(env_mesh())`` does the same for your own calls."""
+    devices = devices or jax.devices()
+    if len(devices) == 1:
+        return contextlib.nullcontext()
+    return jax.sharding.use_abstract_mesh(env_mesh(devices).abstract_mesh)
+
+
 def replicate(tree: Any, devices: list | None = None) -> Any:
     """Copies every array of `tree` (e.g. a Task) onto all `devices`, to run beside a
     state placed by `shard_envs`."""
     devices = devices or jax.devices()
     if len(devices) == 1:
         return jax.device_put(tree, devices[0])
-    mesh = jax.sharding.Mesh(np.array(devices), ("envs",))
-    return jax.tree.map(lambda x: _put(x, NamedSharding(mesh, PartitionSpec())), tree)
+    return jax.tree.map(lambda x: _put(x, NamedSharding(env_mesh(devices), PartitionSpec())), tree)
 
 
 def _put(x: Any, sharding: NamedSharding) -> Any:

@@ -34,7 +34,7 @@ import numpy as np
 from mjzoo import tree
 from mjzoo.harness import checkpoints, compilation, distributed, metrics as metrics_lib, plotting, rendering
 from mjzoo.harness.contract import Algorithm, AlgorithmConfig, check_algorithm, check_state
-from mjzoo.harness.devices import replicate, shard_envs, template_data
+from mjzoo.harness.devices import env_mesh_scope, replicate, shard_envs, template_data
 from mjzoo.harness.settings import EvalSchedule, Settings, checkpoint_due, config_dict
 from mjzoo.running import control_dt
 from mjzoo.types import Task
@@ -72,7 +72,8 @@ def _claim(out: Path, settings: Settings) -> None:
 @functools.lru_cache(maxsize=8)  # runs in one process with one config share the compile
 def _chunk_fn(algorithm: ModuleType, config: Any, length: int):
     def chunk(task: Task, state):
-        state, metrics = jax.lax.scan(lambda s, _: algorithm.update(config, task, s), state, None, length=length)
+        with env_mesh_scope():  # Warp's physics splits over the devices by it (worlds.vmap_transition)
+            state, metrics = jax.lax.scan(lambda s, _: algorithm.update(config, task, s), state, None, length=length)
         return state, jax.tree.map(jnp.nanmean, metrics)  # NaN: nothing to report that update
 
     return jax.jit(chunk, donate_argnums=1)

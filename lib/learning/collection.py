@@ -131,13 +131,12 @@ def collect(
     num_steps = checks.integer("collect", "num_steps", num_steps)
     env = with_auto_reset(task)
     act = jax.vmap(policy)
-    step = jax.vmap(transition, in_axes=(None, 0, 0, 0))
 
     def body(c: Collector, key: Array):
         act_key, step_key = jax.random.split(key)
         num_envs = c.start.shape[0]
         carry, action, extras = act(c.carry, c.env_state.obs, c.start, jax.random.split(act_key, num_envs))
-        next_state = step(env, c.env_state, action, jax.random.split(step_key, num_envs))
+        next_state = worlds.vmap_transition(transition, env, c.env_state, action, jax.random.split(step_key, num_envs))
         done = next_state.terminated | next_state.truncated
         episode_return, episode_length = c.episode_return + next_state.reward, c.episode_length + 1.0
         ended = {

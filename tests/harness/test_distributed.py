@@ -11,6 +11,7 @@ run and its resume, then the one-process reference beside the resume."""
 
 from __future__ import annotations
 
+import importlib.util
 import json
 import os
 import re
@@ -61,14 +62,15 @@ def _free_port() -> int:
 Launched = list[tuple[subprocess.Popen, Path]]  # each process with the stem of its log files
 
 
-def _launch(out: Path | None, logs: Path, *args: str, processes: int = 1, devices: int = 1) -> Launched:
-    """`mjzoo train ppo SPEC` in `processes` processes of `devices` CPU devices each,
+def _launch(out: Path | None, logs: Path, *args: str, processes: int = 1, devices: int = 1,
+            spec: str = SPEC) -> Launched:  # fmt: skip
+    """`mjzoo train ppo spec` in `processes` processes of `devices` CPU devices each,
     writing their output to files in `logs` (a pipe nobody reads could fill and stall one)."""
     cache = logs.parent / "cache"  # process 0 of the resumed run finds its executables there
     env = {k: v for k, v in os.environ.items() if not k.startswith(("JAX_COORDINATOR", "JAX_NUM_PROC", "JAX_PROCESS"))}
     env.update(JAX_PLATFORMS="cpu", MJZOO_COMPILE_CACHE=str(cache), JAX_COMPILATION_CACHE_DIR=str(cache),
                XLA_FLAGS=f"{env.get('XLA_FLAGS', '')} --xla_force_host_platform_device_count={devices}")  # fmt: skip
-    command = [sys.executable, "-m", "mjzoo", "train", "ppo", SPEC, *args, *FLAGS, *(["--out", str(out)] if out else [])]
+    command = [sys.executable, "-m", "mjzoo", "train", "ppo", spec, *args, *FLAGS, *(["--out", str(out)] if out else [])]
     port = _free_port()
     joined = [[f"--coordinator=localhost:{port}", f"--num-processes={processes}", f"--process-id={i}"]
               for i in range(processes)] if processes > 1 else [[]]  # fmt: skip
@@ -135,6 +137,22 @@ def test_two_processes_train_as_one_process_with_two_devices_and_resume(tmp_path
     assert final.keys() == wanted.keys()
     for name in wanted:
         np.testing.assert_allclose(final[name], wanted[name], rtol=RTOL, atol=ATOL, err_msg=name)
+
+
+@pytest.mark.skipif(importlib.util.find_spec("warp") is None or os.environ.get("MJZOO_WARP_ON_CPU") != "1",
+                    reason="needs MuJoCo Warp installed and MJZOO_WARP_ON_CPU=1 (Warp's slow CPU backend)")
+def test_two_processes_on_warp_train_as_one_process_with_two_devices(tmp_path):
+    """One process per device is how Warp runs on several GPUs: each process's physics on
+    its own device (MJX's default device for Warp is process 0's), each device its own
+    worlds and share of the contact pool. The hopper: its worlds touch the floor."""
+    two, one = tmp_path / "two", tmp_path / "one"
+    args = ["--total-steps", str(STEPS_PER_CHUNK), "--env-overrides", "impl=warp"]
+    _finish(_launch(two, tmp_path / "logs-two", *args, processes=2, spec="hopper")
+            + _launch(one, tmp_path / "logs-one", *args, devices=2, spec="hopper"), timeout=900)  # fmt: skip
+    assert json.loads((two / "config.json").read_text())["physics"]["impl"] == "warp"
+    (line,), (wanted,) = _lines(two), _lines(one)
+    for name in ("eval/return", "loss/total", "train/episode_return"):
+        np.testing.assert_allclose(line[name], wanted[name], rtol=RTOL, atol=ATOL, err_msg=name)
 
 
 @pytest.fixture
