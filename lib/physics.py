@@ -189,7 +189,9 @@ def step(model: mjx.Model, data: mjx.Data, ctrl: jax.Array, n_substeps: int) -> 
     report this control step's substeps.
     """
     data = clear_overflow(data).replace(ctrl=ctrl)
-    if n_substeps == 1:
+    # On Warp a lone substep goes through the loop too: called bare under a vmap inside a
+    # scan (the evaluation's), MJX's Warp step leaked its tracers (UnexpectedTracerError).
+    if n_substeps == 1 and data.impl != mjx.Impl.WARP:
         return substep(model, data)
     return jax.lax.fori_loop(0, n_substeps, lambda _, d: substep(model, d), data)
 

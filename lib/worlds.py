@@ -18,15 +18,14 @@ import jax
 import jax.numpy as jnp
 import mujoco
 import numpy as np
-from mujoco import mjx
-
 from jax.sharding import PartitionSpec
+from mujoco import mjx
 
 from mjzoo.tree import where as leafwise_where
 
 __all__ = [
-    "AXIS", "sized", "own", "shared", "where", "partition", "vmap_transition", "Contacts", "contacts", "overflow", "overflow_metrics", "clear_overflow",
-    "probe_capacity", "OVERFLOW_CAPACITY", "OVERFLOW_SOLVER",
+    "AXIS", "sized", "own", "shared", "where", "partition", "vmap_transition", "Contacts", "contacts", "overflow",
+    "overflow_metrics", "clear_overflow", "probe_capacity", "OVERFLOW_CAPACITY", "OVERFLOW_SOLVER",
 ]  # fmt: skip
 
 # MuJoCo Warp's overflow bits (mujoco_warp OverflowType): capacities a run outgrew (its
@@ -37,6 +36,10 @@ _WARP_SCRATCH = {"actuator_moment", "moment_colind", "moment_rowadr"}  # sparse,
 AXIS = "envs"  # the mesh axis a batch of worlds is split along (mjzoo.harness.devices)
 
 
+def _is_data(x: Any) -> bool:
+    return isinstance(x, mjx.Data)
+
+
 def sized(tree: Any, worlds: int) -> Any:
     """`tree` (a Task, a State, a Data, any pytree) with every Warp Data in it holding a
     contact pool for `worlds` simulated worlds: what a batch of `worlds` needs before it
@@ -44,8 +47,7 @@ def sized(tree: Any, worlds: int) -> Any:
     samples). The pools' contents are dropped: the next step recomputes them. Warp
     sizes its pool statically, so the caller who knows the batch sizes it; identity on
     JAX."""
-    is_data = lambda x: isinstance(x, mjx.Data)  # noqa: E731
-    return jax.tree.map(lambda x: _sized(x, worlds) if is_data(x) else x, tree, is_leaf=is_data)
+    return jax.tree.map(lambda x: _sized(x, worlds) if _is_data(x) else x, tree, is_leaf=_is_data)
 
 
 def _sized(data: mjx.Data, worlds: int) -> mjx.Data:
@@ -82,8 +84,7 @@ def own(tree: Any) -> Any:
     a varying order (both recomputed by every step; their fields become None). Every
     leaf then has the batch's axes and compares across runs: for indexing or comparing
     batched states. Identity on JAX."""
-    is_data = lambda x: isinstance(x, mjx.Data)  # noqa: E731
-    return jax.tree.map(lambda x: _own_fields(x) if is_data(x) else x, tree, is_leaf=is_data)
+    return jax.tree.map(lambda x: _own_fields(x) if _is_data(x) else x, tree, is_leaf=_is_data)
 
 
 def _own_fields(data: mjx.Data) -> mjx.Data:
@@ -104,17 +105,16 @@ def _array_fields(data: mjx.Data, names: set[str]) -> list[str]:
 def shared(tree: Any) -> Any:
     """`tree` with a bool for each leaf: True for the contact pool and counters that the
     worlds of a Warp batch share (MJX keeps them unbatched under `jax.vmap`)."""
-    is_data = lambda x: isinstance(x, mjx.Data)  # noqa: E731
 
     def mark(x: Any) -> Any:
         flags = jax.tree.map(lambda _: False, x)
-        if not is_data(x) or x.impl != mjx.Impl.WARP:
+        if not _is_data(x) or x.impl != mjx.Impl.WARP:
             return flags
         from mujoco.mjx.warp.types import DATA_NON_VMAP
 
         return flags.replace(_impl=flags._impl.replace(**dict.fromkeys(_array_fields(x, DATA_NON_VMAP), True)))
 
-    return jax.tree.map(mark, tree, is_leaf=is_data)
+    return jax.tree.map(mark, tree, is_leaf=_is_data)
 
 
 def where(cond: jax.Array, on_true: mjx.Data, on_false: mjx.Data) -> mjx.Data:
@@ -203,10 +203,6 @@ def vmap_transition(step: Any, task: Any, states: Any, *per_world: Any) -> Any:
     whole = jax.tree.map(lambda _: PartitionSpec(), task)
     return jax.shard_map(local, in_specs=(whole, specs, *map(partition, per_world)), out_specs=specs,
                          check_vma=False)(task, states, *per_world)  # fmt: skip
-
-
-def _is_data(x: Any) -> bool:
-    return isinstance(x, mjx.Data)
 
 
 class Contacts(NamedTuple):

@@ -344,6 +344,23 @@ def test_a_warp_batch_resets_as_each_env_would(monkeypatch):
     jax.tree.map(np.testing.assert_array_equal, batched, chosen_per_env)
 
 
+def _upright(p, model, state, action, next_state):
+    return jnp.cos(next_state.data.qpos[0])
+
+
+@needs_warp
+def test_a_warp_task_of_one_substep_per_control_step_evaluates():
+    """MJX's Warp step called bare under the evaluation's vmap inside its scan leaked its
+    tracers (UnexpectedTracerError); a run of such a task failed at its first evaluation."""
+    from mjzoo import learning
+
+    task = mjzoo.task(PENDULUM, rewards={"upright": _upright}, time_limit=20, impl="warp", ctrl_dt=0.01)
+    assert mjzoo.control_dt(task) == pytest.approx(task.mj_model.opt.timestep)  # one substep
+    policy = learning.feed_forward(lambda obs, key: (jnp.zeros(task.action_size), ()))
+    returns = jax.jit(lambda t, k: learning.evaluate(t, policy, k, 2, 20).returns)(task, jax.random.key(0))
+    np.testing.assert_allclose(returns, 20.0, rtol=1e-4)  # hanging still: cos 0 = 1 a step
+
+
 WARP_TWO_DEVICES = """
 import os, sys
 import jax, numpy as np
