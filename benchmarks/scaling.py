@@ -64,17 +64,17 @@ def worker(env: str, devices: int, envs_per_device: int, steps: int, smoke: bool
     if smoke:  # two chunks of two updates at any count, so the steady rate is measured
         fields.update(SMOKE, total_steps=fields["num_envs"] * SMOKE["unroll_length"] * 4)
     config = ppo.Config(**fields)
-    with tempfile.TemporaryDirectory() as out:  # one host: the processes' run directory is process 0's
-        out = str(result.parent / "run") if joined is not None else out
+    with tempfile.TemporaryDirectory() as own:
+        out = Path(own) if joined is None else result.parent / "run"  # one host: the processes share process 0's
         # Chunks of the same env steps at every count (10 updates on one device), each evaluated.
-        settings = training.Settings(out_dir=Path(out), video=False, progress=False, checkpoint_every=0, eval_every=1,
+        settings = training.Settings(out_dir=out, video=False, progress=False, checkpoint_every=0, eval_every=1,
                                      eval_envs=16 if smoke else 256, updates_per_chunk=2 if smoke else max(1, 10 // devices))  # fmt: skip
         task = mjzoo.envs.make(env, **({"impl": impl} if impl else {}))
         start = time.perf_counter()
         training.run(ppo, config, task, settings)
         if not distributed.is_primary():  # process 0 writes the metrics and the result
             return
-        curve, steps_per_s = training_curve(Path(out) / "metrics.jsonl", time.perf_counter() - start)
+        curve, steps_per_s = training_curve(out / "metrics.jsonl", time.perf_counter() - start)
     threshold = THRESHOLDS.get(env, float("inf"))
     result.write_text(json.dumps({
         "devices": devices, "processes": jax.process_count(), "device_kind": jax.devices()[0].device_kind, "num_envs": config.num_envs,

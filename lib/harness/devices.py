@@ -48,7 +48,7 @@ def shard_envs(train_state: Any, per_env_fields: Sequence[str], devices: list | 
             return jax.tree.map(lambda x, spec: _put(x, NamedSharding(mesh, spec if jnp.size(x) else PartitionSpec())),
                                 node, worlds.partition(node))  # fmt: skip
         if not paths or not dataclasses.is_dataclass(node):
-            return jax.tree.map(lambda x: _put(x, NamedSharding(mesh, PartitionSpec())), node)
+            return replicate(node, devices)
         return dataclasses.replace(node, **{
             f.name: place(getattr(node, f.name), [p[1:] for p in paths if p[0] == f.name])
             for f in dataclasses.fields(node)
@@ -93,7 +93,8 @@ def replicate(tree: Any, devices: list | None = None) -> Any:
     devices = devices or jax.devices()
     if len(devices) == 1:
         return jax.device_put(tree, devices[0])
-    return jax.tree.map(lambda x: _put(x, NamedSharding(env_mesh(devices), PartitionSpec())), tree)
+    whole = NamedSharding(env_mesh(devices), PartitionSpec())
+    return jax.tree.map(lambda x: _put(x, whole), tree)
 
 
 def _put(x: Any, sharding: NamedSharding) -> Any:
