@@ -9,13 +9,17 @@ gradients (`mjzoo.harness.devices`). Reported per count: the median training ste
 after the first chunk, its speedup over one device and its share of linear scaling,
 the time to the threshold (compile included; every chunk of about 3.3M env steps is
 evaluated) and the final evaluation return. Goal (issue 19): >= 1.85x on 2 GPUs and
->= 3.5x on 4. On MuJoCo Warp (`--impl warp`) each device steps its own worlds with its
-own contact pool (`mjzoo.worlds.vmap_transition`). With `--processes`, each device
-gets a process of its own, joined by `jax.distributed` on localhost, as on several hosts
-(how Warp must run on several GPUs: one process driving two crashed XLA's compiler).
+>= 3.5x on 4. With `--processes`, each device gets a process of its own, joined by
+`jax.distributed` on localhost, as on several hosts. MuJoCo Warp (`--impl warp`) runs
+here on one GPU only: split over two, its program crashed XLA's GPU compiler, in one
+process and in one per GPU (`warp_multi_gpu_probe.py`); on CPU devices it splits.
+More envs per update with the same `num_minibatches` means fewer gradient steps per env
+step; `--scale-minibatches` multiplies `num_minibatches` by the device count instead, so
+every count learns as one device does per env step (same minibatch size, same gradient
+steps per env step), and only the rollout shrinks with more devices.
 
-    python benchmarks/scaling.py --devices 1 2 4 --steps 40000000 --impl jax    # humanoid_walk
-    python benchmarks/scaling.py --devices 1 2 --steps 40000000 --impl warp --processes
+    python benchmarks/scaling.py --devices 1 2 4 --steps 40000000 --impl jax --scale-minibatches  # humanoid_walk
+    python benchmarks/scaling.py --devices 1 2 --steps 20000000 --impl jax --processes
     python benchmarks/scaling.py --env cartpole_balance --devices 1 2 --smoke   # on a CPU
 """
 
@@ -47,7 +51,7 @@ def gpu_count() -> int:
 
 
 def worker(env: str, devices: int, envs_per_device: int, steps: int, smoke: bool, impl: str | None,
-           result: Path, joined: tuple[str, int] | None = None) -> None:  # fmt: skip
+           result: Path, joined: tuple[str, int] | None = None, scale_minibatches: bool = False) -> None:  # fmt: skip
     """One device count, in this process (or, `joined` = (coordinator, process id), in
     one of `devices` processes of a device each): train and write the figures to `result`."""
     import jax
@@ -63,6 +67,8 @@ def worker(env: str, devices: int, envs_per_device: int, steps: int, smoke: bool
     fields = {**mjzoo.envs.hyperparameters(env, "ppo"), "num_envs": envs_per_device * devices, "total_steps": steps}
     if smoke:  # two chunks of two updates at any count, so the steady rate is measured
         fields.update(SMOKE, total_steps=fields["num_envs"] * SMOKE["unroll_length"] * 4)
+    if scale_minibatches:  # one device's minibatch size and gradient steps per env step
+        fields["num_minibatches"] = fields.get("num_minibatches", ppo.Config.num_minibatches) * devices
     config = ppo.Config(**fields)
     with tempfile.TemporaryDirectory() as own:
         out = Path(own) if joined is None else result.parent / "run"  # one host: the processes share process 0's
@@ -78,7 +84,7 @@ def worker(env: str, devices: int, envs_per_device: int, steps: int, smoke: bool
     threshold = THRESHOLDS.get(env, float("inf"))
     result.write_text(json.dumps({
         "devices": devices, "processes": jax.process_count(), "device_kind": jax.devices()[0].device_kind, "num_envs": config.num_envs,
-        "impl": training.physics_info(task).get("impl"),
+        "num_minibatches": config.num_minibatches, "impl": training.physics_info(task).get("impl"),
         "steps_per_s": steps_per_s, "curve": curve, "final_return": curve[-1][2],
         "time_to_threshold_s": next((t for _, t, r in curve if r >= threshold), None), "threshold": threshold,
     }))  # fmt: skip
@@ -91,7 +97,8 @@ def run_count(args: argparse.Namespace, devices: int, log: Path) -> dict:
         result = Path(tmp) / "result.json"
         command = [sys.executable, __file__, "--worker", str(devices), "--env", args.env, "--steps", str(args.steps),
                    "--envs-per-device", str(args.envs_per_device), "--result", str(result)] + (["--smoke"] if args.smoke else [])
-        command += ["--impl", args.impl] if args.impl else []  # fmt: skip
+        command += ["--impl", args.impl] if args.impl else []
+        command += ["--scale-minibatches"] if args.scale_minibatches else []
         if args.processes and devices > 1:
             port = _free_port()
             launches = [(command + ["--coordinator", f"localhost:{port}", "--process-id", str(i)], _visible(args, [i]))
@@ -147,6 +154,9 @@ def main() -> None:
     parser.add_argument("--steps", type=int, default=None, help="env steps per run (default: the env's total_steps)")
     parser.add_argument("--impl", choices=["jax", "warp"], default=None, help="physics (default: the env's default)")
     parser.add_argument("--processes", action="store_true", help="one process per device (jax.distributed on localhost)")
+    parser.add_argument("--scale-minibatches", action="store_true",
+                        help="num_minibatches x devices: one device's minibatch size and gradient steps per env step, "
+                             "so the learning curve per env step is one device's")  # fmt: skip
     parser.add_argument("--smoke", action="store_true", help="tiny sizes on CPU devices, to check the script")
     parser.add_argument("--out", type=Path, default=Path(__file__).parent / "results" / "scaling")
     parser.add_argument("--worker", type=int, help=argparse.SUPPRESS)
@@ -156,7 +166,8 @@ def main() -> None:
     args = parser.parse_args()
     if args.worker:
         joined = (args.coordinator, args.process_id) if args.coordinator else None
-        worker(args.env, args.worker, args.envs_per_device, args.steps, args.smoke, args.impl, args.result, joined)
+        worker(args.env, args.worker, args.envs_per_device, args.steps, args.smoke, args.impl, args.result, joined,
+               args.scale_minibatches)
         return
     import mjzoo.envs
 
@@ -170,7 +181,7 @@ def main() -> None:
         raise SystemExit(f"scaling: this host has {available} GPU(s); --devices {args.devices} needs more")
     args.out.mkdir(parents=True, exist_ok=True)
     name = f"scaling_{args.env}_{'cpu' if args.cpu else 'gpu'}" + (f"_{args.impl}" if args.impl else "")
-    name += "_processes" if args.processes else ""
+    name += ("_processes" if args.processes else "") + ("_scaled" if args.scale_minibatches else "")
     path = args.out / f"{name}.json"
     rows = []
     print(f"{args.env}: {args.envs_per_device} envs per device, "

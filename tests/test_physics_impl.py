@@ -281,19 +281,26 @@ def test_training_stops_when_warp_outgrew_its_capacity():
         training._check_capacity(task, {"env/physics/capacity_overflow": 0.01})
 
 
-def test_warp_on_several_gpus_of_one_process_is_refused_with_the_ways_out(monkeypatch):
-    """It crashed XLA's GPU compiler (benchmarks/results/scaling/): one clear error instead."""
+def test_warp_over_several_gpus_is_refused_with_the_way_out(monkeypatch):
+    """It crashed XLA's GPU compiler in one process and in one per GPU
+    (benchmarks/results/scaling/): one clear error instead, naming MJX-JAX."""
     from mjzoo.harness import devices as placement
 
     monkeypatch.setattr(placement, "template_data", lambda tree: types.SimpleNamespace(impl=mjx.Impl.WARP))
     gpus = [types.SimpleNamespace(process_index=jax.process_index(), platform="gpu") for _ in range(2)]
-    with pytest.raises(NotImplementedError, match=r"2 GPUs in one process.*impl='jax'.*--num-processes"):
+    with pytest.raises(NotImplementedError, match=r"over 2 GPUs.*one process or one per GPU.*impl='jax'"):
         placement.shard_envs({"collector": jnp.zeros(4)}, ["collector"], gpus)
+    other = [types.SimpleNamespace(process_index=jax.process_index() + 1, platform="gpu")]
+    with pytest.raises(NotImplementedError, match="over 2 GPUs"):
+        placement._check_warp_gpus({}, gpus[:1] + other)  # one GPU per process crashed too
+    monkeypatch.setenv(placement.WARP_GPUS, "1")
+    placement._check_warp_gpus({}, gpus)  # asked for: tried
+    monkeypatch.delenv(placement.WARP_GPUS)
     monkeypatch.setattr(placement, "template_data", lambda tree: types.SimpleNamespace(impl=mjx.Impl.JAX))
     placement._check_warp_gpus({}, gpus)  # MJX-JAX on the same GPUs: allowed
-    other = [types.SimpleNamespace(process_index=jax.process_index() + 1 + i, platform="gpu") for i in range(2)]
+    cpus = [types.SimpleNamespace(process_index=0, platform="cpu") for _ in range(2)]
     monkeypatch.setattr(placement, "template_data", lambda tree: types.SimpleNamespace(impl=mjx.Impl.WARP))
-    placement._check_warp_gpus({}, gpus[:1] + other)  # one GPU per process: allowed
+    placement._check_warp_gpus({}, cpus)  # Warp over CPU devices runs (the tests below)
 
 
 # --- Warp itself (developers: Warp installed, MJZOO_WARP_ON_CPU=1) ----------------------

@@ -26,7 +26,7 @@ from typing import Any
 import jax
 from jax.experimental.compilation_cache import compilation_cache
 
-__all__ = ["cache_directory", "compile_ahead", "enable_cache", "wait"]
+__all__ = ["cache_directory", "compile_ahead", "enable_cache", "overlaps_safely", "wait"]
 
 _OFF = ("0", "off", "false", "no", "")
 
@@ -75,12 +75,14 @@ def enable_cache(directory: str | Path | None = None) -> Path | None:
     return directory
 
 
-def compile_ahead(function: Callable, *args: Any, **kwargs: Any) -> threading.Thread:
+def compile_ahead(function: Callable, *args: Any, background: bool = True, **kwargs: Any) -> threading.Thread | None:
     """Starts compiling the jitted `function` for `args` (arrays or `jax.ShapeDtypeStruct`s
     with the shardings of the later call; static arguments as in that call) on a daemon
     thread, and returns it. A later call of `function` with matching arguments reuses
     the executable (it still traces, which is quick). A failure here is ignored: the
     later call compiles for itself and reports any error where it belongs.
+    `background=False` compiles on this thread now and returns None: for programs that
+    must not overlap a compile (`overlaps_safely`).
 
     `function` may instead be a `jax.stages.Lowered` (no arguments), traced and lowered
     by the caller: tracing holds the GIL, so where the caller goes on to trace something
@@ -93,9 +95,22 @@ def compile_ahead(function: Callable, *args: Any, **kwargs: Any) -> threading.Th
         except Exception:  # noqa: BLE001 (the real call raises it with its own context)
             pass
 
+    if not background:
+        work()
+        return None
     thread = threading.Thread(target=work, name=f"compile-ahead-{getattr(function, '__name__', 'fn')}", daemon=True)
     thread.start()
     return thread
+
+
+def overlaps_safely(model: Any) -> bool:
+    """Whether programs on `model`'s physics may run while another thread traces or
+    compiles. Not MuJoCo Warp's on a GPU: Warp's runtime is not thread-safe while it
+    captures its CUDA graphs (a program's first run), and with the chunk compiling
+    ahead a humanoid run on an H200 failed in its first steps ("Graph creation error",
+    with XLA's autotuner finding its red zone overwritten)."""
+    impl = getattr(getattr(model, "impl", None), "value", None)
+    return impl != "warp" or jax.default_backend() == "cpu"
 
 
 def wait(thread: threading.Thread | None, what: str, patience: float = 30.0) -> None:

@@ -21,7 +21,7 @@ from mujoco import mjx
 
 from mjzoo import worlds
 
-WARP_GPUS = "MJZOO_WARP_SEVERAL_GPUS"  # =1: let one process train Warp physics on several GPUs
+WARP_GPUS = "MJZOO_WARP_SEVERAL_GPUS"  # =1: let Warp physics train over several GPUs (it crashed XLA)
 
 __all__ = ["shard_envs", "replicate", "env_mesh", "env_mesh_scope", "template_data"]
 
@@ -58,16 +58,18 @@ def shard_envs(train_state: Any, per_env_fields: Sequence[str], devices: list | 
 
 
 def _check_warp_gpus(train_state: Any, devices: list) -> None:
-    """Refuses Warp physics on several GPUs of one process: compiling the chunk crashed
-    XLA (a segfault, JAX 0.11.2 and mujoco-mjx 3.17 on two H200s; the same program runs
-    on CPU devices). One process per GPU is how Warp's JAX interop is reported to work."""
-    local = [d for d in devices if d.process_index == jax.process_index() and d.platform == "gpu"]
+    """Refuses Warp physics split over several GPUs: compiling a program that steps Warp
+    under `jax.shard_map` on more than one GPU segfaults in XLA's GPU compiler (JAX
+    0.11.2, mujoco-mjx 3.17, warp-lang 1.18, two H200s), whether one process drives both
+    GPUs or each has its own, and with every Warp graph mode
+    (`benchmarks/warp_multi_gpu_probe.py`). The same programs run on CPU devices."""
+    gpus = [d for d in devices if d.platform == "gpu"]
     data = template_data(train_state)
-    if len(local) > 1 and data is not None and data.impl == mjx.Impl.WARP and os.environ.get(WARP_GPUS) != "1":
+    if len(gpus) > 1 and data is not None and data.impl == mjx.Impl.WARP and os.environ.get(WARP_GPUS) != "1":
         raise NotImplementedError(
-            f"training on MuJoCo Warp with {len(local)} GPUs in one process crashed XLA's GPU compiler "
-            "(JAX 0.11.2, mujoco-mjx 3.17): use impl='jax', or one process per GPU (`mjzoo train ... "
-            f"--num-processes N --process-id I` with CUDA_VISIBLE_DEVICES=I); {WARP_GPUS}=1 tries it anyway"
+            f"training on MuJoCo Warp over {len(gpus)} GPUs crashes XLA's GPU compiler (JAX 0.11.2, mujoco-mjx "
+            f"3.17, in one process or one per GPU): use impl='jax' to train on several GPUs, or one GPU; "
+            f"{WARP_GPUS}=1 tries it anyway"
         )
 
 
@@ -101,12 +103,15 @@ def _put(x: Any, sharding: NamedSharding) -> Any:
     """`jax.device_put`. In a multi-process run, an array on this process's own devices
     would be taken for a transfer between hosts (which CPUs cannot do): each process
     places its shards of the whole value from a host copy instead (a typed PRNG key as
-    its raw data)."""
+    its raw data). Not `device_put` of that copy, which insists that every process hold
+    the same bits: Warp's GPU physics is not bitwise deterministic, so two processes'
+    initial states differ in their last bits, and each shard is one process's anyway."""
     if sharding.is_fully_addressable or not isinstance(x, jax.Array) or not x.is_fully_addressable:
         return jax.device_put(x, sharding)
     if jnp.issubdtype(x.dtype, jax.dtypes.prng_key):
         return jax.random.wrap_key_data(_put(jax.random.key_data(x), sharding), impl=jax.random.key_impl(x))
-    return jax.device_put(np.asarray(x), sharding)
+    host = np.asarray(x)
+    return jax.make_array_from_callback(host.shape, sharding, lambda index: host[index])
 
 
 def template_data(tree: Any) -> mjx.Data | None:

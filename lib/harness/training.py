@@ -231,11 +231,12 @@ class _Loop:
         """Compiles the evaluation on a background thread while the first chunk runs: the
         first evaluation then waits for no compiler (`compilation.compile_ahead`). `state`
         is described by shapes and shardings (`_described`); the key is a real one, as a
-        key's description lowers to another program."""
+        key's description lowers to another program. On Warp's GPU physics it compiles
+        now, before the chunk runs (`compilation.overlaps_safely`)."""
         key = jax.random.fold_in(self.key, 0)
-        s = self.settings
+        s, background = self.settings, compilation.overlaps_safely(getattr(self.task, "model", None))
         self.ahead = compilation.compile_ahead(self.evaluate, self.config, self.task, state, key, s.eval_envs,
-                                               self.eval_steps)  # fmt: skip
+                                               self.eval_steps, background=background)  # fmt: skip
 
     def _evaluate(self, state: Any, step: int, final: bool) -> dict[str, float]:
         """Evaluates (`settings.eval_envs` episodes) and writes a video when one is due."""
@@ -345,8 +346,9 @@ def _compile_chunk_ahead(algorithm: Algorithm, config: AlgorithmConfig, task: Ta
                          key: jax.Array) -> threading.Thread | None:  # fmt: skip
     """Starts compiling the training chunk on a thread (or loading it from the cache) from
     the shapes init will return (`eval_shape`, whose trace init's call reuses) while init
-    compiles. Traced here: tracing holds the GIL. One device (a known sharding) only."""
-    if len(devices := jax.devices()) != 1:
+    compiles. Traced here: tracing holds the GIL. One device (a known sharding) only, and
+    not on Warp's GPU physics (`compilation.overlaps_safely`)."""
+    if len(devices := jax.devices()) != 1 or not compilation.overlaps_safely(getattr(task, "model", None)):
         return None
     shapes = _init_fn(algorithm).eval_shape(config, task, key)
     place = jax.sharding.SingleDeviceSharding(devices[0])

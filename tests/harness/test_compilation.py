@@ -5,6 +5,7 @@ from __future__ import annotations
 import dataclasses
 import threading
 import time
+import types
 from pathlib import Path
 
 import jax
@@ -100,6 +101,26 @@ def test_a_function_lowered_by_the_caller_compiles_ahead_for_the_call():
     assert jnp.allclose(result, jnp.full((3, 3), 2 * np.tanh(1.0)))
 
 
+def test_compiling_now_instead_of_ahead_also_serves_the_call():
+    """`background=False` (Warp's GPU physics, `overlaps_safely`) compiles on this thread
+    before returning: nothing left to compile, and nothing running beside the call."""
+    function = jax.jit(lambda x: jnp.cos(x) * 2)
+    x = jnp.arange(3.0)
+    assert compilation.compile_ahead(function, jax.ShapeDtypeStruct(x.shape, x.dtype), background=False) is None
+    _compiles.clear()
+    result = function(x)
+    assert _compiles == []
+    assert jnp.allclose(result, jnp.cos(x) * 2)
+
+
+def test_only_warp_physics_on_a_gpu_must_not_overlap_a_compile(monkeypatch):
+    warp, mjx_jax = (types.SimpleNamespace(impl=types.SimpleNamespace(value=v)) for v in ("warp", "jax"))
+    assert compilation.overlaps_safely(warp) and compilation.overlaps_safely(mjx_jax)  # on this CPU
+    monkeypatch.setattr(jax, "default_backend", lambda: "gpu")
+    assert not compilation.overlaps_safely(warp)
+    assert compilation.overlaps_safely(mjx_jax) and compilation.overlaps_safely(None)  # a task without a Model
+
+
 def test_waiting_long_for_a_compile_says_what_for(capsys):
     slow, quick = threading.Thread(target=time.sleep, args=(0.3,)), threading.Thread(target=time.sleep, args=(0.0,))
     slow.start(), quick.start()
@@ -140,7 +161,7 @@ class Updates:
     num_updates: int
 
 
-def test_the_chunk_compiled_ahead_from_inits_shapes_serves_every_chunk():
+def test_the_chunk_compiled_ahead_from_inits_shapes_serves_every_chunk(monkeypatch):
     """`training.run` compiles its chunk on a thread while init compiles, from the shapes
     init will return: the described state (PRNG keys, the device's sharding) must be the
     placed state exactly, or the first chunk compiles again. And init's weakly typed leaf
@@ -160,6 +181,9 @@ def test_the_chunk_compiled_ahead_from_inits_shapes_serves_every_chunk():
     config = Updates(num_updates=4)
     settings = training.Settings(updates_per_chunk=2, video=False, progress=False)
     task, key = {"gain": jnp.ones(3)}, jax.random.key(0)
+    monkeypatch.setattr(compilation, "overlaps_safely", lambda model: False)  # as on Warp's GPU physics
+    assert training._compile_chunk_ahead(algorithm, config, task, settings, key) is None  # the chunk compiles first
+    monkeypatch.undo()
     ahead = training._compile_chunk_ahead(algorithm, config, task, settings, key)
     assert ahead is not None  # one device
     ahead.join()
