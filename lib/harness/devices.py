@@ -23,16 +23,14 @@ from mjzoo import worlds
 
 WARP_GPUS = "MJZOO_WARP_SEVERAL_GPUS"  # =1: let Warp physics train over several GPUs (it crashed XLA)
 
-__all__ = ["shard_envs", "replicate", "env_mesh", "env_mesh_scope", "template_data"]
+__all__ = ["shard_envs", "env_shardings", "replicate", "env_mesh", "env_mesh_scope", "template_data"]
 
 
 def shard_envs(train_state: Any, per_env_fields: Sequence[str], devices: list | None = None) -> Any:
     """Places the leaves of a train state's `per_env_fields` (an algorithm's
-    `PER_ENV_FIELDS`) across devices (leading axis), the rest replicated. Under jit,
-    XLA then splits the env batch and averages gradients (and, on Warp, each device
-    steps its own worlds: `mjzoo.worlds.partition`). Empty per-env arrays (no contacts
-    in a model) are replicated, as XLA returns them: placed otherwise, the second chunk
-    would compile again for their new sharding.
+    `PER_ENV_FIELDS`) across devices (leading axis), the rest replicated, as
+    `env_shardings` says. Under jit, XLA then splits the env batch and averages gradients
+    (and, on Warp, each device steps its own worlds: `mjzoo.worlds.partition`).
 
     On one device this commits the state to it: jit compiles separately for
     uncommitted inputs and for its own (committed) outputs, which would cost a second
@@ -41,14 +39,26 @@ def shard_envs(train_state: Any, per_env_fields: Sequence[str], devices: list | 
     if len(devices) == 1:
         return jax.device_put(train_state, devices[0])
     _check_warp_gpus(train_state, devices)
+    return jax.tree.map(_put, train_state, env_shardings(train_state, per_env_fields, devices))
+
+
+def env_shardings(train_state: Any, per_env_fields: Sequence[str], devices: list | None = None) -> Any:
+    """The sharding of each leaf of a train state (arrays, or `jax.ShapeDtypeStruct`s to
+    compile for ahead) as `shard_envs` places it. Empty per-env arrays (no contacts in a
+    model) are replicated, as XLA returns them: placed otherwise, the second chunk would
+    compile again for their new sharding."""
+    devices = devices or jax.devices()
+    if len(devices) == 1:
+        return jax.tree.map(lambda _: jax.sharding.SingleDeviceSharding(devices[0]), train_state)
     mesh = env_mesh(devices)
+    whole = NamedSharding(mesh, PartitionSpec())
 
     def place(node: Any, paths: list[list[str]]) -> Any:
         if [] in paths:  # this node is per-env
-            return jax.tree.map(lambda x, spec: _put(x, NamedSharding(mesh, spec if jnp.size(x) else PartitionSpec())),
+            return jax.tree.map(lambda x, spec: NamedSharding(mesh, spec) if np.prod(np.shape(x)) else whole,
                                 node, worlds.partition(node))  # fmt: skip
         if not paths or not dataclasses.is_dataclass(node):
-            return replicate(node, devices)
+            return jax.tree.map(lambda _: whole, node)
         return dataclasses.replace(node, **{
             f.name: place(getattr(node, f.name), [p[1:] for p in paths if p[0] == f.name])
             for f in dataclasses.fields(node)

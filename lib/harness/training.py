@@ -34,7 +34,7 @@ import numpy as np
 from mjzoo import tree
 from mjzoo.harness import checkpoints, compilation, distributed, metrics as metrics_lib, plotting, rendering
 from mjzoo.harness.contract import Algorithm, AlgorithmConfig, check_algorithm, check_state
-from mjzoo.harness.devices import env_mesh_scope, replicate, shard_envs, template_data
+from mjzoo.harness.devices import env_mesh_scope, env_shardings, replicate, shard_envs, template_data
 from mjzoo.harness.settings import EvalSchedule, Settings, checkpoint_due, config_dict
 from mjzoo.running import control_dt
 from mjzoo.types import Task
@@ -345,14 +345,15 @@ def _per_chunk(config: AlgorithmConfig, settings: Settings) -> int:
 def _compile_chunk_ahead(algorithm: Algorithm, config: AlgorithmConfig, task: Task, settings: Settings,
                          key: jax.Array) -> threading.Thread | None:  # fmt: skip
     """Starts compiling the training chunk on a thread (or loading it from the cache) from
-    the shapes init will return (`eval_shape`, whose trace init's call reuses) while init
-    compiles. Traced here: tracing holds the GIL. One device (a known sharding) only, and
-    not on Warp's GPU physics (`compilation.overlaps_safely`)."""
-    if len(devices := jax.devices()) != 1 or not compilation.overlaps_safely(getattr(task, "model", None)):
+    the shapes init will return (`eval_shape`, whose trace init's call reuses) and the
+    shardings `shard_envs` will give them, while init compiles. Traced here: tracing
+    holds the GIL. Not on Warp's GPU physics (`compilation.overlaps_safely`)."""
+    if not compilation.overlaps_safely(getattr(task, "model", None)):
         return None
     shapes = _init_fn(algorithm).eval_shape(config, task, key)
-    place = jax.sharding.SingleDeviceSharding(devices[0])
-    state = jax.tree.map(lambda x: jax.ShapeDtypeStruct(x.shape, x.dtype, sharding=place), shapes)  # strong: `_owned`
+    shardings = env_shardings(shapes, algorithm.PER_ENV_FIELDS)
+    described = lambda x, s: jax.ShapeDtypeStruct(x.shape, x.dtype, sharding=s)  # noqa: E731 (strong, as `_owned`)
+    state = jax.tree.map(described, shapes, shardings)
     chunk = _chunk_fn(algorithm, config, _per_chunk(config, settings))
     try:
         return compilation.compile_ahead(chunk.lower(replicate(task), state))
