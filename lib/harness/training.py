@@ -183,6 +183,7 @@ class _Loop:
         self.video: tuple[int, Path] | None = None  # (step, path) of the latest videos/eval_<step>.mp4
         self.pending: dict[str, float] = {}  # once-only metrics waiting for the next metrics line
         self.ahead: threading.Thread | None = None  # the evaluation compiling in the background
+        self.overlaps = compilation.overlaps_safely(getattr(task, "model", None))  # not Warp on a GPU
         self.saved = launched  # when the last checkpoint was written
         if settings.profile_memory and (silent := metrics_lib.device_memory()[1]):
             warnings.warn(f"training: profile_memory: {', '.join(silent)} report no memory statistics "
@@ -198,8 +199,11 @@ class _Loop:
         shapes = _described(state) if not self.history else None  # before the chunk donates it
         compilation.wait(self.chunk_ahead, "training: the chunk")  # compiling it twice at once would waste a core
         self.chunk_ahead = None
+        if shapes is not None and not self.overlaps:  # nothing may compile while Warp runs: init first, then
+            jax.block_until_ready(state)  # the evaluation's compile and the chunk's, each alone
+            self.compile_evaluation_ahead(shapes)
         state, chunk_metrics = self.chunk(self.task, state)
-        if shapes is not None:  # while this launch's first chunk runs, not while it traces: one GIL for both
+        if shapes is not None and self.overlaps:  # while this launch's first chunk runs, not while it traces
             self.compile_evaluation_ahead(shapes)
         jax.block_until_ready(state)
         end = _clock()
@@ -232,11 +236,12 @@ class _Loop:
         first evaluation then waits for no compiler (`compilation.compile_ahead`). `state`
         is described by shapes and shardings (`_described`); the key is a real one, as a
         key's description lowers to another program. On Warp's GPU physics it compiles
-        now, before the chunk runs (`compilation.overlaps_safely`)."""
+        now, on this thread, and `step` calls it before the chunk runs
+        (`compilation.overlaps_safely`)."""
         key = jax.random.fold_in(self.key, 0)
-        s, background = self.settings, compilation.overlaps_safely(getattr(self.task, "model", None))
+        s = self.settings
         self.ahead = compilation.compile_ahead(self.evaluate, self.config, self.task, state, key, s.eval_envs,
-                                               self.eval_steps, background=background)  # fmt: skip
+                                               self.eval_steps, background=self.overlaps)  # fmt: skip
 
     def _evaluate(self, state: Any, step: int, final: bool) -> dict[str, float]:
         """Evaluates (`settings.eval_envs` episodes) and writes a video when one is due."""

@@ -265,3 +265,42 @@ def test_the_evaluation_compiled_ahead_serves_the_first_evaluation(monkeypatch):
     _, last = training.run(algorithm, CountConfig(num_updates=2), TASK, settings)
     assert last["eval/return"] == 4 * 2.0 * 3  # four envs at 2.0, times 3 steps
     assert during == [0, 0]
+
+
+def test_beside_warp_on_a_gpu_the_evaluation_compiles_alone_before_the_first_chunk(monkeypatch):
+    """Warp is not thread-safe while it captures its CUDA graphs (`overlaps_safely`): the
+    evaluation then compiles on the main thread, after init has run and before the chunk
+    is called, and the chunk is not compiled ahead; the first evaluation still finds it."""
+    from mjzoo.harness import training
+
+    from tests.harness.test_training import TASK, CountConfig, counter
+
+    algorithm = counter(evaluate=lambda config, task, s, key, n, steps: (s.per_env.sum() * steps, jnp.zeros(n), None))
+    monkeypatch.setattr(compilation, "overlaps_safely", lambda model: False)
+    events = []
+    compile_for_real, chunk_fn = training._Loop.compile_evaluation_ahead, training._chunk_fn
+
+    def compile_evaluation_ahead(loop, shapes):
+        compile_for_real(loop, shapes)
+        events.append(("evaluation compiled", threading.current_thread().name, loop.ahead))
+
+    def chunk(*args):
+        real = chunk_fn(*args)
+        return lambda *inputs: events.append(("chunk", None, None)) or real(*inputs)
+
+    monkeypatch.setattr(training._Loop, "compile_evaluation_ahead", compile_evaluation_ahead)
+    monkeypatch.setattr(training, "_chunk_fn", chunk)
+    during = []
+    evaluate_for_real = training._Loop._evaluate
+
+    def evaluate(loop, *args):
+        before = _threads.count("MainThread")
+        result = evaluate_for_real(loop, *args)
+        during.append(_threads.count("MainThread") - before)
+        return result
+
+    monkeypatch.setattr(training._Loop, "_evaluate", evaluate)
+    settings = training.Settings(updates_per_chunk=1, eval_every=1, eval_steps=3, video=False, progress=False)
+    _, last = training.run(algorithm, CountConfig(num_updates=2), TASK, settings)
+    assert events[:2] == [("evaluation compiled", "MainThread", None), ("chunk", None, None)]
+    assert last["eval/return"] == 4 * 2.0 * 3 and during == [0, 0]
