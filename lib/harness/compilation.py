@@ -26,7 +26,7 @@ from typing import Any
 import jax
 from jax.experimental.compilation_cache import compilation_cache
 
-__all__ = ["cache_directory", "compile_ahead", "enable_cache", "overlaps_safely", "wait"]
+__all__ = ["cache_directory", "compile_ahead", "described", "enable_cache", "overlaps_safely", "wait"]
 
 _OFF = ("0", "off", "false", "no", "")
 
@@ -101,6 +101,19 @@ def compile_ahead(function: Callable, *args: Any, background: bool = True, **kwa
     thread = threading.Thread(target=work, name=f"compile-ahead-{getattr(function, '__name__', 'fn')}", daemon=True)
     thread.start()
     return thread
+
+
+def described(tree: Any) -> Any:
+    """`tree` with its arrays replaced by `jax.ShapeDtypeStruct`s of their shapes,
+    shardings and weak types: what `compile_ahead` compiles for, kept while the arrays
+    themselves are donated."""
+
+    def like(x: Any) -> Any:
+        if not isinstance(x, jax.Array):
+            return x
+        return jax.ShapeDtypeStruct(x.shape, x.dtype, sharding=x.sharding, weak_type=x.aval.weak_type)
+
+    return jax.tree.map(like, tree)
 
 
 def overlaps_safely(model: Any) -> bool:

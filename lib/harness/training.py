@@ -196,7 +196,7 @@ class _Loop:
     def step(self, state: Any) -> Any:
         """Trains one chunk and does its bookkeeping; returns the new state."""
         start = _clock()
-        shapes = _described(state) if not self.history else None  # before the chunk donates it
+        shapes = compilation.described(state) if not self.history else None  # before the chunk donates it
         compilation.wait(self.chunk_ahead, "training: the chunk")  # compiling it twice at once would waste a core
         self.chunk_ahead = None
         if shapes is not None and not self.overlaps:  # nothing may compile while Warp runs: init first, then
@@ -234,7 +234,7 @@ class _Loop:
     def compile_evaluation_ahead(self, state: Any) -> None:
         """Compiles the evaluation on a background thread while the first chunk runs: the
         first evaluation then waits for no compiler (`compilation.compile_ahead`). `state`
-        is described by shapes and shardings (`_described`); the key is a real one, as a
+        is described by shapes and shardings (`compilation.described`); the key is a real one, as a
         key's description lowers to another program. On Warp's GPU physics it compiles
         now, on this thread, and `step` calls it before the chunk runs
         (`compilation.overlaps_safely`)."""
@@ -364,17 +364,6 @@ def _compile_chunk_ahead(algorithm: Algorithm, config: AlgorithmConfig, task: Ta
         return compilation.compile_ahead(chunk.lower(replicate(task), state))
     except Exception:  # noqa: BLE001 (the chunk's own call raises it where it belongs)
         return None
-
-
-def _described(state: Any) -> Any:
-    """`state` with its arrays replaced by `jax.ShapeDtypeStruct`s of their shapes and shardings."""
-
-    def like(x: Any) -> Any:
-        if not isinstance(x, jax.Array):
-            return x
-        return jax.ShapeDtypeStruct(x.shape, x.dtype, sharding=x.sharding, weak_type=x.aval.weak_type)
-
-    return jax.tree.map(like, state)
 
 
 def _diagnose(algorithm: Algorithm, history: list[dict[str, float]], warned: str | None) -> str | None:
