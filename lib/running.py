@@ -125,10 +125,13 @@ _SHAPES: dict = {}
 
 
 def _transition_shape(task: Task, state: State) -> State:
-    """`jax.eval_shape` of a transition, memoized on the abstract types of its inputs:
-    nested combinators ask for the same structures many times while tracing."""
+    """`jax.eval_shape` of a transition, memoized on the shapes and dtypes of its inputs:
+    nested combinators ask for the same structures many times while tracing. Not on
+    their shardings, which shapes do not depend on: a task replicated over devices
+    would trace its step once more."""
     inputs = (task, state)
-    signature = (jax.tree.structure(inputs), tuple(jax.typeof(x) for x in jax.tree.leaves(inputs)))
+    types = (jax.typeof(x) for x in jax.tree.leaves(inputs))
+    signature = (jax.tree.structure(inputs), tuple((t.shape, t.dtype, t.weak_type) for t in types))
     if signature not in _SHAPES:
         if len(_SHAPES) > 1024:
             _SHAPES.clear()

@@ -86,3 +86,26 @@ def test_a_wrong_action_size_is_named():
     state = mjzoo.reset(task, jax.random.key(0))
     with pytest.raises(ValueError, match=r"the action has shape \(2,\), but the task takes \(1,\)"):
         mjzoo.transition(task, state, jnp.zeros(2), jax.random.key(0))
+
+
+def test_a_transitions_shape_is_traced_once_whatever_the_tasks_sharding():
+    """`complete` (every reset) asks `jax.eval_shape` for a transition's structure,
+    memoized: the same task placed on a mesh, as the harness replicates it over several
+    devices, must not trace its step again (a humanoid's step takes seconds to trace)."""
+    import numpy as np
+    from jax.sharding import Mesh, NamedSharding, PartitionSpec
+
+    traced = []
+
+    def counted(model, state, action, key):
+        traced.append(1)
+        return step(model, state, action, key)
+
+    task = make().replace(step=bind(counted))
+    mjzoo.reset(task, jax.random.key(0))
+    assert len(traced) == 1
+    whole = NamedSharding(Mesh(np.array(jax.devices()[:1]), ("envs",)), PartitionSpec())
+    placed = jax.device_put(task, whole)
+    assert jax.typeof(placed.model.qpos0) != jax.typeof(task.model.qpos0)  # the types differ by their mesh
+    mjzoo.reset(placed, jax.random.key(1))
+    assert len(traced) == 1
