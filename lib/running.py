@@ -130,8 +130,8 @@ def _transition_shape(task: Task, state: State) -> State:
     their shardings, which shapes do not depend on: a task replicated over devices
     would trace its step once more."""
     inputs = (task, state)
-    types = (jax.typeof(x) for x in jax.tree.leaves(inputs))
-    signature = (jax.tree.structure(inputs), tuple((t.shape, t.dtype, t.weak_type) for t in types))
+    avals = (jax.typeof(x) for x in jax.tree.leaves(inputs))
+    signature = (jax.tree.structure(inputs), tuple((a.shape, a.dtype, a.weak_type) for a in avals))
     if signature not in _SHAPES:
         if len(_SHAPES) > 1024:
             _SHAPES.clear()

@@ -251,7 +251,19 @@ def test_the_evaluation_compiled_ahead_serves_the_first_evaluation(monkeypatch):
     from tests.harness.test_training import TASK, CountConfig, counter
 
     algorithm = counter(evaluate=lambda config, task, s, key, n, steps: (s.per_env.sum() * steps, jnp.zeros(n), None))
-    during = []  # the main thread's compiles during each evaluation
+    during = _main_thread_compiles_per_evaluation(monkeypatch)
+    settings = training.Settings(updates_per_chunk=1, eval_every=1, eval_steps=3, video=False, progress=False)
+    _, last = training.run(algorithm, CountConfig(num_updates=2), TASK, settings)
+    assert last["eval/return"] == 4 * 2.0 * 3  # four envs at 2.0, times 3 steps
+    assert during == [0, 0]
+
+
+def _main_thread_compiles_per_evaluation(monkeypatch) -> list[int]:
+    """A list that `training.run`'s evaluations fill with the compiles each made on the
+    main thread."""
+    from mjzoo.harness import training
+
+    during, evaluate_for_real = [], training._Loop._evaluate
 
     def evaluate(loop, *args):
         before = _threads.count("MainThread")
@@ -259,12 +271,8 @@ def test_the_evaluation_compiled_ahead_serves_the_first_evaluation(monkeypatch):
         during.append(_threads.count("MainThread") - before)
         return result
 
-    evaluate_for_real = training._Loop._evaluate
     monkeypatch.setattr(training._Loop, "_evaluate", evaluate)
-    settings = training.Settings(updates_per_chunk=1, eval_every=1, eval_steps=3, video=False, progress=False)
-    _, last = training.run(algorithm, CountConfig(num_updates=2), TASK, settings)
-    assert last["eval/return"] == 4 * 2.0 * 3  # four envs at 2.0, times 3 steps
-    assert during == [0, 0]
+    return during
 
 
 def test_beside_warp_on_a_gpu_the_evaluation_compiles_alone_before_the_first_chunk(monkeypatch):
@@ -290,16 +298,7 @@ def test_beside_warp_on_a_gpu_the_evaluation_compiles_alone_before_the_first_chu
 
     monkeypatch.setattr(training._Loop, "compile_evaluation_ahead", compile_evaluation_ahead)
     monkeypatch.setattr(training, "_chunk_fn", chunk)
-    during = []
-    evaluate_for_real = training._Loop._evaluate
-
-    def evaluate(loop, *args):
-        before = _threads.count("MainThread")
-        result = evaluate_for_real(loop, *args)
-        during.append(_threads.count("MainThread") - before)
-        return result
-
-    monkeypatch.setattr(training._Loop, "_evaluate", evaluate)
+    during = _main_thread_compiles_per_evaluation(monkeypatch)
     settings = training.Settings(updates_per_chunk=1, eval_every=1, eval_steps=3, video=False, progress=False)
     _, last = training.run(algorithm, CountConfig(num_updates=2), TASK, settings)
     assert events[:2] == [("evaluation compiled", "MainThread", None), ("chunk", None, None)]
