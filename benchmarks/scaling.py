@@ -31,9 +31,11 @@ import os
 import shutil
 import socket
 import subprocess
+import statistics
 import sys
 import tempfile
 import time
+from concurrent.futures import ThreadPoolExecutor
 from pathlib import Path
 
 sys.path.insert(0, str(Path(__file__).parent))  # the worker's ppo_vs_brax
@@ -42,16 +44,20 @@ THRESHOLDS = {"humanoid_walk": 6000.0, "ant": 3000.0, "cartpole_balance": 450.0}
 SMOKE = dict(num_minibatches=4, num_epochs=1, unroll_length=8)
 
 
-def gpu_count() -> int:
-    """GPUs on this host, without starting JAX here (it would take their memory)."""
+def visible_gpus() -> list[str]:
+    """The GPUs this process may use (``CUDA_VISIBLE_DEVICES`` if set, else every GPU of
+    the host), without starting JAX here (it would take their memory)."""
+    chosen = os.environ.get("CUDA_VISIBLE_DEVICES")
+    if chosen is not None:
+        return [gpu for gpu in chosen.split(",") if gpu.strip()]
     if shutil.which("nvidia-smi") is None:
         return 0
     listed = subprocess.run(["nvidia-smi", "-L"], capture_output=True, text=True, check=False).stdout
-    return sum(line.startswith("GPU ") for line in listed.splitlines())
+    return [str(i) for i in range(sum(line.startswith("GPU ") for line in listed.splitlines()))]
 
 
 def worker(env: str, devices: int, envs_per_device: int, steps: int, smoke: bool, impl: str | None,
-           result: Path, joined: tuple[str, int] | None = None, scale_minibatches: bool = False) -> None:  # fmt: skip
+           result: Path, joined: tuple[str, int] | None = None, scale_minibatches: bool = False, seed: int = 0) -> None:  # fmt: skip
     """One device count, in this process (or, `joined` = (coordinator, process id), in
     one of `devices` processes of a device each): train and write the figures to `result`."""
     import jax
@@ -73,7 +79,7 @@ def worker(env: str, devices: int, envs_per_device: int, steps: int, smoke: bool
     with tempfile.TemporaryDirectory() as own:
         out = Path(own) if joined is None else result.parent / "run"  # one host: the processes share process 0's
         # Chunks of the same env steps at every count (10 updates on one device), each evaluated.
-        settings = training.Settings(out_dir=out, video=False, progress=False, checkpoint_every=0, eval_every=1,
+        settings = training.Settings(out_dir=out, seed=seed, video=False, progress=False, checkpoint_every=0, eval_every=1,
                                      eval_envs=16 if smoke else 256, updates_per_chunk=2 if smoke else max(1, 10 // devices))  # fmt: skip
         task = mjzoo.envs.make(env, **({"impl": impl} if impl else {}))
         start = time.perf_counter()
@@ -83,32 +89,34 @@ def worker(env: str, devices: int, envs_per_device: int, steps: int, smoke: bool
         curve, steps_per_s = training_curve(out / "metrics.jsonl", time.perf_counter() - start)
     threshold = THRESHOLDS.get(env, float("inf"))
     result.write_text(json.dumps({
-        "devices": devices, "processes": jax.process_count(), "device_kind": jax.devices()[0].device_kind, "num_envs": config.num_envs,
+        "devices": devices, "seed": seed, "processes": jax.process_count(), "device_kind": jax.devices()[0].device_kind, "num_envs": config.num_envs,
         "num_minibatches": config.num_minibatches, "impl": training.physics_info(task).get("impl"),
         "steps_per_s": steps_per_s, "curve": curve, "final_return": curve[-1][2],
         "time_to_threshold_s": next((t for _, t, r in curve if r >= threshold), None), "threshold": threshold,
     }))  # fmt: skip
 
 
-def run_count(args: argparse.Namespace, devices: int, log: Path) -> dict:
-    """Runs `worker` for `devices` devices in a fresh process (`--processes`: one per
-    device); the output goes to `log` (process I > 0: `log` with suffix .I.log)."""
+def run_count(args: argparse.Namespace, gpus: list[int], seed: int, log: Path) -> dict:
+    """Runs `worker` on the devices `gpus` (GPU numbers; on a CPU, as many devices) in a
+    fresh process (`--processes`: one per device); the output goes to `log` (process
+    I > 0: `log` with suffix .I.log)."""
+    devices = len(gpus)
     with tempfile.TemporaryDirectory() as tmp:
         result = Path(tmp) / "result.json"
         command = [sys.executable, __file__, "--worker", str(devices), "--env", args.env, "--steps", str(args.steps),
-                   "--envs-per-device", str(args.envs_per_device), "--result", str(result)] + (["--smoke"] if args.smoke else [])
+                   "--envs-per-device", str(args.envs_per_device), "--result", str(result), "--seed", str(seed)] + (["--smoke"] if args.smoke else [])
         command += ["--impl", args.impl] if args.impl else []
         command += ["--scale-minibatches"] if args.scale_minibatches else []
         if args.processes and devices > 1:
             port = _free_port()
-            launches = [(command + ["--coordinator", f"localhost:{port}", "--process-id", str(i)], _visible(args, [i]))
-                        for i in range(devices)]  # fmt: skip
+            launches = [(command + ["--coordinator", f"localhost:{port}", "--process-id", str(i)], _visible(args, [gpu]))
+                        for i, gpu in enumerate(gpus)]  # fmt: skip
         else:
-            launches = [(command, _visible(args, list(range(devices))))]
+            launches = [(command, _visible(args, gpus))]
         logs = [log] + [log.with_suffix(f".{i}.log") for i in range(1, len(launches))]
         codes = _run_all([(c, e, path) for (c, e), path in zip(launches, logs)])
         if any(codes):
-            return {"devices": devices, "error": f"exit {codes}; see {log}"}
+            return {"devices": devices, "seed": seed, "error": f"exit {codes}; see {log}"}
         return json.loads(result.read_text())
 
 
@@ -119,7 +127,7 @@ def _visible(args: argparse.Namespace, devices: list[int]) -> dict[str, str]:
         flags = environment.get("XLA_FLAGS", "")
         environment.update(JAX_PLATFORMS="cpu", XLA_FLAGS=f"{flags} --xla_force_host_platform_device_count={len(devices)}")
     else:
-        environment["CUDA_VISIBLE_DEVICES"] = ",".join(map(str, devices))
+        environment["CUDA_VISIBLE_DEVICES"] = ",".join(args.gpus[i] for i in devices)
     return environment
 
 
@@ -146,6 +154,34 @@ def _free_port() -> int:
         return s.getsockname()[1]
 
 
+def _seed_suffix(args: argparse.Namespace, seed: int) -> str:
+    return "" if args.seeds == [0] else f"_seed{seed}"
+
+
+def _summary(rows: list[dict], devices: int) -> str:
+    """One line for `devices`: median steps/s over seeds and its speedup over one device
+    (written into each row too), and every seed's time to the threshold."""
+    def median_rate(count: int) -> float | None:
+        rates = [row["steps_per_s"] for row in rows if row["devices"] == count and "steps_per_s" in row]
+        return statistics.median(rates) if rates else None
+
+    base = median_rate(1)
+    for row in rows:
+        if "steps_per_s" in row and base:
+            row.update(speedup=row["steps_per_s"] / base, efficiency=row["steps_per_s"] / base / row["devices"])
+    mine = [row for row in rows if row["devices"] == devices]
+    errors = [row["error"] for row in mine if "error" in row]
+    rate = median_rate(devices)
+    if rate is None:
+        return f"{devices} device(s): " + "; ".join(errors)
+    speedup = f" ({rate / base:.2f}x)" if base else ""
+    times = ", ".join("never" if row["time_to_threshold_s"] is None else f"{row['time_to_threshold_s']:.1f} s"
+                      for row in mine if "steps_per_s" in row)  # fmt: skip
+    finals = ", ".join(f"{row['final_return']:.0f}" for row in mine if "steps_per_s" in row)
+    return (f"{devices} device(s): {rate:,.0f} steps/s median{speedup}; to {mine[0].get('threshold', 0):g}: {times}; "
+            f"final returns {finals}" + (f"; failed: {'; '.join(errors)}" if errors else ""))
+
+
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     parser.add_argument("--env", default="humanoid_walk")
@@ -157,48 +193,52 @@ def main() -> None:
     parser.add_argument("--scale-minibatches", action="store_true",
                         help="num_minibatches x devices: one device's minibatch size and gradient steps per env step, "
                              "so the learning curve per env step is one device's")  # fmt: skip
+    parser.add_argument("--seeds", nargs="+", type=int, default=[0], help="one run per seed at every count")
+    parser.add_argument("--parallel", action="store_true",
+                        help="run a count's seeds side by side on disjoint GPUs (4 GPUs: four 1-GPU runs at once)")
     parser.add_argument("--smoke", action="store_true", help="tiny sizes on CPU devices, to check the script")
     parser.add_argument("--out", type=Path, default=Path(__file__).parent / "results" / "scaling")
     parser.add_argument("--worker", type=int, help=argparse.SUPPRESS)
     parser.add_argument("--result", type=Path, help=argparse.SUPPRESS)
     parser.add_argument("--coordinator", help=argparse.SUPPRESS)
     parser.add_argument("--process-id", type=int, help=argparse.SUPPRESS)
+    parser.add_argument("--seed", type=int, default=0, help=argparse.SUPPRESS)
     args = parser.parse_args()
     if args.worker:
         joined = (args.coordinator, args.process_id) if args.coordinator else None
         worker(args.env, args.worker, args.envs_per_device, args.steps, args.smoke, args.impl, args.result, joined,
-               args.scale_minibatches)
+               args.scale_minibatches, args.seed)
         return
     import mjzoo.envs
 
     tuned = mjzoo.envs.hyperparameters(args.env, "ppo")
     args.envs_per_device = args.envs_per_device or (16 if args.smoke else tuned.get("num_envs", 2048))
     args.steps = args.steps or tuned.get("total_steps", 10**8)
-    available = gpu_count()
-    args.cpu = args.smoke or available == 0
-    wanted = [d for d in args.devices if args.cpu or d <= available]
+    args.gpus = visible_gpus()
+    args.cpu = args.smoke or not args.gpus
+    wanted = [d for d in args.devices if args.cpu or d <= len(args.gpus)]
     if not wanted:
-        raise SystemExit(f"scaling: this host has {available} GPU(s); --devices {args.devices} needs more")
+        raise SystemExit(f"scaling: {len(args.gpus)} GPU(s) visible; --devices {args.devices} needs more")
     args.out.mkdir(parents=True, exist_ok=True)
     name = f"scaling_{args.env}_{'cpu' if args.cpu else 'gpu'}" + (f"_{args.impl}" if args.impl else "")
     name += ("_processes" if args.processes else "") + ("_scaled" if args.scale_minibatches else "")
+    name += "" if args.seeds == [0] else "_seeds_" + "_".join(map(str, args.seeds))
     path = args.out / f"{name}.json"
     rows = []
     print(f"{args.env}: {args.envs_per_device} envs per device, "
-          f"{'smoke sizes' if args.smoke else f'{args.steps:,} env steps per run'}", flush=True)
+          f"{'smoke sizes' if args.smoke else f'{args.steps:,} env steps per run'}, seeds {args.seeds}", flush=True)
     for devices in wanted:
-        rows.append(run_count(args, devices, args.out / f"{name}_{devices}.log"))
-        base = next((row["steps_per_s"] for row in rows if row["devices"] == 1 and "steps_per_s" in row), None)
-        for row in rows:
-            if "steps_per_s" in row and base:
-                row.update(speedup=row["steps_per_s"] / base, efficiency=row["steps_per_s"] / base / row["devices"])
-        row = rows[-1]
-        speedup = f" ({row['speedup']:.2f}x)" if "speedup" in row else ""
-        print(f"{devices} device(s): " + (row["error"] if "error" in row else
-              f"{row['steps_per_s']:,.0f} steps/s{speedup}, to {row['threshold']:g}: "
-              f"{'never' if row['time_to_threshold_s'] is None else format(row['time_to_threshold_s'], '.1f') + ' s'}, final return {row['final_return']:.1f}"), flush=True)  # fmt: skip
+        # CPU devices share the host's cores: side by side, the runs would slow each other.
+        slots = len(args.gpus) // devices if args.parallel and not args.cpu else 1
+        for wave in range(0, len(args.seeds), slots):
+            seeds = args.seeds[wave : wave + slots]
+            with ThreadPoolExecutor(len(seeds)) as pool:
+                rows += pool.map(lambda k, seed: run_count(args, list(range(k * devices, (k + 1) * devices)), seed,
+                                                           args.out / f"{name}_{devices}{_seed_suffix(args, seed)}.log"),
+                                 range(len(seeds)), seeds)  # fmt: skip
+        print(_summary(rows, devices), flush=True)
         path.write_text(json.dumps({"env": args.env, "envs_per_device": args.envs_per_device, "steps": args.steps,
-                                    "rows": rows}, indent=1))  # fmt: skip
+                                    "seeds": args.seeds, "parallel": args.parallel, "rows": rows}, indent=1))  # fmt: skip
     print(f"wrote {path}", flush=True)
 
 
