@@ -14,11 +14,17 @@ evaluated) and the final evaluation return. Goal (issue 19): >= 1.85x on 2 GPUs 
 here on one GPU only: split over two, its program crashed XLA's GPU compiler, in one
 process and in one per GPU (`warp_multi_gpu_probe.py`); on CPU devices it splits.
 More envs per update with the same `num_minibatches` means fewer gradient steps per env
-step; `--scale-minibatches` multiplies `num_minibatches` by the device count instead, so
-every count learns as one device does per env step (same minibatch size, same gradient
-steps per env step), and only the rollout shrinks with more devices.
+step; `--scale-minibatches` multiplies `num_minibatches` by the device count instead
+(same minibatch size and gradient steps per env step, but more of them per update, so
+the policy moves further from the one that collected the batch: on 4 GPUs the humanoid
+no longer walked in 40M steps); `--split-unroll` divides `unroll_length` by it, so every
+update has one device's batch, minibatches and gradient steps, and only each env's
+segment is shorter (as Brax's humanoid trains with unrolls of 10). `--seeds 0 1 2 3
+--parallel` runs a count's seeds side by side on disjoint GPUs.
 
     python benchmarks/scaling.py --devices 1 2 4 --steps 40000000 --impl jax --scale-minibatches  # humanoid_walk
+    python benchmarks/scaling.py --devices 4 --steps 40000000 --impl jax --split-unroll --keep-runs
+    python benchmarks/scaling.py --devices 1 --seeds 0 1 2 3 --parallel --steps 40000000 --impl jax
     python benchmarks/scaling.py --devices 1 2 --steps 20000000 --impl jax --processes
     python benchmarks/scaling.py --env cartpole_balance --devices 1 2 --smoke   # on a CPU
 """
@@ -57,42 +63,60 @@ def visible_gpus() -> list[str]:
 
 
 def worker(env: str, devices: int, envs_per_device: int, steps: int, smoke: bool, impl: str | None,
-           result: Path, joined: tuple[str, int] | None = None, scale_minibatches: bool = False, seed: int = 0) -> None:  # fmt: skip
+           result: Path, joined: tuple[str, int] | None = None, scale: str | None = None, seed: int = 0,
+           run_dir: Path | None = None) -> None:  # fmt: skip
     """One device count, in this process (or, `joined` = (coordinator, process id), in
-    one of `devices` processes of a device each): train and write the figures to `result`."""
+    one of `devices` processes of a device each): train and write the figures to `result`
+    (the run's own files to `run_dir`, if given; else they are dropped). `scale`:
+    "minibatches" or "unroll" (see the module's docstring)."""
     import jax
+    import numpy as np
     from ppo_vs_brax import training_curve
 
     import mjzoo.envs
     from mjzoo.algorithms import ppo
-    from mjzoo.harness import distributed, training
+    from mjzoo.harness import distributed, metrics, training
 
     if joined is not None:
         distributed.initialize(joined[0], devices, joined[1])
     assert jax.device_count() == devices, (jax.devices(), devices)
-    fields = {**mjzoo.envs.hyperparameters(env, "ppo"), "num_envs": envs_per_device * devices, "total_steps": steps}
+    tuned = mjzoo.envs.hyperparameters(env, "ppo")
+    fields = {**tuned, "num_envs": envs_per_device * devices, "total_steps": steps}
     if smoke:  # two chunks of two updates at any count, so the steady rate is measured
         fields.update(SMOKE, total_steps=fields["num_envs"] * SMOKE["unroll_length"] * 4)
-    if scale_minibatches:  # one device's minibatch size and gradient steps per env step
+    if scale == "minibatches":  # one device's minibatch size and gradient steps per env step
         fields["num_minibatches"] = fields.get("num_minibatches", ppo.Config.num_minibatches) * devices
+    if scale == "unroll":  # one device's batch per update, minibatches and gradient steps
+        unroll = fields.get("unroll_length", ppo.Config.unroll_length)
+        if unroll % devices:
+            raise SystemExit(f"scaling: --split-unroll needs unroll_length ({unroll}) divisible by {devices} devices")
+        fields["unroll_length"] = unroll // devices
     config = ppo.Config(**fields)
     with tempfile.TemporaryDirectory() as own:
-        out = Path(own) if joined is None else result.parent / "run"  # one host: the processes share process 0's
-        # Chunks of the same env steps at every count (10 updates on one device), each evaluated.
+        out = run_dir or (Path(own) if joined is None else result.parent / "run")  # one host: the processes share process 0's
+        # Chunks of the same env steps at every count and envs per device (10 updates of the
+        # env's own batch), each evaluated: the curves' points line up.
+        batch = tuned.get("num_envs", config.num_envs) * tuned.get("unroll_length", config.unroll_length)
+        chunk = 2 if smoke else max(1, 10 * batch // (config.num_envs * config.unroll_length))
         settings = training.Settings(out_dir=out, seed=seed, video=False, progress=False, checkpoint_every=0, eval_every=1,
-                                     eval_envs=16 if smoke else 256, updates_per_chunk=2 if smoke else max(1, 10 // devices))  # fmt: skip
+                                     eval_envs=16 if smoke else 256, updates_per_chunk=chunk)  # fmt: skip
         task = mjzoo.envs.make(env, **({"impl": impl} if impl else {}))
         start = time.perf_counter()
         training.run(ppo, config, task, settings)
         if not distributed.is_primary():  # process 0 writes the metrics and the result
             return
         curve, steps_per_s = training_curve(out / "metrics.jsonl", time.perf_counter() - start)
+        evaluating = np.cumsum([line["perf/eval_s"] for line in metrics.read_metrics(out / "metrics.jsonl")
+                                if "eval/return" in line])  # fmt: skip
     threshold = THRESHOLDS.get(env, float("inf"))
+    reached = next((i for i, (_, _, r) in enumerate(curve) if r >= threshold), None)
     result.write_text(json.dumps({
         "devices": devices, "seed": seed, "processes": jax.process_count(), "device_kind": jax.devices()[0].device_kind, "num_envs": config.num_envs,
-        "num_minibatches": config.num_minibatches, "impl": training.physics_info(task).get("impl"),
+        "num_minibatches": config.num_minibatches, "unroll_length": config.unroll_length, "impl": training.physics_info(task).get("impl"),
         "steps_per_s": steps_per_s, "curve": curve, "final_return": curve[-1][2],
-        "time_to_threshold_s": next((t for _, t, r in curve if r >= threshold), None), "threshold": threshold,
+        "time_to_threshold_s": None if reached is None else curve[reached][1], "threshold": threshold,
+        # The evaluations' share of it: a fixed cost per chunk, whatever the device count.
+        "eval_s_to_threshold": None if reached is None else float(evaluating[reached]),
     }))  # fmt: skip
 
 
@@ -107,6 +131,8 @@ def run_count(args: argparse.Namespace, gpus: list[int], seed: int, log: Path) -
                    "--envs-per-device", str(args.envs_per_device), "--result", str(result), "--seed", str(seed)] + (["--smoke"] if args.smoke else [])
         command += ["--impl", args.impl] if args.impl else []
         command += ["--scale-minibatches"] if args.scale_minibatches else []
+        command += ["--split-unroll"] if args.split_unroll else []
+        command += ["--run-dir", str(args.out / "runs" / f"{log.stem}")] if args.keep_runs else []
         if args.processes and devices > 1:
             port = _free_port()
             launches = [(command + ["--coordinator", f"localhost:{port}", "--process-id", str(i)], _visible(args, [gpu]))
@@ -190,9 +216,13 @@ def main() -> None:
     parser.add_argument("--steps", type=int, default=None, help="env steps per run (default: the env's total_steps)")
     parser.add_argument("--impl", choices=["jax", "warp"], default=None, help="physics (default: the env's default)")
     parser.add_argument("--processes", action="store_true", help="one process per device (jax.distributed on localhost)")
-    parser.add_argument("--scale-minibatches", action="store_true",
-                        help="num_minibatches x devices: one device's minibatch size and gradient steps per env step, "
-                             "so the learning curve per env step is one device's")  # fmt: skip
+    scaled = parser.add_mutually_exclusive_group()
+    scaled.add_argument("--scale-minibatches", action="store_true",
+                        help="num_minibatches x devices: one device's minibatch size and gradient steps per env step")
+    scaled.add_argument("--split-unroll", action="store_true",
+                        help="unroll_length / devices: one device's batch per update, minibatches and gradient steps; "
+                             "each env's segment is shorter")  # fmt: skip
+    parser.add_argument("--keep-runs", action="store_true", help="keep each run's metrics under OUT/runs/")
     parser.add_argument("--seeds", nargs="+", type=int, default=[0], help="one run per seed at every count")
     parser.add_argument("--parallel", action="store_true",
                         help="run a count's seeds side by side on disjoint GPUs (4 GPUs: four 1-GPU runs at once)")
@@ -203,11 +233,12 @@ def main() -> None:
     parser.add_argument("--coordinator", help=argparse.SUPPRESS)
     parser.add_argument("--process-id", type=int, help=argparse.SUPPRESS)
     parser.add_argument("--seed", type=int, default=0, help=argparse.SUPPRESS)
+    parser.add_argument("--run-dir", type=Path, help=argparse.SUPPRESS)
     args = parser.parse_args()
     if args.worker:
         joined = (args.coordinator, args.process_id) if args.coordinator else None
         worker(args.env, args.worker, args.envs_per_device, args.steps, args.smoke, args.impl, args.result, joined,
-               args.scale_minibatches, args.seed)
+               "minibatches" if args.scale_minibatches else "unroll" if args.split_unroll else None, args.seed, args.run_dir)
         return
     import mjzoo.envs
 
@@ -222,6 +253,7 @@ def main() -> None:
     args.out.mkdir(parents=True, exist_ok=True)
     name = f"scaling_{args.env}_{'cpu' if args.cpu else 'gpu'}" + (f"_{args.impl}" if args.impl else "")
     name += ("_processes" if args.processes else "") + ("_scaled" if args.scale_minibatches else "")
+    name += "_split_unroll" if args.split_unroll else ""
     name += "" if args.seeds == [0] else "_seeds_" + "_".join(map(str, args.seeds))
     path = args.out / f"{name}.json"
     rows = []
