@@ -57,7 +57,7 @@ def visible_gpus() -> list[str]:
     if chosen is not None:
         return [gpu for gpu in chosen.split(",") if gpu.strip()]
     if shutil.which("nvidia-smi") is None:
-        return 0
+        return []
     listed = subprocess.run(["nvidia-smi", "-L"], capture_output=True, text=True, check=False).stdout
     return [str(i) for i in range(sum(line.startswith("GPU ") for line in listed.splitlines()))]
 
@@ -87,10 +87,7 @@ def worker(env: str, devices: int, envs_per_device: int, steps: int, smoke: bool
     if scale == "minibatches":  # one device's minibatch size and gradient steps per env step
         fields["num_minibatches"] = fields.get("num_minibatches", ppo.Config.num_minibatches) * devices
     if scale == "unroll":  # one device's batch per update, minibatches and gradient steps
-        unroll = fields.get("unroll_length", ppo.Config.unroll_length)
-        if unroll % devices:
-            raise SystemExit(f"scaling: --split-unroll needs unroll_length ({unroll}) divisible by {devices} devices")
-        fields["unroll_length"] = unroll // devices
+        fields["unroll_length"] = fields.get("unroll_length", ppo.Config.unroll_length) // devices
     config = ppo.Config(**fields)
     with tempfile.TemporaryDirectory() as own:
         out = run_dir or (Path(own) if joined is None else result.parent / "run")  # one host: the processes share process 0's
@@ -241,6 +238,7 @@ def main() -> None:
                "minibatches" if args.scale_minibatches else "unroll" if args.split_unroll else None, args.seed, args.run_dir)
         return
     import mjzoo.envs
+    from mjzoo.algorithms import ppo
 
     tuned = mjzoo.envs.hyperparameters(args.env, "ppo")
     args.envs_per_device = args.envs_per_device or (16 if args.smoke else tuned.get("num_envs", 2048))
@@ -250,6 +248,10 @@ def main() -> None:
     wanted = [d for d in args.devices if args.cpu or d <= len(args.gpus)]
     if not wanted:
         raise SystemExit(f"scaling: {len(args.gpus)} GPU(s) visible; --devices {args.devices} needs more")
+    unroll = SMOKE["unroll_length"] if args.smoke else tuned.get("unroll_length", ppo.Config.unroll_length)
+    if args.split_unroll and (uneven := [d for d in wanted if unroll % d]):
+        raise SystemExit(f"scaling: --split-unroll divides unroll_length ({unroll}) by the device count; "
+                         f"it does not divide by {uneven}")  # fmt: skip
     args.out.mkdir(parents=True, exist_ok=True)
     name = f"scaling_{args.env}_{'cpu' if args.cpu else 'gpu'}" + (f"_{args.impl}" if args.impl else "")
     name += ("_processes" if args.processes else "") + ("_scaled" if args.scale_minibatches else "")
