@@ -118,7 +118,7 @@ def worker(env: str, devices: int, envs_per_device: int, steps: int, smoke: bool
 
 
 def run_count(args: argparse.Namespace, gpus: list[int], seed: int, log: Path) -> dict:
-    """Runs `worker` on the devices `gpus` (GPU numbers; on a CPU, as many devices) in a
+    """Runs `worker` on the devices `gpus` (places in the visible GPUs; on a CPU, as many) in a
     fresh process (`--processes`: one per device); the output goes to `log` (process
     I > 0: `log` with suffix .I.log)."""
     devices = len(gpus)
@@ -144,7 +144,8 @@ def run_count(args: argparse.Namespace, gpus: list[int], seed: int, log: Path) -
 
 
 def _visible(args: argparse.Namespace, devices: list[int]) -> dict[str, str]:
-    """The environment of a process that sees `devices` (GPU numbers; on a CPU, as many devices)."""
+    """The environment of a process that sees `devices` (places in the visible GPUs; on a
+    CPU, as many devices)."""
     environment = dict(os.environ)
     if args.cpu:
         flags = environment.get("XLA_FLAGS", "")
