@@ -260,6 +260,11 @@ def main() -> None:
     name += "" if args.seeds == [0] else "_seeds_" + "_".join(map(str, args.seeds))
     path = args.out / f"{name}.json"
     rows = []
+
+    def save():
+        path.write_text(json.dumps({"env": args.env, "envs_per_device": args.envs_per_device, "steps": args.steps,
+                                    "seeds": args.seeds, "parallel": args.parallel, "rows": rows}, indent=1))  # fmt: skip
+
     print(f"{args.env}: {args.envs_per_device} envs per device, "
           f"{'smoke sizes' if args.smoke else f'{args.steps:,} env steps per run'}, seeds {args.seeds}", flush=True)
     for devices in wanted:
@@ -271,9 +276,9 @@ def main() -> None:
                 rows += pool.map(lambda k, seed: run_count(args, list(range(k * devices, (k + 1) * devices)), seed,
                                                            args.out / f"{name}_{devices}{_seed_suffix(args, seed)}.log"),
                                  range(len(seeds)), seeds)  # fmt: skip
+            save()  # after every wave: a run cut off later (a device call's time limit) keeps these rows
         print(_summary(rows, devices), flush=True)
-        path.write_text(json.dumps({"env": args.env, "envs_per_device": args.envs_per_device, "steps": args.steps,
-                                    "seeds": args.seeds, "parallel": args.parallel, "rows": rows}, indent=1))  # fmt: skip
+        save()  # with the speedups _summary adds
     print(f"wrote {path}", flush=True)
 
 

@@ -26,7 +26,7 @@ from typing import Any
 import jax
 from jax.experimental.compilation_cache import compilation_cache
 
-__all__ = ["cache_directory", "compile_ahead", "described", "enable_cache", "overlaps_safely", "wait"]
+__all__ = ["cache_directory", "compile_ahead", "described", "enable_cache", "overlaps_safely", "still_compiling", "wait"]
 
 _OFF = ("0", "off", "false", "no", "")
 
@@ -124,6 +124,15 @@ def overlaps_safely(model: Any) -> bool:
     with XLA's autotuner finding its red zone overwritten)."""
     impl = getattr(getattr(model, "impl", None), "value", None)
     return impl != "warp" or jax.default_backend() == "cpu"
+
+
+def still_compiling(thread: threading.Thread | None, grace: float) -> bool:
+    """Whether a `compile_ahead` thread is still at work after waiting up to `grace`
+    seconds for it (None: nothing compiles)."""
+    if thread is None:
+        return False
+    thread.join(grace)
+    return thread.is_alive()
 
 
 def wait(thread: threading.Thread | None, what: str, patience: float = 30.0) -> None:

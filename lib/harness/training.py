@@ -49,6 +49,8 @@ class TrainingWarning(UserWarning):
     """Training has gone wrong in a way its metrics show (an algorithm's `diagnose`)."""
 
 
+# A chunk still compiling this long after init is a cold compile (a cached one loads in ~2 s).
+COLD_GRACE_S = 5.0
 RUN_FILES = ("config.json", "metrics.jsonl", "checkpoints", "tensorboard", "curves.png", "eval.mp4", "videos")  # `run` writes
 
 
@@ -197,14 +199,16 @@ class _Loop:
         """Trains one chunk and does its bookkeeping; returns the new state."""
         start = _clock()
         shapes = compilation.described(state) if not self.history else None  # before the chunk donates it
+        if shapes is not None and self.overlaps and compilation.still_compiling(self.chunk_ahead, COLD_GRACE_S):
+            self.compile_evaluation_ahead(shapes)  # a cold compile: the evaluation's goes beside it, not after
         compilation.wait(self.chunk_ahead, "training: the chunk")  # compiling it twice at once would waste a core
         self.chunk_ahead = None
         if shapes is not None and not self.overlaps:  # nothing may compile while Warp runs: init first, then
             jax.block_until_ready(state)  # the evaluation's compile and the chunk's, each alone
             self.compile_evaluation_ahead(shapes)
         state, chunk_metrics = self.chunk(self.task, state)
-        if shapes is not None and self.overlaps:  # while this launch's first chunk runs, not while it traces
-            self.compile_evaluation_ahead(shapes)
+        if shapes is not None and self.overlaps and self.ahead is None:  # while the first chunk runs, not while it
+            self.compile_evaluation_ahead(shapes)  # traces: beside a cached chunk's load it slowed the first update
         jax.block_until_ready(state)
         end = _clock()
         updates, per_chunk = int(state.updates), self.per_chunk
