@@ -20,12 +20,14 @@ the policy moves further from the one that collected the batch: on 4 GPUs the hu
 no longer walked in 40M steps); `--split-unroll` divides `unroll_length` by it, so every
 update has one device's batch, minibatches and gradient steps, and only each env's
 segment is shorter (as Brax's humanoid trains with unrolls of 10). `--seeds 0 1 2 3
---parallel` runs a count's seeds side by side on disjoint GPUs.
+--parallel` runs a count's seeds side by side on disjoint GPUs. `--algorithm amp` measures
+AMP the same way (default env `humanoid_amp_walk`; its threshold: lasting the episode).
 
     python benchmarks/scaling.py --devices 1 2 4 --steps 40000000 --impl jax --scale-minibatches  # humanoid_walk
     python benchmarks/scaling.py --devices 4 --steps 40000000 --impl jax --split-unroll --keep-runs
     python benchmarks/scaling.py --devices 1 --seeds 0 1 2 3 --parallel --steps 40000000 --impl jax
     python benchmarks/scaling.py --devices 1 2 --steps 20000000 --impl jax --processes
+    python benchmarks/scaling.py --algorithm amp --devices 1 2 4 --steps 40000000 --impl jax --split-unroll
     python benchmarks/scaling.py --env cartpole_balance --devices 1 2 --smoke   # on a CPU
 """
 
@@ -46,7 +48,9 @@ from pathlib import Path
 
 sys.path.insert(0, str(Path(__file__).parent))  # the worker's ppo_vs_brax
 
-THRESHOLDS = {"humanoid_walk": 6000.0, "ant": 3000.0, "cartpole_balance": 450.0}
+# humanoid_amp_walk: it lasts the 1000-step episode (its reward is ~1 a step alive; the
+# style is benchmarks/amp.py's measure).
+THRESHOLDS = {"humanoid_walk": 6000.0, "ant": 3000.0, "cartpole_balance": 450.0, "humanoid_amp_walk": 950.0}
 SMOKE = dict(num_minibatches=4, num_epochs=1, unroll_length=8)
 
 
@@ -64,23 +68,24 @@ def visible_gpus() -> list[str]:
 
 def worker(env: str, devices: int, envs_per_device: int, steps: int, smoke: bool, impl: str | None,
            result: Path, joined: tuple[str, int] | None = None, scale: str | None = None, seed: int = 0,
-           run_dir: Path | None = None) -> None:  # fmt: skip
+           run_dir: Path | None = None, algorithm_name: str = "ppo") -> None:  # fmt: skip
     """One device count, in this process (or, `joined` = (coordinator, process id), in
     one of `devices` processes of a device each): train and write the figures to `result`
     (the run's own files to `run_dir`, if given; else they are dropped). `scale`:
-    "minibatches" or "unroll" (see the module's docstring)."""
+    "minibatches" or "unroll" (see the module's docstring). `algorithm_name`: ppo or amp."""
     import jax
     import numpy as np
     from ppo_vs_brax import training_curve
 
     import mjzoo.envs
-    from mjzoo.algorithms import ppo
+    from mjzoo.algorithms import amp, ppo
     from mjzoo.harness import distributed, metrics, training
 
+    algorithm = {"ppo": ppo, "amp": amp}[algorithm_name]
     if joined is not None:
         distributed.initialize(joined[0], devices, joined[1])
     assert jax.device_count() == devices, (jax.devices(), devices)
-    tuned = mjzoo.envs.hyperparameters(env, "ppo")
+    tuned = mjzoo.envs.hyperparameters(env, algorithm_name)
     fields = {**tuned, "num_envs": envs_per_device * devices, "total_steps": steps}
     if smoke:  # two chunks of two updates at any count, so the steady rate is measured
         fields.update(SMOKE, total_steps=fields["num_envs"] * SMOKE["unroll_length"] * 4)
@@ -88,7 +93,7 @@ def worker(env: str, devices: int, envs_per_device: int, steps: int, smoke: bool
         fields["num_minibatches"] = fields.get("num_minibatches", ppo.Config.num_minibatches) * devices
     if scale == "unroll":  # one device's batch per update, minibatches and gradient steps
         fields["unroll_length"] = fields.get("unroll_length", ppo.Config.unroll_length) // devices
-    config = ppo.Config(**fields)
+    config = algorithm.Config(**fields)
     with tempfile.TemporaryDirectory() as own:
         out = run_dir or (Path(own) if joined is None else result.parent / "run")  # one host: the processes share process 0's
         # Chunks of the same env steps at every count and envs per device (10 updates of the
@@ -99,7 +104,7 @@ def worker(env: str, devices: int, envs_per_device: int, steps: int, smoke: bool
                                      eval_envs=16 if smoke else 256, updates_per_chunk=chunk)  # fmt: skip
         task = mjzoo.envs.make(env, **({"impl": impl} if impl else {}))
         start = time.perf_counter()
-        training.run(ppo, config, task, settings)
+        training.run(algorithm, config, task, settings)
         if not distributed.is_primary():  # process 0 writes the metrics and the result
             return
         curve, steps_per_s = training_curve(out / "metrics.jsonl", time.perf_counter() - start)
@@ -108,7 +113,7 @@ def worker(env: str, devices: int, envs_per_device: int, steps: int, smoke: bool
     threshold = THRESHOLDS.get(env, float("inf"))
     reached = next((i for i, (_, _, r) in enumerate(curve) if r >= threshold), None)
     result.write_text(json.dumps({
-        "devices": devices, "seed": seed, "processes": jax.process_count(), "device_kind": jax.devices()[0].device_kind, "num_envs": config.num_envs,
+        "algorithm": algorithm_name, "devices": devices, "seed": seed, "processes": jax.process_count(), "device_kind": jax.devices()[0].device_kind, "num_envs": config.num_envs,
         "num_minibatches": config.num_minibatches, "unroll_length": config.unroll_length, "impl": training.physics_info(task).get("impl"),
         "steps_per_s": steps_per_s, "curve": curve, "final_return": curve[-1][2],
         "time_to_threshold_s": None if reached is None else curve[reached][1], "threshold": threshold,
@@ -125,6 +130,7 @@ def run_count(args: argparse.Namespace, gpus: list[int], seed: int, log: Path) -
     with tempfile.TemporaryDirectory() as tmp:
         result = Path(tmp) / "result.json"
         command = [sys.executable, __file__, "--worker", str(devices), "--env", args.env, "--steps", str(args.steps),
+                   "--algorithm", args.algorithm,
                    "--envs-per-device", str(args.envs_per_device), "--result", str(result), "--seed", str(seed)] + (["--smoke"] if args.smoke else [])
         command += ["--impl", args.impl] if args.impl else []
         command += ["--scale-minibatches"] if args.scale_minibatches else []
@@ -208,7 +214,8 @@ def _summary(rows: list[dict], devices: int) -> str:
 
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
-    parser.add_argument("--env", default="humanoid_walk")
+    parser.add_argument("--env", default=None, help="default: humanoid_walk (ppo), humanoid_amp_walk (amp)")
+    parser.add_argument("--algorithm", choices=["ppo", "amp"], default="ppo")
     parser.add_argument("--devices", nargs="+", type=int, default=[1, 2, 4])
     parser.add_argument("--envs-per-device", type=int, default=None, help="default: the env's num_envs (smoke: 16)")
     parser.add_argument("--steps", type=int, default=None, help="env steps per run (default: the env's total_steps)")
@@ -233,15 +240,17 @@ def main() -> None:
     parser.add_argument("--seed", type=int, default=0, help=argparse.SUPPRESS)
     parser.add_argument("--run-dir", type=Path, help=argparse.SUPPRESS)
     args = parser.parse_args()
+    args.env = args.env or {"ppo": "humanoid_walk", "amp": "humanoid_amp_walk"}[args.algorithm]
     if args.worker:
         joined = (args.coordinator, args.process_id) if args.coordinator else None
         worker(args.env, args.worker, args.envs_per_device, args.steps, args.smoke, args.impl, args.result, joined,
-               "minibatches" if args.scale_minibatches else "unroll" if args.split_unroll else None, args.seed, args.run_dir)
+               "minibatches" if args.scale_minibatches else "unroll" if args.split_unroll else None, args.seed, args.run_dir,
+               args.algorithm)
         return
     import mjzoo.envs
     from mjzoo.algorithms import ppo
 
-    tuned = mjzoo.envs.hyperparameters(args.env, "ppo")
+    tuned = mjzoo.envs.hyperparameters(args.env, args.algorithm)
     args.envs_per_device = args.envs_per_device or (16 if args.smoke else tuned.get("num_envs", 2048))
     args.steps = args.steps or tuned.get("total_steps", 10**8)
     args.gpus = visible_gpus()
@@ -254,7 +263,9 @@ def main() -> None:
         raise SystemExit(f"scaling: --split-unroll divides unroll_length ({unroll}) by the device count; "
                          f"it does not divide by {uneven}")  # fmt: skip
     args.out.mkdir(parents=True, exist_ok=True)
-    name = f"scaling_{args.env}_{'cpu' if args.cpu else 'gpu'}" + (f"_{args.impl}" if args.impl else "")
+    name = f"scaling_{args.env}" + ("" if args.algorithm in args.env.split("_") + ["ppo"] else f"_{args.algorithm}")
+    name += f"_{'cpu' if args.cpu else 'gpu'}"
+    name += f"_{args.impl}" if args.impl else ""
     name += ("_processes" if args.processes else "") + ("_scaled" if args.scale_minibatches else "")
     name += "_split_unroll" if args.split_unroll else ""
     name += "" if args.seeds == [0] else "_seeds_" + "_".join(map(str, args.seeds))
@@ -262,7 +273,7 @@ def main() -> None:
     rows = []
 
     def save():
-        path.write_text(json.dumps({"env": args.env, "envs_per_device": args.envs_per_device, "steps": args.steps,
+        path.write_text(json.dumps({"env": args.env, "algorithm": args.algorithm, "envs_per_device": args.envs_per_device, "steps": args.steps,
                                     "seeds": args.seeds, "parallel": args.parallel, "rows": rows}, indent=1))  # fmt: skip
 
     print(f"{args.env}: {args.envs_per_device} envs per device, "
