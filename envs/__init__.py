@@ -38,7 +38,7 @@ from mjzoo.planning.sampling import SamplingConfig
 from mjzoo.running import control_dt
 from mjzoo.types import Task
 
-__all__ = ["make", "names", "factory", "defaults", "register", "hyperparameters", "planning",
+__all__ = ["make", "names", "factory", "defaults", "takes", "register", "hyperparameters", "planning",
            "closed_loop_problem", "PLAYGROUND", "PLAYGROUND_PLANNING"]
 
 _REGISTRY: dict[str, Callable[..., Task]] = {
@@ -197,6 +197,17 @@ def defaults(spec: str) -> dict[str, Any]:
     kinds = _KEYWORDS if _is_user(spec) else (inspect.Parameter.KEYWORD_ONLY,)
     parameters = inspect.signature(factory(spec)).parameters.values()
     return {p.name: p.default for p in parameters if p.kind in kinds and p.default is not p.empty}
+
+
+def takes(spec: str, name: str) -> bool:
+    """Whether `make(spec, **{name: ...})` accepts the override `name`: a registered env
+    its keyword arguments and the physics options, a user's factory its own keyword
+    arguments (any, with ``**kwargs``), a Playground env its config's entries."""
+    if _is_user(spec):
+        parameters = inspect.signature(factory(spec)).parameters
+        return any(p.kind == inspect.Parameter.VAR_KEYWORD for p in parameters.values()) or (
+            name in parameters and parameters[name].kind in _KEYWORDS)  # fmt: skip
+    return name in defaults(spec) or (not _is_playground(spec) and name in physics.OPTIONS)
 
 
 def make(spec: str, **overrides: Any) -> Task:

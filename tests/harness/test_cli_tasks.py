@@ -76,6 +76,10 @@ def test_a_factory_spec_builds_from_python(user_dir, monkeypatch):
     assert mjzoo.envs.hyperparameters(SPEC, "ppo") == {}  # ppo.Config's own defaults
     with pytest.raises(TypeError, match=r"unknown override\(s\) \['mass'\]; make_pendulum takes"):
         mjzoo.envs.make(SPEC, mass=2.0)
+    assert mjzoo.envs.takes(SPEC, "episode_steps") and not mjzoo.envs.takes(SPEC, "mass")
+    assert not mjzoo.envs.takes(SPEC, "impl")  # its own physics: a resumed run does not pass one
+    assert mjzoo.envs.takes("cartpole_balance", "impl") and mjzoo.envs.takes("cartpole_balance", "episode_steps")
+    assert not mjzoo.envs.takes("cartpole_balance", "mass")
 
 
 def test_a_factory_without_planning_plans_one_episode(user_dir, monkeypatch):

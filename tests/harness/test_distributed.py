@@ -1,7 +1,8 @@
 """Several processes (`mjzoo.harness.distributed`): two processes on localhost with one
-CPU device each train as one process with two devices does, write one run directory
-(process 0's files, each process its checkpoint shards) and resume from it; a
-malformed or partial setup is one clear error.
+CPU device each train as one process with two devices does (PPO, and AMP with its
+discriminator and replay buffer), write one run directory (process 0's files, each
+process its checkpoint shards) and resume from it; a malformed or partial setup is one
+clear error.
 
 The runs go through the CLI (`mjzoo train ... --coordinator --num-processes
 --process-id`) on a one-joint task that compiles quickly. Every process compiles for
@@ -36,6 +37,8 @@ XML = """
 </mujoco>
 """
 SPEC = "tests.harness.test_distributed:block_task"
+AMP_SPEC = "tests.harness.test_distributed:block_amp_task"
+AMP_FLAGS = ["disc_minibatches=2", "disc_hidden_sizes=(16,)", "replay_size=64"]  # after --config
 FLAGS = ["--config", "num_envs=8", "unroll_length=8", "num_minibatches=2", "num_epochs=1",
          "policy_hidden_sizes=(16,)", "value_hidden_sizes=(16,)", "--updates-per-chunk", "2", "--eval-envs", "2",
          "--eval-every", "1", "--checkpoint-every", "1", "--no-video"]  # fmt: skip (every chunk evaluates and
@@ -53,6 +56,17 @@ def block_task(impl: str = "jax") -> mjzoo.Task:
     return mjzoo.task(XML, rewards={"distance": _distance}, time_limit=10, impl=impl)
 
 
+def block_amp_task() -> mjzoo.Task:
+    """The block with a reference to imitate, sliding x = 0.3 sin(t). It takes no `impl`:
+    a resumed run builds it as it was first built."""
+    task = block_task()
+    dt = mjzoo.control_dt(task)
+    t = np.arange(200) * dt
+    clip = mjzoo.motion.Clip(name="slide", fps=1 / dt, qpos=0.3 * np.sin(t)[:, None], qvel=0.3 * np.cos(t)[:, None],
+                             joint_names=("x",))  # fmt: skip
+    return mjzoo.motion.with_reference(task, mjzoo.motion.reference(clip, task.mj_model, dt))
+
+
 def _free_port() -> int:
     with socket.socket() as s:
         s.bind(("localhost", 0))
@@ -63,14 +77,15 @@ Launched = list[tuple[subprocess.Popen, Path]]  # each process with the stem of 
 
 
 def _launch(out: Path | None, logs: Path, *args: str, processes: int = 1, devices: int = 1,
-            spec: str = SPEC) -> Launched:  # fmt: skip
-    """`mjzoo train ppo spec` in `processes` processes of `devices` CPU devices each,
+            spec: str = SPEC, algorithm: str = "ppo") -> Launched:  # fmt: skip
+    """`mjzoo train algorithm spec` in `processes` processes of `devices` CPU devices each,
     writing their output to files in `logs` (a pipe nobody reads could fill and stall one)."""
     cache = logs.parent / "cache"  # process 0 of the resumed run finds its executables there
     env = {k: v for k, v in os.environ.items() if not k.startswith(("JAX_COORDINATOR", "JAX_NUM_PROC", "JAX_PROCESS"))}
     env.update(JAX_PLATFORMS="cpu", MJZOO_COMPILE_CACHE=str(cache), JAX_COMPILATION_CACHE_DIR=str(cache),
                XLA_FLAGS=f"{env.get('XLA_FLAGS', '')} --xla_force_host_platform_device_count={devices}")  # fmt: skip
-    command = [sys.executable, "-m", "mjzoo", "train", "ppo", spec, *args, *FLAGS, *(["--out", str(out)] if out else [])]
+    flags = FLAGS[:1] + AMP_FLAGS + FLAGS[1:] if algorithm == "amp" else FLAGS
+    command = [sys.executable, "-m", "mjzoo", "train", algorithm, spec, *args, *flags, *(["--out", str(out)] if out else [])]
     port = _free_port()
     joined = [[f"--coordinator=localhost:{port}", f"--num-processes={processes}", f"--process-id={i}"]
               for i in range(processes)] if processes > 1 else [[]]  # fmt: skip
@@ -111,9 +126,12 @@ def _saved_arrays(run: Path, step: int) -> dict[str, np.ndarray]:
     return reader.restore(path, {k: np.zeros(m.shape, m.dtype) for k, m in metadata.items()})
 
 
-def test_two_processes_train_as_one_process_with_two_devices_and_resume(tmp_path):
+@pytest.mark.parametrize("algorithm,spec", [("ppo", SPEC), ("amp", AMP_SPEC)])
+def test_two_processes_train_as_one_process_with_two_devices_and_resume(tmp_path, algorithm, spec):
     two, one = tmp_path / "two", tmp_path / "one"
-    first, second = _finish(_launch(two, tmp_path / "logs-two", "--total-steps", str(2 * STEPS_PER_CHUNK), processes=2))
+    run = dict(spec=spec, algorithm=algorithm)
+    first, second = _finish(_launch(two, tmp_path / "logs-two", "--total-steps", str(2 * STEPS_PER_CHUNK), processes=2,
+                                    **run))  # fmt: skip
     assert "final eval/return" in first and "final eval/return" not in second  # process 0 reports
     assert sorted(p.name for p in two.iterdir()) == ["checkpoints", "config.json", "curves.png", "metrics.jsonl",
                                                     "task.json", "tensorboard"]  # fmt: skip
@@ -123,8 +141,8 @@ def test_two_processes_train_as_one_process_with_two_devices_and_resume(tmp_path
 
     # The resume (two processes again) beside one process with two devices training straight through.
     total = ["--total-steps", str(3 * STEPS_PER_CHUNK)]
-    resumed = _launch(None, tmp_path / "logs-resumed", "--resume", str(two), *total, processes=2)
-    reference = _launch(one, tmp_path / "logs-one", *total, devices=2)
+    resumed = _launch(None, tmp_path / "logs-resumed", "--resume", str(two), *total, processes=2, **run)
+    reference = _launch(one, tmp_path / "logs-one", *total, devices=2, **run)
     _finish(resumed + reference)
     lines, expected = _lines(two), _lines(one)
     assert [line["step"] for line in lines] == [line["step"] for line in expected] == [128, 256, 384]

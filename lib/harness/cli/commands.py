@@ -226,7 +226,7 @@ def _resumed(resume: Path, out: Path | None, env: str, algorithm: str, env_overr
              config: tuple[str, ...], impl: str | None) -> tuple[Path, dict, dict, dict]:  # fmt: skip
     """(out, env overrides, config values, run settings) of the run `--resume` continues,
     checked against what the command line says of it. It keeps its physics
-    implementation (config.json), unless --impl names one."""
+    implementation (config.json) where the env takes `impl`, unless --impl names one."""
     if out is not None and out != resume:
         raise UsageError(f"--out {out} and --resume {resume}: a resumed run stays in its directory; give one")
     if env_overrides:
@@ -242,7 +242,8 @@ def _resumed(resume: Path, out: Path | None, env: str, algorithm: str, env_overr
 
     kept = {f.name for f in dataclasses.fields(training.Settings)} - set(_NOT_KEPT)
     run_settings = {**RUN_DEFAULTS, **{k: v for k, v in info.get("settings", {}).items() if k in kept}}
-    physics_impl = impl or info.get("physics", {}).get("impl")
+    # The physics it ran on, where the env lets it be chosen (a factory without `impl` chose its own).
+    physics_impl = impl or (info.get("physics", {}).get("impl") if mjzoo.envs.takes(env, "impl") else None)
     return resume, {**saved["overrides"], **({"impl": physics_impl} if physics_impl else {})}, config_values, run_settings
 
 
