@@ -37,7 +37,6 @@ import argparse
 import json
 import os
 import shutil
-import socket
 import subprocess
 import statistics
 import sys
@@ -137,7 +136,9 @@ def run_count(args: argparse.Namespace, gpus: list[int], seed: int, log: Path) -
         command += ["--split-unroll"] if args.split_unroll else []
         command += ["--run-dir", str(args.out / "runs" / f"{log.stem}")] if args.keep_runs else []
         if args.processes and devices > 1:
-            port = _free_port()
+            from mjzoo.harness.distributed import free_port
+
+            port = free_port("localhost")
             launches = [(command + ["--coordinator", f"localhost:{port}", "--process-id", str(i)], _visible(args, [gpu]))
                         for i, gpu in enumerate(gpus)]  # fmt: skip
         else:
@@ -176,12 +177,6 @@ def _run_all(launches: list[tuple[list[str], dict[str, str], Path]]) -> list[int
             proc.kill()
             codes.append(proc.wait())
     return codes
-
-
-def _free_port() -> int:
-    with socket.socket() as s:
-        s.bind(("localhost", 0))
-        return s.getsockname()[1]
 
 
 def _seed_suffix(args: argparse.Namespace, seed: int) -> str:

@@ -19,7 +19,6 @@ import contextlib
 import io
 import json
 import shutil
-import socket
 import subprocess
 import tempfile
 import time
@@ -28,6 +27,8 @@ from collections.abc import Iterator
 from pathlib import Path
 
 import numpy as np
+
+from mjzoo.harness.distributed import free_port
 
 CHROMIUM = ("chromium", "chromium-browser", "google-chrome")
 PANEL_PX = 340  # viser's control panel on the right: not part of the canvas
@@ -59,7 +60,7 @@ def not_blank(stats: dict[str, float]) -> bool:
 def chromium(binary: str, width: int, height: int) -> Iterator[str]:
     """A headless Chromium with the DevTools protocol on a free port; yields the
     websocket address of its page."""
-    port = _free_port()
+    port = free_port("127.0.0.1")
     with tempfile.TemporaryDirectory() as profile:
         args = [binary, "--headless=new", "--no-sandbox", "--use-angle=swiftshader", "--enable-unsafe-swiftshader",
                 "--ignore-gpu-blocklist", f"--remote-debugging-port={port}", f"--user-data-dir={profile}",
@@ -128,12 +129,6 @@ def shoot(url: str, out: Path, binary: str, connected, timeout: float = 40.0, si
     out.parent.mkdir(parents=True, exist_ok=True)
     out.write_bytes(png)
     return {"path": str(out), "seconds": round(time.time() - start, 1), **stats, "ok": bool(png) and not_blank(stats)}
-
-
-def _free_port() -> int:
-    with socket.socket() as s:
-        s.bind(("127.0.0.1", 0))
-        return s.getsockname()[1]
 
 
 def main() -> int:

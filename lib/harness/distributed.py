@@ -21,13 +21,14 @@ must call them alike (with one process they cost nothing).
 from __future__ import annotations
 
 import os
+import socket
 from typing import Any
 
 import jax
 import numpy as np
 from jax.experimental import multihost_utils
 
-__all__ = ["initialize", "is_primary", "barrier", "agree", "fetch"]
+__all__ = ["initialize", "is_primary", "barrier", "agree", "fetch", "free_port"]
 
 # Each argument's environment variable (JAX reads the first itself, but not the others).
 _VARIABLES = {"coordinator": "JAX_COORDINATOR_ADDRESS", "num_processes": "JAX_NUM_PROCESSES",
@@ -146,3 +147,11 @@ def fetch(tree: Any) -> Any:
         return jax.device_get(x)  # (process_allgather would stack a local array with the others' copies)
 
     return jax.tree.map(one, tree)
+
+
+def free_port(host: str = "") -> int:
+    """A TCP port of `host` (default: every interface) no one listens on now, for a
+    coordinator on localhost or a viewer (the OS picks one for port 0)."""
+    with socket.socket() as s:
+        s.bind((host, 0))
+        return s.getsockname()[1]

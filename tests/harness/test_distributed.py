@@ -16,7 +16,6 @@ import importlib.util
 import json
 import os
 import re
-import socket
 import subprocess
 import sys
 from pathlib import Path
@@ -67,12 +66,6 @@ def block_amp_task() -> mjzoo.Task:
     return mjzoo.motion.with_reference(task, mjzoo.motion.reference(clip, task.mj_model, dt))
 
 
-def _free_port() -> int:
-    with socket.socket() as s:
-        s.bind(("localhost", 0))
-        return s.getsockname()[1]
-
-
 Launched = list[tuple[subprocess.Popen, Path]]  # each process with the stem of its log files
 
 
@@ -86,7 +79,7 @@ def _launch(out: Path | None, logs: Path, *args: str, processes: int = 1, device
                XLA_FLAGS=f"{env.get('XLA_FLAGS', '')} --xla_force_host_platform_device_count={devices}")  # fmt: skip
     flags = FLAGS[:1] + AMP_FLAGS + FLAGS[1:] if algorithm == "amp" else FLAGS
     command = [sys.executable, "-m", "mjzoo", "train", algorithm, spec, *args, *flags, *(["--out", str(out)] if out else [])]
-    port = _free_port()
+    port = distributed.free_port("localhost")
     joined = [[f"--coordinator=localhost:{port}", f"--num-processes={processes}", f"--process-id={i}"]
               for i in range(processes)] if processes > 1 else [[]]  # fmt: skip
     logs.mkdir(parents=True, exist_ok=True)
@@ -255,7 +248,7 @@ except ValueError as e:
 
 def test_initialize_is_idempotent_but_not_with_other_values(clean_env):
     env = {**os.environ, "JAX_PLATFORMS": "cpu"}
-    result = subprocess.run([sys.executable, "-c", IDEMPOTENT, f"localhost:{_free_port()}"], env=env,
+    result = subprocess.run([sys.executable, "-c", IDEMPOTENT, f"localhost:{distributed.free_port('localhost')}"], env=env,
                             capture_output=True, text=True, timeout=120)  # fmt: skip
     assert result.returncode == 0, result.stderr[-3000:]
     assert result.stdout.strip() == "distributed: already initialized otherwise: num_processes=2 (it is 1)"

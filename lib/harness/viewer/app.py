@@ -11,7 +11,6 @@ between two jitted calls.
 from __future__ import annotations
 
 import collections
-import socket
 import threading
 import time
 from typing import Any
@@ -19,6 +18,7 @@ from typing import Any
 import numpy as np
 import viser
 
+from mjzoo.harness.distributed import free_port
 from mjzoo.harness.viewer import gui
 from mjzoo.harness.viewer.scene import Scene
 from mjzoo.harness.viewer.sources import Frame
@@ -43,7 +43,7 @@ class Viewer:
                  speed: float | str = 1.0, playing: bool = True, track_body: str | None = None,
                  record: bool = False, label: str = "mjzoo view"):  # fmt: skip
         self.source, self.display_hz, self.record = source, display_hz, record
-        self.server = viser.ViserServer(host=host, port=port or _free_port(), label=label, verbose=False)
+        self.server = viser.ViserServer(host=host, port=port or free_port(), label=label, verbose=False)
         self.lock = threading.RLock()
         self.scene = Scene(self.server, source.mj_model, source.num_envs)
         self.speed, self.playing, self.shown, self.track = speed, playing, None, None
@@ -187,13 +187,6 @@ class Viewer:
             offset = np.asarray(camera.position) - np.asarray(camera.look_at)
             with client.atomic():
                 camera.look_at, camera.position = target, target + offset
-
-
-def _free_port() -> int:
-    """A TCP port no one listens on now (port 0 asks for any)."""
-    with socket.socket() as s:
-        s.bind(("", 0))
-        return s.getsockname()[1]
 
 
 class _Rate:
