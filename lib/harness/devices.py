@@ -23,7 +23,7 @@ from mjzoo import worlds
 
 WARP_GPUS = "MJZOO_WARP_SEVERAL_GPUS"  # =1: let Warp physics train over several GPUs (it crashed XLA)
 
-__all__ = ["shard_envs", "env_shardings", "replicate", "env_mesh", "env_mesh_scope", "template_data"]
+__all__ = ["shard_envs", "env_shardings", "check_split", "replicate", "env_mesh", "env_mesh_scope", "template_data"]
 
 
 def shard_envs(train_state: Any, per_env_fields: Sequence[str], devices: list | None = None) -> Any:
@@ -55,8 +55,10 @@ def env_shardings(train_state: Any, per_env_fields: Sequence[str], devices: list
 
     def place(node: Any, paths: list[list[str]]) -> Any:
         if [] in paths:  # this node is per-env
+            specs = worlds.partition(node)
+            _check_even(node, specs, devices)
             return jax.tree.map(lambda x, spec: NamedSharding(mesh, spec) if np.prod(np.shape(x)) else whole,
-                                node, worlds.partition(node))  # fmt: skip
+                                node, specs)  # fmt: skip
         if not paths or not dataclasses.is_dataclass(node):
             return jax.tree.map(lambda _: whole, node)
         return dataclasses.replace(node, **{
@@ -65,6 +67,22 @@ def env_shardings(train_state: Any, per_env_fields: Sequence[str], devices: list
         })  # fmt: skip
 
     return place(train_state, [path.split(".") for path in per_env_fields])
+
+
+def check_split(num_envs: int, devices: list | None = None) -> None:
+    """Raises one ValueError naming the fix where `num_envs` envs do not split evenly
+    over `devices` (default `jax.devices()`; JAX's own error names a sharding and a shape)."""
+    count = len(devices or jax.devices())
+    if num_envs % count:
+        raise ValueError(f"{num_envs} envs do not split evenly over {count} devices; make num_envs a "
+                         f"multiple of {count}, or use fewer devices (CUDA_VISIBLE_DEVICES)")  # fmt: skip
+
+
+def _check_even(node: Any, specs: Any, devices: list) -> None:
+    """`check_split` for each per-env leaf that is split (its leading axis: the envs)."""
+    for x, spec in zip(jax.tree.leaves(node), jax.tree.leaves(specs, is_leaf=lambda s: isinstance(s, PartitionSpec))):
+        if len(spec) and np.prod(np.shape(x)):
+            check_split(np.shape(x)[0], devices)
 
 
 def _check_warp_gpus(train_state: Any, devices: list) -> None:

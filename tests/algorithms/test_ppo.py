@@ -176,7 +176,7 @@ def test_a_crashed_run_resumes_to_the_same_result(tmp_path, monkeypatch):
 
 TWO_DEVICES = textwrap.dedent(
     """
-    import jax, jax.numpy as jnp, numpy as np
+    import dataclasses, jax, jax.numpy as jnp, numpy as np
     import mjzoo.envs
     from mjzoo.harness import training
     from mjzoo.algorithms import ppo
@@ -197,6 +197,12 @@ TWO_DEVICES = textwrap.dedent(
     print("max param difference", diff)
     np.testing.assert_allclose(one.collector.env_state.obs, two.collector.env_state.obs, atol=1e-4)
     assert diff < 1e-4
+    odd = ppo.init(dataclasses.replace(config, num_envs=5, num_minibatches=1), task, jax.random.key(0))
+    try:  # an uneven split is refused, naming the fix
+        training.shard_envs(odd, ppo.PER_ENV_FIELDS)
+        raise AssertionError("5 envs were split over 2 devices")
+    except ValueError as error:
+        assert "5 envs do not split evenly over 2 devices; make num_envs a multiple of 2" in str(error), error
     """
 )
 

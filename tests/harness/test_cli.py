@@ -98,6 +98,15 @@ def test_a_mistake_is_one_line_and_status_2(capsys, tmp_path, monkeypatch, argv,
     assert list(tmp_path.iterdir()) == []  # nothing written (no runs/ directory either)
 
 
+def test_envs_that_do_not_split_over_the_devices_are_one_line(capsys, tmp_path, monkeypatch):
+    """Three devices (this one, thrice) and 8 envs: refused before anything is written."""
+    monkeypatch.chdir(tmp_path)
+    monkeypatch.setattr(jax, "devices", lambda *backend: [jax.local_devices()[0]] * 3)
+    assert_usage_error(capsys, ["train", "ppo", ENV, "--config", "num_envs=8"],
+                       "8 envs do not split evenly over 3 devices", "multiple of 3")  # fmt: skip
+    assert list(tmp_path.iterdir()) == []
+
+
 def test_an_unknown_algorithm_is_tyros_short_usage_error(capsys):
     code, _, err = run_cli(capsys, "train", "ppx", ENV)
     assert code == 2 and "Traceback" not in err

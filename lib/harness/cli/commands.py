@@ -159,7 +159,7 @@ def train(
     each process trains its share of the envs, and process 0 writes --out, which every
     process must reach.
     """
-    from mjzoo.harness import checkpoints, distributed, training
+    from mjzoo.harness import checkpoints, devices, distributed, training
 
     with checking():
         distributed.initialize(coordinator, num_processes, process_id)  # before anything touches JAX's devices
@@ -177,6 +177,7 @@ def train(
         task = mjzoo.envs.make(env, **env_values)
         config_values.update(_lengths(task, total_steps, rollout_seconds))
         cfg = build_config(module, env, config_values)
+        devices.check_split(cfg.num_envs)
         if task.time_limit is None and run_settings.get("eval_steps") is None and run_settings.get("eval_seconds") is None:
             raise UsageError(f"{env}: the task has no time limit (mjzoo.with_time_limit) to end its evaluation "
                              "episodes; give --eval-steps or --eval-seconds")  # fmt: skip
