@@ -79,10 +79,12 @@ def check_split(num_envs: int, devices: list | None = None) -> None:
 
 
 def _check_even(node: Any, specs: Any, devices: list) -> None:
-    """`check_split` for each per-env leaf that is split (its leading axis: the envs)."""
-    for x, spec in zip(jax.tree.leaves(node), jax.tree.leaves(specs, is_leaf=lambda s: isinstance(s, PartitionSpec))):
-        if len(spec) and np.prod(np.shape(x)):
-            check_split(np.shape(x)[0], devices)
+    """`check_split` of the envs of a per-env node: the shortest leading axis of its split
+    leaves (Warp's contact pool has a multiple of it)."""
+    split = jax.tree.leaves(specs, is_leaf=lambda s: isinstance(s, PartitionSpec))
+    rows = [np.shape(x)[0] for x, spec in zip(jax.tree.leaves(node), split) if len(spec) and np.prod(np.shape(x))]
+    if rows:
+        check_split(min(rows), devices)
 
 
 def _check_warp_gpus(train_state: Any, devices: list) -> None:
