@@ -4,7 +4,9 @@ For each env: `mjzoo train ppo ENV` is launched twice in fresh processes with on
 persistent compilation cache (cold, then warm), and the time from launch to its first
 update is read off: the first metrics line's arrival, less what the run did after the
 first chunk ended (its clock's ``perf/elapsed_s`` minus ``perf/first_update_s``: the
-final evaluation, when the first chunk is also the last). Then one run with the default
+final evaluation, when the first chunk is also the last; that evaluation's end is recorded
+too, as ``*_first_evaluation_s``: its compile waits behind the chunk's or runs beside
+it). Then one run with the default
 evaluation schedule (`Settings.eval_budget`, 5% of the wall-clock) reports the share of
 its wall-clock spent evaluating, and its overall rate against the training rate.
 
@@ -80,6 +82,9 @@ def measure(env: str, steps: int, eval_steps: int, smoke: bool, timeout: float, 
         "warm_launch_to_first_update_s": warm["launch_to_first_update_s"],
         "cold_first_update_s": cold["lines"][0]["perf/first_update_s"],
         "warm_first_update_s": warm["lines"][0]["perf/first_update_s"],
+        # To the end of the first evaluation (run's clock), whose compile waits behind the chunk's or beside it.
+        **{f"{name}_first_evaluation_s": run["lines"][0]["perf/elapsed_s"]
+           for name, run in (("cold", cold), ("warm", warm)) if "eval/return" in run["lines"][0]},
     }
     if budget is None:
         return row
@@ -122,7 +127,7 @@ def main() -> None:
         keep.mkdir(exist_ok=True)
     rows = []
     for env in args.envs:
-        eval_steps = args.steps if args.smoke else args.eval_run_steps
+        eval_steps = args.steps if args.smoke and args.eval_run_steps else args.eval_run_steps
         rows.append(measure(env, args.steps, eval_steps, args.smoke, args.timeout, keep))
         path.write_text(json.dumps({"device": device, "rows": rows}, indent=1))
     print(f"\n{'env':<18} {'cold (s)':>9} {'warm (s)':>9} {'eval share':>10} {'train/s':>12} {'overall/s':>12}")
