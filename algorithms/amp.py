@@ -258,7 +258,8 @@ def _learn_discriminator(config: Config, task: Task, ts: TrainState, windows: Ar
     data = jax.tree.map(lambda w: normalization.normalize(stats, w),
                         {"fresh": windows, "replayed": replayed, "reference": reference})  # fmt: skip
     (params, opt_state), metrics = learning.learn(step, (ts.disc_params, ts.disc_opt_state), data, learn_key,
-                                                  num_epochs=config.disc_epochs, num_minibatches=config.disc_minibatches)  # fmt: skip
+                                                  num_epochs=config.disc_epochs, num_minibatches=config.disc_minibatches,
+                                                  split_over_devices=config.split_minibatches)  # fmt: skip
     return ts.replace(disc_params=params, disc_opt_state=opt_state, disc_stats=stats, replay=buffer), metrics
 
 

@@ -81,6 +81,8 @@ class Config:
     # layers, gradients and the optimizer stay float32); the learner's matmuls and
     # activations then move half the bytes.
     compute_dtype: Literal["float32", "bfloat16"] = "float32"
+    # Several devices: each computes its share of every minibatch step, not all of it (`learning.learn`).
+    split_minibatches: bool = False
     recurrent: bool = False
     gru_hidden_size: int = 64
     # A dict observation: the entry each network sees (Brax's names; e.g. the value
@@ -358,6 +360,7 @@ def improve(config: Config, task: Task, train_state: TrainState, data: learning.
     (params, opt_state, _), metrics = learning.learn(
         sgd_step, (ts.params, ts.opt_state, entropy_key), batch, shuffle_key, num_epochs=config.num_epochs,
         num_minibatches=config.num_minibatches, sequences=_is_recurrent(policy_net),
+        split_over_devices=config.split_minibatches,
     )  # fmt: skip
     return ts.replace(params=params, opt_state=opt_state, obs_stats=stats), metrics
 

@@ -19,6 +19,17 @@ naming its JSON), e.g. CUDA graphs around the minibatch loop:
     python benchmarks/ppo_profile.py --envs cartpole_balance playground:CartpoleBalance \\
         --variants base bf16=compute_dtype:bfloat16 f32=precision:float32
     python benchmarks/ppo_profile.py --envs cartpole_balance --smoke        # on a CPU
+
+Several GPUs: ``--devices N`` splits one update over the first N devices as
+`scaling.py --split-unroll` does (``num_envs`` x N, ``unroll_length`` / N: the same batch,
+minibatches and gradient steps, each minibatch split N ways), so that the minibatch
+step's time shows whether splitting it shortens it; its kernel count then includes the
+gradients' all-reduce. ``--env-config`` takes each env's registered PPO hyperparameters
+instead of Playground's. The variant ``split=split_minibatches:True`` splits each
+minibatch over the devices (`ppo.Config.split_minibatches`), where by default every
+device computes every minibatch step whole:
+
+    python benchmarks/ppo_profile.py --envs humanoid_walk --env-config --devices 4 --variants base split=split_minibatches:True
 """
 
 from __future__ import annotations
@@ -44,7 +55,7 @@ import mjzoo.envs  # noqa: E402
 from mjzoo.algorithms import ppo  # noqa: E402
 from mjzoo.harness import training  # noqa: E402
 from mjzoo.harness.cli import arguments  # noqa: E402
-from mjzoo.harness.devices import replicate  # noqa: E402
+from mjzoo.harness.devices import env_mesh_scope, replicate, shard_envs  # noqa: E402
 
 CHUNK = 5  # updates per harness chunk timed (`training.run` scans its chunks the same way)
 SMOKE = dict(num_envs=16, unroll_length=8, num_minibatches=4, num_epochs=2)
@@ -62,7 +73,7 @@ def loop_kernels(hlo: str) -> int:
     """Kernel launches in one minibatch step: the fusions and library calls (cuBLAS, ...)
     of the compiled program's busiest computation, which is the minibatch loop's body."""
     computations = re.split(r"\n(?=[%A-Z][^\n]*\{\n)", hlo)
-    return max(len(re.findall(r"= \S+ (?:fusion|custom-call)\(", c)) for c in computations)
+    return max(len(re.findall(r"= (?:\S+|\([^)]*\)) (?:fusion|custom-call|all-reduce(?:-start)?)\(", c)) for c in computations)
 
 
 def best_of(fn, *args, repeats: int) -> float:
@@ -73,6 +84,16 @@ def best_of(fn, *args, repeats: int) -> float:
         jax.block_until_ready(fn(*args))
         times.append(time.perf_counter() - start)
     return float(np.median(times))
+
+
+def in_mesh(fn, devices: list):
+    """`fn` traced under the env mesh of `devices` (`devices.env_mesh_scope`)."""
+
+    def traced(*args):
+        with env_mesh_scope(devices):
+            return fn(*args)
+
+    return traced
 
 
 def per_update(run, state, updates: int, repeats: int) -> float:
@@ -87,7 +108,7 @@ def per_update(run, state, updates: int, repeats: int) -> float:
     return float(np.median(times))
 
 
-def profile(env: str, base: ppo.Config, fields: dict[str, str], repeats: int) -> dict:
+def profile(env: str, base: ppo.Config, fields: dict[str, str], repeats: int, devices: int = 1) -> dict:
     fields = dict(fields)
     precision = fields.pop("precision", None)
     flat_adam = fields.pop("flat_adam", None) == "1"
@@ -95,26 +116,35 @@ def profile(env: str, base: ppo.Config, fields: dict[str, str], repeats: int) ->
     config = dataclasses.replace(base, **values)
     if flat_adam:  # the config's own optimizer over all parameters concatenated, not one update per array
         config = dataclasses.replace(config, optimizer=optax.flatten(ppo._optimizer(config)))
+    if devices not in (1, jax.device_count()):  # the harness's chunk (timed too) meshes every device
+        raise SystemExit(f"ppo_profile: --devices {devices} of {jax.device_count()}: show it only those "
+                         "(CUDA_VISIBLE_DEVICES)")  # fmt: skip
+    if config.unroll_length % devices:
+        raise SystemExit(f"ppo_profile: --devices {devices} must divide unroll_length {config.unroll_length}")
+    config = dataclasses.replace(config, num_envs=config.num_envs * devices, unroll_length=config.unroll_length // devices)
+    placed = jax.devices()[:devices]
     task = mjzoo.envs.make(env)
+    placed_task = replicate(task, placed)  # as `training.run` holds it
     scope = jax.default_matmul_precision(precision) if precision else contextlib.nullcontext()
     with scope:
-        state = ppo.init(config, task, jax.random.key(0))
-        rollout = jax.jit(lambda s, k: ppo.rollout(config, task, s, k)[1])
-        improve = jax.jit(lambda s, d, k: ppo.improve(config, task, s, d, k)[0])
-        update = jax.jit(lambda s: ppo.update(config, task, s)[0])
+        state = shard_envs(ppo.init(config, task, jax.random.key(0)), ppo.PER_ENV_FIELDS, placed)
+        # Traced under the env mesh, as the harness's chunk is (`learning.learn` splits minibatches by it).
+        rollout = jax.jit(in_mesh(lambda t, s, k: ppo.rollout(config, t, s, k)[1], placed))
+        improve = jax.jit(in_mesh(lambda t, s, d, k: ppo.improve(config, t, s, d, k)[0], placed))
+        update = jax.jit(in_mesh(lambda t, s: ppo.update(config, t, s)[0], placed))
         key = jax.random.key(1)
         start = time.perf_counter()
-        data = jax.block_until_ready(rollout(state, key))
+        data = jax.block_until_ready(rollout(placed_task, state, key))
         compile_rollout = time.perf_counter() - start
         start = time.perf_counter()
-        jax.block_until_ready(improve(state, data, key))
+        jax.block_until_ready(improve(placed_task, state, data, key))
         compile_improve = time.perf_counter() - start
-        kernels = loop_kernels(improve.lower(state, data, key).compile().as_text())
-        t_rollout = best_of(rollout, state, key, repeats=repeats)
-        t_improve = best_of(improve, state, data, key, repeats=repeats)
-        t_update = best_of(update, state, repeats=repeats)
-        t_onward = per_update(update, state, 1, repeats)
-        chunk, placed_task = training._chunk_fn(ppo, config, CHUNK), replicate(task)  # as `training.run` holds them
+        kernels = loop_kernels(improve.lower(placed_task, state, data, key).compile().as_text())
+        t_rollout = best_of(rollout, placed_task, state, key, repeats=repeats)
+        t_improve = best_of(improve, placed_task, state, data, key, repeats=repeats)
+        t_update = best_of(update, placed_task, state, repeats=repeats)
+        t_onward = per_update(lambda s: update(placed_task, s), state, 1, repeats)
+        chunk = training._chunk_fn(ppo, config, CHUNK)
         t_chunk = per_update(lambda s: chunk(placed_task, s)[0], state, CHUNK, repeats)
         defaults = mjzoo.envs.defaults(env)
         steps = defaults.get("episode_steps") or defaults.get("episode_length", 1000)
@@ -124,7 +154,9 @@ def profile(env: str, base: ppo.Config, fields: dict[str, str], repeats: int) ->
         in_loop = training._evaluate_fn(ppo)
         t_in_loop = best_of(lambda s, k: in_loop(config, placed_task, s, k, 128, steps), state, key, repeats=1)
     sgd_steps = config.num_epochs * config.num_minibatches
-    return {"env": env, "config": {**fields, **({"precision": precision} if precision else {})},
+    return {"env": env, "devices": devices, "num_envs": config.num_envs, "unroll_length": config.unroll_length,
+            "minibatch_samples_per_device": config.steps_per_update // config.num_minibatches // devices,
+            "config": {**fields, **({"precision": precision} if precision else {})},
             "rollout_s": t_rollout, "improve_s": t_improve, "update_s": t_update, "update_onward_s": t_onward, "chunk_update_s": t_chunk, "evaluate_128_envs_s": t_evaluate,
             "evaluate_in_loop_s": t_in_loop, "evaluate_steps": steps,
             "sgd_step_ms": 1e3 * t_improve / sgd_steps, "sgd_step_kernels": kernels, "steps_per_s": config.steps_per_update / t_update,
@@ -139,6 +171,8 @@ def main() -> None:
     parser.add_argument("--smoke", action="store_true", help="tiny sizes, to check the script on a CPU")
     parser.add_argument("--out", type=Path, default=Path(__file__).parent / "results" / "ppo_profile")
     parser.add_argument("--tag", default="", help="added to the JSON's name (e.g. for a run under other XLA_FLAGS)")
+    parser.add_argument("--devices", type=int, default=1, help="split each update over this many devices")
+    parser.add_argument("--env-config", action="store_true", help="each env's registered PPO hyperparameters")
     args = parser.parse_args()
     base = mjzoo_config(total_steps=10**9)
     if args.smoke:
@@ -148,11 +182,16 @@ def main() -> None:
           f"{base.num_epochs * base.num_minibatches} minibatch steps", flush=True)  # fmt: skip
     rows = []
     args.out.mkdir(parents=True, exist_ok=True)
-    path = args.out / f"ppo_profile_{jax.default_backend()}{'_' + args.tag if args.tag else ''}.json"
+    name = f"ppo_profile_{jax.default_backend()}" + (f"_{args.devices}_devices" if args.devices > 1 else "")
+    path = args.out / f"{name}{'_' + args.tag if args.tag else ''}.json"
     print(f"{'env':<28} {'variant':<10} {'rollout s':>9} {'improve s':>9} {'update s':>9} {'onward s':>8} {'chunk s':>8} {'sgd ms':>7} {'kernels':>7} {'steps/s':>11} {'eval s':>7} {'in loop':>7}")
     for env in args.envs:
         for name, fields in map(parse_variant, args.variants):
-            row = {"variant": name, **profile(env, base, fields, args.repeats)}
+            config = base
+            if args.env_config:
+                config = ppo.Config(**{**mjzoo.envs.hyperparameters(env, "ppo"), "total_steps": 10**9,
+                                       **(SMOKE if args.smoke else {})})  # fmt: skip
+            row = {"variant": name, **profile(env, config, fields, args.repeats, args.devices)}
             rows.append(row)
             print(f"{env:<28} {name:<10} {row['rollout_s']:>9.3f} {row['improve_s']:>9.3f} {row['update_s']:>9.3f} {row['update_onward_s']:>8.3f} {row['chunk_update_s']:>8.3f} "
                   f"{row['sgd_step_ms']:>7.2f} {row['sgd_step_kernels']:>7} {row['steps_per_s']:>11,.0f} {row['evaluate_128_envs_s']:>7.2f} {row['evaluate_in_loop_s']:>7.2f}",

@@ -27,6 +27,7 @@ AMP the same way (default env `humanoid_amp_walk`; its threshold: lasting the ep
     python benchmarks/scaling.py --devices 4 --steps 40000000 --impl jax --split-unroll --keep-runs
     python benchmarks/scaling.py --devices 1 --seeds 0 1 2 3 --parallel --steps 40000000 --impl jax
     python benchmarks/scaling.py --devices 1 2 --steps 20000000 --impl jax --processes
+    python benchmarks/scaling.py --devices 4 --steps 40000000 --impl jax --split-unroll --config split_minibatches=True
     python benchmarks/scaling.py --algorithm amp --devices 1 2 4 --steps 40000000 --impl jax --split-unroll
     python benchmarks/scaling.py --env cartpole_balance --devices 1 2 --smoke   # on a CPU
 """
@@ -67,11 +68,12 @@ def visible_gpus() -> list[str]:
 
 def worker(env: str, devices: int, envs_per_device: int, steps: int, smoke: bool, impl: str | None,
            result: Path, joined: tuple[str, int] | None = None, scale: str | None = None, seed: int = 0,
-           run_dir: Path | None = None, algorithm_name: str = "ppo") -> None:  # fmt: skip
+           run_dir: Path | None = None, algorithm_name: str = "ppo", config_fields: tuple[str, ...] = ()) -> None:  # fmt: skip
     """One device count, in this process (or, `joined` = (coordinator, process id), in
     one of `devices` processes of a device each): train and write the figures to `result`
     (the run's own files to `run_dir`, if given; else they are dropped). `scale`:
-    "minibatches" or "unroll" (see the module's docstring). `algorithm_name`: ppo or amp."""
+    "minibatches" or "unroll" (see the module's docstring). `algorithm_name`: ppo or amp;
+    `config_fields`: NAME=VALUE over the env's config (``--config``)."""
     import jax
     import numpy as np
     from ppo_vs_brax import training_curve
@@ -79,13 +81,15 @@ def worker(env: str, devices: int, envs_per_device: int, steps: int, smoke: bool
     import mjzoo.envs
     from mjzoo.algorithms import amp, ppo
     from mjzoo.harness import distributed, metrics, training
+    from mjzoo.harness.cli.arguments import parse_assignments
 
     algorithm = {"ppo": ppo, "amp": amp}[algorithm_name]
     if joined is not None:
         distributed.initialize(joined[0], devices, joined[1])
     assert jax.device_count() == devices, (jax.devices(), devices)
     tuned = mjzoo.envs.hyperparameters(env, algorithm_name)
-    fields = {**tuned, "num_envs": envs_per_device * devices, "total_steps": steps}
+    fields = {**tuned, **parse_assignments(tuple(config_fields), "--config"), "num_envs": envs_per_device * devices,
+              "total_steps": steps}  # fmt: skip
     if smoke:  # two chunks of two updates at any count, so the steady rate is measured
         fields.update(SMOKE, total_steps=fields["num_envs"] * SMOKE["unroll_length"] * 4)
     if scale == "minibatches":  # one device's minibatch size and gradient steps per env step
@@ -129,7 +133,7 @@ def run_count(args: argparse.Namespace, gpus: list[int], seed: int, log: Path) -
     with tempfile.TemporaryDirectory() as tmp:
         result = Path(tmp) / "result.json"
         command = [sys.executable, __file__, "--worker", str(devices), "--env", args.env, "--steps", str(args.steps),
-                   "--algorithm", args.algorithm,
+                   "--algorithm", args.algorithm, "--config", *args.config,
                    "--envs-per-device", str(args.envs_per_device), "--result", str(result), "--seed", str(seed)] + (["--smoke"] if args.smoke else [])
         command += ["--impl", args.impl] if args.impl else []
         command += ["--scale-minibatches"] if args.scale_minibatches else []
@@ -224,6 +228,7 @@ def main() -> None:
                              "each env's segment is shorter")  # fmt: skip
     parser.add_argument("--keep-runs", action="store_true", help="keep each run's metrics under OUT/runs/")
     parser.add_argument("--seeds", nargs="+", type=int, default=[0], help="one run per seed at every count")
+    parser.add_argument("--config", nargs="*", default=[], help="NAME=VALUE fields over the env's config, as for mjzoo train")
     parser.add_argument("--parallel", action="store_true",
                         help="run a count's seeds side by side on disjoint GPUs (4 GPUs: four 1-GPU runs at once)")
     parser.add_argument("--smoke", action="store_true", help="tiny sizes on CPU devices, to check the script")
@@ -240,7 +245,7 @@ def main() -> None:
         joined = (args.coordinator, args.process_id) if args.coordinator else None
         worker(args.env, args.worker, args.envs_per_device, args.steps, args.smoke, args.impl, args.result, joined,
                "minibatches" if args.scale_minibatches else "unroll" if args.split_unroll else None, args.seed, args.run_dir,
-               args.algorithm)
+               args.algorithm, args.config)
         return
     import mjzoo.envs
     from mjzoo.algorithms import ppo
@@ -263,6 +268,7 @@ def main() -> None:
     name += f"_{args.impl}" if args.impl else ""
     name += ("_processes" if args.processes else "") + ("_scaled" if args.scale_minibatches else "")
     name += "_split_unroll" if args.split_unroll else ""
+    name += "".join(f"_{field.replace('=', '_')}" for field in args.config)
     name += "" if args.seeds == [0] else "_seeds_" + "_".join(map(str, args.seeds))
     path = args.out / f"{name}.json"
     rows = []

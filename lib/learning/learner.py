@@ -18,8 +18,9 @@ from typing import Any
 
 import jax
 import jax.numpy as jnp
+from jax.sharding import NamedSharding, PartitionSpec
 
-from mjzoo import checks
+from mjzoo import checks, worlds
 
 __all__ = ["learn"]
 
@@ -36,6 +37,7 @@ def learn(
     num_epochs: int,
     num_minibatches: int,
     sequences: bool = False,
+    split_over_devices: bool = False,
 ) -> tuple[PyTree, dict[str, Array]]:
     """Runs ``step(carry, minibatch) -> (carry, metrics)`` over `num_epochs` epochs of
     `num_minibatches` shuffled minibatches of `data`, with `lax.scan` (both static).
@@ -51,6 +53,12 @@ def learn(
       sequences: False: each minibatch holds T * N / num_minibatches samples, leaves
         [T * N / m, ...]. True: N / num_minibatches whole env sequences, leaves
         [T, N / m, ...].
+      split_over_devices: under a mesh with axis `mjzoo.worlds.AXIS` (the training
+        harness sets one while it traces), split each minibatch's samples over its
+        devices, so that each computes its share of every step and XLA sums the
+        gradients. Otherwise XLA gathers the shuffled batch onto every device, and each
+        computes every step whole. Either way the result is the same, up to the order
+        of float sums.
 
     Returns:
       (carry, metrics): the carry after every step, and each metric's mean over all
@@ -76,7 +84,20 @@ def learn(
         return jax.tree.map(lambda x: x.reshape((t * n,) + x.shape[2:])[order], data)
 
     def epoch(carry: PyTree, key: Array):
-        return jax.lax.scan(step, carry, minibatches(key))
+        batches = minibatches(key)
+        return jax.lax.scan(step, carry, _split_over_devices(batches, 2 if sequences else 1) if split_over_devices else batches)
 
     carry, metrics = jax.lax.scan(epoch, carry, jax.random.split(key, num_epochs))
     return carry, jax.tree.map(jnp.mean, metrics)
+
+
+def _split_over_devices(batches: PyTree, axis: int) -> PyTree:
+    """Stacked minibatches with each minibatch's samples (`axis`) split over the devices of
+    the env mesh (`mjzoo.worlds.AXIS`); without such a mesh, or where the samples do not
+    split evenly, as given."""
+    mesh = jax.sharding.get_abstract_mesh()
+    devices = 1 if mesh.empty or worlds.AXIS not in mesh.axis_names else mesh.shape[worlds.AXIS]
+    if devices == 1 or any(jnp.shape(x)[axis] % devices for x in jax.tree.leaves(batches)):
+        return batches
+    spec = PartitionSpec(*(None,) * axis, worlds.AXIS)
+    return jax.tree.map(lambda x: jax.lax.with_sharding_constraint(x, NamedSharding(mesh, spec)), batches)

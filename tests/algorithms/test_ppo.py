@@ -175,28 +175,48 @@ def test_a_crashed_run_resumes_to_the_same_result(tmp_path, monkeypatch):
 
 
 TWO_DEVICES = textwrap.dedent(
-    """
-    import dataclasses, jax, jax.numpy as jnp, numpy as np
+    r"""
+    import dataclasses, re, jax, jax.numpy as jnp, numpy as np
     import mjzoo.envs
-    from mjzoo.harness import training
+    from mjzoo.harness import devices, training
     from mjzoo.algorithms import ppo
     assert jax.device_count() == 2
     config = ppo.Config(num_envs=8, unroll_length=8, num_minibatches=2, num_epochs=2, total_steps=256)
     task = mjzoo.envs.make("cartpole_balance")
-    update = jax.jit(lambda t, s: ppo.update(config, t, s))
+    split = dataclasses.replace(config, split_minibatches=True)
+
+    def update(config, task, state):
+        with devices.env_mesh_scope():  # as the harness traces its chunk
+            return ppo.update(config, task, state)
+
+    update = jax.jit(update, static_argnums=0)
     results = []
-    for devices in (jax.devices()[:1], jax.devices()):
-        state = training.shard_envs(ppo.init(config, task, jax.random.key(0)), ppo.PER_ENV_FIELDS, devices)
-        placed = training.replicate(task, devices)
+    for config_, placed in ((config, jax.devices()[:1]), (config, jax.devices()), (split, jax.devices())):
+        state = training.shard_envs(ppo.init(config_, task, jax.random.key(0)), ppo.PER_ENV_FIELDS, placed)
+        task_ = training.replicate(task, placed)
         for _ in range(3):
-            state, _ = update(placed, state)
+            state, _ = update(config_, task_, state)
         results.append(state)
     assert len(results[1].collector.env_state.obs.sharding.device_set) == 2
-    one, two = jax.device_get(results)
-    diff = max(jax.tree.leaves(jax.tree.map(lambda a, b: float(np.max(np.abs(a - b))), one.params, two.params)))
-    print("max param difference", diff)
-    np.testing.assert_allclose(one.collector.env_state.obs, two.collector.env_state.obs, atol=1e-4)
-    assert diff < 1e-4
+    one, two, three = jax.device_get(results)  # split or not, the result of one device
+    for other in (two, three):
+        diff = max(jax.tree.leaves(jax.tree.map(lambda a, b: float(np.max(np.abs(a - b))), one.params, other.params)))
+        print("max param difference", diff)
+        np.testing.assert_allclose(one.collector.env_state.obs, other.collector.env_state.obs, atol=1e-4)
+        assert diff < 1e-4
+
+    def loop_collectives(config_):  # all-reduces in the minibatch loop's body, the busiest computation
+        state, task_ = results[1], training.replicate(task, jax.devices())
+        data = jax.jit(lambda t, s: ppo.rollout(config_, t, s, jax.random.key(1))[1])(task_, state)
+        learn = jax.jit(lambda t, s, d: ppo.improve(config_, t, s, d, jax.random.key(2)))
+        with devices.env_mesh_scope():
+            hlo = learn.lower(task_, state, data).compile().as_text()
+        bodies = re.split(r"\n(?=[%A-Z][^\n]*\{\n)", hlo)
+        body = max(bodies, key=lambda c: len(re.findall(r" fusion\(", c)))
+        return len(re.findall(r" all-reduce(?:-start)?\(", body))
+
+    assert loop_collectives(config) == 0  # each device computes every step whole
+    assert loop_collectives(split) >= 1  # each its share, the gradients summed every step
     odd = ppo.init(dataclasses.replace(config, num_envs=5, num_minibatches=1), task, jax.random.key(0))
     try:  # an uneven split is refused, naming the fix
         training.shard_envs(odd, ppo.PER_ENV_FIELDS)
