@@ -187,10 +187,10 @@ def test_two_devices_give_one_devices_result():
     gives the parameters one device gives."""
     code = textwrap.dedent(
         """
-        import jax, numpy as np, mjzoo, mjzoo.envs
+        import dataclasses, jax, numpy as np, mjzoo, mjzoo.envs
         from mjzoo import motion
         from mjzoo.algorithms import amp
-        from mjzoo.harness import training
+        from mjzoo.harness import devices, training
         from tests.algorithms.test_amp import SMALL, sway_clip
         task = mjzoo.envs.make("pendulum_swingup")
         task = motion.with_reference(task, motion.reference(sway_clip(task), task.mj_model, mjzoo.control_dt(task)))
@@ -200,8 +200,13 @@ def test_two_devices_give_one_devices_result():
         assert len(sharded.ppo.collector.start.sharding.device_set) == 2
         assert len(sharded.disc_params[0]["kernel"].sharding.device_set) == 2  # replicated
         two = jax.jit(amp.update, static_argnums=0)(SMALL, training.replicate(task), sharded)[0]
-        for a, b in zip(jax.tree.leaves((one.ppo.params, one.disc_params)), jax.tree.leaves((two.ppo.params, two.disc_params))):
-            np.testing.assert_allclose(np.asarray(a), np.asarray(b), rtol=2e-4, atol=2e-5)
+        def split_update(config, task, state):  # each device its share of every minibatch step
+            with devices.env_mesh_scope():
+                return amp.update(dataclasses.replace(config, split_minibatches=True), task, state)
+        three = jax.jit(split_update, static_argnums=0)(SMALL, training.replicate(task), sharded)[0]
+        for other in (two, three):
+            for a, b in zip(jax.tree.leaves((one.ppo.params, one.disc_params)), jax.tree.leaves((other.ppo.params, other.disc_params))):
+                np.testing.assert_allclose(np.asarray(a), np.asarray(b), rtol=2e-4, atol=2e-5)
         print("ok")
         """
     )
