@@ -85,7 +85,9 @@ def learn(
 
     def epoch(carry: PyTree, key: Array):
         batches = minibatches(key)
-        return jax.lax.scan(step, carry, _split_over_devices(batches, 2 if sequences else 1) if split_over_devices else batches)
+        if split_over_devices:
+            batches = _split_over_devices(batches, 2 if sequences else 1)
+        return jax.lax.scan(step, carry, batches)
 
     carry, metrics = jax.lax.scan(epoch, carry, jax.random.split(key, num_epochs))
     return carry, jax.tree.map(jnp.mean, metrics)
