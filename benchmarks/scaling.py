@@ -116,7 +116,7 @@ def worker(env: str, devices: int, envs_per_device: int, steps: int, smoke: bool
     threshold = THRESHOLDS.get(env, float("inf"))
     reached = next((i for i, (_, _, r) in enumerate(curve) if r >= threshold), None)
     result.write_text(json.dumps({
-        "algorithm": algorithm_name, "devices": devices, "seed": seed, "processes": jax.process_count(), "device_kind": jax.devices()[0].device_kind, "num_envs": config.num_envs,
+        "algorithm": algorithm_name, "config_fields": list(config_fields), "devices": devices, "seed": seed, "processes": jax.process_count(), "device_kind": jax.devices()[0].device_kind, "num_envs": config.num_envs,
         "num_minibatches": config.num_minibatches, "unroll_length": config.unroll_length, "impl": training.physics_info(task).get("impl"),
         "steps_per_s": steps_per_s, "curve": curve, "final_return": curve[-1][2],
         "time_to_threshold_s": None if reached is None else curve[reached][1], "threshold": threshold,
