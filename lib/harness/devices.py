@@ -1,5 +1,6 @@
 """Where a run's arrays live: the env batch of a train state split over the devices,
-everything else replicated; XLA then splits the work and averages gradients.
+everything else replicated; XLA then splits the work that follows the envs (the learner
+too, where `learning.learn` splits its minibatches over the env mesh).
 
 The devices are `jax.devices()`: in a multi-process run (`mjzoo.harness.distributed`)
 those of every process. Each process then passes the same whole value (same seed, same
@@ -29,7 +30,7 @@ __all__ = ["shard_envs", "env_shardings", "check_split", "replicate", "env_mesh"
 def shard_envs(train_state: Any, per_env_fields: Sequence[str], devices: list | None = None) -> Any:
     """Places the leaves of a train state's `per_env_fields` (an algorithm's
     `PER_ENV_FIELDS`) across devices (leading axis), the rest replicated, as
-    `env_shardings` says. Under jit, XLA then splits the env batch and averages gradients
+    `env_shardings` says. Under jit, XLA then splits the env batch
     (and, on Warp, each device steps its own worlds: `mjzoo.worlds.partition`).
 
     On one device this commits the state to it: jit compiles separately for
