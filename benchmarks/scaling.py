@@ -4,8 +4,8 @@ and wall-clock time to the task's return threshold (humanoid_walk: 6000, walking
 Each device count runs in its own process that sees only that many devices
 (``CUDA_VISIBLE_DEVICES``; on a CPU, ``--xla_force_host_platform_device_count``), with
 the env's registered PPO hyperparameters and ``num_envs = envs_per_device x devices``:
-the harness shards the env batch over every local device and XLA averages the
-gradients (`mjzoo.harness.devices`). Reported per count: the median training steps/s
+the harness shards the env batch over every local device (`mjzoo.harness.devices`;
+the learner runs whole on each unless ``--config split_minibatches=True``). Reported per count: the median training steps/s
 after the first chunk, its speedup over one device and its share of linear scaling,
 the time to the threshold (compile included; every chunk of about 3.3M env steps is
 evaluated) and the final evaluation return. Goal (issue 19): >= 1.85x on 2 GPUs and
