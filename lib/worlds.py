@@ -24,7 +24,7 @@ from mujoco import mjx
 from mjzoo.tree import where as leafwise_where
 
 __all__ = [
-    "AXIS", "sized", "own", "shared", "where", "partition", "vmap_transition", "Contacts", "contacts", "overflow",
+    "AXIS", "sized", "own", "shared", "where", "partition", "mesh_devices", "vmap_transition", "Contacts", "contacts", "overflow",
     "overflow_metrics", "clear_overflow", "probe_capacity", "OVERFLOW_CAPACITY", "OVERFLOW_SOLVER",
 ]  # fmt: skip
 
@@ -137,6 +137,13 @@ def where(cond: jax.Array, on_true: mjx.Data, on_false: mjx.Data) -> mjx.Data:
     return on_false.replace(**public, _impl=on_false._impl.replace(**impl))
 
 
+def mesh_devices() -> int:
+    """The devices along `AXIS` of the current mesh (``jax.set_mesh``, or the abstract mesh
+    the training harness sets while it traces); 1 without such a mesh."""
+    mesh = jax.sharding.get_abstract_mesh()
+    return 1 if mesh.empty or AXIS not in mesh.axis_names else mesh.shape[AXIS]
+
+
 def partition(tree: Any, axis: str = AXIS) -> Any:
     """A `PartitionSpec` for each leaf of a batch of worlds (leading axis: the worlds), to
     split it over the devices of mesh axis `axis`: each world's leaves along that axis,
@@ -177,8 +184,7 @@ def vmap_transition(step: Any, task: Any, states: Any, *per_world: Any) -> Any:
     its share of the contact pool, and the pool's counters are summed over the devices.
     `states` must then be split as `partition` says (`mjzoo.harness.devices.shard_envs`)."""
     batched = jax.vmap(step, in_axes=(None,) + (0,) * (1 + len(per_world)))
-    mesh = jax.sharding.get_abstract_mesh()
-    devices = 1 if mesh.empty or AXIS not in mesh.axis_names else mesh.shape[AXIS]
+    devices = mesh_devices()
     warp = [x for x in jax.tree.leaves(states, is_leaf=_is_data) if _is_data(x) and x.impl == mjx.Impl.WARP]
     if devices == 1 or not warp:
         return batched(task, states, *per_world)

@@ -97,9 +97,9 @@ def _split_over_devices(batches: PyTree, axis: int) -> PyTree:
     """Stacked minibatches with each minibatch's samples (`axis`) split over the devices of
     the env mesh (`mjzoo.worlds.AXIS`); without such a mesh, or where the samples do not
     split evenly, as given."""
-    mesh = jax.sharding.get_abstract_mesh()
-    devices = 1 if mesh.empty or worlds.AXIS not in mesh.axis_names else mesh.shape[worlds.AXIS]
+    devices = worlds.mesh_devices()
     if devices == 1 or any(jnp.shape(x)[axis] % devices for x in jax.tree.leaves(batches)):
         return batches
     spec = PartitionSpec(*(None,) * axis, worlds.AXIS)
-    return jax.tree.map(lambda x: jax.lax.with_sharding_constraint(x, NamedSharding(mesh, spec)), batches)
+    sharding = NamedSharding(jax.sharding.get_abstract_mesh(), spec)
+    return jax.tree.map(lambda x: jax.lax.with_sharding_constraint(x, sharding), batches)
