@@ -81,8 +81,8 @@ class Config:
     # layers, gradients and the optimizer stay float32); the learner's matmuls and
     # activations then move half the bytes.
     compute_dtype: Literal["float32", "bfloat16"] = "float32"
-    # Several devices: each computes its share of every minibatch step, not all of it (`learning.learn`).
-    split_minibatches: bool = False
+    # Several devices: each its share of every minibatch step, else all of it (`learning.learn`).
+    split_minibatches: bool = True
     recurrent: bool = False
     gru_hidden_size: int = 64
     # A dict observation: the entry each network sees (Brax's names; e.g. the value

@@ -25,11 +25,11 @@ Several GPUs: ``--devices N`` splits one update over the first N devices as
 minibatches and gradient steps, each minibatch split N ways), so that the minibatch
 step's time shows whether splitting it shortens it; its kernel count then includes the
 gradients' all-reduce. ``--env-config`` takes each env's registered PPO hyperparameters
-instead of Playground's. The variant ``split=split_minibatches:True`` splits each
-minibatch over the devices (`ppo.Config.split_minibatches`), where by default every
-device computes every minibatch step whole:
+instead of Playground's. By default each minibatch step is split over the devices
+(`ppo.Config.split_minibatches`); the variant ``whole=split_minibatches:False`` has
+every device compute every step whole:
 
-    python benchmarks/ppo_profile.py --envs humanoid_walk --env-config --devices 4 --variants base split=split_minibatches:True
+    python benchmarks/ppo_profile.py --envs humanoid_walk --env-config --devices 4 --variants base whole=split_minibatches:False
 """
 
 from __future__ import annotations
@@ -155,6 +155,7 @@ def profile(env: str, base: ppo.Config, fields: dict[str, str], repeats: int, de
         t_in_loop = best_of(lambda s, k: in_loop(config, placed_task, s, k, 128, steps), state, key, repeats=1)
     sgd_steps = config.num_epochs * config.num_minibatches
     return {"env": env, "devices": devices, "num_envs": config.num_envs, "unroll_length": config.unroll_length,
+            "steps_per_update": config.steps_per_update, "sgd_steps": sgd_steps,
             "minibatch_samples_per_device": config.steps_per_update // config.num_minibatches // devices,
             "config": {**fields, **({"precision": precision} if precision else {})},
             "rollout_s": t_rollout, "improve_s": t_improve, "update_s": t_update, "update_onward_s": t_onward, "chunk_update_s": t_chunk, "evaluate_128_envs_s": t_evaluate,
@@ -178,19 +179,20 @@ def main() -> None:
     if args.smoke:
         base = dataclasses.replace(base, **SMOKE)
     device = jax.devices()[0].device_kind
-    print(f"device: {device}, jax {jax.__version__}; per update: {base.steps_per_update:,} env steps, "
-          f"{base.num_epochs * base.num_minibatches} minibatch steps", flush=True)  # fmt: skip
+    print(f"device: {device}, jax {jax.__version__}", flush=True)
     rows = []
     args.out.mkdir(parents=True, exist_ok=True)
     name = f"ppo_profile_{jax.default_backend()}" + (f"_{args.devices}_devices" if args.devices > 1 else "")
     path = args.out / f"{name}{'_' + args.tag if args.tag else ''}.json"
     print(f"{'env':<28} {'variant':<10} {'rollout s':>9} {'improve s':>9} {'update s':>9} {'onward s':>8} {'chunk s':>8} {'sgd ms':>7} {'kernels':>7} {'steps/s':>11} {'eval s':>7} {'in loop':>7}")
     for env in args.envs:
+        config = base
+        if args.env_config:
+            config = ppo.Config(**{**mjzoo.envs.hyperparameters(env, "ppo"), "total_steps": 10**9,
+                                   **(SMOKE if args.smoke else {})})  # fmt: skip
+        print(f"{env}: per update (unless a variant changes it) {config.steps_per_update:,} env steps x devices, "
+              f"{config.num_epochs * config.num_minibatches} minibatch steps", flush=True)  # fmt: skip
         for name, fields in map(parse_variant, args.variants):
-            config = base
-            if args.env_config:
-                config = ppo.Config(**{**mjzoo.envs.hyperparameters(env, "ppo"), "total_steps": 10**9,
-                                       **(SMOKE if args.smoke else {})})  # fmt: skip
             row = {"variant": name, **profile(env, config, fields, args.repeats, args.devices)}
             rows.append(row)
             print(f"{env:<28} {name:<10} {row['rollout_s']:>9.3f} {row['improve_s']:>9.3f} {row['update_s']:>9.3f} {row['update_onward_s']:>8.3f} {row['chunk_update_s']:>8.3f} "

@@ -5,7 +5,7 @@ Each device count runs in its own process that sees only that many devices
 (``CUDA_VISIBLE_DEVICES``; on a CPU, ``--xla_force_host_platform_device_count``), with
 the env's registered PPO hyperparameters and ``num_envs = envs_per_device x devices``:
 the harness shards the env batch over every local device (`mjzoo.harness.devices`;
-the learner runs whole on each unless ``--config split_minibatches=True``). Reported per count: the median training steps/s
+each minibatch step is split too, unless ``--config split_minibatches=False``). Reported per count: the median training steps/s
 after the first chunk, its speedup over one device and its share of linear scaling,
 the time to the threshold (compile included; every chunk of about 3.3M env steps is
 evaluated) and the final evaluation return. Goal (issue 19): >= 1.85x on 2 GPUs and
@@ -27,7 +27,7 @@ AMP the same way (default env `humanoid_amp_walk`; its threshold: lasting the ep
     python benchmarks/scaling.py --devices 4 --steps 40000000 --impl jax --split-unroll --keep-runs
     python benchmarks/scaling.py --devices 1 --seeds 0 1 2 3 --parallel --steps 40000000 --impl jax
     python benchmarks/scaling.py --devices 1 2 --steps 20000000 --impl jax --processes
-    python benchmarks/scaling.py --devices 4 --steps 40000000 --impl jax --split-unroll --config split_minibatches=True
+    python benchmarks/scaling.py --devices 4 --steps 40000000 --impl jax --split-unroll --config split_minibatches=False
     python benchmarks/scaling.py --algorithm amp --devices 1 2 4 --steps 40000000 --impl jax --split-unroll
     python benchmarks/scaling.py --env cartpole_balance --devices 1 2 --smoke   # on a CPU
 """

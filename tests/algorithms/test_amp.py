@@ -199,10 +199,11 @@ def test_two_devices_give_one_devices_result():
         sharded = training.shard_envs(state, amp.PER_ENV_FIELDS)
         assert len(sharded.ppo.collector.start.sharding.device_set) == 2
         assert len(sharded.disc_params[0]["kernel"].sharding.device_set) == 2  # replicated
-        two = jax.jit(amp.update, static_argnums=0)(SMALL, training.replicate(task), sharded)[0]
-        def split_update(config, task, state):  # each device its share of every minibatch step
+        whole = dataclasses.replace(SMALL, split_minibatches=False)  # each device every minibatch step whole
+        two = jax.jit(amp.update, static_argnums=0)(whole, training.replicate(task), sharded)[0]
+        def split_update(config, task, state):  # each device its share of every step, under the env mesh
             with devices.env_mesh_scope():
-                return amp.update(dataclasses.replace(config, split_minibatches=True), task, state)
+                return amp.update(config, task, state)
         three = jax.jit(split_update, static_argnums=0)(SMALL, training.replicate(task), sharded)[0]
         for other in (two, three):
             for a, b in zip(jax.tree.leaves((one.ppo.params, one.disc_params)), jax.tree.leaves((other.ppo.params, other.disc_params))):

@@ -183,7 +183,7 @@ TWO_DEVICES = textwrap.dedent(
     assert jax.device_count() == 2
     config = ppo.Config(num_envs=8, unroll_length=8, num_minibatches=2, num_epochs=2, total_steps=256)
     task = mjzoo.envs.make("cartpole_balance")
-    split = dataclasses.replace(config, split_minibatches=True)
+    whole = dataclasses.replace(config, split_minibatches=False)  # the default splits
 
     def update(config, task, state):
         with devices.env_mesh_scope():  # as the harness traces its chunk
@@ -191,7 +191,7 @@ TWO_DEVICES = textwrap.dedent(
 
     update = jax.jit(update, static_argnums=0)
     results = []
-    for config_, placed in ((config, jax.devices()[:1]), (config, jax.devices()), (split, jax.devices())):
+    for config_, placed in ((config, jax.devices()[:1]), (whole, jax.devices()), (config, jax.devices())):
         state = training.shard_envs(ppo.init(config_, task, jax.random.key(0)), ppo.PER_ENV_FIELDS, placed)
         task_ = training.replicate(task, placed)
         for _ in range(3):
@@ -215,8 +215,8 @@ TWO_DEVICES = textwrap.dedent(
         body = max(bodies, key=lambda c: len(re.findall(r" fusion\(", c)))
         return len(re.findall(r" all-reduce(?:-start)?\(", body))
 
-    assert loop_collectives(config) == 0  # each device computes every step whole
-    assert loop_collectives(split) >= 1  # each its share, the gradients summed every step
+    assert loop_collectives(whole) == 0  # each device computes every step whole
+    assert loop_collectives(config) >= 1  # each its share, the gradients summed every step
     odd = ppo.init(dataclasses.replace(config, num_envs=5, num_minibatches=1), task, jax.random.key(0))
     try:  # an uneven split is refused, naming the fix
         training.shard_envs(odd, ppo.PER_ENV_FIELDS)
