@@ -25,9 +25,10 @@ class Settings:
     multiple of `eval_every` (counted over the whole run, so a resumed run evaluates at
     the same steps); with `eval_every=None` (the default), the evaluations so far and
     one more at the last one's cost stay within `eval_budget` of the wall-clock time
-    since launch (the first chunk evaluates, to learn that cost; waiting for the
-    evaluation's compile, a one-off, is not counted), so evaluating never slows training
-    by more than that share; `eval_every_seconds` have passed since the
+    since launch and the evaluation has compiled (the first chance evaluates, to learn
+    that cost; an evaluation still compiling in the background is put off, rather than
+    stopping training for its compile), so evaluating never slows training by more than
+    that share; `eval_every_seconds` have passed since the
     last evaluation began (or since the launch); or it is the first chance after
     `eval_first_seconds` (KSim's "first validation after M seconds"). Metrics lines of
     chunks that do not evaluate lack eval/*. Evaluating with `eval_every=0` and no
@@ -122,15 +123,16 @@ class EvalSchedule:
         self.last: float | None = None  # when the last evaluation of this launch began
         self.total, self.latest = 0.0, 0.0  # seconds of all evaluations so far, and of the latest
 
-    def due(self, chunk: int, final: bool, now: float) -> bool:
+    def due(self, chunk: int, final: bool, now: float, compiled: bool = True) -> bool:
         """Whether chunk number `chunk` (1-based), ending at `now`, evaluates; if so,
-        the clock trigger counts from now."""
+        the clock trigger counts from now. `compiled`: whether the evaluation's program
+        is ready; the budget's trigger waits for it, the others wait for its compile."""
         s = self.settings
         waiting = s.eval_first_seconds is not None and now - self.launched < s.eval_first_seconds
         since = now - (self.launched if self.last is None else self.last)
         affordable = self.total + self.latest <= s.eval_budget * (now - self.launched)
         fires = (
-            (s.eval_every is None and affordable)
+            (s.eval_every is None and affordable and compiled)
             or (bool(s.eval_every) and chunk % s.eval_every == 0)
             or (s.eval_every_seconds is not None and since >= s.eval_every_seconds)
             or (s.eval_first_seconds is not None and self.last is None)

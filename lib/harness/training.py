@@ -220,7 +220,8 @@ class _Loop:
             self.shown["first"] = f"{end - self.launched:.1f}s"
         with self.progress.paused():  # the bar's steps/s is the training rate
             final = updates >= self.total_updates
-            due = (self.schedule.due(number, final, end), checkpoint_due(self.settings, number, final, end - self.saved))
+            compiled = not compilation.still_compiling(self.ahead, 0.0)  # else the budget puts the evaluation off
+            due = (self.schedule.due(number, final, end, compiled), checkpoint_due(self.settings, number, final, end - self.saved))
             evaluated, save = (bool(x) for x in distributed.agree(due))  # process 0's clock: one collective for both
             metrics.update(self._evaluate(state, step, final) if evaluated else {"perf/eval_s": 0.0})
         metrics["perf/elapsed_s"] = _clock() - self.launched
@@ -236,12 +237,11 @@ class _Loop:
         return state
 
     def compile_evaluation_ahead(self, state: Any) -> None:
-        """Compiles the evaluation on a background thread while the first chunk runs: the
-        first evaluation then waits for no compiler (`compilation.compile_ahead`). `state`
-        is described by shapes and shardings (`compilation.described`); the key is a real one, as a
-        key's description lowers to another program. On Warp's GPU physics it compiles
-        now, on this thread, and `step` calls it before the chunk runs
-        (`compilation.overlaps_safely`)."""
+        """Compiles the evaluation on a background thread while the first chunk runs
+        (`compilation.compile_ahead`). `state` is described by shapes and shardings
+        (`compilation.described`); the key is a real one, as a key's description lowers to
+        another program. On Warp's GPU physics it compiles now, on this thread, and `step`
+        calls it before the chunk runs (`compilation.overlaps_safely`)."""
         key = jax.random.fold_in(self.key, 0)
         s = self.settings
         self.ahead = compilation.compile_ahead(self.evaluate, self.config, self.task, state, key, s.eval_envs,

@@ -105,7 +105,8 @@ LOGGING = counter(update=lambda config, task, s: (Count(s.updates + 1, s.per_env
 
 class FakeClock:
     """training._clock: each chunk of updates takes 10 s, each evaluation `eval_s`;
-    nothing else takes time."""
+    nothing else takes time. The evaluation's background compile ends at
+    `eval_compile_s` after launch (the evaluation itself then compiles at its first call)."""
 
     def __init__(self, monkeypatch: pytest.MonkeyPatch, eval_s: float = 0.0, eval_compile_s: float = 0.0) -> None:
         self.now = 0.0
@@ -126,11 +127,13 @@ class FakeClock:
         monkeypatch.setattr(training, "_clock", lambda: self.now)
         monkeypatch.setattr(training, "_chunk_fn", timed(real_chunk, 10.0))
         monkeypatch.setattr(training, "_evaluate_fn", timed(real_evaluate, eval_s))
-        if eval_compile_s:  # the first evaluation waits that long for its compile on a thread
-            waiting = types.SimpleNamespace(join=lambda *patience: setattr(self, "now", self.now + eval_compile_s),
-                                            is_alive=lambda: False)  # fmt: skip
-            ahead = lambda loop, state: setattr(loop, "ahead", waiting)  # noqa: E731
-            monkeypatch.setattr(training._Loop, "compile_evaluation_ahead", ahead)
+
+        def join(timeout: float | None = None) -> None:  # a look (timeout 0) takes no time; a wait, until done
+            if timeout != 0:
+                self.now = max(self.now, eval_compile_s)
+
+        compiling = types.SimpleNamespace(join=join, is_alive=lambda: self.now < eval_compile_s)
+        monkeypatch.setattr(training._Loop, "compile_evaluation_ahead", lambda loop, state: setattr(loop, "ahead", compiling))
 
 
 def lines(tmp_path, chunks: int, **settings) -> list[dict]:
@@ -187,14 +190,26 @@ def test_evaluation_by_budget_keeps_its_share_of_the_wall_clock(tmp_path, monkey
     assert sum(r["perf/eval_s"] for r in records[:-1]) <= budget * before_last["perf/elapsed_s"] + 1e-9
 
 
-def test_waiting_for_the_evaluations_compile_is_not_charged_to_its_budget(tmp_path, monkeypatch):
-    """The first evaluation waits 30 s for its compile: charged, it held off every other
-    evaluation until the end (the humanoid's 230 s run evaluated twice). Not charged:
-    2 s at t=42; then 2 + 2 <= 0.05 x 82 (chunk 5), 6 <= 0.05 x 124 (chunk 9); the last."""
+@pytest.mark.parametrize(
+    "settings, chunks, first_eval_s",
+    [
+        # By the budget, training goes on meanwhile: chunks 1 and 2 do not evaluate, chunk 3
+        # (t=30) does, 2 s; then 2 + 2 <= 0.05 x 82 (chunk 8), 6 <= 0.05 x 124 (the last).
+        ({}, [3, 8, 12], 2.0),
+        # Asked for every chunk: the first evaluation waits from t=10 to t=30 (reported as it
+        # was), not charged to a budget: charged, it held off every later evaluation.
+        ({"eval_every": 1}, list(range(1, 13)), 22.0),
+    ],
+)
+def test_an_evaluation_still_compiling_is_put_off_by_the_budget_and_waited_for_on_request(
+    tmp_path, monkeypatch, settings, chunks, first_eval_s
+):
+    """The evaluation compiles in the background until t=30 (a humanoid's on a GPU: ~20 s
+    after the first update)."""
     FakeClock(monkeypatch, eval_s=2.0, eval_compile_s=30.0)
-    records = lines(tmp_path, 12, log_every=1)
-    assert evaluated(records) == [1, 5, 9, 12]
-    assert records[0]["perf/eval_s"] == 32.0  # reported as it was: the compile included
+    records = lines(tmp_path, 12, log_every=1, **settings)
+    assert evaluated(records) == chunks
+    assert records[chunks[0] - 1]["perf/eval_s"] == first_eval_s
 
 
 @pytest.mark.parametrize(
