@@ -126,7 +126,8 @@ class EvalSchedule:
     def due(self, chunk: int, final: bool, now: float, compiled: bool = True) -> bool:
         """Whether chunk number `chunk` (1-based), ending at `now`, evaluates; if so,
         the clock trigger counts from now. `compiled`: whether the evaluation's program
-        is ready; the budget's trigger waits for it, the others wait for its compile."""
+        is ready. The budget fires only once it is; the other triggers fire anyway, and
+        the evaluation then waits for its compile."""
         s = self.settings
         waiting = s.eval_first_seconds is not None and now - self.launched < s.eval_first_seconds
         since = now - (self.launched if self.last is None else self.last)
