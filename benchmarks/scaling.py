@@ -249,8 +249,10 @@ def main() -> None:
         return
     import mjzoo.envs
     from mjzoo.algorithms import ppo
+    from mjzoo.harness.cli.arguments import parse_assignments
 
-    tuned = mjzoo.envs.hyperparameters(args.env, args.algorithm)
+    # The workers' config as they will build it, so that --split-unroll is checked against an overridden unroll too.
+    tuned = {**mjzoo.envs.hyperparameters(args.env, args.algorithm), **parse_assignments(tuple(args.config), "--config")}
     args.envs_per_device = args.envs_per_device or (16 if args.smoke else tuned.get("num_envs", 2048))
     args.steps = args.steps or tuned.get("total_steps", 10**8)
     args.gpus = visible_gpus()
