@@ -46,8 +46,20 @@ from mjzoo.harness import training
 from mjzoo.learning import discriminators, motion_features, networks, normalization, replay
 from mjzoo.types import Task
 
-__all__ = ["PER_ENV_FIELDS", "Config", "TrainState", "diagnose", "evaluate", "init", "policy", "policy_params",
-           "reference_windows", "style_task", "train", "update"]  # fmt: skip
+__all__ = [
+    "PER_ENV_FIELDS",
+    "Config",
+    "TrainState",
+    "diagnose",
+    "evaluate",
+    "init",
+    "policy",
+    "policy_params",
+    "reference_windows",
+    "style_task",
+    "train",
+    "update",
+]
 
 Array = jax.Array
 
@@ -88,8 +100,11 @@ class Config(ppo.Config):
             value = getattr(self, field)
             need(isinstance(value, int) and not isinstance(value, bool) and value >= 1, field, "an integer >= 1")
         need(self.num_frames >= 2, "num_frames", ">= 2 (a window holds a transition)")
-        need(self.steps_per_update % self.disc_minibatches == 0, "disc_minibatches",
-             f"a divisor of num_envs * unroll_length = {self.steps_per_update}")  # fmt: skip
+        need(
+            self.steps_per_update % self.disc_minibatches == 0,
+            "disc_minibatches",
+            f"a divisor of num_envs * unroll_length = {self.steps_per_update}",
+        )
         need(self.disc_loss in ("least_squares", "logistic"), "disc_loss", "least_squares or logistic")
         need(self.disc_learning_rate > 0, "disc_learning_rate", "> 0")
         need(self.disc_max_grad_norm is None or self.disc_max_grad_norm > 0, "disc_max_grad_norm", "None or > 0")
@@ -150,8 +165,10 @@ def style_task(config: Config, task: Task) -> Task:
 
 def _reference(task: Task) -> motion.Reference:
     if not isinstance(task.motion, motion.Reference):
-        raise ValueError("amp: the task has no motion reference to imitate; attach one with "
-                         "mjzoo.motion.with_reference(task, mjzoo.motion.reference(clips, task.mj_model, dt))")  # fmt: skip
+        raise ValueError(
+            "amp: the task has no motion reference to imitate; attach one with "
+            "mjzoo.motion.with_reference(task, mjzoo.motion.reference(clips, task.mj_model, dt))"
+        )
     return task.motion
 
 
@@ -160,8 +177,9 @@ def _discriminator(config: Config) -> networks.Network:
 
 
 def _disc_optimizer(config: Config) -> optax.GradientTransformation:
-    return discriminators.discriminator_optimizer(config.disc_learning_rate, config.disc_weight_decay,
-                                                  config.disc_max_grad_norm)  # fmt: skip
+    return discriminators.discriminator_optimizer(
+        config.disc_learning_rate, config.disc_weight_decay, config.disc_max_grad_norm
+    )
 
 
 def _logit(config: Config) -> Callable[[Any, Array], Array]:
@@ -218,23 +236,31 @@ def update(config: Config, task: Task, train_state: TrainState) -> tuple[TrainSt
     style = discriminators.style_reward(config.disc_loss, logits[..., 0])
     reward = config.task_weight * data.reward + config.style_weight * style
     ppo_state = ts.ppo.replace(collector=collector, key=key, updates=ts.ppo.updates + 1)
-    ppo_state, learn_metrics = ppo.improve(pcfg, windowed, ppo_state, dataclasses.replace(data, reward=reward), learn_key)
+    ppo_state, learn_metrics = ppo.improve(
+        pcfg, windowed, ppo_state, dataclasses.replace(data, reward=reward), learn_key
+    )
 
     template = jax.tree.map(lambda x: x[0], collector.env_state.data)
     ts, disc_metrics = _learn_discriminator(config, task, ts.replace(ppo=ppo_state), windows, template, disc_key)
-    style_metrics = {"amp/style_reward": jnp.mean(style), "amp/style_reward_std": jnp.std(style),
-                     "amp/task_reward": jnp.mean(data.reward), "amp/replay_size": ts.replay.size.astype(jnp.float32)}  # fmt: skip
+    style_metrics = {
+        "amp/style_reward": jnp.mean(style),
+        "amp/style_reward_std": jnp.std(style),
+        "amp/task_reward": jnp.mean(data.reward),
+        "amp/replay_size": ts.replay.size.astype(jnp.float32),
+    }
     return ts, {**collect_metrics, **learn_metrics, **disc_metrics, **style_metrics}
 
 
-def _learn_discriminator(config: Config, task: Task, ts: TrainState, windows: Array, template: Any,
-                         key: Array) -> tuple[TrainState, dict[str, Array]]:  # fmt: skip
+def _learn_discriminator(
+    config: Config, task: Task, ts: TrainState, windows: Array, template: Any, key: Array
+) -> tuple[TrainState, dict[str, Array]]:
     """`disc_epochs` x `disc_minibatches` steps on this update's windows [T, N, k, F],
     as many replayed ones and as many reference ones."""
     t, n = windows.shape[:2]
     insert_key, replay_key, reference_key, learn_key = jax.random.split(key, 4)
-    buffer = replay.insert(ts.replay, windows.reshape((t * n,) + windows.shape[2:]), insert_key,
-                           config.replay_keep_probability)  # fmt: skip
+    buffer = replay.insert(
+        ts.replay, windows.reshape((t * n,) + windows.shape[2:]), insert_key, config.replay_keep_probability
+    )
     replayed = replay.sample(buffer, replay_key, t * n).reshape(windows.shape)
     reference = reference_windows(config, task, template, reference_key, t * n).reshape(windows.shape)
     stats = normalization.update_stats(ts.disc_stats, windows, num_batch_dims=2)
@@ -245,9 +271,15 @@ def _learn_discriminator(config: Config, task: Task, ts: TrainState, windows: Ar
     def loss(params, batch):
         policy = jnp.concatenate([batch["fresh"], batch["replayed"]])
         return discriminators.discriminator_loss(
-            config.disc_loss, logit, params, batch["reference"], policy, config.gradient_penalty_weight,
-            config.policy_gradient_penalty, config.logit_l2_weight,
-        )  # fmt: skip
+            config.disc_loss,
+            logit,
+            params,
+            batch["reference"],
+            policy,
+            config.gradient_penalty_weight,
+            config.policy_gradient_penalty,
+            config.logit_l2_weight,
+        )
 
     def step(carry, batch):
         params, opt_state = carry
@@ -255,11 +287,18 @@ def _learn_discriminator(config: Config, task: Task, ts: TrainState, windows: Ar
         updates, opt_state = optimizer.update(grads, opt_state, params)
         return (optax.apply_updates(params, updates), opt_state), metrics
 
-    data = jax.tree.map(lambda w: normalization.normalize(stats, w),
-                        {"fresh": windows, "replayed": replayed, "reference": reference})  # fmt: skip
-    (params, opt_state), metrics = learning.learn(step, (ts.disc_params, ts.disc_opt_state), data, learn_key,
-                                                  num_epochs=config.disc_epochs, num_minibatches=config.disc_minibatches,
-                                                  split_over_devices=config.split_minibatches)  # fmt: skip
+    data = jax.tree.map(
+        lambda w: normalization.normalize(stats, w), {"fresh": windows, "replayed": replayed, "reference": reference}
+    )
+    (params, opt_state), metrics = learning.learn(
+        step,
+        (ts.disc_params, ts.disc_opt_state),
+        data,
+        learn_key,
+        num_epochs=config.disc_epochs,
+        num_minibatches=config.disc_minibatches,
+        split_over_devices=config.split_minibatches,
+    )
     return ts.replace(disc_params=params, disc_opt_state=opt_state, disc_stats=stats, replay=buffer), metrics
 
 
@@ -280,8 +319,9 @@ def policy(config: Config, task: Task, deterministic: bool = True) -> Callable[[
     return ppo.policy(dataclasses.replace(config, policy_obs_key=None, value_obs_key=None), task, deterministic)
 
 
-def evaluate(config: Config, task: Task, train_state: TrainState, key: Array, num_envs: int,
-             num_steps: int | None = None):  # fmt: skip
+def evaluate(
+    config: Config, task: Task, train_state: TrainState, key: Array, num_envs: int, num_steps: int | None = None
+):
     """Deterministic episodes scored by the task's own reward, as `ppo.evaluate`:
     (mean return, per-env returns [num_envs], Trajectory of env 0 [num_steps])."""
     return ppo.evaluate(_ppo(config), style_task(config, task), train_state.ppo, key, num_envs, num_steps)
@@ -296,8 +336,10 @@ def diagnose(history: Sequence[dict[str, float]], chunks: int = 3) -> str | None
     names = ("disc/accuracy_reference", "disc/accuracy_policy")
     recent = [[m.get(name, 0.0) for name in names] for m in history[-chunks:]]
     if len(recent) == chunks and all(min(accuracies) > 0.99 for accuracies in recent):
-        return (f"amp: the discriminator has won: accuracy > 0.99 on reference and policy windows over the last "
-                f"{chunks} chunks; raise gradient_penalty_weight or lower disc_learning_rate")  # fmt: skip
+        return (
+            f"amp: the discriminator has won: accuracy > 0.99 on reference and policy windows over the last "
+            f"{chunks} chunks; raise gradient_penalty_weight or lower disc_learning_rate"
+        )
     return None
 
 

@@ -42,9 +42,11 @@ class Config(planning.SamplingConfig):
     def __post_init__(self) -> None:
         super().__post_init__()
         checks = {
-            "num_elites": 1 <= self.num_elites <= self.num_samples, "sigma_min": 0 <= self.sigma_min,
-            "sigma_max": self.sigma_min <= self.sigma_max, "explore_fraction": 0 <= self.explore_fraction < 1,
-        }  # fmt: skip
+            "num_elites": 1 <= self.num_elites <= self.num_samples,
+            "sigma_min": 0 <= self.sigma_min,
+            "sigma_max": self.sigma_min <= self.sigma_max,
+            "explore_fraction": 0 <= self.explore_fraction < 1,
+        }
         for field, ok in checks.items():
             if not ok:
                 raise ValueError(f"cem.Config: invalid {field}={getattr(self, field)!r}")
@@ -66,10 +68,12 @@ def plan(
     (`planning.as_terminal_value`: a Partial whose weights are leaves, not recompiled)."""
     half_range = planning.half_range(task)
     num_explore = int(config.explore_fraction * config.num_samples)
-    stds = jnp.concatenate([
-        jnp.broadcast_to(state.std, (config.num_samples - num_explore,) + state.std.shape),
-        jnp.broadcast_to(config.sigma_max * half_range, (num_explore,) + state.std.shape),
-    ])  # [N, K, nu]  # fmt: skip
+    stds = jnp.concatenate(
+        [
+            jnp.broadcast_to(state.std, (config.num_samples - num_explore,) + state.std.shape),
+            jnp.broadcast_to(config.sigma_max * half_range, (num_explore,) + state.std.shape),
+        ]
+    )  # [N, K, nu]
     state, samples, costs = planning.sample_around(config, task, state, env_state, key, stds, terminal_value)
     mean, std = planning.cem_update(
         samples, costs, config.num_elites, config.sigma_min * half_range, config.sigma_max * half_range

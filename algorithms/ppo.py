@@ -48,7 +48,7 @@ __all__ = [
     "rollout",
     "train",
     "update",
-]  # fmt: skip
+]
 
 Array = jax.Array
 ACTIVATIONS = {"swish": jax.nn.swish, "tanh": jnp.tanh, "relu": jax.nn.relu, "elu": jax.nn.elu}
@@ -103,10 +103,16 @@ class Config:
         for field in ("num_envs", "unroll_length", "num_minibatches", "num_epochs", "total_steps", "gru_hidden_size"):
             value = getattr(self, field)
             need(isinstance(value, int) and not isinstance(value, bool) and value >= 1, field, "an integer >= 1")
-        need((self.num_envs * self.unroll_length) % self.num_minibatches == 0, "num_minibatches",
-             f"a divisor of num_envs * unroll_length = {self.num_envs * self.unroll_length}")  # fmt: skip
-        need(not self.recurrent or self.num_envs % self.num_minibatches == 0, "num_minibatches",
-             "a divisor of num_envs (recurrent minibatches split whole sequences)")  # fmt: skip
+        need(
+            (self.num_envs * self.unroll_length) % self.num_minibatches == 0,
+            "num_minibatches",
+            f"a divisor of num_envs * unroll_length = {self.num_envs * self.unroll_length}",
+        )
+        need(
+            not self.recurrent or self.num_envs % self.num_minibatches == 0,
+            "num_minibatches",
+            "a divisor of num_envs (recurrent minibatches split whole sequences)",
+        )
         need(self.learning_rate > 0, "learning_rate", "> 0")
         need(self.lr_schedule in ("constant", "linear", "cosine"), "lr_schedule", "constant, linear or cosine")
         for field in ("discount", "gae_lambda"):
@@ -120,9 +126,12 @@ class Config:
         need(self.activation in ACTIVATIONS, "activation", f"one of {sorted(ACTIVATIONS)}")
         need(self.compute_dtype in ("float32", "bfloat16"), "compute_dtype", "float32 or bfloat16")
         if self.total_steps < self.steps_per_update:  # a run is whole updates: this one is one, larger
-            warnings.warn(f"ppo.Config: total_steps={self.total_steps} is less than one update (num_envs x "
-                          f"unroll_length = {self.steps_per_update} env steps); the run trains that one update",
-                          training.TrainingWarning, stacklevel=3)  # fmt: skip
+            warnings.warn(
+                f"ppo.Config: total_steps={self.total_steps} is less than one update (num_envs x "
+                f"unroll_length = {self.steps_per_update} env steps); the run trains that one update",
+                training.TrainingWarning,
+                stacklevel=3,
+            )
 
     @property
     def steps_per_update(self) -> int:
@@ -164,11 +173,17 @@ def _networks(config: Config, task: Task):
     dtype = jnp.dtype(config.compute_dtype)
     policy_net = config.policy_network
     if policy_net is None and config.recurrent:
-        policy_net = networks.gru_mlp(2 * task.action_size, config.gru_hidden_size, config.policy_hidden_sizes,
-                                      activation=activation, output_scale=0.01)  # fmt: skip
+        policy_net = networks.gru_mlp(
+            2 * task.action_size,
+            config.gru_hidden_size,
+            config.policy_hidden_sizes,
+            activation=activation,
+            output_scale=0.01,
+        )
     elif policy_net is None:
-        policy_net = networks.mlp(2 * task.action_size, config.policy_hidden_sizes, activation, output_scale=0.01,
-                                  compute_dtype=dtype)  # fmt: skip
+        policy_net = networks.mlp(
+            2 * task.action_size, config.policy_hidden_sizes, activation, output_scale=0.01, compute_dtype=dtype
+        )
     value_net = config.value_network or networks.mlp(1, config.value_hidden_sizes, activation, compute_dtype=dtype)
     return policy_net, value_net
 
@@ -191,8 +206,10 @@ def _view(obs: Any, key: str | None, field: str) -> Any:
     """The entry `key` of a dict observation (`policy_obs_key` / `value_obs_key`)."""
     if key is None:
         if isinstance(obs, dict):
-            raise ValueError(f"ppo.Config: the observation is a dict with entries {sorted(obs)}; set {field} to "
-                             "the entry the network sees")  # fmt: skip
+            raise ValueError(
+                f"ppo.Config: the observation is a dict with entries {sorted(obs)}; set {field} to "
+                "the entry the network sees"
+            )
         return obs
     if not isinstance(obs, dict) or key not in obs:
         found = sorted(obs) if isinstance(obs, dict) else f"an array of shape {jnp.shape(obs)}"
@@ -293,6 +310,7 @@ def _loss(config: Config, task: Task, params, stats, batch, key) -> tuple[jax.Ar
     policy_net, value_net = _networks(config, task)
     obs, value_obs = _inputs(config, stats, batch["obs"])
     if _is_recurrent(policy_net):
+
         def step(carry, inputs):  # over time, vmapped over the minibatch's envs
             return jax.vmap(lambda c, o, s: policy_net.apply(params["policy"], c, o, s))(carry, *inputs)
 
@@ -309,9 +327,14 @@ def _loss(config: Config, task: Task, params, stats, batch, key) -> tuple[jax.Ar
     old_values = batch["values"] if config.value_clip_epsilon else None
     v_loss = losses.value_loss(values, batch["returns"], old_values, config.value_clip_epsilon)
     total = policy_loss + config.value_coef * v_loss - config.entropy_coef * entropy
-    return total, {"loss/policy": policy_loss, "loss/value": v_loss, "loss/entropy": entropy,
-                   "loss/total": total, "loss/approx_kl": aux["approx_kl"],
-                   "loss/clip_fraction": aux["clip_fraction"]}  # fmt: skip
+    return total, {
+        "loss/policy": policy_loss,
+        "loss/value": v_loss,
+        "loss/entropy": entropy,
+        "loss/total": total,
+        "loss/approx_kl": aux["approx_kl"],
+        "loss/clip_fraction": aux["clip_fraction"],
+    }
 
 
 def rollout(config: Config, task: Task, train_state: TrainState, key: jax.Array):
@@ -325,8 +348,9 @@ def rollout(config: Config, task: Task, train_state: TrainState, key: jax.Array)
     return learning.collect(task, act, train_state.collector, key, config.unroll_length)
 
 
-def improve(config: Config, task: Task, train_state: TrainState, data: learning.Transitions,
-            key: jax.Array) -> tuple[TrainState, dict[str, jax.Array]]:  # fmt: skip
+def improve(
+    config: Config, task: Task, train_state: TrainState, data: learning.Transitions, key: jax.Array
+) -> tuple[TrainState, dict[str, jax.Array]]:
     """Learns from `data` (from `rollout`, rewards as given): the observation statistics,
     GAE from the value function, then `num_epochs` x `num_minibatches` clipped-surrogate
     steps. Returns the state with new params, optimizer state and statistics (its
@@ -341,10 +365,23 @@ def improve(config: Config, task: Task, train_state: TrainState, data: learning.
         return value_net.apply(ts.params["value"], _inputs(config, stats, obs)[1])[..., 0]
 
     values = value_of(data.obs)
-    adv, returns = learning.gae(data.reward * config.reward_scaling, values, value_of(data.next_obs),
-                                data.terminated, data.truncated, config.discount, config.gae_lambda)  # fmt: skip
-    batch = {"obs": data.obs, "start": data.start, **data.extras, "advantages": adv, "returns": returns,
-             "values": values}  # fmt: skip
+    adv, returns = learning.gae(
+        data.reward * config.reward_scaling,
+        values,
+        value_of(data.next_obs),
+        data.terminated,
+        data.truncated,
+        config.discount,
+        config.gae_lambda,
+    )
+    batch = {
+        "obs": data.obs,
+        "start": data.start,
+        **data.extras,
+        "advantages": adv,
+        "returns": returns,
+        "values": values,
+    }
 
     optimizer = _optimizer(config)
     grad_fn = jax.grad(lambda p, b, k: _loss(config, task, p, stats, b, k), has_aux=True)
@@ -358,10 +395,15 @@ def improve(config: Config, task: Task, train_state: TrainState, data: learning.
 
     shuffle_key, entropy_key = jax.random.split(key)
     (params, opt_state, _), metrics = learning.learn(
-        sgd_step, (ts.params, ts.opt_state, entropy_key), batch, shuffle_key, num_epochs=config.num_epochs,
-        num_minibatches=config.num_minibatches, sequences=_is_recurrent(policy_net),
+        sgd_step,
+        (ts.params, ts.opt_state, entropy_key),
+        batch,
+        shuffle_key,
+        num_epochs=config.num_epochs,
+        num_minibatches=config.num_minibatches,
+        sequences=_is_recurrent(policy_net),
         split_over_devices=config.split_minibatches,
-    )  # fmt: skip
+    )
     return ts.replace(params=params, opt_state=opt_state, obs_stats=stats), metrics
 
 
@@ -378,8 +420,9 @@ def update(config: Config, task: Task, train_state: TrainState) -> tuple[TrainSt
 # --- evaluate and train -------------------------------------------------------------
 
 
-def evaluate(config: Config, task: Task, train_state: TrainState, key: jax.Array, num_envs: int,
-             num_steps: int | None = None):  # fmt: skip
+def evaluate(
+    config: Config, task: Task, train_state: TrainState, key: jax.Array, num_envs: int, num_steps: int | None = None
+):
     """Deterministic episodes (`learning.evaluate` of the mean action): the mean return
     of the first episode of `num_envs` envs over at most `num_steps` steps (static;
     None: the task's own episode length, read on the host), and env 0's trajectory.

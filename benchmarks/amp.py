@@ -65,8 +65,13 @@ from mjzoo.harness import rendering, training  # noqa: E402
 
 STYLE_FROM = 200  # steps: the style is that of the steady walk (the reference starts there too)
 # The teacher's 7 episodes other than the reference's, measured as above (steps 200-1000).
-TEACHER = {"style_error": 0.0331, "style_error_range": [0.0310, 0.0345], "forward_speed_m_s": 1.948,
-           "fell": False, "source": "the teacher's episodes 1-7 (walk_episodes.npz)"}  # fmt: skip
+TEACHER = {
+    "style_error": 0.0331,
+    "style_error_range": [0.0310, 0.0345],
+    "forward_speed_m_s": 1.948,
+    "fell": False,
+    "source": "the teacher's episodes 1-7 (walk_episodes.npz)",
+}
 QUICK = dict(num_envs=8, unroll_length=8, num_minibatches=4, num_epochs=1, disc_minibatches=2, replay_size=256)
 
 
@@ -105,41 +110,72 @@ def measure_episode(style_task: mjzoo.Task, qpos: np.ndarray, terminated: np.nda
     error = humanoid_amp.style_error(style_task, steady, window=min(humanoid_amp.STYLE_WINDOW, len(steady)))
     speed = humanoid_amp.forward_speed(steady, float(style_task.motion.dt)) if len(steady) > 1 else float("nan")
     whole = length == len(qpos) and humanoid_amp.walks_like_teacher(error, speed, fell)
-    return {"style_error": error, "forward_speed_m_s": speed, "length": length, "fell": fell,
-            "walks_like_teacher": whole}  # fmt: skip
+    return {
+        "style_error": error,
+        "forward_speed_m_s": speed,
+        "length": length,
+        "fell": fell,
+        "walks_like_teacher": whole,
+    }
 
 
 # --- one trainer ------------------------------------------------------------------------
 
 
-def train(label: str, algorithm: types.ModuleType, config, task: mjzoo.Task, style_task: mjzoo.Task, out: Path,
-          quick: bool, video: bool) -> dict:  # fmt: skip
+def train(
+    label: str,
+    algorithm: types.ModuleType,
+    config,
+    task: mjzoo.Task,
+    style_task: mjzoo.Task,
+    out: Path,
+    quick: bool,
+    video: bool,
+) -> dict:
     """Trains `algorithm` on `task` through the harness, evaluating every chunk; the row of
     results, with the final episode saved under `out`/`label`/."""
     episodes: list = []
-    settings = training.Settings(out_dir=out / label, updates_per_chunk=1 if quick else 10,
-                                 eval_envs=2 if quick else 16, eval_steps=50 if quick else 1000, checkpoint_every=0,
-                                 eval_every=1,  # every chunk, to time the first walk in style: not the default budget
-                                 video=False, overwrite=True, progress=False)  # fmt: skip
+    settings = training.Settings(
+        out_dir=out / label,
+        updates_per_chunk=1 if quick else 10,
+        eval_envs=2 if quick else 16,
+        eval_steps=50 if quick else 1000,
+        checkpoint_every=0,
+        eval_every=1,  # every chunk, to time the first walk in style: not the default budget
+        video=False,
+        overwrite=True,
+        progress=False,
+    )
     start = time.perf_counter()
     training.run(recording(algorithm, episodes), config, task, settings)
     total = time.perf_counter() - start
     curve, steps_per_s = training_curve(out / label / "metrics.jsonl", total)
     measured = [measure_episode(style_task, *episode) for episode in episodes]  # one per chunk, in order
-    points = [{"step": step, "elapsed_s": seconds, "eval_return": ret, **m}
-              for (step, seconds, ret), m in zip(curve, measured)]  # fmt: skip
+    points = [
+        {"step": step, "elapsed_s": seconds, "eval_return": ret, **m}
+        for (step, seconds, ret), m in zip(curve, measured)
+    ]
     first = next((p for p in points if p["walks_like_teacher"]), None)
     qpos = episodes[-1][0]
     np.savez_compressed(out / label / "final_policy.npz", qpos=qpos, dt=float(style_task.motion.dt))
     if video:
         render(style_task, qpos, out / label / "final_policy.mp4")
     last = measured[-1]
-    print(f"{label}: {steps_per_s:,.0f} steps/s, final return {curve[-1][2]:.1f}, style {last['style_error']:.3f} rad, "
-          f"speed {last['forward_speed_m_s']:.2f} m/s, trained {total:.0f} s", flush=True)  # fmt: skip
-    return {"config": training.config_dict(config), "steps_per_s": steps_per_s, "train_s": total,
-            "compile_s": curve[0][1] - settings.updates_per_chunk * config.steps_per_update / steps_per_s,
-            "time_to_style_s": first and first["elapsed_s"], "steps_to_style": first and first["step"],
-            "final": points[-1], "curve": points}  # fmt: skip
+    print(
+        f"{label}: {steps_per_s:,.0f} steps/s, final return {curve[-1][2]:.1f}, style {last['style_error']:.3f} rad, "
+        f"speed {last['forward_speed_m_s']:.2f} m/s, trained {total:.0f} s",
+        flush=True,
+    )
+    return {
+        "config": training.config_dict(config),
+        "steps_per_s": steps_per_s,
+        "train_s": total,
+        "compile_s": curve[0][1] - settings.updates_per_chunk * config.steps_per_update / steps_per_s,
+        "time_to_style_s": first and first["elapsed_s"],
+        "steps_to_style": first and first["step"],
+        "final": points[-1],
+        "curve": points,
+    }
 
 
 def render(task: mjzoo.Task, qpos: np.ndarray, path: Path) -> None:
@@ -158,9 +194,13 @@ def teacher(style_task: mjzoo.Task, path: Path | None) -> dict:
     done = np.zeros(qpos.shape[1], bool)
     rows = [measure_episode(style_task, q, done, done) for q in qpos[1:]]
     errors = [r["style_error"] for r in rows]
-    return {"style_error": float(np.mean(errors)), "style_error_range": [min(errors), max(errors)],
-            "forward_speed_m_s": float(np.mean([r["forward_speed_m_s"] for r in rows])), "fell": False,
-            "source": str(path)}  # fmt: skip
+    return {
+        "style_error": float(np.mean(errors)),
+        "style_error_range": [min(errors), max(errors)],
+        "forward_speed_m_s": float(np.mean([r["forward_speed_m_s"] for r in rows])),
+        "fell": False,
+        "source": str(path),
+    }
 
 
 # --- the run --------------------------------------------------------------------------------
@@ -181,20 +221,26 @@ def configs(steps: int, ppo_steps: int, quick: bool) -> tuple[ppo.Config, amp.Co
 def print_table(result: dict) -> None:
     names = {"ppo": "PPO (task reward)", "amp": "AMP (style)"}
     rows = [(name, result[key]) for key, name in names.items() if key in result]
-    print(f"\n{'trainer':<18} {'steps/s':>11} {'/raw':>6} {'to style (s)':>12} {'style (rad)':>11} {'speed':>6} "
-          f"{'length':>6} {'return':>8} {'compile s':>9}")  # fmt: skip
+    print(
+        f"\n{'trainer':<18} {'steps/s':>11} {'/raw':>6} {'to style (s)':>12} {'style (rad)':>11} {'speed':>6} "
+        f"{'length':>6} {'return':>8} {'compile s':>9}"
+    )
     for name, r in rows:
         f, ttt = r["final"], r["time_to_style_s"]
-        print(f"{name:<18} {r['steps_per_s']:>11,.0f} {r['steps_per_s'] / result['raw_steps_per_s']:>6.2f} "
-              f"{'never' if ttt is None else f'{ttt:.1f}':>12} {f['style_error']:>11.3f} "
-              f"{f['forward_speed_m_s']:>6.2f} "
-              f"{f['length']:>6} {f['eval_return']:>8.1f} {r['compile_s']:>9.1f}")  # fmt: skip
+        print(
+            f"{name:<18} {r['steps_per_s']:>11,.0f} {r['steps_per_s'] / result['raw_steps_per_s']:>6.2f} "
+            f"{'never' if ttt is None else f'{ttt:.1f}':>12} {f['style_error']:>11.3f} "
+            f"{f['forward_speed_m_s']:>6.2f} "
+            f"{f['length']:>6} {f['eval_return']:>8.1f} {r['compile_s']:>9.1f}"
+        )
     t = result["teacher"]
     print(f"{'teacher':<18} {'':>11} {'':>6} {'':>12} {t['style_error']:>11.3f} {t['forward_speed_m_s']:>6.2f}")
     overhead = f"{100 * result['amp_overhead']:.1f}%" if "amp_overhead" in result else "not measured"
-    print(f"raw {result['raw_steps_per_s']:,.0f} steps/s at {result['num_envs']} envs; AMP's overhead over PPO "
-          f"{overhead} (goal <= 15%); style threshold {humanoid_amp.STYLE_THRESHOLD} rad, "
-          f">= {humanoid_amp.MIN_SPEED} m/s, no fall")  # fmt: skip
+    print(
+        f"raw {result['raw_steps_per_s']:,.0f} steps/s at {result['num_envs']} envs; AMP's overhead over PPO "
+        f"{overhead} (goal <= 15%); style threshold {humanoid_amp.STYLE_THRESHOLD} rad, "
+        f">= {humanoid_amp.MIN_SPEED} m/s, no fall"
+    )
 
 
 def main() -> None:
@@ -221,13 +267,22 @@ def main() -> None:
     raw = raw_steps_per_s(walk, "humanoid_walk", *batch, repeats=3)
     print(f"raw stepping {raw:,.0f} steps/s at {amp_config.num_envs} envs", flush=True)
     video = not args.no_video
-    result = {"device": device, "jax": jax.__version__, "num_envs": amp_config.num_envs, "raw_steps_per_s": raw,
-              "style_threshold_rad": humanoid_amp.STYLE_THRESHOLD, "min_speed_m_s": humanoid_amp.MIN_SPEED,
-              "style_from_step": STYLE_FROM, "teacher": teacher(style_task, args.teacher_episodes)}  # fmt: skip
+    result = {
+        "device": device,
+        "jax": jax.__version__,
+        "num_envs": amp_config.num_envs,
+        "raw_steps_per_s": raw,
+        "style_threshold_rad": humanoid_amp.STYLE_THRESHOLD,
+        "min_speed_m_s": humanoid_amp.MIN_SPEED,
+        "style_from_step": STYLE_FROM,
+        "teacher": teacher(style_task, args.teacher_episodes),
+    }
     args.out.mkdir(parents=True, exist_ok=True)
     path = args.out / f"amp_{jax.default_backend()}_{'_'.join(args.trainers)}{'_quick' if args.quick else ''}.json"
-    for key, label, algorithm, config, task in (("ppo", "ppo_walk", ppo, ppo_config, walk),
-                                                ("amp", "amp_walk", amp, amp_config, style_task)):  # fmt: skip
+    for key, label, algorithm, config, task in (
+        ("ppo", "ppo_walk", ppo, ppo_config, walk),
+        ("amp", "amp_walk", amp, amp_config, style_task),
+    ):
         if key in args.trainers:
             result[key] = train(label, algorithm, config, task, style_task, args.out, args.quick, video)
             path.write_text(json.dumps(result, indent=2))  # what is done survives a run cut short

@@ -31,7 +31,9 @@ def measure(name: str, num_envs: int, steps: int, batched_rule: bool) -> tuple[f
         action = 0.5 * jnp.ones((task.action_size,))
 
         def body(states, key):
-            states = jax.vmap(lambda s, k: running.transition(task, s, action, k))(states, jax.random.split(key, num_envs))
+            states = jax.vmap(lambda s, k: running.transition(task, s, action, k))(
+                states, jax.random.split(key, num_envs)
+            )
             return states, (states.reward, states.obs, states.terminated | states.truncated)
 
         run = jax.jit(lambda s: jax.lax.scan(body, s, jax.random.split(jax.random.key(1), steps)))
@@ -54,8 +56,11 @@ def main() -> None:
         per_env, a = measure(name, args.num_envs, args.steps, batched_rule=False)
         batched, b = measure(name, args.num_envs, args.steps, batched_rule=True)
         same = all(jax.tree.leaves(jax.tree.map(lambda x, y: bool(jnp.array_equal(x, y)), a, b)))
-        print(f"{name}: per-env choice {per_env:,.0f} steps/s, batched {batched:,.0f} ({batched / per_env:.2f}x); "
-              f"episodes ended {int(jnp.sum(a[2]))}; identical: {same}", flush=True)  # fmt: skip
+        print(
+            f"{name}: per-env choice {per_env:,.0f} steps/s, batched {batched:,.0f} ({batched / per_env:.2f}x); "
+            f"episodes ended {int(jnp.sum(a[2]))}; identical: {same}",
+            flush=True,
+        )
 
 
 if __name__ == "__main__":

@@ -30,8 +30,12 @@ from mjzoo.algorithms import ppo
 from mjzoo.harness import training
 from mjzoo.interop import playground
 
-VARIANTS = [("alone", {}), ("alone", {"xla_gpu_autotune_level": 0}),
-            ("beside a chunk", {}), ("beside a chunk", {"xla_gpu_autotune_level": 0})]  # fmt: skip
+VARIANTS = [
+    ("alone", {}),
+    ("alone", {"xla_gpu_autotune_level": 0}),
+    ("beside a chunk", {}),
+    ("beside a chunk", {"xla_gpu_autotune_level": 0}),
+]
 
 
 def main() -> None:
@@ -81,15 +85,29 @@ def main() -> None:
             timing["chunk_s"] = time.perf_counter() - start
             thread.join()
         rows.append({"where": where, "options": options, "eval_envs": args.eval_envs + i, **timing})
-        print(f"{args.env}: evaluation compiled {where} with {options or 'default options'}: "
-              f"{timing['compile_s']:.1f} s" + (f" (the chunk ran {timing['chunk_s']:.1f} s)" if "chunk_s" in timing else ""),
-              flush=True)  # fmt: skip
+        print(
+            f"{args.env}: evaluation compiled {where} with {options or 'default options'}: "
+            f"{timing['compile_s']:.1f} s"
+            + (f" (the chunk ran {timing['chunk_s']:.1f} s)" if "chunk_s" in timing else ""),
+            flush=True,
+        )
 
     device = jax.devices()[0]
     path = args.out / f"background_compile_{jax.default_backend()}_{args.env}.json"
     args.out.mkdir(parents=True, exist_ok=True)
-    path.write_text(json.dumps({"device": device.device_kind, "jax": jax.__version__, "env": args.env,
-                                "updates": args.updates, "eval_steps": args.eval_steps, "rows": rows}, indent=1))  # fmt: skip
+    path.write_text(
+        json.dumps(
+            {
+                "device": device.device_kind,
+                "jax": jax.__version__,
+                "env": args.env,
+                "updates": args.updates,
+                "eval_steps": args.eval_steps,
+                "rows": rows,
+            },
+            indent=1,
+        )
+    )
     print(f"wrote {path}")
 
 

@@ -119,7 +119,7 @@ def train_brax_ppo(
     )
 
     trained = [r for r in reports if r[0] > 0]  # reports after training epochs
-    (first_step, first_t, first_m), (last_step, last_t, last_m) = trained[0], trained[-1]
+    (first_step, first_t, first_m), (last_step, _, last_m) = trained[0], trained[-1]
     curve = [(step, t, float(m.get("eval/episode_reward", math.nan))) for step, t, m in reports]
     steps_per_s = wall_steps_per_s(curve)
     train_seconds = last_m["training/walltime"] - first_m["training/walltime"]
@@ -151,10 +151,16 @@ def main() -> None:
     episode_length = mjzoo.envs.defaults(args.env)["episode_steps"]
     print(f"device: {jax.devices()[0].device_kind} ({jax.default_backend()}), jax {jax.__version__}")
     result = train_brax_ppo(
-        task, num_timesteps=args.num_timesteps, num_envs=args.num_envs, batch_size=args.batch_size,
-        num_minibatches=args.num_minibatches, num_evals=args.num_evals, num_eval_envs=args.num_eval_envs,
-        episode_length=episode_length, seed=args.seed,
-    )  # fmt: skip
+        task,
+        num_timesteps=args.num_timesteps,
+        num_envs=args.num_envs,
+        batch_size=args.batch_size,
+        num_minibatches=args.num_minibatches,
+        num_evals=args.num_evals,
+        num_eval_envs=args.num_eval_envs,
+        episode_length=episode_length,
+        seed=args.seed,
+    )
     print(f"{'env steps':>10} {'wall s':>8} {'eval return':>12}")
     for step, seconds, ret in result["curve"]:
         print(f"{step:>10} {seconds:>8.1f} {ret:>12.2f}")

@@ -74,9 +74,7 @@ class _TimedRollout:
         self.inner.close()
 
 
-def _backend(
-    model: mujoco.MjModel, num_rollouts: int, threads: int
-) -> MJRolloutBackend:
+def _backend(model: mujoco.MjModel, num_rollouts: int, threads: int) -> MJRolloutBackend:
     """Judo's CPU backend, its pool swapped for a timed one of `threads` threads (0: Judo's)."""
     backend = MJRolloutBackend(model, num_rollouts)
     backend._rollout_obj.close()
@@ -114,9 +112,7 @@ def _time_stages(ctrl: Controller) -> dict[str, list[float]]:
     return seconds
 
 
-def _controller(
-    task_name: str, optimizer: str, factor: int, threads: int
-) -> Controller:
+def _controller(task_name: str, optimizer: str, factor: int, threads: int) -> Controller:
     """Judo's controller at the task's shipped overrides, with `factor` x the rollouts."""
     task_cls, _ = judo.tasks.get_registered_tasks()[task_name]
     task = task_cls()
@@ -127,9 +123,7 @@ def _controller(
     ctrl_cfg = ControllerConfig()
     ctrl_cfg.set_override(task_name)
     backend = _backend(task.model, opt_cfg.num_rollouts, threads)
-    return Controller(
-        ctrl_cfg, task, opt_cls(opt_cfg, task.nu), rollout_backend=backend
-    )
+    return Controller(ctrl_cfg, task, opt_cls(opt_cfg, task.nu), rollout_backend=backend)
 
 
 def _score(task_name: str, sim: MJSimulation) -> float:
@@ -140,9 +134,7 @@ def _score(task_name: str, sim: MJSimulation) -> float:
     return float(np.linalg.norm(qpos[2:4] - sim.task.config.goal_pos[:2]))
 
 
-def episode(
-    task_name: str, optimizer: str, factor: int, threads: int, seed: int, seconds: float
-) -> dict:
+def episode(task_name: str, optimizer: str, factor: int, threads: int, seed: int, seconds: float) -> dict:
     """One closed-loop run from a random initial state (Judo's `Task.reset`, seeded).
 
     Returns per-replan wall times (s) of the whole replan and of `mujoco.rollout` in it,
@@ -203,10 +195,7 @@ def settings(task_name: str, optimizer: str, factor: int, threads: int) -> dict:
         "sim_timestep_s": float(model.opt.timestep),
         "physics_substeps": task.physics_substeps,
         "actuator_ctrlrange": task.actuator_ctrlrange.tolist(),
-        "task_config": {
-            k: np.asarray(v).tolist()
-            for k, v in dataclasses.asdict(task.config).items()
-        },
+        "task_config": {k: np.asarray(v).tolist() for k, v in dataclasses.asdict(task.config).items()},
         "rollout_threads": threads or ctrl.optimizer_cfg.num_rollouts,
         "sim_spline": "zero (SplineData default, as Judo's simulation node)",
     }
@@ -221,20 +210,12 @@ def row(
     seconds: float,
 ) -> dict:
     """Latency and success of one task x optimizer x sample factor over `seeds` episodes."""
-    runs = [
-        episode(task_name, optimizer, factor, threads, s, seconds) for s in range(seeds)
-    ]
+    runs = [episode(task_name, optimizer, factor, threads, s, seconds) for s in range(seeds)]
     replan = [t for r in runs for t in r["replan_s"][WARMUP_REPLANS:]]
     rollout = [t for r in runs for t in r["rollout_s"][WARMUP_REPLANS:]]
-    overhead = [
-        a - b
-        for r in runs
-        for a, b in zip(r["replan_s"][WARMUP_REPLANS:], r["rollout_s"][WARMUP_REPLANS:])
-    ]
+    overhead = [a - b for r in runs for a, b in zip(r["replan_s"][WARMUP_REPLANS:], r["rollout_s"][WARMUP_REPLANS:])]
     scores = np.array([r["score"] for r in runs])
-    stages = {
-        k: [t for r in runs for t in r["stages_s"][k][WARMUP_REPLANS:]] for k in STAGES
-    }
+    stages = {k: [t for r in runs for t in r["stages_s"][k][WARMUP_REPLANS:]] for k in STAGES}
     # The rest: Judo's backend around the C call (tiling x0, copying outputs), loop glue.
     stages["other"] = list(np.array(overhead) - np.sum([stages[k] for k in STAGES], 0))
     out = {
@@ -254,24 +235,18 @@ def row(
     out["num_rollouts"] = out["settings"]["optimizer"]["num_rollouts"]
     if task_name == "cartpole":
         out["success_rate"] = float(np.mean(scores < 0.2))
-        out["score_meaning"] = (
-            "max |pole angle from upright| (rad) over the last 1 s; success < 0.2"
-        )
+        out["score_meaning"] = "max |pole angle from upright| (rad) over the last 1 s; success < 0.2"
     else:
         for tol in PUSH_TOLERANCES:
             out[f"success_rate_{tol}"] = float(np.mean(scores < tol))
         out["success_rate"] = out["success_rate_0.05"]
-        out["score_meaning"] = (
-            "final cylinder-to-goal distance (m); success < 0.05 (also 0.1, and 0.3 as Judo's own)"
-        )
+        out["score_meaning"] = "final cylinder-to-goal distance (m); success < 0.05 (also 0.1, and 0.3 as Judo's own)"
     return out
 
 
 def _physical_cores() -> int:
     try:
-        lines = subprocess.run(
-            ["lscpu", "-p=core,socket"], capture_output=True, text=True, check=True
-        ).stdout
+        lines = subprocess.run(["lscpu", "-p=core,socket"], capture_output=True, text=True, check=True).stdout
         return len({ln for ln in lines.splitlines() if ln and not ln.startswith("#")})
     except (OSError, subprocess.CalledProcessError):
         return os.cpu_count() or 1
@@ -279,14 +254,8 @@ def _physical_cores() -> int:
 
 def _cpu_model() -> str:
     try:
-        out = subprocess.run(
-            ["lscpu"], capture_output=True, text=True, check=True
-        ).stdout
-        return next(
-            ln.split(":", 1)[1].strip()
-            for ln in out.splitlines()
-            if ln.startswith("Model name")
-        )
+        out = subprocess.run(["lscpu"], capture_output=True, text=True, check=True).stdout
+        return next(ln.split(":", 1)[1].strip() for ln in out.splitlines() if ln.startswith("Model name"))
     except (OSError, subprocess.CalledProcessError, StopIteration):
         return platform.processor()
 
@@ -301,9 +270,7 @@ def main() -> None:
     parser.add_argument("--tasks", nargs="+", default=["cartpole", "cylinder_push"])
     parser.add_argument("--optimizers", nargs="+", default=["ps", "cem", "mppi"])
     parser.add_argument("--sample-factors", nargs="+", type=int, default=[1, 4])
-    parser.add_argument(
-        "--seconds", type=float, default=8.0, help="simulated seconds per episode"
-    )
+    parser.add_argument("--seconds", type=float, default=8.0, help="simulated seconds per episode")
     parser.add_argument("--seeds", type=int, default=3)
     parser.add_argument(
         "--threads",
@@ -320,9 +287,7 @@ def main() -> None:
         for optimizer in args.optimizers:
             for factor in args.sample_factors:
                 load = _loadavg()
-                rows.append(
-                    row(task_name, optimizer, factor, threads, args.seeds, args.seconds)
-                )
+                rows.append(row(task_name, optimizer, factor, threads, args.seeds, args.seconds))
                 rows[-1]["loadavg_before_after"] = [load, _loadavg()]
                 r = rows[-1]
                 print(

@@ -64,10 +64,10 @@ from task_overhead import add_impl_argument, impls, inputs, ratio, raw_steps_per
 
 import mjzoo  # noqa: E402
 import mjzoo.envs  # noqa: E402
-from mjzoo.catalog import observations  # noqa: E402
-from mjzoo.harness import rendering, training  # noqa: E402
 from mjzoo.algorithms import ppo  # noqa: E402
+from mjzoo.catalog import observations  # noqa: E402
 from mjzoo.envs import joystick  # noqa: E402
+from mjzoo.harness import rendering, training  # noqa: E402
 
 
 @dataclasses.dataclass(frozen=True)
@@ -79,10 +79,16 @@ class Spec:
 
 SPECS = {
     "ant": Spec(lambda impl: mjzoo.envs.make("ant", impl=impl), lambda impl: mjzoo.envs.make("ant", impl=impl), 3000.0),
-    "humanoid_walk": Spec(lambda impl: mjzoo.envs.make("humanoid_walk", impl=impl),
-                          lambda impl: mjzoo.envs.make("humanoid_walk", impl=impl), 6000.0),  # fmt: skip
-    "ant_joystick": Spec(lambda impl: joystick.joystick_curriculum(impl=impl),
-                         lambda impl: mjzoo.envs.make("ant_joystick", level=1.0, impl=impl), 1000.0),  # fmt: skip
+    "humanoid_walk": Spec(
+        lambda impl: mjzoo.envs.make("humanoid_walk", impl=impl),
+        lambda impl: mjzoo.envs.make("humanoid_walk", impl=impl),
+        6000.0,
+    ),
+    "ant_joystick": Spec(
+        lambda impl: joystick.joystick_curriculum(impl=impl),
+        lambda impl: mjzoo.envs.make("ant_joystick", level=1.0, impl=impl),
+        1000.0,
+    ),
 }
 
 
@@ -104,17 +110,28 @@ def episode_measures(config: ppo.Config, task: mjzoo.Task, train_state, key, num
             next_state = mjzoo.transition(task, state, act(params, state.obs, key), key)
             command = state.info.get("command", jnp.zeros(3))
             error = jnp.linalg.norm(velocity(task.model, next_state)[:2] - command[:2])
-            out = dict(reward=next_state.reward * alive, alive=alive, error=error * alive,
-                       com=next_state.data.subtree_com[1, 0], fell=next_state.terminated & alive,
-                       qpos=next_state.data.qpos)  # fmt: skip
+            out = dict(
+                reward=next_state.reward * alive,
+                alive=alive,
+                error=error * alive,
+                com=next_state.data.subtree_com[1, 0],
+                fell=next_state.terminated & alive,
+                qpos=next_state.data.qpos,
+            )
             return (next_state, alive & ~(next_state.terminated | next_state.truncated)), out
 
         start = state.data.subtree_com[1, 0]
         _, out = jax.lax.scan(body, (state, jnp.ones((), bool)), jax.random.split(key, num_steps))
         steps = jnp.sum(out["alive"])
         last = out["com"][jnp.maximum(steps - 1, 0).astype(jnp.int32)]
-        return dict(ret=jnp.sum(out["reward"]), length=steps, distance=last - start,
-                    error=jnp.sum(out["error"]) / steps, fell=jnp.any(out["fell"]), qpos=out["qpos"])  # fmt: skip
+        return dict(
+            ret=jnp.sum(out["reward"]),
+            length=steps,
+            distance=last - start,
+            error=jnp.sum(out["error"]) / steps,
+            fell=jnp.any(out["fell"]),
+            qpos=out["qpos"],
+        )
 
     return jax.vmap(one)(jax.random.split(key, num_envs))
 
@@ -124,9 +141,13 @@ def evaluate(config: ppo.Config, task: mjzoo.Task, train_state, num_envs: int, n
     env's qpos [T, nq] (its episode runs on after an end: it is the video)."""
     result = jax.device_get(episode_measures(config, task, train_state, jax.random.key(123), num_envs, num_steps))
     speed = result["distance"] / (result["length"] * mjzoo.control_dt(task))
-    means = {"return": float(np.mean(result["ret"])), "length": float(np.mean(result["length"])),
-             "forward_speed_m_s": float(np.mean(speed)), "velocity_error_m_s": float(np.mean(result["error"])),
-             "fell_fraction": float(np.mean(result["fell"]))}  # fmt: skip
+    means = {
+        "return": float(np.mean(result["ret"])),
+        "length": float(np.mean(result["length"])),
+        "forward_speed_m_s": float(np.mean(speed)),
+        "velocity_error_m_s": float(np.mean(result["error"])),
+        "fell_fraction": float(np.mean(result["fell"])),
+    }
     return means, np.asarray(result["qpos"][0])
 
 
@@ -151,9 +172,18 @@ def launch_seconds() -> float:
     return uptime - start_ticks / os.sysconf("SC_CLK_TCK")
 
 
-def run_task(name: str, total_steps: int | None, out: Path, eval_envs: int, smoke: bool, video: bool,
-             impl: str = "jax", final_eval: bool = True, first_in_process: bool = False,
-             seed: int = 0) -> dict:  # fmt: skip
+def run_task(
+    name: str,
+    total_steps: int | None,
+    out: Path,
+    eval_envs: int,
+    smoke: bool,
+    video: bool,
+    impl: str = "jax",
+    final_eval: bool = True,
+    first_in_process: bool = False,
+    seed: int = 0,
+) -> dict:
     spec = SPECS[name]
     run_dir = out / (name + ("" if impl == "jax" else f"_{impl}") + (f"_seed{seed}" if seed else ""))
     fields = mjzoo.envs.hyperparameters(name, "ppo")
@@ -166,9 +196,17 @@ def run_task(name: str, total_steps: int | None, out: Path, eval_envs: int, smok
     episode = 50 if smoke else mjzoo.envs.defaults(name)["episode_steps"]
     # Training first: launch-to-first-update counts from the process start to its first record.
     # Every chunk evaluates (not the default 5% budget), to time the stated return.
-    settings = training.Settings(out_dir=run_dir, updates_per_chunk=1 if smoke else 10,
-                                 eval_envs=16 if smoke else 128, eval_steps=episode, checkpoint_every=0, eval_every=1,
-                                 video=video, overwrite=True, seed=seed)  # fmt: skip  # a new measurement replaces the last
+    settings = training.Settings(
+        out_dir=run_dir,
+        updates_per_chunk=1 if smoke else 10,
+        eval_envs=16 if smoke else 128,
+        eval_steps=episode,
+        checkpoint_every=0,
+        eval_every=1,
+        video=video,
+        overwrite=True,
+        seed=seed,
+    )  # a new measurement replaces the last
     launched = launch_seconds()
     start = time.perf_counter()
     train_state, _ = ppo.train(config, spec.train_task(impl), settings)
@@ -177,11 +215,21 @@ def run_task(name: str, total_steps: int | None, out: Path, eval_envs: int, smok
     eval_task = spec.eval_task(impl)
     raw = raw_steps_per_s(eval_task, name, *inputs(eval_task, config.num_envs, 20 if smoke else 100), repeats=3)
     print(f"{name} ({impl}): raw stepping {raw:,.0f} steps/s at {config.num_envs} envs", flush=True)
-    row = {"task": name, "impl": impl, "seed": seed, "config": training.config_dict(config), "raw_steps_per_s": raw,
-           "steps_per_s": steps_per_s, "fraction_of_raw": steps_per_s / raw, "train_s": total,
-           "threshold": spec.threshold, "time_to_threshold_s": time_to(curve, spec.threshold),
-           "first_update_s": curve[0][1],
-           "launch_to_first_update_s": launched + curve[0][1] if first_in_process else None, "curve": curve}  # fmt: skip
+    row = {
+        "task": name,
+        "impl": impl,
+        "seed": seed,
+        "config": training.config_dict(config),
+        "raw_steps_per_s": raw,
+        "steps_per_s": steps_per_s,
+        "fraction_of_raw": steps_per_s / raw,
+        "train_s": total,
+        "threshold": spec.threshold,
+        "time_to_threshold_s": time_to(curve, spec.threshold),
+        "first_update_s": curve[0][1],
+        "launch_to_first_update_s": launched + curve[0][1] if first_in_process else None,
+        "curve": curve,
+    }
     # Kept before evaluating: compiling the evaluation takes minutes on a GPU.
     (run_dir / "training.json").write_text(json.dumps(row, indent=2))
     if not final_eval:
@@ -202,14 +250,18 @@ def warp_vs_jax(name: str, warp: dict, jax_: dict) -> dict:
 
 def summary(row: dict) -> str:
     ttt, f = row["time_to_threshold_s"], row.get("final")
-    line = (f"{row['task']} ({row['impl']}): {row['steps_per_s']:,.0f} steps/s ({row['fraction_of_raw']:.2f} of raw), "
-            f"threshold {row['threshold']:.0f} at {'never' if ttt is None else f'{ttt:.1f} s'} (compile included), "
-            f"first update at {row['first_update_s']:.1f} s"
-            + (f" ({row['launch_to_first_update_s']:.1f} s from launch)" if row["launch_to_first_update_s"] else "")
-            + f", trained {row['train_s']:.0f} s, last eval return {row['curve'][-1][2]:.1f}")  # fmt: skip
+    line = (
+        f"{row['task']} ({row['impl']}): {row['steps_per_s']:,.0f} steps/s ({row['fraction_of_raw']:.2f} of raw), "
+        f"threshold {row['threshold']:.0f} at {'never' if ttt is None else f'{ttt:.1f} s'} (compile included), "
+        f"first update at {row['first_update_s']:.1f} s"
+        + (f" ({row['launch_to_first_update_s']:.1f} s from launch)" if row["launch_to_first_update_s"] else "")
+        + f", trained {row['train_s']:.0f} s, last eval return {row['curve'][-1][2]:.1f}"
+    )
     if f:
-        line += (f"; final return {f['return']:.1f}, speed {f['forward_speed_m_s']:.2f} m/s, velocity error "
-                 f"{f['velocity_error_m_s']:.3f} m/s, fell {f['fell_fraction']:.2f}, length {f['length']:.0f}")  # fmt: skip
+        line += (
+            f"; final return {f['return']:.1f}, speed {f['forward_speed_m_s']:.2f} m/s, velocity error "
+            f"{f['velocity_error_m_s']:.3f} m/s, fell {f['fell_fraction']:.2f}, length {f['length']:.0f}"
+        )
     return line
 
 
@@ -222,7 +274,9 @@ def main() -> None:
     parser.add_argument("--smoke", action="store_true", help="tiny sizes, to check the script on a CPU")
     parser.add_argument("--no-video", action="store_true", help="save the final episodes, render them later")
     parser.add_argument("--render", action="store_true", help="only render the saved final episodes under --out")
-    parser.add_argument("--no-final-eval", action="store_true", help="skip (c), the final evaluation (minutes to compile)")
+    parser.add_argument(
+        "--no-final-eval", action="store_true", help="skip (c), the final evaluation (minutes to compile)"
+    )
     parser.add_argument("--tag", default="", help="suffix of the JSON file")
     parser.add_argument("--seed", type=int, default=0, help="training seed (not 0: named in the run directories)")
     add_impl_argument(parser)
@@ -238,15 +292,29 @@ def main() -> None:
     for name in args.tasks:
         by_impl = {}
         for impl in impls(args.impl):
-            row = run_task(name, args.steps, args.out, args.eval_envs, args.smoke, not args.no_video, impl,
-                           final_eval=not args.no_final_eval, first_in_process=not rows, seed=args.seed)  # fmt: skip
+            row = run_task(
+                name,
+                args.steps,
+                args.out,
+                args.eval_envs,
+                args.smoke,
+                not args.no_video,
+                impl,
+                final_eval=not args.no_final_eval,
+                first_in_process=not rows,
+                seed=args.seed,
+            )
             rows.append(by_impl.setdefault(impl, row))
             print(summary(row), flush=True)
             if len(by_impl) == 2:
                 ratios.append(warp_vs_jax(name, by_impl["warp"], by_impl["jax"]))
-                print(f"{name}: warp/jax " + ", ".join(f"{k} {v:.2f}x" for k, v in ratios[-1].items() if k != "task" and v))
-            path.write_text(json.dumps({"device": device, "jax": jax.__version__, "rows": rows, "warp_vs_jax": ratios},
-                                       indent=2))  # fmt: skip
+                print(
+                    f"{name}: warp/jax "
+                    + ", ".join(f"{k} {v:.2f}x" for k, v in ratios[-1].items() if k != "task" and v)
+                )
+            path.write_text(
+                json.dumps({"device": device, "jax": jax.__version__, "rows": rows, "warp_vs_jax": ratios}, indent=2)
+            )
     print(f"wrote {path}", flush=True)
 
 

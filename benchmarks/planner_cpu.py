@@ -64,9 +64,17 @@ def problem(task: str, planner: str, samples: int, backend: str, seconds: float)
     plan_task = mjzoo.envs.make(spec["env"], **overrides)
     plan_task = setup.plan_view(plan_task) if setup.plan_view else plan_task
     sim_task = mjzoo.envs.make(spec["env"], episode_steps=10**9)
-    return realtime.Problem(module, module.Config(**fields), sim_task, plan_task, seconds=seconds,
-                            replan_every=setup.replan_every, hooks=setup.hooks, success=setup.success,
-                            backend=backend)  # fmt: skip
+    return realtime.Problem(
+        module,
+        module.Config(**fields),
+        sim_task,
+        plan_task,
+        seconds=seconds,
+        replan_every=setup.replan_every,
+        hooks=setup.hooks,
+        success=setup.success,
+        backend=backend,
+    )
 
 
 def measure(task: str, planner: str, samples: int, backend: str, seconds: float, seeds: int, clock: str) -> dict:
@@ -80,10 +88,22 @@ def measure(task: str, planner: str, samples: int, backend: str, seconds: float,
         solved, score = p.success(jax.device_get(result.states))
         runs.append({**stats, "success": bool(solved), "score": float(score)})
     mean = lambda k: float(np.mean([r[k] for r in runs]))  # noqa: E731
-    row = {"task": task, "planner": planner, "num_samples": samples, "backend": backend, "peer": "mjzoo",
-           "replan_ms": {"median": mean("plan_latency_ms"), "p95": mean("plan_latency_p95_ms")},
-           "plan_hz": mean("plan_hz"), "sim_step_ms": mean("sim_step_ms"), "success_rate": mean("success"),
-           "score": mean("score"), "seeds": seeds, "clock": clock, "setup_s": build, "runs": runs}  # fmt: skip
+    row = {
+        "task": task,
+        "planner": planner,
+        "num_samples": samples,
+        "backend": backend,
+        "peer": "mjzoo",
+        "replan_ms": {"median": mean("plan_latency_ms"), "p95": mean("plan_latency_p95_ms")},
+        "plan_hz": mean("plan_hz"),
+        "sim_step_ms": mean("sim_step_ms"),
+        "success_rate": mean("success"),
+        "score": mean("score"),
+        "seeds": seeds,
+        "clock": clock,
+        "setup_s": build,
+        "runs": runs,
+    }
     if backend == "native":
         row["rollout_ms"] = {"median": mean("plan_physics_ms")}
         row["overhead_ms"] = {"median": row["replan_ms"]["median"] - row["rollout_ms"]["median"]}
@@ -95,23 +115,42 @@ def judo(args, out: Path) -> dict | None:
     if not python.exists():
         print(f"judo: {python} not found (bash benchmarks/judo_env.sh makes it); Judo's rows are left out")
         return None
-    command = [str(python), str(ROOT / "benchmarks" / "judo_peer.py"), "--out", str(out), "--tasks", *args.tasks,
-               "--optimizers", *args.planners, "--sample-factors", *map(str, args.sample_factors),
-               "--seconds", str(args.seconds), "--seeds", str(args.seeds), "--threads", str(args.threads)]  # fmt: skip
+    command = [
+        str(python),
+        str(ROOT / "benchmarks" / "judo_peer.py"),
+        "--out",
+        str(out),
+        "--tasks",
+        *args.tasks,
+        "--optimizers",
+        *args.planners,
+        "--sample-factors",
+        *map(str, args.sample_factors),
+        "--seconds",
+        str(args.seconds),
+        "--seeds",
+        str(args.seeds),
+        "--threads",
+        str(args.threads),
+    ]
     subprocess.run(command, check=True, env={k: v for k, v in os.environ.items() if k != "PYTHONPATH"})
     return json.loads(out.read_text())
 
 
 def table(rows: list[dict]) -> str:
-    lines = ["| task | planner | K | backend | replan ms (median / p95) | C rollouts ms | overhead ms | Hz | success |",
-             "|---|---|---|---|---|---|---|---|---|"]  # fmt: skip
+    lines = [
+        "| task | planner | K | backend | replan ms (median / p95) | C rollouts ms | overhead ms | Hz | success |",
+        "|---|---|---|---|---|---|---|---|---|",
+    ]
     for r in rows:
         rollout = r.get("rollout_ms", {}).get("median")
         overhead = r.get("overhead_ms", {}).get("median")
         fmt = lambda x: "" if x is None else f"{x:.2f}"  # noqa: E731
-        lines.append(f"| {r['task']} | {r['planner']} | {r['num_samples']} | {r['backend']} | "
-                     f"{r['replan_ms']['median']:.2f} / {r['replan_ms']['p95']:.2f} | {fmt(rollout)} | {fmt(overhead)} | "
-                     f"{fmt(r.get('plan_hz'))} | {r['success_rate']:.2f} |")  # fmt: skip
+        lines.append(
+            f"| {r['task']} | {r['planner']} | {r['num_samples']} | {r['backend']} | "
+            f"{r['replan_ms']['median']:.2f} / {r['replan_ms']['p95']:.2f} | {fmt(rollout)} | {fmt(overhead)} | "
+            f"{fmt(r.get('plan_hz'))} | {r['success_rate']:.2f} |"
+        )
     return "\n".join(lines)
 
 
@@ -123,13 +162,19 @@ def main() -> None:
     parser.add_argument("--backends", nargs="+", default=["native", "mjx"], choices=["native", "mjx"])
     parser.add_argument("--seconds", type=float, default=8.0)
     parser.add_argument("--seeds", type=int, default=1)
-    parser.add_argument("--clock", default="simulated", choices=["simulated", "wall"],
-                        help="simulated: replan every 0.05 s of simulated time with no sleeping, as judo_peer.py "
-                             "does (the like-for-like latency); wall: mjzoo plan's real-time runner")  # fmt: skip
+    parser.add_argument(
+        "--clock",
+        default="simulated",
+        choices=["simulated", "wall"],
+        help="simulated: replan every 0.05 s of simulated time with no sleeping, as judo_peer.py "
+        "does (the like-for-like latency); wall: mjzoo plan's real-time runner",
+    )
     parser.add_argument("--threads", type=int, default=native.physical_cores())
     parser.add_argument("--judo-python", default=str(ROOT / ".judo" / "venv" / "bin" / "python"))
     parser.add_argument("--no-judo", action="store_true")
-    parser.add_argument("--out", type=Path, default=ROOT / "benchmarks" / "results" / "planner_cpu" / "planner_cpu.json")
+    parser.add_argument(
+        "--out", type=Path, default=ROOT / "benchmarks" / "results" / "planner_cpu" / "planner_cpu.json"
+    )
     args = parser.parse_args()
     load = [os.getloadavg()]
     rows = []
@@ -145,20 +190,47 @@ def main() -> None:
         with tempfile.TemporaryDirectory() as tmp:
             peer = judo(args, Path(tmp) / "judo.json")
         for r in (peer or {}).get("rows", []):
-            judo_rows.append({"task": r["task"], "planner": r["optimizer"], "num_samples": r["settings"]["optimizer"]["num_rollouts"],
-                              "backend": "judo", "peer": "judo", "replan_ms": r["replan_ms"], "rollout_ms": r["rollout_ms"],
-                              "overhead_ms": r["overhead_ms"], "plan_hz": None, "success_rate": r["success_rate"],
-                              "score": r.get("mean_score"), "seeds": len(r.get("scores", []))})  # fmt: skip
+            judo_rows.append(
+                {
+                    "task": r["task"],
+                    "planner": r["optimizer"],
+                    "num_samples": r["settings"]["optimizer"]["num_rollouts"],
+                    "backend": "judo",
+                    "peer": "judo",
+                    "replan_ms": r["replan_ms"],
+                    "rollout_ms": r["rollout_ms"],
+                    "overhead_ms": r["overhead_ms"],
+                    "plan_hz": None,
+                    "success_rate": r["success_rate"],
+                    "score": r.get("mean_score"),
+                    "seeds": len(r.get("scores", [])),
+                }
+            )
     load.append(os.getloadavg())
     ratios = {}
     for r in rows:
-        peer = [j for j in judo_rows if (j["task"], j["planner"], j["num_samples"]) == (r["task"], r["planner"], r["num_samples"])]
+        peer = [
+            j
+            for j in judo_rows
+            if (j["task"], j["planner"], j["num_samples"]) == (r["task"], r["planner"], r["num_samples"])
+        ]
         if peer and r["backend"] == "native":
-            ratios[f"{r['task']}/{r['planner']}/{r['num_samples']}"] = r["replan_ms"]["median"] / peer[0]["replan_ms"]["median"]
-    result = {"machine": {"cpu": platform.processor() or platform.machine(), "cores": os.cpu_count(),
-                          "physical_cores": native.physical_cores(), "loadavg_before_after": load},
-              "rollout_threads": args.threads, "seconds": args.seconds, "rate_hz": RATE_HZ,
-              "native_over_judo_latency": ratios, "rows": rows + judo_rows}  # fmt: skip
+            ratios[f"{r['task']}/{r['planner']}/{r['num_samples']}"] = (
+                r["replan_ms"]["median"] / peer[0]["replan_ms"]["median"]
+            )
+    result = {
+        "machine": {
+            "cpu": platform.processor() or platform.machine(),
+            "cores": os.cpu_count(),
+            "physical_cores": native.physical_cores(),
+            "loadavg_before_after": load,
+        },
+        "rollout_threads": args.threads,
+        "seconds": args.seconds,
+        "rate_hz": RATE_HZ,
+        "native_over_judo_latency": ratios,
+        "rows": rows + judo_rows,
+    }
     args.out.parent.mkdir(parents=True, exist_ok=True)
     args.out.write_text(json.dumps(result, indent=1))
     print(table(sorted(rows + judo_rows, key=lambda r: (r["task"], r["planner"], r["num_samples"], r["backend"]))))

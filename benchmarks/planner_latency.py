@@ -80,8 +80,16 @@ def bare_rollouts(task: mjzoo.Task, n_substeps: int, unroll: int = 1):
     return run
 
 
-def measure(env: str, physics_options: dict, samples: list[int], horizons: list[int], repeats: int, extras: bool,
-            save, impl: str = "jax") -> list[dict]:  # fmt: skip
+def measure(
+    env: str,
+    physics_options: dict,
+    samples: list[int],
+    horizons: list[int],
+    repeats: int,
+    extras: bool,
+    save,
+    impl: str = "jax",
+) -> list[dict]:
     task, n_substeps = make(env, {**physics_options, "impl": impl})
     state = mjzoo.complete(task, mjzoo.reset(task, jax.random.key(0)))
     rows = []
@@ -93,13 +101,27 @@ def measure(env: str, physics_options: dict, samples: list[int], horizons: list[
         plan_ms = median_ms(plan, config, task, planner_state, state, jax.random.key(1), repeats=repeats)
         controls = jax.random.uniform(jax.random.key(2), (n, h, task.action_size), minval=-1, maxval=1)
         bare_ms = median_ms(bare_rollouts(task, n_substeps, unroll), state.data, controls, repeats=repeats)
-        result = {"env": env, "impl": impl, "physics": physics_options, "planner": planner.__name__.rsplit(".", 1)[-1], "samples": n, "horizon_steps": h,
-                  "horizon_s": h * n_substeps * float(task.model.opt.timestep), "unroll": unroll,
-                  "plan_ms": plan_ms, "bare_ms": bare_ms, "overhead": plan_ms / bare_ms - 1.0,
-                  "ms_per_physics_step": plan_ms / (h * n_substeps), "plan_hz": 1e3 / plan_ms}  # fmt: skip
-        print(f"{env:<16} {impl:<5} {result['planner']:<20} N={n:<6} H={h:<3} ({result['horizon_s']:.2f} s) unroll={unroll} "
-              f"plan {plan_ms:8.2f} ms  bare {bare_ms:8.2f} ms  overhead {100 * result['overhead']:+6.1f}%  "
-              f"{result['ms_per_physics_step']:.3f} ms/step  {result['plan_hz']:.0f} Hz", flush=True)  # fmt: skip
+        result = {
+            "env": env,
+            "impl": impl,
+            "physics": physics_options,
+            "planner": planner.__name__.rsplit(".", 1)[-1],
+            "samples": n,
+            "horizon_steps": h,
+            "horizon_s": h * n_substeps * float(task.model.opt.timestep),
+            "unroll": unroll,
+            "plan_ms": plan_ms,
+            "bare_ms": bare_ms,
+            "overhead": plan_ms / bare_ms - 1.0,
+            "ms_per_physics_step": plan_ms / (h * n_substeps),
+            "plan_hz": 1e3 / plan_ms,
+        }
+        print(
+            f"{env:<16} {impl:<5} {result['planner']:<20} N={n:<6} H={h:<3} ({result['horizon_s']:.2f} s) unroll={unroll} "
+            f"plan {plan_ms:8.2f} ms  bare {bare_ms:8.2f} ms  overhead {100 * result['overhead']:+6.1f}%  "
+            f"{result['ms_per_physics_step']:.3f} ms/step  {result['plan_hz']:.0f} Hz",
+            flush=True,
+        )
         rows.append(result)
         save(rows)
 
@@ -116,8 +138,13 @@ def measure(env: str, physics_options: dict, samples: list[int], horizons: list[
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     parser.add_argument("--envs", nargs="*", default=["cartpole_swingup", "humanoid_walk"])
-    parser.add_argument("--physics", nargs="*", default=[], metavar="KEY=VALUE",
-                        help="physics options of the planning model, e.g. dt=0.025 ctrl_dt=0.05 iterations=1")
+    parser.add_argument(
+        "--physics",
+        nargs="*",
+        default=[],
+        metavar="KEY=VALUE",
+        help="physics options of the planning model, e.g. dt=0.025 ctrl_dt=0.05 iterations=1",
+    )
     parser.add_argument("--samples", nargs="*", type=int, default=[64, 256, 1024, 4096, 16384])
     parser.add_argument("--horizons", nargs="*", type=int, default=[13, 25], help="planning control steps")
     parser.add_argument("--repeats", type=int, default=10)
@@ -134,17 +161,29 @@ def main() -> None:
     flags = os.environ.get("XLA_FLAGS", "")
 
     def save(env_rows: list[dict]) -> None:
-        path.write_text(json.dumps({"device": device, "jax": jax.__version__, "xla_flags": flags,
-                                    "rows": rows + env_rows, "warp_vs_jax": warp_vs_jax(rows + env_rows)}, indent=2))  # fmt: skip
+        path.write_text(
+            json.dumps(
+                {
+                    "device": device,
+                    "jax": jax.__version__,
+                    "xla_flags": flags,
+                    "rows": rows + env_rows,
+                    "warp_vs_jax": warp_vs_jax(rows + env_rows),
+                },
+                indent=2,
+            )
+        )
 
     options = {k: float(v) if "." in v else int(v) for k, v in (item.split("=", 1) for item in args.physics)}
     for env in args.envs:
         for impl in impls(args.impl):
             rows += measure(env, options, args.samples, args.horizons, args.repeats, not args.no_extras, save, impl)
     for r in warp_vs_jax(rows):
-        print(f"{r['env']:<16} warp/jax {r['planner']:<20} N={r['samples']:<6} H={r['horizon_steps']:<3} "
-              f"({r['horizon_s']:.2f} s) unroll={r['unroll']}  plan Hz {r['plan_hz']:.2f}x  bare {r['bare']:.2f}x  "
-              f"(warp {r['warp_plan_hz']:.0f} Hz, jax {r['jax_plan_hz']:.0f} Hz)")  # fmt: skip
+        print(
+            f"{r['env']:<16} warp/jax {r['planner']:<20} N={r['samples']:<6} H={r['horizon_steps']:<3} "
+            f"({r['horizon_s']:.2f} s) unroll={r['unroll']}  plan Hz {r['plan_hz']:.2f}x  bare {r['bare']:.2f}x  "
+            f"(warp {r['warp_plan_hz']:.0f} Hz, jax {r['jax_plan_hz']:.0f} Hz)"
+        )
     print(f"wrote {path}", flush=True)
 
 
@@ -154,10 +193,21 @@ def warp_vs_jax(rows: list[dict]) -> list[dict]:
     setting = lambda r: (r["env"], r["planner"], r["samples"], r["horizon_steps"], r["unroll"])  # noqa: E731
     jax_rows = {setting(r): r for r in rows if r["impl"] == "jax"}
     pairs = [(r, jax_rows[setting(r)]) for r in rows if r["impl"] == "warp" and setting(r) in jax_rows]
-    return [{"env": w["env"], "planner": w["planner"], "samples": w["samples"], "horizon_steps": w["horizon_steps"],
-             "horizon_s": w["horizon_s"], "unroll": w["unroll"], "plan_hz": ratio(w["plan_hz"], j["plan_hz"]),
-             "bare": ratio(j["bare_ms"], w["bare_ms"]), "warp_plan_hz": w["plan_hz"], "jax_plan_hz": j["plan_hz"]}
-            for w, j in pairs]  # fmt: skip
+    return [
+        {
+            "env": w["env"],
+            "planner": w["planner"],
+            "samples": w["samples"],
+            "horizon_steps": w["horizon_steps"],
+            "horizon_s": w["horizon_s"],
+            "unroll": w["unroll"],
+            "plan_hz": ratio(w["plan_hz"], j["plan_hz"]),
+            "bare": ratio(j["bare_ms"], w["bare_ms"]),
+            "warp_plan_hz": w["plan_hz"],
+            "jax_plan_hz": j["plan_hz"],
+        }
+        for w, j in pairs
+    ]
 
 
 if __name__ == "__main__":

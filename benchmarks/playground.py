@@ -48,8 +48,14 @@ from mjzoo.interop import playground  # noqa: E402
 DEFAULT_ENVS = ["CartpoleBalance", "PendulumSwingup", "CheetahRun", "WalkerWalk"]
 # Measured by the issue's author on one H100 with Playground's tuned config (JAX physics;
 # 995k steps/s on Warp): Brax PPO on CartpoleBalance returns ~993 after 9.8M steps.
-PUBLISHED = {"CartpoleBalance": {"brax_steps_per_s_jax": 734_000, "brax_steps_per_s_warp": 995_000,
-                                 "return": 993.0, "at_steps": 9_800_000}}  # fmt: skip
+PUBLISHED = {
+    "CartpoleBalance": {
+        "brax_steps_per_s_jax": 734_000,
+        "brax_steps_per_s_warp": 995_000,
+        "return": 993.0,
+        "at_steps": 9_800_000,
+    }
+}
 SMOKE = dict(num_envs=16, batch_size=16, num_minibatches=4, num_updates_per_batch=2, num_evals=3, episode_length=50)
 
 
@@ -110,24 +116,37 @@ def train_brax(env, config: dict, seed: int, time_limit: float | None = None) ->
             raise _OutOfTime
 
     try:
-        brax_ppo.train(environment=env, wrap_env_fn=wrapper.wrap_for_brax_training, network_factory=network,
-                       progress_fn=progress, seed=seed, **params)  # fmt: skip
+        brax_ppo.train(
+            environment=env,
+            wrap_env_fn=wrapper.wrap_for_brax_training,
+            network_factory=network,
+            progress_fn=progress,
+            seed=seed,
+            **params,
+        )
         cut_off = None
     except _OutOfTime:
         cut_off = reports[-1][0]
     (first_step, first_s), (last_step, last_s) = trained_s[0], trained_s[-1]
     steps_per_s = wall_steps_per_s(reports)
     first_report = next(t for step, t, _ in reports if step > 0)
-    return {"steps_per_s": steps_per_s, "train_steps_per_s": (last_step - first_step) / (last_s - first_s),
-            "curve": reports, "final_return": reports[-1][2], "compile_s": first_report - first_step / steps_per_s,
-            **({"cut_off_at_step": cut_off} if cut_off is not None else {})}  # fmt: skip
+    return {
+        "steps_per_s": steps_per_s,
+        "train_steps_per_s": (last_step - first_step) / (last_s - first_s),
+        "curve": reports,
+        "final_return": reports[-1][2],
+        "compile_s": first_report - first_step / steps_per_s,
+        **({"cut_off_at_step": cut_off} if cut_off is not None else {}),
+    }
 
 
 def brax_env_steps(config: dict) -> int:
     """The env steps Brax PPO actually trains for `config`: whole epochs of
     `num_resets_per_eval` training steps between `num_evals - 1` evaluations, rounded up
     (Playground's 60M-step DM Control config trains 88.5M)."""
-    per_step = config["batch_size"] * config["unroll_length"] * config["num_minibatches"] * config.get("action_repeat", 1)
+    per_step = (
+        config["batch_size"] * config["unroll_length"] * config["num_minibatches"] * config.get("action_repeat", 1)
+    )
     evals = max(config["num_evals"] - 1, 1)
     resets = max(config.get("num_resets_per_eval", 0), 1)
     return evals * resets * per_step * int(np.ceil(config["num_timesteps"] / (evals * per_step * resets)))
@@ -139,28 +158,56 @@ def train_mjzoo(env, name: str, config: dict, seed: int, overrides: dict) -> dic
     often as Brax's `num_evals`."""
     fields = {**playground.ppo_hyperparameters(name), "total_steps": brax_env_steps(config), **overrides}
     if config["num_envs"] != fields["num_envs"]:  # --smoke
-        fields.update(num_envs=config["num_envs"], unroll_length=config["unroll_length"],
-                      num_minibatches=config["num_minibatches"], num_epochs=config["num_updates_per_batch"])  # fmt: skip
+        fields.update(
+            num_envs=config["num_envs"],
+            unroll_length=config["unroll_length"],
+            num_minibatches=config["num_minibatches"],
+            num_epochs=config["num_updates_per_batch"],
+        )
     ppo_config = ppo.Config(**fields)
     per_chunk = max(1, ppo_config.num_updates // max(1, config["num_evals"] - 1))
     with tempfile.TemporaryDirectory() as out:
-        settings = training.Settings(out_dir=Path(out), updates_per_chunk=per_chunk, eval_envs=config["num_eval_envs"],
-                                     eval_steps=config["episode_length"], eval_every=1, video=False, progress=False,
-                                     checkpoint_every=0, seed=seed)  # fmt: skip
+        settings = training.Settings(
+            out_dir=Path(out),
+            updates_per_chunk=per_chunk,
+            eval_envs=config["num_eval_envs"],
+            eval_steps=config["episode_length"],
+            eval_every=1,
+            video=False,
+            progress=False,
+            checkpoint_every=0,
+            seed=seed,
+        )
         start = time.perf_counter()
         training.run(ppo, ppo_config, playground.task(env), settings)
         curve, train_steps_per_s = training_curve(Path(out) / "metrics.jsonl", time.perf_counter() - start)
-    return {"steps_per_s": wall_steps_per_s(curve), "train_steps_per_s": train_steps_per_s, "curve": curve,
-            "final_return": curve[-1][2], "overrides": overrides,
-            "compile_s": curve[0][1] - ppo_config.steps_per_update / train_steps_per_s}  # fmt: skip
+    return {
+        "steps_per_s": wall_steps_per_s(curve),
+        "train_steps_per_s": train_steps_per_s,
+        "curve": curve,
+        "final_return": curve[-1][2],
+        "overrides": overrides,
+        "compile_s": curve[0][1] - ppo_config.steps_per_update / train_steps_per_s,
+    }
 
 
-TRAINERS = {"mjzoo": train_mjzoo,
-            "brax": lambda env, name, config, seed, overrides, time_limit=None: train_brax(env, config, seed, time_limit)}
+TRAINERS = {
+    "mjzoo": train_mjzoo,
+    "brax": lambda env, name, config, seed, overrides, time_limit=None: train_brax(env, config, seed, time_limit),
+}
 
 
-def measure(name: str, impl: str, steps: int, seeds: range, trainers: list[str], smoke: bool, overrides: dict,
-            evals: int | None = None, brax_time_limit: float | None = None) -> Iterator[dict]:  # fmt: skip
+def measure(
+    name: str,
+    impl: str,
+    steps: int,
+    seeds: range,
+    trainers: list[str],
+    smoke: bool,
+    overrides: dict,
+    evals: int | None = None,
+    brax_time_limit: float | None = None,
+) -> Iterator[dict]:
     """Raw stepping and each of `trainers` over `seeds` seeds on Playground's `name`: the
     row so far after each trainer (a run cut off keeps what it measured)."""
     config = brax_config(name, steps, smoke, evals)
@@ -168,20 +215,30 @@ def measure(name: str, impl: str, steps: int, seeds: range, trainers: list[str],
     start = time.perf_counter()
     env = playground.load(name, impl=impl, **({"episode_length": config["episode_length"]} if smoke else {}))
     raw = raw_steps_per_s(env, config["num_envs"])
-    print(f"{name} ({impl}): raw stepping {raw:,.0f} steps/s (load and compile included: "
-          f"{time.perf_counter() - start:.0f} s); each trainer trains {brax_env_steps(config):,} env steps",
-          flush=True)  # fmt: skip
-    row = {"env": name, "impl": impl, "raw_steps_per_s": raw, "steps": brax_env_steps(config),
-           "published": PUBLISHED.get(name)}  # fmt: skip
+    print(
+        f"{name} ({impl}): raw stepping {raw:,.0f} steps/s (load and compile included: "
+        f"{time.perf_counter() - start:.0f} s); each trainer trains {brax_env_steps(config):,} env steps",
+        flush=True,
+    )
+    row = {
+        "env": name,
+        "impl": impl,
+        "raw_steps_per_s": raw,
+        "steps": brax_env_steps(config),
+        "published": PUBLISHED.get(name),
+    }
     for trainer in trainers:
         runs = []
         for seed in seeds:
             limit = {"time_limit": brax_time_limit} if trainer == "brax" else {}
             runs.append({**TRAINERS[trainer](env, name, config, seed, overrides, **limit), "seed": seed})
-            print(f"{name} ({impl}) seed {seed}: {trainer} {runs[-1]['steps_per_s']:,.0f} steps/s, final "
-                  f"{runs[-1]['final_return']:.1f}, compile {runs[-1]['compile_s']:.0f} s, "
-                  + (f"cut off at step {runs[-1]['cut_off_at_step']:,}, " if "cut_off_at_step" in runs[-1] else "")
-                  + f"{time.perf_counter() - start:.0f} s so far", flush=True)  # fmt: skip
+            print(
+                f"{name} ({impl}) seed {seed}: {trainer} {runs[-1]['steps_per_s']:,.0f} steps/s, final "
+                f"{runs[-1]['final_return']:.1f}, compile {runs[-1]['compile_s']:.0f} s, "
+                + (f"cut off at step {runs[-1]['cut_off_at_step']:,}, " if "cut_off_at_step" in runs[-1] else "")
+                + f"{time.perf_counter() - start:.0f} s so far",
+                flush=True,
+            )
         row[trainer] = {"runs": runs}
         yield dict(row)
 
@@ -210,10 +267,15 @@ def summarize(row: dict, threshold: float) -> dict:
         rs = row[t]["runs"]
         times = [time_to(r["curve"], row["threshold"]) for r in rs]
         speed, training = (_mean([r.get(rate) for r in rs]) for rate in ("steps_per_s", "train_steps_per_s"))
-        row[t].update(steps_per_s=speed, train_steps_per_s=training, final_return=finals[t],
-                      fraction_of_raw=None if training is None else training / row["raw_steps_per_s"],
-                      final_return_std=float(np.std([r["final_return"] for r in rs])), seeds=len(rs),
-                      time_to_threshold_s=None if None in times else float(np.mean(times)))  # fmt: skip
+        row[t].update(
+            steps_per_s=speed,
+            train_steps_per_s=training,
+            final_return=finals[t],
+            fraction_of_raw=None if training is None else training / row["raw_steps_per_s"],
+            final_return_std=float(np.std([r["final_return"] for r in rs])),
+            seeds=len(rs),
+            time_to_threshold_s=None if None in times else float(np.mean(times)),
+        )
     if len(trainers) == 2:
         for rate in ("steps_per_s", "train_steps_per_s"):
             mjzoo, brax = row["mjzoo"][rate], row["brax"][rate]
@@ -228,42 +290,76 @@ def _mean(values: list[float | None]) -> float | None:
 
 
 def print_table(rows: list[dict]) -> None:
-    print(f"\n{'env':<16} {'impl':<5} {'trainer':<6} {'seeds':>5} {'steps/s':>10} {'training':>10} {'/raw':>5} "
-          f"{'to thr (s)':>10} {'final':>16}")  # fmt: skip
+    print(
+        f"\n{'env':<16} {'impl':<5} {'trainer':<6} {'seeds':>5} {'steps/s':>10} {'training':>10} {'/raw':>5} "
+        f"{'to thr (s)':>10} {'final':>16}"
+    )
     for r in rows:
         for trainer in (t for t in TRAINERS if t in r):
             t = r[trainer]
             ttt = "never" if t["time_to_threshold_s"] is None else f"{t['time_to_threshold_s']:.1f}"
-            training, fraction = (("-", "-") if t["train_steps_per_s"] is None else
-                                  (f"{t['train_steps_per_s']:,.0f}", f"{t['fraction_of_raw']:.2f}"))  # fmt: skip
-            print(f"{r['env']:<16} {r['impl']:<5} {trainer:<6} {t['seeds']:>5} {t['steps_per_s']:>10,.0f} {training:>10} "
-                  f"{fraction:>5} {ttt:>10} {t['final_return']:>7.1f} ± {t['final_return_std']:<6.1f}")  # fmt: skip
+            training, fraction = (
+                ("-", "-")
+                if t["train_steps_per_s"] is None
+                else (f"{t['train_steps_per_s']:,.0f}", f"{t['fraction_of_raw']:.2f}")
+            )
+            print(
+                f"{r['env']:<16} {r['impl']:<5} {trainer:<6} {t['seeds']:>5} {t['steps_per_s']:>10,.0f} {training:>10} "
+                f"{fraction:>5} {ttt:>10} {t['final_return']:>7.1f} ± {t['final_return_std']:<6.1f}"
+            )
         wall, train = r.get("mjzoo_over_brax_steps_per_s"), r.get("mjzoo_over_brax_train_steps_per_s")
-        print(f"{'':<16} {r['impl']:<5} raw    {'':>5} {r['raw_steps_per_s']:>10,.0f}   threshold {r['threshold']:.1f}"
-              + (f"; mjzoo/brax steps/s {wall:.2f}x" if wall else "")
-              + (f" (training alone {train:.2f}x)" if train else "")
-              + (f"; published: {r['published']}" if r["published"] else ""))  # fmt: skip
+        print(
+            f"{'':<16} {r['impl']:<5} raw    {'':>5} {r['raw_steps_per_s']:>10,.0f}   threshold {r['threshold']:.1f}"
+            + (f"; mjzoo/brax steps/s {wall:.2f}x" if wall else "")
+            + (f" (training alone {train:.2f}x)" if train else "")
+            + (f"; published: {r['published']}" if r["published"] else "")
+        )
 
 
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     parser.add_argument("--envs", nargs="+", default=DEFAULT_ENVS)
     parser.add_argument("--impl", nargs="+", default=["jax"], choices=["jax", "warp"])
-    parser.add_argument("--trainers", nargs="+", default=list(TRAINERS), choices=list(TRAINERS),
-                        help="measure only these; their rows merge into the JSON's rows of the same env")
-    parser.add_argument("--steps", type=int, default=60_000_000,
-                        help="Brax's num_timesteps (Playground's: 60M, which Brax rounds up to 88.5M); mjzoo trains "
-                             "as many env steps as Brax does")  # fmt: skip
-    parser.add_argument("--evals", type=int, default=None,
-                        help="Brax's num_evals (Playground's: 10). Brax trains whole epochs between evaluations: "
-                             "with --steps 20000000, 4 evaluations train 29.5M steps where 10 train 88.5M")  # fmt: skip
-    parser.add_argument("--brax-time-limit", type=float, default=None, metavar="SECONDS",
-                        help="end each Brax run at its first evaluation after SECONDS (a run longer than one device "
-                             "call); the run's final return is then that evaluation's, and `cut_off_at_step` says so")  # fmt: skip
+    parser.add_argument(
+        "--trainers",
+        nargs="+",
+        default=list(TRAINERS),
+        choices=list(TRAINERS),
+        help="measure only these; their rows merge into the JSON's rows of the same env",
+    )
+    parser.add_argument(
+        "--steps",
+        type=int,
+        default=60_000_000,
+        help="Brax's num_timesteps (Playground's: 60M, which Brax rounds up to 88.5M); mjzoo trains "
+        "as many env steps as Brax does",
+    )
+    parser.add_argument(
+        "--evals",
+        type=int,
+        default=None,
+        help="Brax's num_evals (Playground's: 10). Brax trains whole epochs between evaluations: "
+        "with --steps 20000000, 4 evaluations train 29.5M steps where 10 train 88.5M",
+    )
+    parser.add_argument(
+        "--brax-time-limit",
+        type=float,
+        default=None,
+        metavar="SECONDS",
+        help="end each Brax run at its first evaluation after SECONDS (a run longer than one device "
+        "call); the run's final return is then that evaluation's, and `cut_off_at_step` says so",
+    )
     parser.add_argument("--seeds", type=int, default=1)
-    parser.add_argument("--first-seed", type=int, default=0, help="seeds FIRST .. FIRST+SEEDS-1, added to the row's others")
-    parser.add_argument("--set", nargs="*", default=[], metavar="FIELD=VALUE",
-                        help="ppo.Config overrides for mjzoo (e.g. compute_dtype=bfloat16)")
+    parser.add_argument(
+        "--first-seed", type=int, default=0, help="seeds FIRST .. FIRST+SEEDS-1, added to the row's others"
+    )
+    parser.add_argument(
+        "--set",
+        nargs="*",
+        default=[],
+        metavar="FIELD=VALUE",
+        help="ppo.Config overrides for mjzoo (e.g. compute_dtype=bfloat16)",
+    )
     parser.add_argument("--threshold", type=float, default=0.9, help="fraction of the better final return")
     parser.add_argument("--smoke", action="store_true", help="tiny sizes, to check the script on a CPU")
     parser.add_argument("--out", type=Path, default=Path(__file__).parent / "results" / "playground")
@@ -278,8 +374,9 @@ def main() -> None:
     for name in args.envs:
         for impl in args.impl:
             seeds = range(args.first_seed, args.first_seed + args.seeds)
-            for row in measure(name, impl, args.steps, seeds, args.trainers, args.smoke, overrides, args.evals,
-                               args.brax_time_limit):  # fmt: skip
+            for row in measure(
+                name, impl, args.steps, seeds, args.trainers, args.smoke, overrides, args.evals, args.brax_time_limit
+            ):
                 rows = [summarize(r, args.threshold) for r in merged(rows, with_earlier_seeds(rows, row))]
                 path.write_text(json.dumps({"device": device, "jax": jax.__version__, "rows": rows}, indent=1))
     print_table(rows)

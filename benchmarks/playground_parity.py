@@ -35,7 +35,10 @@ def trajectories(name: str, impl: str, envs: int, steps: int) -> dict[str, np.nd
         return state, (state.reward, state.obs)
 
     run = lambda step, start: jax.jit(lambda s: jax.lax.scan(step, s, actions)[1])(start)  # noqa: E731
-    (r0, o0), (r1, o1) = run(bare, jax.vmap(env.reset)(keys)), run(adapted, jax.vmap(lambda k: mjzoo.reset(task, k))(keys))
+    (r0, o0), (r1, o1) = (
+        run(bare, jax.vmap(env.reset)(keys)),
+        run(adapted, jax.vmap(lambda k: mjzoo.reset(task, k))(keys)),
+    )
     return {"bare_reward": np.asarray(r0), "bare_obs": np.asarray(o0), "reward": np.asarray(r1), "obs": np.asarray(o1)}
 
 
@@ -48,8 +51,10 @@ def main() -> None:
     args = parser.parse_args()
     runs = {impl: trajectories(args.env, impl, args.envs, args.steps) for impl in args.impl}
     for impl, r in runs.items():
-        print(f"{args.env} ({impl}): adapter - bare env: {_max_gaps(r, r, 'bare_')}; "
-              f"returns {r['reward'].sum(0).round(2).tolist()}")  # fmt: skip
+        print(
+            f"{args.env} ({impl}): adapter - bare env: {_max_gaps(r, r, 'bare_')}; "
+            f"returns {r['reward'].sum(0).round(2).tolist()}"
+        )
     if len(runs) == 2:
         a, b = runs.values()
         print(f"{args.env}: {' - '.join(runs)}: {_max_gaps(a, b, 'bare_', 'bare_')}")

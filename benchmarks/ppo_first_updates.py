@@ -39,9 +39,12 @@ def main() -> None:
         state, m = update(config, task, state)
         obs = ppo._inputs(config, state.obs_stats, state.collector.env_state.obs)[0]
         _, scale = distributions.split_params(policy_net.apply(state.params["policy"], obs))
-        print(f"update {i}: entropy {float(m['loss/entropy']):.3g}, approx KL {float(m['loss/approx_kl']):.3g}, "
-              f"clip fraction {float(m['loss/clip_fraction']):.3f}, value loss {float(m['loss/value']):.3g}, "
-              f"scale {np.percentile(np.asarray(scale), [1, 50, 99]).round(3)}", flush=True)  # fmt: skip
+        print(
+            f"update {i}: entropy {float(m['loss/entropy']):.3g}, approx KL {float(m['loss/approx_kl']):.3g}, "
+            f"clip fraction {float(m['loss/clip_fraction']):.3f}, value loss {float(m['loss/value']):.3g}, "
+            f"scale {np.percentile(np.asarray(scale), [1, 50, 99]).round(3)}",
+            flush=True,
+        )
 
 
 if __name__ == "__main__":

@@ -73,7 +73,9 @@ def loop_kernels(hlo: str) -> int:
     """Kernel launches in one minibatch step: the fusions and library calls (cuBLAS, ...)
     of the compiled program's busiest computation, which is the minibatch loop's body."""
     computations = re.split(r"\n(?=[%A-Z][^\n]*\{\n)", hlo)
-    return max(len(re.findall(r"= (?:\S+|\([^)]*\)) (?:fusion|custom-call|all-reduce(?:-start)?)\(", c)) for c in computations)
+    return max(
+        len(re.findall(r"= (?:\S+|\([^)]*\)) (?:fusion|custom-call|all-reduce(?:-start)?)\(", c)) for c in computations
+    )
 
 
 def best_of(fn, *args, repeats: int) -> float:
@@ -117,11 +119,14 @@ def profile(env: str, base: ppo.Config, fields: dict[str, str], repeats: int, de
     if flat_adam:  # the config's own optimizer over all parameters concatenated, not one update per array
         config = dataclasses.replace(config, optimizer=optax.flatten(ppo._optimizer(config)))
     if devices not in (1, jax.device_count()):  # the harness's chunk (timed too) meshes every device
-        raise SystemExit(f"ppo_profile: --devices {devices} of {jax.device_count()}: show it only those "
-                         "(CUDA_VISIBLE_DEVICES)")  # fmt: skip
+        raise SystemExit(
+            f"ppo_profile: --devices {devices} of {jax.device_count()}: show it only those (CUDA_VISIBLE_DEVICES)"
+        )
     if config.unroll_length % devices:
         raise SystemExit(f"ppo_profile: --devices {devices} must divide unroll_length {config.unroll_length}")
-    config = dataclasses.replace(config, num_envs=config.num_envs * devices, unroll_length=config.unroll_length // devices)
+    config = dataclasses.replace(
+        config, num_envs=config.num_envs * devices, unroll_length=config.unroll_length // devices
+    )
     placed = jax.devices()[:devices]
     task = mjzoo.envs.make(env)
     placed_task = replicate(task, placed)  # as `training.run` holds it
@@ -154,14 +159,29 @@ def profile(env: str, base: ppo.Config, fields: dict[str, str], repeats: int, de
         in_loop = training._evaluate_fn(ppo)
         t_in_loop = best_of(lambda s, k: in_loop(config, placed_task, s, k, 128, steps), state, key, repeats=1)
     sgd_steps = config.num_epochs * config.num_minibatches
-    return {"env": env, "devices": devices, "num_envs": config.num_envs, "unroll_length": config.unroll_length,
-            "steps_per_update": config.steps_per_update, "sgd_steps": sgd_steps,
-            "minibatch_samples_per_device": config.steps_per_update // config.num_minibatches // devices,
-            "config": {**fields, **({"precision": precision} if precision else {})},
-            "rollout_s": t_rollout, "improve_s": t_improve, "update_s": t_update, "update_onward_s": t_onward, "chunk_update_s": t_chunk, "evaluate_128_envs_s": t_evaluate,
-            "evaluate_in_loop_s": t_in_loop, "evaluate_steps": steps,
-            "sgd_step_ms": 1e3 * t_improve / sgd_steps, "sgd_step_kernels": kernels, "steps_per_s": config.steps_per_update / t_update,
-            "compile_rollout_s": compile_rollout, "compile_improve_s": compile_improve}  # fmt: skip
+    return {
+        "env": env,
+        "devices": devices,
+        "num_envs": config.num_envs,
+        "unroll_length": config.unroll_length,
+        "steps_per_update": config.steps_per_update,
+        "sgd_steps": sgd_steps,
+        "minibatch_samples_per_device": config.steps_per_update // config.num_minibatches // devices,
+        "config": {**fields, **({"precision": precision} if precision else {})},
+        "rollout_s": t_rollout,
+        "improve_s": t_improve,
+        "update_s": t_update,
+        "update_onward_s": t_onward,
+        "chunk_update_s": t_chunk,
+        "evaluate_128_envs_s": t_evaluate,
+        "evaluate_in_loop_s": t_in_loop,
+        "evaluate_steps": steps,
+        "sgd_step_ms": 1e3 * t_improve / sgd_steps,
+        "sgd_step_kernels": kernels,
+        "steps_per_s": config.steps_per_update / t_update,
+        "compile_rollout_s": compile_rollout,
+        "compile_improve_s": compile_improve,
+    }
 
 
 def main() -> None:
@@ -184,21 +204,39 @@ def main() -> None:
     args.out.mkdir(parents=True, exist_ok=True)
     name = f"ppo_profile_{jax.default_backend()}" + (f"_{args.devices}_devices" if args.devices > 1 else "")
     path = args.out / f"{name}{'_' + args.tag if args.tag else ''}.json"
-    print(f"{'env':<28} {'variant':<10} {'rollout s':>9} {'improve s':>9} {'update s':>9} {'onward s':>8} {'chunk s':>8} {'sgd ms':>7} {'kernels':>7} {'steps/s':>11} {'eval s':>7} {'in loop':>7}")
+    print(
+        f"{'env':<28} {'variant':<10} {'rollout s':>9} {'improve s':>9} {'update s':>9} {'onward s':>8} {'chunk s':>8} {'sgd ms':>7} {'kernels':>7} {'steps/s':>11} {'eval s':>7} {'in loop':>7}"
+    )
     for env in args.envs:
         config = base
         if args.env_config:
-            config = ppo.Config(**{**mjzoo.envs.hyperparameters(env, "ppo"), "total_steps": 10**9,
-                                   **(SMOKE if args.smoke else {})})  # fmt: skip
-        print(f"{env}: per update (unless a variant changes it) {config.steps_per_update:,} env steps x devices, "
-              f"{config.num_epochs * config.num_minibatches} minibatch steps", flush=True)  # fmt: skip
+            config = ppo.Config(
+                **{**mjzoo.envs.hyperparameters(env, "ppo"), "total_steps": 10**9, **(SMOKE if args.smoke else {})}
+            )
+        print(
+            f"{env}: per update (unless a variant changes it) {config.steps_per_update:,} env steps x devices, "
+            f"{config.num_epochs * config.num_minibatches} minibatch steps",
+            flush=True,
+        )
         for name, fields in map(parse_variant, args.variants):
             row = {"variant": name, **profile(env, config, fields, args.repeats, args.devices)}
             rows.append(row)
-            print(f"{env:<28} {name:<10} {row['rollout_s']:>9.3f} {row['improve_s']:>9.3f} {row['update_s']:>9.3f} {row['update_onward_s']:>8.3f} {row['chunk_update_s']:>8.3f} "
-                  f"{row['sgd_step_ms']:>7.2f} {row['sgd_step_kernels']:>7} {row['steps_per_s']:>11,.0f} {row['evaluate_128_envs_s']:>7.2f} {row['evaluate_in_loop_s']:>7.2f}",
-                  flush=True)  # fmt: skip
-            path.write_text(json.dumps({"device": device, "jax": jax.__version__, "xla_flags": os.environ.get("XLA_FLAGS", ""), "rows": rows}, indent=1))
+            print(
+                f"{env:<28} {name:<10} {row['rollout_s']:>9.3f} {row['improve_s']:>9.3f} {row['update_s']:>9.3f} {row['update_onward_s']:>8.3f} {row['chunk_update_s']:>8.3f} "
+                f"{row['sgd_step_ms']:>7.2f} {row['sgd_step_kernels']:>7} {row['steps_per_s']:>11,.0f} {row['evaluate_128_envs_s']:>7.2f} {row['evaluate_in_loop_s']:>7.2f}",
+                flush=True,
+            )
+            path.write_text(
+                json.dumps(
+                    {
+                        "device": device,
+                        "jax": jax.__version__,
+                        "xla_flags": os.environ.get("XLA_FLAGS", ""),
+                        "rows": rows,
+                    },
+                    indent=1,
+                )
+            )
     print(f"wrote {path}", flush=True)
 
 

@@ -50,12 +50,21 @@ from task_overhead import add_impl_argument, impls, inputs, ratio, raw_steps_per
 
 import mjzoo  # noqa: E402
 import mjzoo.envs  # noqa: E402
+from mjzoo.algorithms import ppo  # noqa: E402
 from mjzoo.harness import metrics, training  # noqa: E402
 from mjzoo.harness.cli import arguments  # noqa: E402
-from mjzoo.algorithms import ppo  # noqa: E402
 
-HYPER = dict(num_envs=2048, batch_size=1024, unroll_length=30, num_minibatches=32, num_updates_per_batch=16,
-             learning_rate=1e-3, entropy_cost=1e-2, discounting=0.995, reward_scaling=10.0)  # fmt: skip
+HYPER = dict(
+    num_envs=2048,
+    batch_size=1024,
+    unroll_length=30,
+    num_minibatches=32,
+    num_updates_per_batch=16,
+    learning_rate=1e-3,
+    entropy_cost=1e-2,
+    discounting=0.995,
+    reward_scaling=10.0,
+)
 
 
 def mjzoo_config(total_steps: int) -> ppo.Config:
@@ -64,12 +73,23 @@ def mjzoo_config(total_steps: int) -> ppo.Config:
     h = HYPER
     unrolls = h["batch_size"] * h["num_minibatches"] // h["num_envs"]
     return ppo.Config(
-        num_envs=h["num_envs"], unroll_length=h["unroll_length"] * unrolls, num_minibatches=h["num_minibatches"],
-        num_epochs=h["num_updates_per_batch"], learning_rate=h["learning_rate"], entropy_coef=h["entropy_cost"],
-        discount=h["discounting"], reward_scaling=h["reward_scaling"], gae_lambda=0.95, clip_epsilon=0.3,
-        max_grad_norm=None, normalize_observations=True, policy_hidden_sizes=(32,) * 4,
-        value_hidden_sizes=(256,) * 5, activation="swish", total_steps=total_steps,
-    )  # fmt: skip
+        num_envs=h["num_envs"],
+        unroll_length=h["unroll_length"] * unrolls,
+        num_minibatches=h["num_minibatches"],
+        num_epochs=h["num_updates_per_batch"],
+        learning_rate=h["learning_rate"],
+        entropy_coef=h["entropy_cost"],
+        discount=h["discounting"],
+        reward_scaling=h["reward_scaling"],
+        gae_lambda=0.95,
+        clip_epsilon=0.3,
+        max_grad_norm=None,
+        normalize_observations=True,
+        policy_hidden_sizes=(32,) * 4,
+        value_hidden_sizes=(256,) * 5,
+        activation="swish",
+        total_steps=total_steps,
+    )
 
 
 def train_mjzoo(task: mjzoo.Task, total_steps: int, episode_length: int, seed: int = 0, **overrides) -> dict:
@@ -77,13 +97,26 @@ def train_mjzoo(task: mjzoo.Task, total_steps: int, episode_length: int, seed: i
     with tempfile.TemporaryDirectory() as out:
         # Evaluate about as often as Brax does with num_evals=20 (every ~2M steps); Brax
         # writes no checkpoints, so neither do we here.
-        settings = training.Settings(out_dir=Path(out), updates_per_chunk=2, eval_envs=128, eval_steps=episode_length,
-                                     video=False, progress=False, checkpoint_every=0, seed=seed)  # fmt: skip
+        settings = training.Settings(
+            out_dir=Path(out),
+            updates_per_chunk=2,
+            eval_envs=128,
+            eval_steps=episode_length,
+            video=False,
+            progress=False,
+            checkpoint_every=0,
+            seed=seed,
+        )
         start = time.perf_counter()
         training.run(ppo, config, task, settings)
         curve, train_steps_per_s = training_curve(Path(out) / "metrics.jsonl", time.perf_counter() - start)
-    return {"steps_per_s": wall_steps_per_s(curve), "train_steps_per_s": train_steps_per_s, "curve": curve,
-            "final_return": curve[-1][2], "compile_s": curve[0][1] - config.steps_per_update / train_steps_per_s}  # fmt: skip
+    return {
+        "steps_per_s": wall_steps_per_s(curve),
+        "train_steps_per_s": train_steps_per_s,
+        "curve": curve,
+        "final_return": curve[-1][2],
+        "compile_s": curve[0][1] - config.steps_per_update / train_steps_per_s,
+    }
 
 
 def training_curve(metrics_path: Path, total_s: float) -> tuple[list, float]:
@@ -91,8 +124,9 @@ def training_curve(metrics_path: Path, total_s: float) -> tuple[list, float]:
     the first chunk) of a harness run that took `total_s` in all."""
     lines = metrics.read_metrics(metrics_path)
     offset = total_s - lines[-1]["perf/elapsed_s"]  # init before the loop's clock started
-    curve = [(line["step"], line["perf/elapsed_s"] + offset, line["eval/return"]) for line in lines
-             if "eval/return" in line]  # the harness evaluates within its wall-clock budget, not every chunk
+    curve = [
+        (line["step"], line["perf/elapsed_s"] + offset, line["eval/return"]) for line in lines if "eval/return" in line
+    ]  # the harness evaluates within its wall-clock budget, not every chunk
     steady = [line["perf/steps_per_s"] for line in lines[1:]] or [lines[0]["perf/steps_per_s"]]
     return curve, float(np.median(steady))
 
@@ -108,8 +142,9 @@ def train_peer(task: mjzoo.Task, total_steps: int, episode_length: int, seed: in
         # Brax trains at least one epoch between evaluations: fewer of them on short runs.
         epoch = HYPER["batch_size"] * HYPER["unroll_length"] * HYPER["num_minibatches"]
         num_evals = min(20, max(3, total_steps // epoch + 1))
-        return train_brax_ppo(task, num_timesteps=total_steps, episode_length=episode_length, num_evals=num_evals,
-                              seed=seed, **HYPER)  # fmt: skip
+        return train_brax_ppo(
+            task, num_timesteps=total_steps, episode_length=episode_length, num_evals=num_evals, seed=seed, **HYPER
+        )
     except Exception as e:  # noqa: BLE001  # recorded in the JSON: the run goes on
         return {"error": f"{type(e).__name__}: {e}"[:2000]}
 
@@ -120,8 +155,12 @@ def mean_of(runs: list[dict]) -> dict:
     if any("error" in r for r in runs):
         return next(r for r in runs if "error" in r)
     mean = {k: float(np.mean([r[k] for r in runs])) for k in runs[0] if isinstance(runs[0][k], (int, float))}
-    return {**mean, "final_return_std": float(np.std([r["final_return"] for r in runs])), "seeds": len(runs),
-            "runs": runs}  # fmt: skip
+    return {
+        **mean,
+        "final_return_std": float(np.std([r["final_return"] for r in runs])),
+        "seeds": len(runs),
+        "runs": runs,
+    }
 
 
 def measure(env: str, impl: str, total_steps: int, seeds: int, trainers: list[str], overrides: dict) -> dict:
@@ -131,8 +170,10 @@ def measure(env: str, impl: str, total_steps: int, seeds: int, trainers: list[st
     episode_length = mjzoo.envs.defaults(env)["episode_steps"]
     raw = raw_steps_per_s(task, env, *inputs(task, HYPER["num_envs"], 100), repeats=3)
     print(f"{env} ({impl}): raw stepping {raw:,.0f} steps/s", flush=True)
-    train = {"mjzoo": lambda seed: train_mjzoo(task, total_steps, episode_length, seed, **overrides),
-             "brax": lambda seed: train_peer(task, total_steps, episode_length, seed)}  # fmt: skip
+    train = {
+        "mjzoo": lambda seed: train_mjzoo(task, total_steps, episode_length, seed, **overrides),
+        "brax": lambda seed: train_peer(task, total_steps, episode_length, seed),
+    }
     results = {}
     for name in trainers:
         runs = []
@@ -141,8 +182,11 @@ def measure(env: str, impl: str, total_steps: int, seeds: int, trainers: list[st
             if "error" in runs[-1]:
                 print(f"{env} ({impl}): {name} PPO could not run: {runs[-1]['error'][:500]}", flush=True)
                 break
-            print(f"{env} ({impl}) seed {seed}: {name} {runs[-1]['steps_per_s']:,.0f} steps/s, final "
-                  f"{runs[-1]['final_return']:.1f}, compile {runs[-1]['compile_s']:.0f} s", flush=True)  # fmt: skip
+            print(
+                f"{env} ({impl}) seed {seed}: {name} {runs[-1]['steps_per_s']:,.0f} steps/s, final "
+                f"{runs[-1]['final_return']:.1f}, compile {runs[-1]['compile_s']:.0f} s",
+                flush=True,
+            )
         results[name] = mean_of(runs)
     return {"env": env, "impl": impl, "raw_steps_per_s": raw, "mjzoo_overrides": overrides, **results}
 
@@ -179,10 +223,17 @@ def merged(old: list[dict], row: dict) -> list[dict]:
 def warp_vs_jax(env: str, warp: dict, jax_: dict) -> dict:
     """Warp's figures over JAX's (None where a trainer did not run or never got there)."""
     speed = lambda row, name: row[name].get("steps_per_s")  # noqa: E731
-    return {"env": env, "raw_steps_per_s": ratio(warp["raw_steps_per_s"], jax_["raw_steps_per_s"]),
-            **{f"{name}_steps_per_s": ratio(speed(warp, name), speed(jax_, name)) for name in ("mjzoo", "brax")},
-            **{f"{name}_time_to_threshold_s": ratio(warp[f"{name}_time_to_threshold_s"], jax_[f"{name}_time_to_threshold_s"])
-               for name in ("mjzoo", "brax")}}  # fmt: skip
+    return {
+        "env": env,
+        "raw_steps_per_s": ratio(warp["raw_steps_per_s"], jax_["raw_steps_per_s"]),
+        **{f"{name}_steps_per_s": ratio(speed(warp, name), speed(jax_, name)) for name in ("mjzoo", "brax")},
+        **{
+            f"{name}_time_to_threshold_s": ratio(
+                warp[f"{name}_time_to_threshold_s"], jax_[f"{name}_time_to_threshold_s"]
+            )
+            for name in ("mjzoo", "brax")
+        },
+    }
 
 
 def warp_vs_jax_rows(rows: list[dict]) -> list[dict]:
@@ -193,20 +244,26 @@ def warp_vs_jax_rows(rows: list[dict]) -> list[dict]:
 
 
 def print_table(rows: list[dict]) -> None:
-    print(f"\n{'env':<18} {'impl':<5} {'trainer':<7} {'steps/s':>11} {'training':>11} {'/raw':>6} {'to thr (s)':>10} "
-          f"{'final':>8} {'compile s':>9}")  # fmt: skip
+    print(
+        f"\n{'env':<18} {'impl':<5} {'trainer':<7} {'steps/s':>11} {'training':>11} {'/raw':>6} {'to thr (s)':>10} "
+        f"{'final':>8} {'compile s':>9}"
+    )
     for r in rows:
         for name in (n for n in ("mjzoo", "brax") if n in r):
             res, ttt = r[name], r[f"{name}_time_to_threshold_s"]
             if "error" in res:
                 print(f"{r['env']:<18} {r['impl']:<5} {name:<7} did not run: {res['error'][:200]}")
                 continue
-            print(f"{r['env']:<18} {r['impl']:<5} {name:<7} {res['steps_per_s'] or 0:>11,.0f} {res['train_steps_per_s']:>11,.0f} "
-                  f"{r[f'{name}_fraction_of_raw']:>6.2f} "
-                  f"{'never' if ttt is None else f'{ttt:.1f}':>10} {res['final_return']:>8.1f} {res['compile_s']:>9.1f}")  # fmt: skip
+            print(
+                f"{r['env']:<18} {r['impl']:<5} {name:<7} {res['steps_per_s'] or 0:>11,.0f} {res['train_steps_per_s']:>11,.0f} "
+                f"{r[f'{name}_fraction_of_raw']:>6.2f} "
+                f"{'never' if ttt is None else f'{ttt:.1f}':>10} {res['final_return']:>8.1f} {res['compile_s']:>9.1f}"
+            )
         wall, train = r.get("mjzoo_over_brax_steps_per_s"), r.get("mjzoo_over_brax_train_steps_per_s")
-        print(f"{'':<18} {r['impl']:<5} raw     {r['raw_steps_per_s']:>11,.0f}   threshold {r['threshold']:.1f}"
-              + (f"; mjzoo/brax steps/s = {wall:.2f}x (training alone {train:.2f}x)" if wall and train else ""))
+        print(
+            f"{'':<18} {r['impl']:<5} raw     {r['raw_steps_per_s']:>11,.0f}   threshold {r['threshold']:.1f}"
+            + (f"; mjzoo/brax steps/s = {wall:.2f}x (training alone {train:.2f}x)" if wall and train else "")
+        )
 
 
 def main() -> None:
@@ -217,12 +274,20 @@ def main() -> None:
     parser.add_argument("--out", type=Path, default=Path(__file__).parent / "results")
     parser.add_argument("--smoke", action="store_true", help="tiny sizes, to check the script on a CPU")
     parser.add_argument("--tag", default="", help="suffix of the JSON file")
-    parser.add_argument("--merge", action="store_true",
-                        help="merge into the JSON's rows (the trainers measured now replace theirs; others stay)")
+    parser.add_argument(
+        "--merge",
+        action="store_true",
+        help="merge into the JSON's rows (the trainers measured now replace theirs; others stay)",
+    )
     parser.add_argument("--seeds", type=int, default=1)
     parser.add_argument("--trainers", nargs="+", default=["mjzoo", "brax"], choices=["mjzoo", "brax"])
-    parser.add_argument("--set", nargs="*", default=[], metavar="FIELD=VALUE",
-                        help="ppo.Config overrides for mjzoo (e.g. compute_dtype=bfloat16)")
+    parser.add_argument(
+        "--set",
+        nargs="*",
+        default=[],
+        metavar="FIELD=VALUE",
+        help="ppo.Config overrides for mjzoo (e.g. compute_dtype=bfloat16)",
+    )
     add_impl_argument(parser)
     args = parser.parse_args()
     overrides = arguments.parse_assignments(tuple(args.set), "--set")
@@ -239,12 +304,18 @@ def main() -> None:
             rows = [summarize(r, args.threshold) for r in merged(rows, row)]
             ratios = warp_vs_jax_rows(rows)
             # After each row: a later one that runs out of time leaves these.
-            path.write_text(json.dumps({"device": device, "jax": jax.__version__, "hyper": HYPER, "rows": rows,
-                                        "warp_vs_jax": ratios}, indent=2))  # fmt: skip
+            path.write_text(
+                json.dumps(
+                    {"device": device, "jax": jax.__version__, "hyper": HYPER, "rows": rows, "warp_vs_jax": ratios},
+                    indent=2,
+                )
+            )
     print_table(rows)
     for r in ratios:
-        print(f"{r['env']}: warp/jax raw {r['raw_steps_per_s']:.2f}x, mjzoo PPO {r['mjzoo_steps_per_s']:.2f}x"
-              + (f", brax PPO {r['brax_steps_per_s']:.2f}x" if r["brax_steps_per_s"] else ""))
+        print(
+            f"{r['env']}: warp/jax raw {r['raw_steps_per_s']:.2f}x, mjzoo PPO {r['mjzoo_steps_per_s']:.2f}x"
+            + (f", brax PPO {r['brax_steps_per_s']:.2f}x" if r["brax_steps_per_s"] else "")
+        )
     print(f"wrote {path}", flush=True)
 
 

@@ -38,8 +38,8 @@ import argparse
 import json
 import os
 import shutil
-import subprocess
 import statistics
+import subprocess
 import sys
 import tempfile
 import time
@@ -66,9 +66,21 @@ def visible_gpus() -> list[str]:
     return [str(i) for i in range(sum(line.startswith("GPU ") for line in listed.splitlines()))]
 
 
-def worker(env: str, devices: int, envs_per_device: int, steps: int, smoke: bool, impl: str | None,
-           result: Path, joined: tuple[str, int] | None = None, scale: str | None = None, seed: int = 0,
-           run_dir: Path | None = None, algorithm_name: str = "ppo", config_fields: tuple[str, ...] = ()) -> None:  # fmt: skip
+def worker(
+    env: str,
+    devices: int,
+    envs_per_device: int,
+    steps: int,
+    smoke: bool,
+    impl: str | None,
+    result: Path,
+    joined: tuple[str, int] | None = None,
+    scale: str | None = None,
+    seed: int = 0,
+    run_dir: Path | None = None,
+    algorithm_name: str = "ppo",
+    config_fields: tuple[str, ...] = (),
+) -> None:
     """One device count, in this process (or, `joined` = (coordinator, process id), in
     one of `devices` processes of a device each): train and write the figures to `result`
     (the run's own files to `run_dir`, if given; else they are dropped). `scale`:
@@ -88,8 +100,12 @@ def worker(env: str, devices: int, envs_per_device: int, steps: int, smoke: bool
         distributed.initialize(joined[0], devices, joined[1])
     assert jax.device_count() == devices, (jax.devices(), devices)
     tuned = mjzoo.envs.hyperparameters(env, algorithm_name)
-    fields = {**tuned, **parse_assignments(tuple(config_fields), "--config"), "num_envs": envs_per_device * devices,
-              "total_steps": steps}  # fmt: skip
+    fields = {
+        **tuned,
+        **parse_assignments(tuple(config_fields), "--config"),
+        "num_envs": envs_per_device * devices,
+        "total_steps": steps,
+    }
     if smoke:  # two chunks of two updates at any count, so the steady rate is measured
         fields.update(SMOKE, total_steps=fields["num_envs"] * SMOKE["unroll_length"] * 4)
     if scale == "minibatches":  # one device's minibatch size and gradient steps per env step
@@ -98,31 +114,57 @@ def worker(env: str, devices: int, envs_per_device: int, steps: int, smoke: bool
         fields["unroll_length"] = fields.get("unroll_length", ppo.Config.unroll_length) // devices
     config = algorithm.Config(**fields)
     with tempfile.TemporaryDirectory() as own:
-        out = run_dir or (Path(own) if joined is None else result.parent / "run")  # one host: the processes share process 0's
+        out = run_dir or (
+            Path(own) if joined is None else result.parent / "run"
+        )  # one host: the processes share process 0's
         # Chunks of the same env steps at every count and envs per device (10 updates of the
         # env's own batch), each evaluated: the curves' points line up.
         batch = tuned.get("num_envs", config.num_envs) * tuned.get("unroll_length", config.unroll_length)
         chunk = 2 if smoke else max(1, 10 * batch // (config.num_envs * config.unroll_length))
-        settings = training.Settings(out_dir=out, seed=seed, video=False, progress=False, checkpoint_every=0, eval_every=1,
-                                     eval_envs=16 if smoke else 256, updates_per_chunk=chunk)  # fmt: skip
+        settings = training.Settings(
+            out_dir=out,
+            seed=seed,
+            video=False,
+            progress=False,
+            checkpoint_every=0,
+            eval_every=1,
+            eval_envs=16 if smoke else 256,
+            updates_per_chunk=chunk,
+        )
         task = mjzoo.envs.make(env, **({"impl": impl} if impl else {}))
         start = time.perf_counter()
         training.run(algorithm, config, task, settings)
         if not distributed.is_primary():  # process 0 writes the metrics and the result
             return
         curve, steps_per_s = training_curve(out / "metrics.jsonl", time.perf_counter() - start)
-        evaluating = np.cumsum([line["perf/eval_s"] for line in metrics.read_metrics(out / "metrics.jsonl")
-                                if "eval/return" in line])  # fmt: skip
+        evaluating = np.cumsum(
+            [line["perf/eval_s"] for line in metrics.read_metrics(out / "metrics.jsonl") if "eval/return" in line]
+        )
     threshold = THRESHOLDS.get(env, float("inf"))
     reached = next((i for i, (_, _, r) in enumerate(curve) if r >= threshold), None)
-    result.write_text(json.dumps({
-        "algorithm": algorithm_name, "config_fields": list(config_fields), "devices": devices, "seed": seed, "processes": jax.process_count(), "device_kind": jax.devices()[0].device_kind, "num_envs": config.num_envs,
-        "num_minibatches": config.num_minibatches, "unroll_length": config.unroll_length, "impl": training.physics_info(task).get("impl"),
-        "steps_per_s": steps_per_s, "curve": curve, "final_return": curve[-1][2],
-        "time_to_threshold_s": None if reached is None else curve[reached][1], "threshold": threshold,
-        # The evaluations' share of it: a fixed cost per chunk, whatever the device count.
-        "eval_s_to_threshold": None if reached is None else float(evaluating[reached]),
-    }))  # fmt: skip
+    result.write_text(
+        json.dumps(
+            {
+                "algorithm": algorithm_name,
+                "config_fields": list(config_fields),
+                "devices": devices,
+                "seed": seed,
+                "processes": jax.process_count(),
+                "device_kind": jax.devices()[0].device_kind,
+                "num_envs": config.num_envs,
+                "num_minibatches": config.num_minibatches,
+                "unroll_length": config.unroll_length,
+                "impl": training.physics_info(task).get("impl"),
+                "steps_per_s": steps_per_s,
+                "curve": curve,
+                "final_return": curve[-1][2],
+                "time_to_threshold_s": None if reached is None else curve[reached][1],
+                "threshold": threshold,
+                # The evaluations' share of it: a fixed cost per chunk, whatever the device count.
+                "eval_s_to_threshold": None if reached is None else float(evaluating[reached]),
+            }
+        )
+    )
 
 
 def run_count(args: argparse.Namespace, gpus: list[int], seed: int, log: Path) -> dict:
@@ -132,9 +174,26 @@ def run_count(args: argparse.Namespace, gpus: list[int], seed: int, log: Path) -
     devices = len(gpus)
     with tempfile.TemporaryDirectory() as tmp:
         result = Path(tmp) / "result.json"
-        command = [sys.executable, __file__, "--worker", str(devices), "--env", args.env, "--steps", str(args.steps),
-                   "--algorithm", args.algorithm, "--config", *args.config,
-                   "--envs-per-device", str(args.envs_per_device), "--result", str(result), "--seed", str(seed)] + (["--smoke"] if args.smoke else [])
+        command = [
+            sys.executable,
+            __file__,
+            "--worker",
+            str(devices),
+            "--env",
+            args.env,
+            "--steps",
+            str(args.steps),
+            "--algorithm",
+            args.algorithm,
+            "--config",
+            *args.config,
+            "--envs-per-device",
+            str(args.envs_per_device),
+            "--result",
+            str(result),
+            "--seed",
+            str(seed),
+        ] + (["--smoke"] if args.smoke else [])
         command += ["--impl", args.impl] if args.impl else []
         command += ["--scale-minibatches"] if args.scale_minibatches else []
         command += ["--split-unroll"] if args.split_unroll else []
@@ -143,8 +202,10 @@ def run_count(args: argparse.Namespace, gpus: list[int], seed: int, log: Path) -
             from mjzoo.harness.distributed import free_port
 
             port = free_port("localhost")
-            launches = [(command + ["--coordinator", f"localhost:{port}", "--process-id", str(i)], _visible(args, [gpu]))
-                        for i, gpu in enumerate(gpus)]  # fmt: skip
+            launches = [
+                (command + ["--coordinator", f"localhost:{port}", "--process-id", str(i)], _visible(args, [gpu]))
+                for i, gpu in enumerate(gpus)
+            ]
         else:
             launches = [(command, _visible(args, gpus))]
         logs = [log] + [log.with_suffix(f".{i}.log") for i in range(1, len(launches))]
@@ -160,7 +221,9 @@ def _visible(args: argparse.Namespace, devices: list[int]) -> dict[str, str]:
     environment = dict(os.environ)
     if args.cpu:
         flags = environment.get("XLA_FLAGS", "")
-        environment.update(JAX_PLATFORMS="cpu", XLA_FLAGS=f"{flags} --xla_force_host_platform_device_count={len(devices)}")
+        environment.update(
+            JAX_PLATFORMS="cpu", XLA_FLAGS=f"{flags} --xla_force_host_platform_device_count={len(devices)}"
+        )
     else:
         environment["CUDA_VISIBLE_DEVICES"] = ",".join(args.gpus[i] for i in devices)
     return environment
@@ -190,6 +253,7 @@ def _seed_suffix(args: argparse.Namespace, seed: int) -> str:
 def _summary(rows: list[dict], devices: int) -> str:
     """One line for `devices`: median steps/s over seeds and its speedup over one device
     (written into each row too), and every seed's time to the threshold."""
+
     def median_rate(count: int) -> float | None:
         rates = [row["steps_per_s"] for row in rows if row["devices"] == count and "steps_per_s" in row]
         return statistics.median(rates) if rates else None
@@ -204,11 +268,16 @@ def _summary(rows: list[dict], devices: int) -> str:
     if rate is None:
         return f"{devices} device(s): " + "; ".join(errors)
     speedup = f" ({rate / base:.2f}x)" if base else ""
-    times = ", ".join("never" if row["time_to_threshold_s"] is None else f"{row['time_to_threshold_s']:.1f} s"
-                      for row in mine if "steps_per_s" in row)  # fmt: skip
+    times = ", ".join(
+        "never" if row["time_to_threshold_s"] is None else f"{row['time_to_threshold_s']:.1f} s"
+        for row in mine
+        if "steps_per_s" in row
+    )
     finals = ", ".join(f"{row['final_return']:.0f}" for row in mine if "steps_per_s" in row)
-    return (f"{devices} device(s): {rate:,.0f} steps/s median{speedup}; to {mine[0].get('threshold', 0):g}: {times}; "
-            f"final returns {finals}" + (f"; failed: {'; '.join(errors)}" if errors else ""))
+    return (
+        f"{devices} device(s): {rate:,.0f} steps/s median{speedup}; to {mine[0].get('threshold', 0):g}: {times}; "
+        f"final returns {finals}" + (f"; failed: {'; '.join(errors)}" if errors else "")
+    )
 
 
 def main() -> None:
@@ -219,18 +288,31 @@ def main() -> None:
     parser.add_argument("--envs-per-device", type=int, default=None, help="default: the env's num_envs (smoke: 16)")
     parser.add_argument("--steps", type=int, default=None, help="env steps per run (default: the env's total_steps)")
     parser.add_argument("--impl", choices=["jax", "warp"], default=None, help="physics (default: the env's default)")
-    parser.add_argument("--processes", action="store_true", help="one process per device (jax.distributed on localhost)")
+    parser.add_argument(
+        "--processes", action="store_true", help="one process per device (jax.distributed on localhost)"
+    )
     scaled = parser.add_mutually_exclusive_group()
-    scaled.add_argument("--scale-minibatches", action="store_true",
-                        help="num_minibatches x devices: one device's minibatch size and gradient steps per env step")
-    scaled.add_argument("--split-unroll", action="store_true",
-                        help="unroll_length / devices: one device's batch per update, minibatches and gradient steps; "
-                             "each env's segment is shorter")  # fmt: skip
+    scaled.add_argument(
+        "--scale-minibatches",
+        action="store_true",
+        help="num_minibatches x devices: one device's minibatch size and gradient steps per env step",
+    )
+    scaled.add_argument(
+        "--split-unroll",
+        action="store_true",
+        help="unroll_length / devices: one device's batch per update, minibatches and gradient steps; "
+        "each env's segment is shorter",
+    )
     parser.add_argument("--keep-runs", action="store_true", help="keep each run's metrics under OUT/runs/")
     parser.add_argument("--seeds", nargs="+", type=int, default=[0], help="one run per seed at every count")
-    parser.add_argument("--config", nargs="*", default=[], help="NAME=VALUE fields over the env's config, as for mjzoo train")
-    parser.add_argument("--parallel", action="store_true",
-                        help="run a count's seeds side by side on disjoint GPUs (4 GPUs: four 1-GPU runs at once)")
+    parser.add_argument(
+        "--config", nargs="*", default=[], help="NAME=VALUE fields over the env's config, as for mjzoo train"
+    )
+    parser.add_argument(
+        "--parallel",
+        action="store_true",
+        help="run a count's seeds side by side on disjoint GPUs (4 GPUs: four 1-GPU runs at once)",
+    )
     parser.add_argument("--smoke", action="store_true", help="tiny sizes on CPU devices, to check the script")
     parser.add_argument("--out", type=Path, default=Path(__file__).parent / "results" / "scaling")
     parser.add_argument("--worker", type=int, help=argparse.SUPPRESS)
@@ -243,16 +325,31 @@ def main() -> None:
     args.env = args.env or {"ppo": "humanoid_walk", "amp": "humanoid_amp_walk"}[args.algorithm]
     if args.worker:
         joined = (args.coordinator, args.process_id) if args.coordinator else None
-        worker(args.env, args.worker, args.envs_per_device, args.steps, args.smoke, args.impl, args.result, joined,
-               "minibatches" if args.scale_minibatches else "unroll" if args.split_unroll else None, args.seed, args.run_dir,
-               args.algorithm, args.config)
+        worker(
+            args.env,
+            args.worker,
+            args.envs_per_device,
+            args.steps,
+            args.smoke,
+            args.impl,
+            args.result,
+            joined,
+            "minibatches" if args.scale_minibatches else "unroll" if args.split_unroll else None,
+            args.seed,
+            args.run_dir,
+            args.algorithm,
+            args.config,
+        )
         return
     import mjzoo.envs
     from mjzoo.algorithms import ppo
     from mjzoo.harness.cli.arguments import parse_assignments
 
     # The workers' config as they will build it, so that --split-unroll is checked against an overridden unroll too.
-    tuned = {**mjzoo.envs.hyperparameters(args.env, args.algorithm), **parse_assignments(tuple(args.config), "--config")}
+    tuned = {
+        **mjzoo.envs.hyperparameters(args.env, args.algorithm),
+        **parse_assignments(tuple(args.config), "--config"),
+    }
     args.envs_per_device = args.envs_per_device or (16 if args.smoke else tuned.get("num_envs", 2048))
     args.steps = args.steps or tuned.get("total_steps", 10**8)
     args.gpus = visible_gpus()
@@ -262,8 +359,10 @@ def main() -> None:
         raise SystemExit(f"scaling: {len(args.gpus)} GPU(s) visible; --devices {args.devices} needs more")
     unroll = SMOKE["unroll_length"] if args.smoke else tuned.get("unroll_length", ppo.Config.unroll_length)
     if args.split_unroll and (uneven := [d for d in wanted if unroll % d]):
-        raise SystemExit(f"scaling: --split-unroll divides unroll_length ({unroll}) by the device count; "
-                         f"it does not divide by {uneven}")  # fmt: skip
+        raise SystemExit(
+            f"scaling: --split-unroll divides unroll_length ({unroll}) by the device count; "
+            f"it does not divide by {uneven}"
+        )
     args.out.mkdir(parents=True, exist_ok=True)
     name = f"scaling_{args.env}" + ("" if args.algorithm in args.env.split("_") + ["ppo"] else f"_{args.algorithm}")
     name += f"_{'cpu' if args.cpu else 'gpu'}"
@@ -276,20 +375,42 @@ def main() -> None:
     rows = []
 
     def save():
-        path.write_text(json.dumps({"env": args.env, "algorithm": args.algorithm, "envs_per_device": args.envs_per_device, "steps": args.steps,
-                                    "seeds": args.seeds, "parallel": args.parallel, "rows": rows}, indent=1))  # fmt: skip
+        path.write_text(
+            json.dumps(
+                {
+                    "env": args.env,
+                    "algorithm": args.algorithm,
+                    "envs_per_device": args.envs_per_device,
+                    "steps": args.steps,
+                    "seeds": args.seeds,
+                    "parallel": args.parallel,
+                    "rows": rows,
+                },
+                indent=1,
+            )
+        )
 
-    print(f"{args.env}: {args.envs_per_device} envs per device, "
-          f"{'smoke sizes' if args.smoke else f'{args.steps:,} env steps per run'}, seeds {args.seeds}", flush=True)
+    print(
+        f"{args.env}: {args.envs_per_device} envs per device, "
+        f"{'smoke sizes' if args.smoke else f'{args.steps:,} env steps per run'}, seeds {args.seeds}",
+        flush=True,
+    )
     for devices in wanted:
         # CPU devices share the host's cores: side by side, the runs would slow each other.
         slots = len(args.gpus) // devices if args.parallel and not args.cpu else 1
         for wave in range(0, len(args.seeds), slots):
             seeds = args.seeds[wave : wave + slots]
             with ThreadPoolExecutor(len(seeds)) as pool:
-                rows += pool.map(lambda k, seed: run_count(args, list(range(k * devices, (k + 1) * devices)), seed,
-                                                           args.out / f"{name}_{devices}{_seed_suffix(args, seed)}.log"),
-                                 range(len(seeds)), seeds)  # fmt: skip
+                rows += pool.map(
+                    lambda k, seed, devices=devices, name=name: run_count(
+                        args,
+                        list(range(k * devices, (k + 1) * devices)),
+                        seed,
+                        args.out / f"{name}_{devices}{_seed_suffix(args, seed)}.log",
+                    ),
+                    range(len(seeds)),
+                    seeds,
+                )
             save()  # after every wave: a run cut off later (a device call's time limit) keeps these rows
         print(_summary(rows, devices), flush=True)
         save()  # with the speedups _summary adds

@@ -31,13 +31,34 @@ from pathlib import Path
 SMOKE_CONFIG = ("num_envs=32", "unroll_length=8", "num_minibatches=2", "num_epochs=1")
 
 
-def launch(env: str, out: Path, cache: Path, steps: int, extra: tuple[str, ...], smoke: bool,
-           timeout: float, keep: Path | None = None) -> dict:  # fmt: skip
+def launch(
+    env: str,
+    out: Path,
+    cache: Path,
+    steps: int,
+    extra: tuple[str, ...],
+    smoke: bool,
+    timeout: float,
+    keep: Path | None = None,
+) -> dict:
     """Runs `mjzoo train ppo env` to the end; returns launch-to-first-update seconds, the
     total wall-clock, and the metrics lines; with `keep`, its log (JAX's compile steps
     timed) goes there."""
-    command = [sys.executable, "-m", "mjzoo", "train", "ppo", env, "--out", str(out), "--total-steps", str(steps),
-               "--no-video", *extra, *(("--config", *SMOKE_CONFIG, "--eval-envs", "4") if smoke else ())]  # fmt: skip
+    command = [
+        sys.executable,
+        "-m",
+        "mjzoo",
+        "train",
+        "ppo",
+        env,
+        "--out",
+        str(out),
+        "--total-steps",
+        str(steps),
+        "--no-video",
+        *extra,
+        *(("--config", *SMOKE_CONFIG, "--eval-envs", "4") if smoke else ()),
+    ]
     environment = {**os.environ, "MJZOO_COMPILE_CACHE": str(cache), **({"JAX_LOG_COMPILES": "1"} if keep else {})}
     metrics = out / "metrics.jsonl"
     log = open(out.parent / f"{out.name}.log", "w+")  # not a pipe: a full one would stall the child's progress bar
@@ -83,8 +104,11 @@ def measure(env: str, steps: int, eval_steps: int, smoke: bool, timeout: float, 
         "cold_first_update_s": cold["lines"][0]["perf/first_update_s"],
         "warm_first_update_s": warm["lines"][0]["perf/first_update_s"],
         # To the end of the first evaluation (run's clock), whose compile waits behind the chunk's or beside it.
-        **{f"{name}_first_evaluation_s": run["lines"][0]["perf/elapsed_s"]
-           for name, run in (("cold", cold), ("warm", warm)) if "eval/return" in run["lines"][0]},
+        **{
+            f"{name}_first_evaluation_s": run["lines"][0]["perf/elapsed_s"]
+            for name, run in (("cold", cold), ("warm", warm))
+            if "eval/return" in run["lines"][0]
+        },
     }
     if budget is None:
         return row
@@ -94,14 +118,21 @@ def measure(env: str, steps: int, eval_steps: int, smoke: bool, timeout: float, 
     evaluating = sum(line.get("perf/eval_s", 0.0) for line in lines[:-1])  # the last always evaluates
     training_rates = [line["perf/steps_per_s"] for line in lines[1:]] or [lines[0]["perf/steps_per_s"]]
     overall = (lines[-1]["step"] - lines[0]["step"]) / max(elapsed - first, 1e-9)
-    row["budget_run"] = {"steps": lines[-1]["step"], "evaluations": sum("eval/return" in line for line in lines),
-                       "eval_share_before_last": evaluating / elapsed, "elapsed_s": elapsed,
-                       "training_steps_per_s": sum(training_rates) / len(training_rates),
-                       "overall_steps_per_s_after_first": overall,
-                       "final_return": lines[-1].get("eval/return")}  # fmt: skip
-    print(f"{env}: budget run: {row['budget_run']['evaluations']} evaluations, "
-          f"{100 * row['budget_run']['eval_share_before_last']:.1f}% of {elapsed:.0f} s evaluating; training "
-          f"{row['budget_run']['training_steps_per_s']:,.0f} steps/s, overall {overall:,.0f}", flush=True)  # fmt: skip
+    row["budget_run"] = {
+        "steps": lines[-1]["step"],
+        "evaluations": sum("eval/return" in line for line in lines),
+        "eval_share_before_last": evaluating / elapsed,
+        "elapsed_s": elapsed,
+        "training_steps_per_s": sum(training_rates) / len(training_rates),
+        "overall_steps_per_s_after_first": overall,
+        "final_return": lines[-1].get("eval/return"),
+    }
+    print(
+        f"{env}: budget run: {row['budget_run']['evaluations']} evaluations, "
+        f"{100 * row['budget_run']['eval_share_before_last']:.1f}% of {elapsed:.0f} s evaluating; training "
+        f"{row['budget_run']['training_steps_per_s']:,.0f} steps/s, overall {overall:,.0f}",
+        flush=True,
+    )
     return row
 
 
@@ -114,8 +145,11 @@ def main() -> None:
     parser.add_argument("--timeout", type=float, default=900.0)
     parser.add_argument("--out", type=Path, default=Path(__file__).parent / "results" / "startup")
     parser.add_argument("--name-envs", action="store_true", help="name the JSON after the envs too")
-    parser.add_argument("--logs", action="store_true",
-                        help="keep the cold and warm launches' logs in OUT/logs, with JAX's compile steps timed")
+    parser.add_argument(
+        "--logs",
+        action="store_true",
+        help="keep the cold and warm launches' logs in OUT/logs, with JAX's compile steps timed",
+    )
     args = parser.parse_args()
     import jax  # after the children's launch settings are read: only to name the device
 
@@ -133,9 +167,15 @@ def main() -> None:
     print(f"\n{'env':<18} {'cold (s)':>9} {'warm (s)':>9} {'eval share':>10} {'train/s':>12} {'overall/s':>12}")
     for r in rows:
         b = r.get("budget_run")
-        print(f"{r['env']:<18} {r['cold_launch_to_first_update_s']:>9.1f} {r['warm_launch_to_first_update_s']:>9.1f} "
-              + (f"{100 * b['eval_share_before_last']:>9.1f}% {b['training_steps_per_s']:>12,.0f} "
-                 f"{b['overall_steps_per_s_after_first']:>12,.0f}" if b else "  (no budget run)"))  # fmt: skip
+        print(
+            f"{r['env']:<18} {r['cold_launch_to_first_update_s']:>9.1f} {r['warm_launch_to_first_update_s']:>9.1f} "
+            + (
+                f"{100 * b['eval_share_before_last']:>9.1f}% {b['training_steps_per_s']:>12,.0f} "
+                f"{b['overall_steps_per_s_after_first']:>12,.0f}"
+                if b
+                else "  (no budget run)"
+            )
+        )
     print(f"wrote {path}")
 
 

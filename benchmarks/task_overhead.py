@@ -103,9 +103,14 @@ def impls(chosen: list[str] | None) -> list[str]:
 
 
 def add_impl_argument(parser: argparse.ArgumentParser) -> None:
-    parser.add_argument("--impl", nargs="*", choices=mjzoo.physics.IMPLS, default=None,
-                        help="physics implementations, measured in this order (default: jax and warp "
-                        "where Warp is the default physics, else jax)")  # fmt: skip
+    parser.add_argument(
+        "--impl",
+        nargs="*",
+        choices=mjzoo.physics.IMPLS,
+        default=None,
+        help="physics implementations, measured in this order (default: jax and warp "
+        "where Warp is the default physics, else jax)",
+    )
 
 
 def ratio(warp: float | None, jax_: float | None) -> float | None:
@@ -142,8 +147,10 @@ def main() -> None:
 
     device = jax.devices()[0].device_kind
     print(f"device: {device} ({jax.default_backend()}), jax {jax.__version__}")
-    header = (f"{'env':<18} {'impl':<5} {'batch':>6} {'raw steps/s':>13} {'transition':>13} {'overhead':>9} "
-              f"{'auto-reset':>13} {'overhead':>9}")  # fmt: skip
+    header = (
+        f"{'env':<18} {'impl':<5} {'batch':>6} {'raw steps/s':>13} {'transition':>13} {'overhead':>9} "
+        f"{'auto-reset':>13} {'overhead':>9}"
+    )
     print(header)
     rows, ratios = [], []
     for name in args.envs:
@@ -159,13 +166,29 @@ def main() -> None:
                 )
             if len(by_impl) == 2:
                 w, j = by_impl["warp"], by_impl["jax"]
-                ratios.append({"env": name, "batch": batch, **{label: ratio(w[f"{label}_steps_per_s"], j[f"{label}_steps_per_s"])
-                                                               for label in ("raw", "transition", "auto_reset")}})  # fmt: skip
-                print(f"{'':<18} warp/jax {'':>3} raw {ratios[-1]['raw']:.2f}x, transition {ratios[-1]['transition']:.2f}x, "
-                      f"auto-reset {ratios[-1]['auto_reset']:.2f}x", flush=True)  # fmt: skip
+                ratios.append(
+                    {
+                        "env": name,
+                        "batch": batch,
+                        **{
+                            label: ratio(w[f"{label}_steps_per_s"], j[f"{label}_steps_per_s"])
+                            for label in ("raw", "transition", "auto_reset")
+                        },
+                    }
+                )
+                print(
+                    f"{'':<18} warp/jax {'':>3} raw {ratios[-1]['raw']:.2f}x, transition {ratios[-1]['transition']:.2f}x, "
+                    f"auto-reset {ratios[-1]['auto_reset']:.2f}x",
+                    flush=True,
+                )
     args.out.mkdir(parents=True, exist_ok=True)
     path = args.out / f"task_overhead_{jax.default_backend()}{'_' + args.tag if args.tag else ''}.json"
-    meta = {"device": device, "backend": jax.default_backend(), "jax": jax.__version__, "python": platform.python_version()}
+    meta = {
+        "device": device,
+        "backend": jax.default_backend(),
+        "jax": jax.__version__,
+        "python": platform.python_version(),
+    }
     path.write_text(json.dumps({"meta": meta, "rows": rows, "warp_vs_jax": ratios}, indent=2))
     print(f"wrote {path}", flush=True)
 

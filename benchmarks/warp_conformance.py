@@ -39,16 +39,25 @@ import jax.numpy as jnp
 import numpy as np
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "tests" / "conformance"))
+from test_conformance import STEPS, task_for
+
 import mjzoo
 import mjzoo.envs
 from mjzoo import physics, running, worlds
 from mjzoo.testing import PROPERTIES, TaskCheckError, check_task
-from test_conformance import STEPS, task_for
 
 RTOL, ATOL = 1e-3, 1e-3  # per entry: |warp - jax| <= ATOL + RTOL |jax| (qpos: m, rad; qvel: m/s, rad/s)
 # Compared with MJX-JAX: contact-free models first, then contact-rich ones.
-COMPARED = ("pendulum_swingup", "cartpole_balance", "point_mass", "cylinder_push", "hopper", "cheetah", "ant",
-            "humanoid_walk")  # fmt: skip
+COMPARED = (
+    "pendulum_swingup",
+    "cartpole_balance",
+    "point_mass",
+    "cylinder_push",
+    "hopper",
+    "cheetah",
+    "ant",
+    "humanoid_walk",
+)
 
 
 @functools.partial(jax.jit, static_argnums=2)
@@ -65,8 +74,11 @@ def _trajectories(task: mjzoo.Task, keys: jax.Array, num_steps: int) -> dict[str
         first = running.reset(task, reset_key)
         states = running.rollout(task, policy, first, run_key, num_steps)[1].next_state
         joined = lambda a, b: jnp.concatenate([a[None], b])
-        return {"qpos": joined(first.data.qpos, states.data.qpos), "qvel": joined(first.data.qvel, states.data.qvel),
-                "reward": states.reward}  # fmt: skip
+        return {
+            "qpos": joined(first.data.qpos, states.data.qpos),
+            "qvel": joined(first.data.qvel, states.data.qvel),
+            "reward": states.reward,
+        }
 
     return jax.vmap(one)(keys)
 
@@ -112,8 +124,10 @@ def comparison(env: str, steps: int, tight_steps: int, options: dict[str, Any] |
     options = options or {}
     keys = jax.random.split(jax.random.key(1), 1)
     make = lambda impl: mjzoo.envs.make(env, impl=impl, **options)  # noqa: E731
-    runs = {impl: jax.tree.map(lambda x: np.asarray(x[0]), _trajectories(make(impl), keys, steps))
-            for impl in ("jax", "warp")}  # fmt: skip
+    runs = {
+        impl: jax.tree.map(lambda x: np.asarray(x[0]), _trajectories(make(impl), keys, steps))
+        for impl in ("jax", "warp")
+    }
     jx, wp = runs["jax"], runs["warp"]
     reward = lambda r: np.concatenate([[0.0], r])
     error = {k: np.max(np.abs(wp[k] - jx[k]), axis=1) for k in ("qpos", "qvel")}
@@ -149,37 +163,55 @@ def _table(results: dict[str, Any]) -> str:
     lines = [f"{'env':24s} {'stack':5s} {'ok':4s} {'s':>6s}  failed / not run"]
     for r in results["conformance"]:
         bad = [p for p, v in r["properties"].items() if not (v == "pass" or v.startswith("skipped"))]
-        lines.append(f"{r['env']:24s} {r['stack']:5s} {'yes' if r['ok'] else 'NO':4s} {r['seconds']:6.1f}  "
-                     f"{', '.join(bad) or '-'}")  # fmt: skip
+        lines.append(
+            f"{r['env']:24s} {r['stack']:5s} {'yes' if r['ok'] else 'NO':4s} {r['seconds']:6.1f}  "
+            f"{', '.join(bad) or '-'}"
+        )
         lines += [f"{'':36s}{p}: {r['properties'][p]}" for p in bad]
     c = results["comparison"]
     if c["envs"]:
         tight = c["tight_steps"]
-        lines += ["", f"warp vs jax, {c['steps']} steps; tolerance |warp - jax| <= {ATOL} + {RTOL}|jax|",
-                  f"{'env':24s} {'conforms':8s} {'diverges':>8s}   max |diff| first {tight} steps "
-                  + "(qpos, qvel, reward)   max over all steps"]  # fmt: skip
+        lines += [
+            "",
+            f"warp vs jax, {c['steps']} steps; tolerance |warp - jax| <= {ATOL} + {RTOL}|jax|",
+            f"{'env':24s} {'conforms':8s} {'diverges':>8s}   max |diff| first {tight} steps "
+            + "(qpos, qvel, reward)   max over all steps",
+        ]
         for r in c["envs"]:
             if "error" in r:
                 lines.append(f"{r['env']:24s} ERROR {r['error']}")
                 continue
             first, every = r[f"max_first_{tight}"], r[f"max_all_{c['steps']}"]
             fmt = lambda d: ", ".join(f"{d[k]:.2g}" for k in ("qpos", "qvel", "reward"))
-            lines.append(f"{r['env']:24s} {'yes' if r['conforms'] else 'NO':8s} {r['diverges_at']!s:>8s}   "
-                         f"{fmt(first):40s} {fmt(every)}")  # fmt: skip
+            lines.append(
+                f"{r['env']:24s} {'yes' if r['conforms'] else 'NO':8s} {r['diverges_at']!s:>8s}   "
+                f"{fmt(first):40s} {fmt(every)}"
+            )
     return "\n".join(lines)
 
 
 def main(argv: list[str] | None = None) -> dict[str, Any]:
     parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     parser.add_argument("--envs", nargs="+", default=mjzoo.envs.names(), help="default: every registered env")
-    parser.add_argument("--stacks", nargs="*", default=["bare", "all"], choices=["bare", "all"], help="--stacks alone: none")
-    parser.add_argument("--compare", nargs="*", default=list(COMPARED),
-                        help="envs whose Warp and JAX trajectories are compared (those also in --envs); --compare alone: none")  # fmt: skip
+    parser.add_argument(
+        "--stacks", nargs="*", default=["bare", "all"], choices=["bare", "all"], help="--stacks alone: none"
+    )
+    parser.add_argument(
+        "--compare",
+        nargs="*",
+        default=list(COMPARED),
+        help="envs whose Warp and JAX trajectories are compared (those also in --envs); --compare alone: none",
+    )
     parser.add_argument("--steps", type=int, default=50, help="control steps compared")
     parser.add_argument("--tight-steps", type=int, default=10, help="the first steps that must stay within tolerance")
-    parser.add_argument("--physics", nargs="*", default=[], metavar="KEY=VALUE",
-                        help="physics options of the compared envs, e.g. iterations=50 ls_iterations=20 (a converged "
-                             "solver: the envs' own single Newton iteration leaves each implementation its own answer)")  # fmt: skip
+    parser.add_argument(
+        "--physics",
+        nargs="*",
+        default=[],
+        metavar="KEY=VALUE",
+        help="physics options of the compared envs, e.g. iterations=50 ls_iterations=20 (a converged "
+        "solver: the envs' own single Newton iteration leaves each implementation its own answer)",
+    )
     parser.add_argument("--out", type=Path, default=None, help="JSON file, rewritten after every case")
     args = parser.parse_args(argv)
     options = {k: _number(v) for k, _, v in (p.partition("=") for p in args.physics)}

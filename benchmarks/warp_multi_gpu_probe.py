@@ -67,7 +67,9 @@ def probe(variant: str, env: str, num_envs: int, graph_mode: str) -> None:
             placed = _split(states, devices)
             with jax.set_mesh(placement.env_mesh(devices)):
                 results.append(np.asarray(step(placement.replicate(task, devices), placed, actions, keys)))
-    print(f"{variant} ({graph_mode}): ok, max qpos difference {np.max(np.abs(results[0] - results[1])):.2e}", flush=True)
+    print(
+        f"{variant} ({graph_mode}): ok, max qpos difference {np.max(np.abs(results[0] - results[1])):.2e}", flush=True
+    )
     os._exit(0)
 
 
@@ -95,8 +97,20 @@ def main() -> None:
         probe(args.run, args.env, args.num_envs, args.graph_mode)
         return
     for variant in args.variants:
-        command = [sys.executable, "-X", "faulthandler", __file__, "--run", variant, "--env", args.env,
-                   "--num-envs", str(args.num_envs), "--graph-mode", args.graph_mode]  # fmt: skip
+        command = [
+            sys.executable,
+            "-X",
+            "faulthandler",
+            __file__,
+            "--run",
+            variant,
+            "--env",
+            args.env,
+            "--num-envs",
+            str(args.num_envs),
+            "--graph-mode",
+            args.graph_mode,
+        ]
         try:
             done = subprocess.run(command, capture_output=True, text=True, timeout=args.timeout)
         except subprocess.TimeoutExpired:

@@ -31,15 +31,25 @@ from typing import Any, Callable
 import numpy as np
 
 from mjzoo import physics
-from mjzoo.envs import (base, cartpole, cylinder_push, humanoid_amp, joystick, locomotion, pendulum, point_mass,
-                        teachers)  # fmt: skip
+from mjzoo.envs import base, cartpole, cylinder_push, humanoid_amp, joystick, locomotion, pendulum, point_mass, teachers
 from mjzoo.planning.realtime import Problem, default_backend
 from mjzoo.planning.sampling import SamplingConfig
 from mjzoo.running import control_dt
 from mjzoo.types import Task
 
-__all__ = ["make", "names", "factory", "defaults", "takes", "register", "hyperparameters", "planning",
-           "closed_loop_problem", "PLAYGROUND", "PLAYGROUND_PLANNING"]
+__all__ = [
+    "make",
+    "names",
+    "factory",
+    "defaults",
+    "takes",
+    "register",
+    "hyperparameters",
+    "planning",
+    "closed_loop_problem",
+    "PLAYGROUND",
+    "PLAYGROUND_PLANNING",
+]
 
 _REGISTRY: dict[str, Callable[..., Task]] = {
     "pendulum_swingup": pendulum.swingup,
@@ -90,10 +100,16 @@ PLAYGROUND = "playground:"  # the spec prefix of MuJoCo Playground's envs
 # step, so MPPI's temperature is in those units.
 _PLAYGROUND_SAMPLING = dict(num_samples=128, horizon_steps=50, num_knots=4, noise_scale=0.3)
 PLAYGROUND_PLANNING = base.PlanningSetup(
-    seconds=None, replan_every=1, plan_overrides={}, success=None,
-    configs={"predictive_sampling": _PLAYGROUND_SAMPLING, "mppi": dict(_PLAYGROUND_SAMPLING, temperature=0.1),
-             "cem": dict(_PLAYGROUND_SAMPLING, num_elites=8, sigma_min=0.1)},
-)  # fmt: skip
+    seconds=None,
+    replan_every=1,
+    plan_overrides={},
+    success=None,
+    configs={
+        "predictive_sampling": _PLAYGROUND_SAMPLING,
+        "mppi": dict(_PLAYGROUND_SAMPLING, temperature=0.1),
+        "cem": dict(_PLAYGROUND_SAMPLING, num_elites=8, sigma_min=0.1),
+    },
+)
 # Per env where the shared setup fails: Playground's pendulum pays reward only within ~8
 # degrees of upright, which noise of 0.3 over 0.5 s never reaches from hanging down.
 _PLAYGROUND_TUNED = {"PendulumSwingup": dict(horizon_steps=100, noise_scale=1.0)}
@@ -133,8 +149,9 @@ def planning(spec: str) -> base.PlanningSetup:
     if _is_user(spec):
         setup = getattr(importlib.import_module(spec.partition(":")[0]), "PLANNING", _ONE_EPISODE)
         if not isinstance(setup, base.PlanningSetup):
-            raise TypeError(f"{spec}: its module's PLANNING (type {type(setup).__name__}) "
-                            "is not a mjzoo.envs.base.PlanningSetup")
+            raise TypeError(
+                f"{spec}: its module's PLANNING (type {type(setup).__name__}) is not a mjzoo.envs.base.PlanningSetup"
+            )
         return setup
     if spec not in _PLANNING:
         raise KeyError(f"{spec!r} has no planning setup; envs with one: {sorted(_PLANNING)}")
@@ -142,7 +159,11 @@ def planning(spec: str) -> base.PlanningSetup:
 
 
 def closed_loop_problem(
-    spec: str, planner: ModuleType, config: SamplingConfig, seconds: float | None = None, backend: str = "auto",
+    spec: str,
+    planner: ModuleType,
+    config: SamplingConfig,
+    seconds: float | None = None,
+    backend: str = "auto",
     **overrides: Any,
 ) -> Problem:
     """The task's closed-loop problem (its `planning` setup): the task as the world, its
@@ -155,23 +176,35 @@ def closed_loop_problem(
     build = functools.partial(make, spec, **overrides)
     if _is_playground(spec):
         if backend == "native":
-            raise ValueError(f"{spec}: Playground's envs step MJX themselves, which native C rollouts cannot replay; "
-                             "plan with backend 'mjx'")  # fmt: skip
+            raise ValueError(
+                f"{spec}: Playground's envs step MJX themselves, which native C rollouts cannot replay; "
+                "plan with backend 'mjx'"
+            )
         if backend == "auto" and default_backend() == "native":  # say why a CPU plans on the slower engine
-            warnings.warn(f"{spec}: planning on MJX, not native C MuJoCo (auto's choice on a CPU): Playground's envs "
-                          "step MJX themselves, which native C rollouts cannot replay", stacklevel=2)  # fmt: skip
+            warnings.warn(
+                f"{spec}: planning on MJX, not native C MuJoCo (auto's choice on a CPU): Playground's envs "
+                "step MJX themselves, which native C rollouts cannot replay",
+                stacklevel=2,
+            )
         backend = "mjx"
     own_limit = _is_user(spec) or _is_playground(spec)  # a factory may not take episode_steps
     unlimited = {} if own_limit else {"episode_steps": 10**9}
     sim_task = build(**unlimited)
     if not (seconds or setup.seconds) and sim_task.time_limit is None:
-        raise ValueError(f"{spec}: the task has no time limit (mjzoo.with_time_limit) to set the run's length; "
-                         "give seconds")
+        raise ValueError(
+            f"{spec}: the task has no time limit (mjzoo.with_time_limit) to set the run's length; give seconds"
+        )
     return Problem(
-        planner=planner, config=config, sim_task=sim_task, plan_task=setup.plan_task(build, **unlimited),
+        planner=planner,
+        config=config,
+        sim_task=sim_task,
+        plan_task=setup.plan_task(build, **unlimited),
         seconds=seconds or setup.seconds or int(sim_task.time_limit) * control_dt(sim_task),
-        replan_every=setup.replan_every, hooks=setup.hooks, success=setup.success, backend=backend,
-    )  # fmt: skip
+        replan_every=setup.replan_every,
+        hooks=setup.hooks,
+        success=setup.success,
+        backend=backend,
+    )
 
 
 def hyperparameters(spec: str, algorithm: str) -> dict[str, Any]:
@@ -206,7 +239,8 @@ def takes(spec: str, name: str) -> bool:
     if _is_user(spec):
         parameters = inspect.signature(factory(spec)).parameters
         return any(p.kind == inspect.Parameter.VAR_KEYWORD for p in parameters.values()) or (
-            name in parameters and parameters[name].kind in _KEYWORDS)  # fmt: skip
+            name in parameters and parameters[name].kind in _KEYWORDS
+        )
     return name in defaults(spec) or (not _is_playground(spec) and name in physics.OPTIONS)
 
 
@@ -259,9 +293,14 @@ def _expected_type(parameter: inspect.Parameter, value: Any) -> str | None:
     optional = default is None or "None" in annotation or "Optional" in annotation
     if value is None and optional:
         return None
-    kinds = {bool: ((bool, np.bool_), "True or False"), int: ((numbers.Integral,), "an int"),
-             float: ((numbers.Real,), "a number"), str: ((str,), "a string"),
-             tuple: ((tuple, list), "a tuple or list"), list: ((tuple, list), "a list or tuple")}  # fmt: skip
+    kinds = {
+        bool: ((bool, np.bool_), "True or False"),
+        int: ((numbers.Integral,), "an int"),
+        float: ((numbers.Real,), "a number"),
+        str: ((str,), "a string"),
+        tuple: ((tuple, list), "a tuple or list"),
+        list: ((tuple, list), "a list or tuple"),
+    }
     if default is None:
         if "Callable" not in annotation or callable(value):
             return None
@@ -316,7 +355,7 @@ def _playground(spec: str) -> ModuleType:
 
 def _playground_name(spec: str) -> str:
     """The env name of ``playground:NAME``, checked (KeyError naming near ones)."""
-    name = spec[len(PLAYGROUND):]
+    name = spec[len(PLAYGROUND) :]
     _playground(spec).config_defaults(name)
     return name
 
@@ -331,12 +370,15 @@ def _imported(spec: str) -> Callable[..., Task]:
     except ModuleNotFoundError as e:
         if not e.name or not (module_name + ".").startswith(e.name + "."):
             raise  # a module the user's module imports: their bug, with its traceback
-        raise ValueError(f"task spec {spec!r}: no module named {e.name!r} (from the current directory or "
-                         "sys.path)") from e
+        raise ValueError(
+            f"task spec {spec!r}: no module named {e.name!r} (from the current directory or sys.path)"
+        ) from e
     if not hasattr(module, attribute):
         raise ValueError(f"task spec {spec!r}: module {module_name!r} has no attribute {attribute!r}")
     found = getattr(module, attribute)
     if not callable(found):
-        raise TypeError(f"task spec {spec!r}: {attribute} is not callable (type {type(found).__name__}); "
-                        "expected a function returning a Task")
+        raise TypeError(
+            f"task spec {spec!r}: {attribute} is not callable (type {type(found).__name__}); "
+            "expected a function returning a Task"
+        )
     return found

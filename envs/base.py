@@ -4,8 +4,8 @@ divergence guard."""
 
 from __future__ import annotations
 
-from pathlib import Path
 import dataclasses
+from pathlib import Path
 from typing import Any, Callable
 
 import jax
@@ -14,11 +14,21 @@ import numpy as np
 from mujoco import mjx
 
 from mjzoo import physics as physics_lib
-from mjzoo.planning.closed_loop import Hooks
 from mjzoo.combinators import with_divergence_guard, with_time_limit
+from mjzoo.planning.closed_loop import Hooks
 from mjzoo.types import State, Task, bind
 
-__all__ = ["ASSETS", "load", "brax_asset", "floats", "build", "advance", "never_terminate", "PlanningSetup", "held_near"]
+__all__ = [
+    "ASSETS",
+    "load",
+    "brax_asset",
+    "floats",
+    "build",
+    "advance",
+    "never_terminate",
+    "PlanningSetup",
+    "held_near",
+]
 
 ASSETS = Path(__file__).parent / "assets"
 
@@ -107,7 +117,9 @@ class PlanningSetup:
         return self.plan_view(task) if self.plan_view else task
 
 
-def held_near(states, value_fn: Callable[[Any], np.ndarray], tolerance: float, seconds: float = 1.0) -> tuple[bool, float]:
+def held_near(
+    states, value_fn: Callable[[Any], np.ndarray], tolerance: float, seconds: float = 1.0
+) -> tuple[bool, float]:
     """(max |value| over the last `seconds` of the run < tolerance, that max) for a
     per-step value computed from the stacked states."""
     time = np.asarray(states.data.time)

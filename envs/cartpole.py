@@ -24,8 +24,8 @@ import jax
 import jax.numpy as jnp
 from mujoco import mjx
 
-from mjzoo.envs import base
 from mjzoo.catalog.rewards import tolerance
+from mjzoo.envs import base
 from mjzoo.types import State, Task
 
 __all__ = ["Params", "balance", "swingup"]
@@ -33,10 +33,26 @@ __all__ = ["Params", "balance", "swingup"]
 Array = jax.Array
 
 # PPO hyperparameters that solve each task (`mjzoo train ppo cartpole_balance`).
-BALANCE_PPO = dict(num_envs=256, unroll_length=32, num_minibatches=8, num_epochs=4, learning_rate=1e-3,
-                   entropy_coef=1e-3, discount=0.99, total_steps=1_000_000)  # fmt: skip
-SWINGUP_PPO = dict(num_envs=256, unroll_length=32, num_minibatches=8, num_epochs=4, learning_rate=1e-3,
-                   entropy_coef=1e-3, discount=0.99, total_steps=3_000_000)  # fmt: skip
+BALANCE_PPO = dict(
+    num_envs=256,
+    unroll_length=32,
+    num_minibatches=8,
+    num_epochs=4,
+    learning_rate=1e-3,
+    entropy_coef=1e-3,
+    discount=0.99,
+    total_steps=1_000_000,
+)
+SWINGUP_PPO = dict(
+    num_envs=256,
+    unroll_length=32,
+    num_minibatches=8,
+    num_epochs=4,
+    learning_rate=1e-3,
+    entropy_coef=1e-3,
+    discount=0.99,
+    total_steps=3_000_000,
+)
 
 
 def _upright_at_end(states) -> tuple[bool, float]:
@@ -49,10 +65,16 @@ def _upright_at_end(states) -> tuple[bool, float]:
 # replan every 2 steps (25 Hz).
 _SAMPLING = dict(num_samples=64, horizon_steps=60, num_knots=5)
 SWINGUP_PLANNING = base.PlanningSetup(
-    seconds=8.0, replan_every=2, plan_overrides={}, success=_upright_at_end,
-    configs={"predictive_sampling": _SAMPLING, "mppi": dict(_SAMPLING, temperature=0.05),
-             "cem": dict(_SAMPLING, num_elites=8, sigma_min=0.1)},
-)  # fmt: skip
+    seconds=8.0,
+    replan_every=2,
+    plan_overrides={},
+    success=_upright_at_end,
+    configs={
+        "predictive_sampling": _SAMPLING,
+        "mppi": dict(_SAMPLING, temperature=0.05),
+        "cem": dict(_SAMPLING, num_elites=8, sigma_min=0.1),
+    },
+)
 
 
 @jax.tree_util.register_dataclass
@@ -79,7 +101,9 @@ def observe(data: mjx.Data) -> Array:
 def reset(p: Params, model: mjx.Model, key: Array) -> State:
     qpos_key, qvel_key = jax.random.split(key)
     data = p.data0
-    qpos = jnp.array([0.0, 1.0]) * p.init_angle + jax.random.uniform(qpos_key, (2,), minval=-p.init_noise, maxval=p.init_noise)
+    qpos = jnp.array([0.0, 1.0]) * p.init_angle + jax.random.uniform(
+        qpos_key, (2,), minval=-p.init_noise, maxval=p.init_noise
+    )
     qvel = jax.random.uniform(qvel_key, (2,), minval=-p.init_noise, maxval=p.init_noise)
     data = data.replace(qpos=qpos.astype(data.qpos.dtype), qvel=qvel.astype(data.qvel.dtype))
     return State.create(data, observe(data))
@@ -106,19 +130,36 @@ def terminate(p: Params, model: mjx.Model, state: State) -> tuple[Array, Array]:
 
 
 def _make(
-    *, episode_steps, upright_weight, centered_weight, velocity_weight, effort_weight, centered_margin,
-    velocity_margin, init_angle, init_noise, fall_angle, ctrl_dt, **physics_options,
-) -> Task:  # fmt: skip
+    *,
+    episode_steps,
+    upright_weight,
+    centered_weight,
+    velocity_weight,
+    effort_weight,
+    centered_margin,
+    velocity_margin,
+    init_angle,
+    init_noise,
+    fall_angle,
+    ctrl_dt,
+    **physics_options,
+) -> Task:
     physics = base.load("cartpole.xml", ctrl_dt=ctrl_dt, **physics_options)
     params = Params(
         **base.floats(
-            upright_weight=upright_weight, centered_weight=centered_weight, velocity_weight=velocity_weight,
-            effort_weight=effort_weight, centered_margin=centered_margin, velocity_margin=velocity_margin,
-            init_angle=init_angle, init_noise=init_noise, fall_angle=fall_angle,
+            upright_weight=upright_weight,
+            centered_weight=centered_weight,
+            velocity_weight=velocity_weight,
+            effort_weight=effort_weight,
+            centered_margin=centered_margin,
+            velocity_margin=velocity_margin,
+            init_angle=init_angle,
+            init_noise=init_noise,
+            fall_angle=fall_angle,
         ),
         data0=physics.data0,
         n_substeps=physics.n_substeps,
-    )  # fmt: skip
+    )
     return base.build(physics, params, reset, step, reward, terminate, episode_steps=episode_steps)
 
 
@@ -156,5 +197,7 @@ def swingup(
     """Swing up from hanging down and balance; never terminates."""
     return _make(
         **{k: v for k, v in locals().items() if k != "physics_options"},
-        init_angle=jnp.pi, fall_angle=jnp.inf, **physics_options,
-    )  # fmt: skip
+        init_angle=jnp.pi,
+        fall_angle=jnp.inf,
+        **physics_options,
+    )

@@ -24,9 +24,9 @@ import jax.numpy as jnp
 import numpy as np
 from mujoco import mjx
 
+from mjzoo.catalog.rewards import tolerance
 from mjzoo.combinators import with_reward
 from mjzoo.envs import base
-from mjzoo.catalog.rewards import tolerance
 from mjzoo.planning.closed_loop import Hooks
 from mjzoo.types import State, Task, bind
 
@@ -36,8 +36,16 @@ Array = jax.Array
 CONTACT_DISTANCE = 0.15  # pusher radius + cylinder radius
 
 # PPO hyperparameters for this task (`mjzoo train ppo cylinder_push`).
-PPO = dict(num_envs=256, unroll_length=32, num_minibatches=8, num_epochs=4, learning_rate=1e-3,
-           entropy_coef=1e-3, discount=0.99, total_steps=5_000_000)  # fmt: skip
+PPO = dict(
+    num_envs=256,
+    unroll_length=32,
+    num_minibatches=8,
+    num_epochs=4,
+    learning_rate=1e-3,
+    entropy_coef=1e-3,
+    discount=0.99,
+    total_steps=5_000_000,
+)
 
 
 def _behind(data: mjx.Data, goal: Array) -> Array:
@@ -72,11 +80,17 @@ def _on_goal(states) -> tuple[bool, float]:
 # shaped approach term and plans in two phases instead (a pre-rollout hook).
 _SAMPLING = dict(num_samples=32, horizon_steps=30, num_knots=4)
 PLANNING = base.PlanningSetup(
-    seconds=8.0, replan_every=2, plan_overrides=dict(ctrl_dt=0.05, approach_weight=0.0), success=_on_goal,
+    seconds=8.0,
+    replan_every=2,
+    plan_overrides=dict(ctrl_dt=0.05, approach_weight=0.0),
+    success=_on_goal,
     hooks=Hooks(pre_rollout=bind(phase_view, np.float32(0.05), np.float32(1.0))),
-    configs={"predictive_sampling": _SAMPLING, "mppi": dict(_SAMPLING, temperature=0.05),
-             "cem": dict(_SAMPLING, num_elites=4, sigma_min=0.2)},
-)  # fmt: skip
+    configs={
+        "predictive_sampling": _SAMPLING,
+        "mppi": dict(_SAMPLING, temperature=0.05),
+        "cem": dict(_SAMPLING, num_elites=4, sigma_min=0.2),
+    },
+)
 
 
 @jax.tree_util.register_dataclass
@@ -149,10 +163,13 @@ def push(
     physics = base.load("cylinder_push.xml", ctrl_dt=ctrl_dt, **physics_options)
     params = Params(
         **base.floats(
-            goal_weight=goal_weight, approach_weight=approach_weight, effort_weight=effort_weight,
-            margin=margin, spawn_range=spawn_range,
+            goal_weight=goal_weight,
+            approach_weight=approach_weight,
+            effort_weight=effort_weight,
+            margin=margin,
+            spawn_range=spawn_range,
         ),
         data0=physics.data0,
         n_substeps=physics.n_substeps,
-    )  # fmt: skip
+    )
     return base.build(physics, params, reset, step, reward, base.never_terminate, episode_steps=episode_steps)

@@ -44,6 +44,7 @@ from typing import Any
 
 import mujoco
 import numpy as np
+
 from mjzoo import motion
 from mjzoo import physics as physics_lib
 from mjzoo.catalog import resets, rewards, terminations
@@ -52,15 +53,40 @@ from mjzoo.envs import locomotion
 from mjzoo.motion import deepmimic as deepmimic_format
 from mjzoo.types import Task
 
-__all__ = ["AMP", "KEY_BODIES", "MAX_TORQUE", "OPTIONS", "SCALE", "STYLE_JOINTS", "character_joints", "data_path",
-           "humanoid_model", "humanoid_xml", "motion_path", "style_error", "walk", "walk_amp",
-           "walk_clips"]  # fmt: skip
+__all__ = [
+    "AMP",
+    "KEY_BODIES",
+    "MAX_TORQUE",
+    "OPTIONS",
+    "SCALE",
+    "STYLE_JOINTS",
+    "character_joints",
+    "data_path",
+    "humanoid_model",
+    "humanoid_xml",
+    "motion_path",
+    "style_error",
+    "walk",
+    "walk_amp",
+    "walk_clips",
+]
 
 SCALE = 0.25  # pybullet loads the URDF with globalScaling=0.25; the clips are in those metres
 # Per-joint torque limits (N m) of pybullet's DeepMimic humanoid environment.
-MAX_TORQUE = {"chest": 200.0, "neck": 50.0, "right_hip": 200.0, "right_knee": 150.0, "right_ankle": 90.0,
-              "right_shoulder": 100.0, "right_elbow": 60.0, "left_hip": 200.0, "left_knee": 150.0,
-              "left_ankle": 90.0, "left_shoulder": 100.0, "left_elbow": 60.0}  # fmt: skip
+MAX_TORQUE = {
+    "chest": 200.0,
+    "neck": 50.0,
+    "right_hip": 200.0,
+    "right_knee": 150.0,
+    "right_ankle": 90.0,
+    "right_shoulder": 100.0,
+    "right_elbow": 60.0,
+    "left_hip": 200.0,
+    "left_knee": 150.0,
+    "left_ankle": 90.0,
+    "left_shoulder": 100.0,
+    "left_elbow": 60.0,
+}
 # DeepMimic's physics runs at 240 Hz under a 30 Hz policy; Brax's MJX solver settings.
 OPTIONS = dict(locomotion.MJX_OPTIONS, dt=1.0 / 240.0, ctrl_dt=1.0 / 30.0)
 _INSTALL = "pip install pybullet  (its wheel ships pybullet_data: the DeepMimic humanoid and clips)"
@@ -71,19 +97,34 @@ STYLE_JOINTS = ("right_knee", "left_knee", "right_elbow", "left_elbow")  # the h
 # AMP on the walk clip by style alone (`mjzoo train amp mjzoo.envs.deepmimic:walk_amp`), for a GPU: AMP's
 # paper's 2-frame windows and gradient penalty (w_gp / 2 = 5), its discriminator (1024, 512).
 AMP = dict(
-    num_envs=4096, unroll_length=32, num_minibatches=32, num_epochs=5, learning_rate=2e-5, entropy_coef=0.0,
-    discount=0.95, total_steps=200_000_000, policy_hidden_sizes=(1024, 512), value_hidden_sizes=(1024, 512),
-    task_weight=0.0, style_weight=1.0, num_frames=2, key_bodies=KEY_BODIES, disc_hidden_sizes=(1024, 512),
-    disc_learning_rate=1e-5, gradient_penalty_weight=5.0, disc_minibatches=32,
-)  # fmt: skip
+    num_envs=4096,
+    unroll_length=32,
+    num_minibatches=32,
+    num_epochs=5,
+    learning_rate=2e-5,
+    entropy_coef=0.0,
+    discount=0.95,
+    total_steps=200_000_000,
+    policy_hidden_sizes=(1024, 512),
+    value_hidden_sizes=(1024, 512),
+    task_weight=0.0,
+    style_weight=1.0,
+    num_frames=2,
+    key_bodies=KEY_BODIES,
+    disc_hidden_sizes=(1024, 512),
+    disc_learning_rate=1e-5,
+    gradient_penalty_weight=5.0,
+    disc_minibatches=32,
+)
 
 
 def data_path() -> Path:
     """The installed ``pybullet_data`` folder; ModuleNotFoundError saying how to install it."""
     spec = importlib.util.find_spec("pybullet_data")
     if spec is None or not spec.submodule_search_locations:
-        raise ModuleNotFoundError(f"the DeepMimic humanoid and clips come from the package pybullet_data, "
-                                  f"which is not installed: {_INSTALL}")  # fmt: skip
+        raise ModuleNotFoundError(
+            f"the DeepMimic humanoid and clips come from the package pybullet_data, which is not installed: {_INSTALL}"
+        )
     return Path(next(iter(spec.submodule_search_locations)))
 
 
@@ -139,8 +180,14 @@ def walk_clips(names: tuple[str, ...] = ("walk", "run")) -> list[motion.Clip]:
     return [deepmimic_format.load(motion_path(n), m, character_joints(), name=n) for n in names]
 
 
-def walk(*, episode_steps: int = 300, alive_weight: float = 1.0, min_height: float = 0.5,
-         reset_noise: float = 0.01, **physics_options: Any) -> Task:  # fmt: skip
+def walk(
+    *,
+    episode_steps: int = 300,
+    alive_weight: float = 1.0,
+    min_height: float = 0.5,
+    reset_noise: float = 0.01,
+    **physics_options: Any,
+) -> Task:
     """The DeepMimic humanoid free to move (module docstring's table), for AMP: no
     reward but "alive" (`alive_weight` per step not fallen), terminated when the root is
     below `min_height` (m), truncated after `episode_steps` control steps (10 s). Resets
@@ -266,8 +313,10 @@ def _add_joint(body: ET.Element, joint: ET.Element) -> None:
         if kind == "revolute" and limit is not None:
             element.set("range", f"{float(limit.get('lower'))} {float(limit.get('upper'))}")
     elif kind != "fixed":
-        raise ValueError(f"deepmimic.humanoid_xml: URDF joint {name!r} has type {kind!r}; "
-                         "expected spherical, revolute, continuous or fixed")  # fmt: skip
+        raise ValueError(
+            f"deepmimic.humanoid_xml: URDF joint {name!r} has type {kind!r}; "
+            "expected spherical, revolute, continuous or fixed"
+        )
 
 
 def _geom(collision: ET.Element, mass: float, link: str) -> ET.Element:
@@ -291,8 +340,10 @@ def _geom(collision: ET.Element, mass: float, link: str) -> ET.Element:
         half = 0.5 * SCALE * np.array([float(v) for v in shape.get("size").split()])
         geom.attrib.update(type="box", size=_fmt(half), pos=_fmt(centre), quat=_fmt(_quat(turn)))
     else:
-        raise ValueError(f"deepmimic.humanoid_xml: link {link!r} has a {shape.tag!r} shape; "
-                         "expected sphere, capsule, cylinder or box")  # fmt: skip
+        raise ValueError(
+            f"deepmimic.humanoid_xml: link {link!r} has a {shape.tag!r} shape; "
+            "expected sphere, capsule, cylinder or box"
+        )
     return geom
 
 
@@ -329,4 +380,3 @@ def _quat(mat: np.ndarray) -> np.ndarray:
 
 def _fmt(values: np.ndarray) -> str:
     return " ".join(f"{v:.6g}" for v in np.where(np.abs(values) < 1e-12, 0.0, values))
-

@@ -52,8 +52,8 @@ walked in the teacher's style after 16.4M steps (211 s with compiling) and ended
 
 from __future__ import annotations
 
-from pathlib import Path
 from collections.abc import Sequence
+from pathlib import Path
 from typing import Any
 
 import mujoco
@@ -67,9 +67,22 @@ from mjzoo.envs import base
 from mjzoo.envs.locomotion import MJX_OPTIONS, PPO, bare, free_base_observation
 from mjzoo.types import Task
 
-__all__ = ["AMP", "JOYSTICK_AMP", "KEY_BODIES", "MIN_SPEED", "REFERENCE_PATH", "STYLE_THRESHOLD", "STYLE_WINDOW",
-           "forward_speed", "hinge_columns", "humanoid_amp_joystick", "humanoid_amp_walk", "style_error",
-           "walk_reference", "walks_like_teacher"]  # fmt: skip
+__all__ = [
+    "AMP",
+    "JOYSTICK_AMP",
+    "KEY_BODIES",
+    "MIN_SPEED",
+    "REFERENCE_PATH",
+    "STYLE_THRESHOLD",
+    "STYLE_WINDOW",
+    "forward_speed",
+    "hinge_columns",
+    "humanoid_amp_joystick",
+    "humanoid_amp_walk",
+    "style_error",
+    "walk_reference",
+    "walks_like_teacher",
+]
 
 REFERENCE_PATH = Path(__file__).parent / "assets" / "humanoid_walk_ppo.npz"
 STYLE_WINDOW = 10  # frames (0.15 s): about a third of a step
@@ -83,9 +96,19 @@ KEY_BODIES = ("left_foot", "right_foot", "left_lower_arm", "right_lower_arm")
 # costs little beside the physics (2 x 256, one epoch over each update's windows: 3.7% over
 # PPO's time per step on an H100). The joystick's are the walk's with the task reward
 # weighted as much as the style; they have not been trained on a GPU yet.
-_AMP = dict(PPO["humanoid_walk"], reward_scaling=1.0, total_steps=40_000_000, num_frames=2,
-            key_bodies=KEY_BODIES, disc_hidden_sizes=(256, 256), disc_epochs=1, disc_minibatches=8,
-            disc_learning_rate=1e-4, gradient_penalty_weight=5.0, replay_size=200_000)  # fmt: skip
+_AMP = dict(
+    PPO["humanoid_walk"],
+    reward_scaling=1.0,
+    total_steps=40_000_000,
+    num_frames=2,
+    key_bodies=KEY_BODIES,
+    disc_hidden_sizes=(256, 256),
+    disc_epochs=1,
+    disc_minibatches=8,
+    disc_learning_rate=1e-4,
+    gradient_penalty_weight=5.0,
+    replay_size=200_000,
+)
 AMP = dict(_AMP, task_weight=0.1, style_weight=1.0)  # alive keeps it up while the style reward is ~0
 JOYSTICK_AMP = dict(_AMP, task_weight=0.5, style_weight=0.5, total_steps=100_000_000)
 
@@ -108,8 +131,10 @@ def hinge_columns(mj_model: mujoco.MjModel) -> np.ndarray:
 def _reference_qpos(task_or_reference: Task | motion.Reference, who: str) -> np.ndarray:
     ref = task_or_reference.motion if isinstance(task_or_reference, Task) else task_or_reference
     if not isinstance(ref, motion.Reference):
-        raise TypeError(f"{who}: task_or_reference must be a motion.Reference or a Task that carries one "
-                        f"(Task.motion), got {type(task_or_reference).__name__} with no reference")  # fmt: skip
+        raise TypeError(
+            f"{who}: task_or_reference must be a motion.Reference or a Task that carries one "
+            f"(Task.motion), got {type(task_or_reference).__name__} with no reference"
+        )
     return np.asarray(ref.qpos)
 
 
@@ -164,8 +189,13 @@ def walks_like_teacher(error: float, speed: float, fell: bool) -> bool:
 # --- the tasks --------------------------------------------------------------------------
 
 
-def _humanoid(physics: physics_lib.Physics, reference: motion.Reference, reference_probability: float,
-              reset_noise: float, observe=None) -> Task:  # fmt: skip
+def _humanoid(
+    physics: physics_lib.Physics,
+    reference: motion.Reference,
+    reference_probability: float,
+    reset_noise: float,
+    observe=None,
+) -> Task:
     """`bare` humanoid reset to the default pose with joint noise, or (with
     `reference_probability`) to a reference frame."""
     m = physics.mj_model
@@ -175,8 +205,15 @@ def _humanoid(physics: physics_lib.Physics, reference: motion.Reference, referen
     return resets.with_resets(bare(physics, observe), *noise, start, observe=observe)
 
 
-def _finish(task: Task, reference: motion.Reference, min_height: float, episode_steps: int,
-            terms: dict[str, tuple[Any, float]], alive_weight: float, effort_weight: float) -> Task:  # fmt: skip
+def _finish(
+    task: Task,
+    reference: motion.Reference,
+    min_height: float,
+    episode_steps: int,
+    terms: dict[str, tuple[Any, float]],
+    alive_weight: float,
+    effort_weight: float,
+) -> Task:
     m = task.mj_model
     task = terminations.with_terminations(task, {"too_low": terminations.base_too_low(m, min_height, body="torso")})
     spec = {**terms, "alive": (rewards.alive(task), alive_weight), "effort": (rewards.effort, -effort_weight)}
@@ -191,9 +228,17 @@ def _physics(ctrl_dt: float, physics_options: dict[str, Any]) -> physics_lib.Phy
     return base.brax_asset("humanoid.xml", **{**MJX_OPTIONS, "ctrl_dt": ctrl_dt, **physics_options})
 
 
-def humanoid_amp_walk(*, episode_steps: int = 1000, alive_weight: float = 1.0, effort_weight: float = 0.01,
-                      min_height: float = 1.0, reset_noise: float = 0.01, reference_probability: float = 0.7,
-                      ctrl_dt: float = 0.015, **physics_options: Any) -> Task:  # fmt: skip
+def humanoid_amp_walk(
+    *,
+    episode_steps: int = 1000,
+    alive_weight: float = 1.0,
+    effort_weight: float = 0.01,
+    min_height: float = 1.0,
+    reset_noise: float = 0.01,
+    reference_probability: float = 0.7,
+    ctrl_dt: float = 0.015,
+    **physics_options: Any,
+) -> Task:
     """Brax's humanoid free to walk, for AMP (module docstring): reward "alive"
     (`alive_weight` per step not fallen) and effort (-`effort_weight` x sum of squared
     actions), no forward velocity; the teacher's walk attached (`Task.motion`); starts at
@@ -205,12 +250,23 @@ def humanoid_amp_walk(*, episode_steps: int = 1000, alive_weight: float = 1.0, e
     return _finish(task, reference, min_height, episode_steps, {}, alive_weight, effort_weight)
 
 
-def humanoid_amp_joystick(*, episode_steps: int = 1000, speed: Sequence[float] = (0.5, 2.5),
-                          yaw_rate: Sequence[float] = (-0.5, 0.5), resample_interval: Sequence[float] = (5.0, 10.0),
-                          tracking_weight: float = 1.0, yaw_tracking_weight: float = 0.5,
-                          tracking_sigma: float = 0.25, alive_weight: float = 1.0, effort_weight: float = 0.01,
-                          min_height: float = 1.0, reset_noise: float = 0.01, reference_probability: float = 0.7,
-                          ctrl_dt: float = 0.015, **physics_options: Any) -> Task:  # fmt: skip
+def humanoid_amp_joystick(
+    *,
+    episode_steps: int = 1000,
+    speed: Sequence[float] = (0.5, 2.5),
+    yaw_rate: Sequence[float] = (-0.5, 0.5),
+    resample_interval: Sequence[float] = (5.0, 10.0),
+    tracking_weight: float = 1.0,
+    yaw_tracking_weight: float = 0.5,
+    tracking_sigma: float = 0.25,
+    alive_weight: float = 1.0,
+    effort_weight: float = 0.01,
+    min_height: float = 1.0,
+    reset_noise: float = 0.01,
+    reference_probability: float = 0.7,
+    ctrl_dt: float = 0.015,
+    **physics_options: Any,
+) -> Task:
     """`humanoid_amp_walk` asked to follow a velocity command in the teacher's style:
     ``info["command"]`` = [vx ~ U(`speed`) m/s, 0, yaw rate ~ U(`yaw_rate`) rad/s] in the
     torso's heading frame, redrawn every U(`resample_interval`) s and appended to the
@@ -222,8 +278,11 @@ def humanoid_amp_joystick(*, episode_steps: int = 1000, speed: Sequence[float] =
     m = physics.mj_model
     reference = walk_reference(m, physics.ctrl_dt)
     task = _humanoid(physics, reference, reference_probability, reset_noise)
-    task = commands.with_velocity_command(task, vx=speed, vy=(0.0, 0.0), yaw_rate=yaw_rate,
-                                          resample_interval=resample_interval)  # fmt: skip
-    terms = {"tracking": (rewards.linear_velocity_tracking(m, tracking_sigma), tracking_weight),
-             "yaw_tracking": (rewards.angular_velocity_tracking(m, tracking_sigma), yaw_tracking_weight)}  # fmt: skip
+    task = commands.with_velocity_command(
+        task, vx=speed, vy=(0.0, 0.0), yaw_rate=yaw_rate, resample_interval=resample_interval
+    )
+    terms = {
+        "tracking": (rewards.linear_velocity_tracking(m, tracking_sigma), tracking_weight),
+        "yaw_tracking": (rewards.angular_velocity_tracking(m, tracking_sigma), yaw_tracking_weight),
+    }
     return _finish(task, reference, min_height, episode_steps, terms, alive_weight, effort_weight)

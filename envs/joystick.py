@@ -56,9 +56,21 @@ __all__ = ["joystick", "joystick_curriculum", "PPO"]
 
 # PPO hyperparameters (`mjzoo train ppo ant_joystick`; the benchmark trains the
 # curriculum), after MuJoCo Playground's for its quadruped joysticks.
-PPO = dict(num_envs=4096, unroll_length=40, num_minibatches=32, num_epochs=4, learning_rate=3e-4,
-           entropy_coef=1e-2, discount=0.97, clip_epsilon=0.3, max_grad_norm=1.0, policy_hidden_sizes=(128,) * 4,
-           value_hidden_sizes=(256,) * 5, activation="swish", total_steps=100_000_000)  # fmt: skip
+PPO = dict(
+    num_envs=4096,
+    unroll_length=40,
+    num_minibatches=32,
+    num_epochs=4,
+    learning_rate=3e-4,
+    entropy_coef=1e-2,
+    discount=0.97,
+    clip_epsilon=0.3,
+    max_grad_norm=1.0,
+    policy_hidden_sizes=(128,) * 4,
+    value_hidden_sizes=(256,) * 5,
+    activation="swish",
+    total_steps=100_000_000,
+)
 
 
 def joystick(
@@ -92,27 +104,39 @@ def joystick(
     m = physics.mj_model
     actuator = actuator or actuators.pd(m, kp, kd, action_scale=action_scale, default_pose=actuated_pose(m))
     observe = observations.concat(
-        observations.projected_gravity(m), observations.base_height(m), observations.base_linear_velocity(m),
-        observations.base_angular_velocity(m), observations.joint_positions, observations.joint_velocities,
-    )  # fmt: skip
+        observations.projected_gravity(m),
+        observations.base_height(m),
+        observations.base_linear_velocity(m),
+        observations.base_angular_velocity(m),
+        observations.joint_positions,
+        observations.joint_velocities,
+    )
     noisy_start = resets.joint_position_noise(m, 0.1), resets.joint_velocities(m, 0.1), resets.base_heading(m)
     task = resets.with_resets(bare(physics, observe, actuator), *noisy_start, observe=observe)
     task = trackers.with_action_history(actuators.with_action_latency(task, max_action_latency), length=2)
-    task = commands.with_velocity_command(task, vx=(-1.0, 1.0), vy=(-1.0, 1.0), yaw_rate=(-1.0, 1.0),
-                                          resample_interval=(5.0, 10.0), stand_probability=0.1)  # fmt: skip
-    task = rewards.terms(task, {
-        "tracking": (rewards.linear_velocity_tracking(m, tracking_sigma), tracking_weight),
-        "progress": (rewards.command_progress(m), progress_weight),
-        "yaw_tracking": (rewards.angular_velocity_tracking(m, tracking_sigma), yaw_tracking_weight),
-        "vertical": (rewards.vertical_velocity(m), -vertical_weight),
-        "roll_pitch": (rewards.roll_pitch_velocity(m), -roll_pitch_weight),
-        "action_rate": (rewards.action_rate, -action_rate_weight),
-        "effort": (rewards.effort, -effort_weight),
-    })  # fmt: skip
+    task = commands.with_velocity_command(
+        task, vx=(-1.0, 1.0), vy=(-1.0, 1.0), yaw_rate=(-1.0, 1.0), resample_interval=(5.0, 10.0), stand_probability=0.1
+    )
+    task = rewards.terms(
+        task,
+        {
+            "tracking": (rewards.linear_velocity_tracking(m, tracking_sigma), tracking_weight),
+            "progress": (rewards.command_progress(m), progress_weight),
+            "yaw_tracking": (rewards.angular_velocity_tracking(m, tracking_sigma), yaw_tracking_weight),
+            "vertical": (rewards.vertical_velocity(m), -vertical_weight),
+            "roll_pitch": (rewards.roll_pitch_velocity(m), -roll_pitch_weight),
+            "action_rate": (rewards.action_rate, -action_rate_weight),
+            "effort": (rewards.effort, -effort_weight),
+        },
+    )
     task = with_observation_noise(task, level * noise)
-    task = terminations.with_terminations(task, {
-        "tilted": terminations.not_upright(m, 1.2), "too_low": terminations.base_too_low(m, 0.2),
-    })  # fmt: skip
+    task = terminations.with_terminations(
+        task,
+        {
+            "tilted": terminations.not_upright(m, 1.2),
+            "too_low": terminations.base_too_low(m, 0.2),
+        },
+    )
     physics_draw = randomizers.combine(randomizers.scale_friction(m, 0.5, 1.5), randomizers.scale_masses(m, 0.8, 1.2))
     task = with_domain_randomization(task, physics_draw)
     task = events.with_velocity_pushes(task, interval=(5.0, 10.0), linear=(level * push, level * push, 0.0))

@@ -39,14 +39,29 @@ import mujoco
 import numpy as np
 from mujoco import mjx
 
+from mjzoo import names
+from mjzoo import physics as physics_lib
 from mjzoo.catalog import actuators, observations, resets, rewards, terminations
-from mjzoo import names, physics as physics_lib
 from mjzoo.combinators import with_divergence_guard, with_time_limit
 from mjzoo.envs import base
 from mjzoo.types import State, Task, bind
 
-__all__ = ["bare", "reset_pose", "actuated_pose", "gym_task", "hopper", "walker", "cheetah", "ant", "humanoid_walk", "humanoid_run",
-           "humanoid_standup", "free_base_observation", "MJX_OPTIONS", "PPO"]  # fmt: skip
+__all__ = [
+    "bare",
+    "reset_pose",
+    "actuated_pose",
+    "gym_task",
+    "hopper",
+    "walker",
+    "cheetah",
+    "ant",
+    "humanoid_walk",
+    "humanoid_run",
+    "humanoid_standup",
+    "free_base_observation",
+    "MJX_OPTIONS",
+    "PPO",
+]
 
 Array = jax.Array
 Term = tuple[Callable, float]
@@ -76,10 +91,21 @@ def bare(physics: physics_lib.Physics, observe: Callable, actuator: Callable | N
     # Plain functions become Partials (pytrees); a Partial stays itself, since wrapping it
     # again makes a treedef that compares by identity and retraces every new task.
     as_leaf = lambda fn: fn if fn is None or isinstance(fn, jax.tree_util.Partial) else jax.tree_util.Partial(fn)  # noqa: E731
-    params = Params(jnp.asarray(reset_pose(physics.mj_model), jnp.float32), as_leaf(observe), as_leaf(actuator),
-                    physics.data0, physics.n_substeps)  # fmt: skip
-    return Task(model=physics.model, start=bind(_reset, params), step=bind(_step, params),
-                reward=bind(_no_terms), terminate=bind(base.never_terminate, ()), mj_model=physics.mj_model)  # fmt: skip
+    params = Params(
+        jnp.asarray(reset_pose(physics.mj_model), jnp.float32),
+        as_leaf(observe),
+        as_leaf(actuator),
+        physics.data0,
+        physics.n_substeps,
+    )
+    return Task(
+        model=physics.model,
+        start=bind(_reset, params),
+        step=bind(_step, params),
+        reward=bind(_no_terms),
+        terminate=bind(base.never_terminate, ()),
+        mj_model=physics.mj_model,
+    )
 
 
 def reset_pose(mj_model: mujoco.MjModel) -> np.ndarray:
@@ -121,10 +147,13 @@ def free_base_observation(mj_model) -> Callable:
     (base frame), hinge velocities: [1 + 4 + J + 3 + 3 + J]. No x, y: where the robot
     is should not change what it does."""
     return observations.concat(
-        observations.base_height(mj_model), observations.base_orientation(mj_model), observations.joint_positions,
-        observations.base_linear_velocity(mj_model), observations.base_angular_velocity(mj_model),
+        observations.base_height(mj_model),
+        observations.base_orientation(mj_model),
+        observations.joint_positions,
+        observations.base_linear_velocity(mj_model),
+        observations.base_angular_velocity(mj_model),
         observations.joint_velocities,
-    )  # fmt: skip
+    )
 
 
 def _planar_observation(mj_model) -> Callable:
@@ -161,8 +190,9 @@ def gym_task(
     return with_time_limit(with_divergence_guard(rewards.terms(task, spec)), episode_steps)
 
 
-def _upright_torso(m, min_height: float, max_tilt: float | None = None,
-                   max_height: float | None = None) -> dict[str, Callable]:  # fmt: skip
+def _upright_torso(
+    m, min_height: float, max_tilt: float | None = None, max_height: float | None = None
+) -> dict[str, Callable]:
     fallen = {"too_low": terminations.base_too_low(m, min_height, body="torso")}
     if max_height is not None:
         fallen["too_high"] = terminations.base_too_high(m, max_height, body="torso")
@@ -174,119 +204,276 @@ def _upright_torso(m, min_height: float, max_tilt: float | None = None,
 # --- planar runners -----------------------------------------------------------------
 
 
-def _planar(asset: str, min_height: float | None, max_tilt: float | None, forward_weight: float,
-            alive_weight: float, effort_weight: float, reset_noise: float, episode_steps: int,
-            physics_options: dict[str, Any]) -> Task:  # fmt: skip
+def _planar(
+    asset: str,
+    min_height: float | None,
+    max_tilt: float | None,
+    forward_weight: float,
+    alive_weight: float,
+    effort_weight: float,
+    reset_noise: float,
+    episode_steps: int,
+    physics_options: dict[str, Any],
+) -> Task:
     physics = base.brax_asset(asset, **physics_options)
     m = physics.mj_model
     return gym_task(
-        physics, _planar_observation(m), progress={"forward": (rewards.forward_velocity(m, "torso"), forward_weight)},
-        fallen=None if min_height is None else _upright_torso(m, min_height, max_tilt), alive_weight=alive_weight,
-        effort_weight=effort_weight, reset_noise=reset_noise, episode_steps=episode_steps,
-    )  # fmt: skip
+        physics,
+        _planar_observation(m),
+        progress={"forward": (rewards.forward_velocity(m, "torso"), forward_weight)},
+        fallen=None if min_height is None else _upright_torso(m, min_height, max_tilt),
+        alive_weight=alive_weight,
+        effort_weight=effort_weight,
+        reset_noise=reset_noise,
+        episode_steps=episode_steps,
+    )
 
 
-def hopper(*, episode_steps: int = 1000, forward_weight: float = 1.0, alive_weight: float = 1.0,
-           effort_weight: float = 1e-3, min_height: float = 0.7, max_tilt: float = 0.2,
-           reset_noise: float = 5e-3, ctrl_dt: float = 0.008, **physics_options) -> Task:  # fmt: skip
+def hopper(
+    *,
+    episode_steps: int = 1000,
+    forward_weight: float = 1.0,
+    alive_weight: float = 1.0,
+    effort_weight: float = 1e-3,
+    min_height: float = 0.7,
+    max_tilt: float = 0.2,
+    reset_noise: float = 5e-3,
+    ctrl_dt: float = 0.008,
+    **physics_options,
+) -> Task:
     """One-legged hopper running along +x (Brax's hopper.xml)."""
     options = {**_PLANAR, "ctrl_dt": ctrl_dt, **physics_options}
-    return _planar("hopper.xml", min_height, max_tilt, forward_weight, alive_weight, effort_weight, reset_noise,
-                   episode_steps, options)  # fmt: skip
+    return _planar(
+        "hopper.xml",
+        min_height,
+        max_tilt,
+        forward_weight,
+        alive_weight,
+        effort_weight,
+        reset_noise,
+        episode_steps,
+        options,
+    )
 
 
-def walker(*, episode_steps: int = 1000, forward_weight: float = 1.0, alive_weight: float = 1.0,
-           effort_weight: float = 1e-3, min_height: float = 0.8, max_tilt: float = 1.0,
-           reset_noise: float = 5e-3, ctrl_dt: float = 0.008, **physics_options) -> Task:  # fmt: skip
+def walker(
+    *,
+    episode_steps: int = 1000,
+    forward_weight: float = 1.0,
+    alive_weight: float = 1.0,
+    effort_weight: float = 1e-3,
+    min_height: float = 0.8,
+    max_tilt: float = 1.0,
+    reset_noise: float = 5e-3,
+    ctrl_dt: float = 0.008,
+    **physics_options,
+) -> Task:
     """Planar biped walker running along +x (Brax's walker2d.xml)."""
     options = {**_PLANAR, "ctrl_dt": ctrl_dt, **physics_options}
-    return _planar("walker2d.xml", min_height, max_tilt, forward_weight, alive_weight, effort_weight, reset_noise,
-                   episode_steps, options)  # fmt: skip
+    return _planar(
+        "walker2d.xml",
+        min_height,
+        max_tilt,
+        forward_weight,
+        alive_weight,
+        effort_weight,
+        reset_noise,
+        episode_steps,
+        options,
+    )
 
 
-def cheetah(*, episode_steps: int = 1000, forward_weight: float = 1.0, effort_weight: float = 0.1,
-            reset_noise: float = 0.1, ctrl_dt: float = 0.05, **physics_options) -> Task:  # fmt: skip
+def cheetah(
+    *,
+    episode_steps: int = 1000,
+    forward_weight: float = 1.0,
+    effort_weight: float = 0.1,
+    reset_noise: float = 0.1,
+    ctrl_dt: float = 0.05,
+    **physics_options,
+) -> Task:
     """Planar half-cheetah running along +x (Brax's half_cheetah.xml); never terminates."""
     options = {**_PLANAR, "ctrl_dt": ctrl_dt, **physics_options}
-    return _planar("half_cheetah.xml", None, None, forward_weight, 0.0, effort_weight, reset_noise,
-                   episode_steps, options)  # fmt: skip
+    return _planar(
+        "half_cheetah.xml", None, None, forward_weight, 0.0, effort_weight, reset_noise, episode_steps, options
+    )
 
 
 # --- free-floating runners ----------------------------------------------------------
 
 
-def ant(*, episode_steps: int = 1000, forward_weight: float = 1.0, alive_weight: float = 1.0,
-        effort_weight: float = 0.5, min_height: float = 0.2, max_height: float | None = 1.0,
-        reset_noise: float = 0.1, ctrl_dt: float = 0.05, **physics_options) -> Task:  # fmt: skip
+def ant(
+    *,
+    episode_steps: int = 1000,
+    forward_weight: float = 1.0,
+    alive_weight: float = 1.0,
+    effort_weight: float = 0.5,
+    min_height: float = 0.2,
+    max_height: float | None = 1.0,
+    reset_noise: float = 0.1,
+    ctrl_dt: float = 0.05,
+    **physics_options,
+) -> Task:
     """Four-legged ant running along +x (Brax's ant.xml). Its torso must stay between
     `min_height` and `max_height` (m): without the ceiling PPO learns to bounce metres
     high off the soft contacts instead of running."""
     options = {**MJX_OPTIONS, "ctrl_dt": ctrl_dt, **physics_options}
-    return _free_runner("ant.xml", None, episode_steps, forward_weight, alive_weight, effort_weight,
-                        min_height, max_height, reset_noise, options)  # fmt: skip
+    return _free_runner(
+        "ant.xml",
+        None,
+        episode_steps,
+        forward_weight,
+        alive_weight,
+        effort_weight,
+        min_height,
+        max_height,
+        reset_noise,
+        options,
+    )
 
 
-def _free_runner(asset: str, max_speed: float | None, episode_steps: int, forward_weight: float,
-                 alive_weight: float, effort_weight: float, min_height: float, max_height: float | None,
-                 reset_noise: float, options: dict[str, Any]) -> Task:  # fmt: skip
+def _free_runner(
+    asset: str,
+    max_speed: float | None,
+    episode_steps: int,
+    forward_weight: float,
+    alive_weight: float,
+    effort_weight: float,
+    min_height: float,
+    max_height: float | None,
+    reset_noise: float,
+    options: dict[str, Any],
+) -> Task:
     physics = base.brax_asset(asset, **options)
     m = physics.mj_model
     forward = rewards.forward_velocity(m, max_speed=max_speed)
     return gym_task(
-        physics, free_base_observation(m), progress={"forward": (forward, forward_weight)},
-        fallen=_upright_torso(m, min_height, max_height=max_height), alive_weight=alive_weight,
-        effort_weight=effort_weight, reset_noise=reset_noise, episode_steps=episode_steps,
-    )  # fmt: skip
+        physics,
+        free_base_observation(m),
+        progress={"forward": (forward, forward_weight)},
+        fallen=_upright_torso(m, min_height, max_height=max_height),
+        alive_weight=alive_weight,
+        effort_weight=effort_weight,
+        reset_noise=reset_noise,
+        episode_steps=episode_steps,
+    )
 
 
-def humanoid_walk(*, episode_steps: int = 1000, forward_weight: float = 1.25, max_speed: float = 1.5,
-                  alive_weight: float = 5.0, effort_weight: float = 0.1, min_height: float = 1.0,
-                  reset_noise: float = 0.01, ctrl_dt: float = 0.015, **physics_options) -> Task:  # fmt: skip
+def humanoid_walk(
+    *,
+    episode_steps: int = 1000,
+    forward_weight: float = 1.25,
+    max_speed: float = 1.5,
+    alive_weight: float = 5.0,
+    effort_weight: float = 0.1,
+    min_height: float = 1.0,
+    reset_noise: float = 0.01,
+    ctrl_dt: float = 0.015,
+    **physics_options,
+) -> Task:
     """Humanoid walking along +x (Brax's humanoid.xml); speed beyond `max_speed` (m/s)
     earns nothing more."""
     options = {**MJX_OPTIONS, "ctrl_dt": ctrl_dt, **physics_options}
-    return _free_runner("humanoid.xml", max_speed, episode_steps, forward_weight, alive_weight, effort_weight,
-                        min_height, None, reset_noise, options)  # fmt: skip
+    return _free_runner(
+        "humanoid.xml",
+        max_speed,
+        episode_steps,
+        forward_weight,
+        alive_weight,
+        effort_weight,
+        min_height,
+        None,
+        reset_noise,
+        options,
+    )
 
 
-def humanoid_run(*, episode_steps: int = 1000, forward_weight: float = 1.25, alive_weight: float = 5.0,
-                 effort_weight: float = 0.1, min_height: float = 1.0, reset_noise: float = 0.01,
-                 ctrl_dt: float = 0.015, **physics_options) -> Task:  # fmt: skip
+def humanoid_run(
+    *,
+    episode_steps: int = 1000,
+    forward_weight: float = 1.25,
+    alive_weight: float = 5.0,
+    effort_weight: float = 0.1,
+    min_height: float = 1.0,
+    reset_noise: float = 0.01,
+    ctrl_dt: float = 0.015,
+    **physics_options,
+) -> Task:
     """Humanoid running along +x as fast as it can (Brax's humanoid.xml)."""
     options = {**MJX_OPTIONS, "ctrl_dt": ctrl_dt, **physics_options}
-    return _free_runner("humanoid.xml", None, episode_steps, forward_weight, alive_weight, effort_weight,
-                        min_height, None, reset_noise, options)  # fmt: skip
+    return _free_runner(
+        "humanoid.xml",
+        None,
+        episode_steps,
+        forward_weight,
+        alive_weight,
+        effort_weight,
+        min_height,
+        None,
+        reset_noise,
+        options,
+    )
 
 
-def humanoid_standup(*, episode_steps: int = 1000, height_weight: float = 1.0, effort_weight: float = 1e-3,
-                     reset_noise: float = 0.01, ctrl_dt: float = 0.015, **physics_options) -> Task:  # fmt: skip
+def humanoid_standup(
+    *,
+    episode_steps: int = 1000,
+    height_weight: float = 1.0,
+    effort_weight: float = 1e-3,
+    reset_noise: float = 0.01,
+    ctrl_dt: float = 0.015,
+    **physics_options,
+) -> Task:
     """Humanoid getting up from lying on its back (Brax's humanoidstandup.xml): reward
     the torso's height (m) per step; never terminates."""
     physics = base.brax_asset("humanoidstandup.xml", **{**MJX_OPTIONS, "ctrl_dt": ctrl_dt, **physics_options})
     m = physics.mj_model
     return gym_task(
-        physics, free_base_observation(m), progress={"height": (rewards.body_height(m, "torso"), height_weight)},
-        fallen=None, alive_weight=0.0, effort_weight=effort_weight, reset_noise=reset_noise,
+        physics,
+        free_base_observation(m),
+        progress={"height": (rewards.body_height(m, "torso"), height_weight)},
+        fallen=None,
+        alive_weight=0.0,
+        effort_weight=effort_weight,
+        reset_noise=reset_noise,
         episode_steps=episode_steps,
-    )  # fmt: skip
+    )
 
 
 # PPO hyperparameters (`mjzoo train ppo <task>`, benchmarks/locomotion.py), after Brax's
 # published ones for these models (Brax collects batch x minibatches sequences of `unroll`
 # steps per update; here each env collects that many steps in one unroll).
-_BRAX = dict(num_minibatches=32, learning_rate=3e-4, discount=0.97, clip_epsilon=0.3, max_grad_norm=None,
-             policy_hidden_sizes=(32,) * 4, value_hidden_sizes=(256,) * 5, activation="swish")  # fmt: skip
-_HUMANOID = dict(_BRAX, num_envs=2048, unroll_length=160, num_epochs=8, entropy_coef=1e-3, reward_scaling=0.1,
-                 total_steps=50_000_000)  # fmt: skip
+_BRAX = dict(
+    num_minibatches=32,
+    learning_rate=3e-4,
+    discount=0.97,
+    clip_epsilon=0.3,
+    max_grad_norm=None,
+    policy_hidden_sizes=(32,) * 4,
+    value_hidden_sizes=(256,) * 5,
+    activation="swish",
+)
+_HUMANOID = dict(
+    _BRAX, num_envs=2048, unroll_length=160, num_epochs=8, entropy_coef=1e-3, reward_scaling=0.1, total_steps=50_000_000
+)
 PPO = {
     "hopper": dict(_BRAX, num_envs=2048, unroll_length=160, num_epochs=8, entropy_coef=1e-3, total_steps=20_000_000),
     "walker": dict(_BRAX, num_envs=2048, unroll_length=160, num_epochs=8, entropy_coef=1e-3, total_steps=20_000_000),
-    "cheetah": dict(_BRAX, num_envs=2048, unroll_length=160, num_epochs=8, entropy_coef=1e-3, discount=0.95,
-                    total_steps=50_000_000),
-    "ant": dict(_BRAX, num_envs=4096, unroll_length=80, num_epochs=4, entropy_coef=1e-2, reward_scaling=10.0,
-                total_steps=50_000_000),
+    "cheetah": dict(
+        _BRAX, num_envs=2048, unroll_length=160, num_epochs=8, entropy_coef=1e-3, discount=0.95, total_steps=50_000_000
+    ),
+    "ant": dict(
+        _BRAX,
+        num_envs=4096,
+        unroll_length=80,
+        num_epochs=4,
+        entropy_coef=1e-2,
+        reward_scaling=10.0,
+        total_steps=50_000_000,
+    ),
     "humanoid_walk": _HUMANOID,
     "humanoid_run": _HUMANOID,
-    "humanoid_standup": dict(_HUMANOID, unroll_length=240, learning_rate=6e-4, entropy_coef=1e-2,
-                             total_steps=100_000_000),
-}  # fmt: skip
+    "humanoid_standup": dict(
+        _HUMANOID, unroll_length=240, learning_rate=6e-4, entropy_coef=1e-2, total_steps=100_000_000
+    ),
+}

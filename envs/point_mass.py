@@ -19,9 +19,9 @@ import jax.numpy as jnp
 import numpy as np
 from mujoco import mjx
 
-from mjzoo.planning.closed_loop import Hooks
-from mjzoo.envs import base
 from mjzoo.catalog.rewards import tolerance
+from mjzoo.envs import base
+from mjzoo.planning.closed_loop import Hooks
 from mjzoo.types import State, Task, bind
 
 __all__ = ["Params", "reach"]
@@ -30,8 +30,16 @@ Array = jax.Array
 MASS_BODY = 2  # the mass in point_mass.xml (0: world, 1: the mocap target)
 
 # PPO hyperparameters that solve this task (`mjzoo train ppo point_mass`).
-PPO = dict(num_envs=256, unroll_length=32, num_minibatches=8, num_epochs=4, learning_rate=1e-3,
-           entropy_coef=1e-3, discount=0.97, total_steps=2_000_000)  # fmt: skip
+PPO = dict(
+    num_envs=256,
+    unroll_length=32,
+    num_minibatches=8,
+    num_epochs=4,
+    learning_rate=1e-3,
+    entropy_coef=1e-3,
+    discount=0.97,
+    total_steps=2_000_000,
+)
 
 
 def new_goal_when_reached(radius: Array, spawn_range: Array, sim_task: Task, state: State, key: Array) -> State:
@@ -39,7 +47,9 @@ def new_goal_when_reached(radius: Array, spawn_range: Array, sim_task: Task, sta
     goal is drawn uniformly in [-spawn_range, spawn_range]^2 (info, mocap marker and
     observation follow). The planner sees it through the state it plans from."""
     reached = jnp.linalg.norm(state.info["goal"] - state.data.qpos) < radius
-    goal = jnp.where(reached, jax.random.uniform(key, (2,), minval=-spawn_range, maxval=spawn_range), state.info["goal"])
+    goal = jnp.where(
+        reached, jax.random.uniform(key, (2,), minval=-spawn_range, maxval=spawn_range), state.info["goal"]
+    )
     data = state.data.replace(mocap_pos=state.data.mocap_pos.at[0, :2].set(goal))
     return state.replace(data=data, obs=observe(data, goal), info={**state.info, "goal": goal})
 
@@ -84,12 +94,22 @@ def _reaches_goals(states) -> tuple[bool, float]:
 # 0.05 s planning steps over 1 s.
 _SAMPLING = dict(num_samples=32, horizon_steps=20, num_knots=3)
 PLANNING = base.PlanningSetup(
-    seconds=6.0, replan_every=2, plan_overrides=dict(ctrl_dt=0.05), success=_reaches_goals,
-    hooks=Hooks(warm_start=warm_start, post_sim_step=bind(new_goal_when_reached, np.float32(0.05), np.float32(0.3)),
-                pre_sim_step=bind(gusts, np.float32(0.05)), post_rollout=plan_cost),
-    configs={"predictive_sampling": _SAMPLING, "mppi": dict(_SAMPLING, temperature=0.05),
-             "cem": dict(_SAMPLING, num_elites=4, sigma_min=0.2)},
-)  # fmt: skip
+    seconds=6.0,
+    replan_every=2,
+    plan_overrides=dict(ctrl_dt=0.05),
+    success=_reaches_goals,
+    hooks=Hooks(
+        warm_start=warm_start,
+        post_sim_step=bind(new_goal_when_reached, np.float32(0.05), np.float32(0.3)),
+        pre_sim_step=bind(gusts, np.float32(0.05)),
+        post_rollout=plan_cost,
+    ),
+    configs={
+        "predictive_sampling": _SAMPLING,
+        "mppi": dict(_SAMPLING, temperature=0.05),
+        "cem": dict(_SAMPLING, num_elites=4, sigma_min=0.2),
+    },
+)
 
 
 @jax.tree_util.register_dataclass
@@ -145,10 +165,13 @@ def reach(
     physics = base.load("point_mass.xml", ctrl_dt=ctrl_dt, **physics_options)
     params = Params(
         **base.floats(
-            reach_weight=reach_weight, effort_weight=effort_weight, target_radius=target_radius,
-            reach_margin=reach_margin, spawn_range=spawn_range,
+            reach_weight=reach_weight,
+            effort_weight=effort_weight,
+            target_radius=target_radius,
+            reach_margin=reach_margin,
+            spawn_range=spawn_range,
         ),
         data0=physics.data0,
         n_substeps=physics.n_substeps,
-    )  # fmt: skip
+    )
     return base.build(physics, params, reset, step, reward, base.never_terminate, episode_steps=episode_steps)

@@ -43,6 +43,7 @@ from pathlib import Path
 import jax
 import mujoco
 import numpy as np
+
 from mjzoo import motion
 from mjzoo.catalog import resets
 from mjzoo.envs import base, cartpole
@@ -56,10 +57,22 @@ STYLE_WINDOW = 25  # frames (0.5 s) per compared window: about one pump of the s
 # AMP on style alone (`mjzoo train amp mjzoo.envs.teachers:cartpole_amp_swingup`), 4-12 min on 2 shared CPU
 # cores; it does not swing up yet (module docstring).
 AMP = dict(
-    num_envs=128, unroll_length=32, num_minibatches=8, num_epochs=4, learning_rate=1e-3, entropy_coef=1e-3,
-    discount=0.99, total_steps=2_000_000, task_weight=0.0, style_weight=1.0, num_frames=2,
-    disc_hidden_sizes=(256, 256), disc_learning_rate=1e-4, gradient_penalty_weight=5.0, disc_minibatches=8,
-)  # fmt: skip
+    num_envs=128,
+    unroll_length=32,
+    num_minibatches=8,
+    num_epochs=4,
+    learning_rate=1e-3,
+    entropy_coef=1e-3,
+    discount=0.99,
+    total_steps=2_000_000,
+    task_weight=0.0,
+    style_weight=1.0,
+    num_frames=2,
+    disc_hidden_sizes=(256, 256),
+    disc_learning_rate=1e-4,
+    gradient_penalty_weight=5.0,
+    disc_minibatches=8,
+)
 
 
 def cartpole_clip(mj_model: mujoco.MjModel) -> motion.Clip:
@@ -67,16 +80,30 @@ def cartpole_clip(mj_model: mujoco.MjModel) -> motion.Clip:
     return motion.load(CARTPOLE_CLIP, mj_model, name="cartpole_swingup_mppi")
 
 
-def cartpole_amp_swingup(*, reference_init: float = 0.0, episode_steps: int = 500, upright_weight: float = 1.0,
-                         centered_weight: float = 0.1, velocity_weight: float = 0.1, effort_weight: float = 0.01,
-                         ctrl_dt: float = 0.02, **physics_options) -> Task:  # fmt: skip
+def cartpole_amp_swingup(
+    *,
+    reference_init: float = 0.0,
+    episode_steps: int = 500,
+    upright_weight: float = 1.0,
+    centered_weight: float = 0.1,
+    velocity_weight: float = 0.1,
+    effort_weight: float = 0.01,
+    ctrl_dt: float = 0.02,
+    **physics_options,
+) -> Task:
     """`cartpole.swingup(...)` (its reward weights, episode length and physics options)
     with the planner's clip as its reference (`Task.motion`, resampled to one frame per
     control step, not looping); a fraction `reference_init` in [0, 1] of the episodes
     starts at a clip frame (`resets.reference_state`), the others hanging."""
-    task = cartpole.swingup(episode_steps=episode_steps, upright_weight=upright_weight, centered_weight=centered_weight,
-                            velocity_weight=velocity_weight, effort_weight=effort_weight, ctrl_dt=ctrl_dt,
-                            **physics_options)  # fmt: skip
+    task = cartpole.swingup(
+        episode_steps=episode_steps,
+        upright_weight=upright_weight,
+        centered_weight=centered_weight,
+        velocity_weight=velocity_weight,
+        effort_weight=effort_weight,
+        ctrl_dt=ctrl_dt,
+        **physics_options,
+    )
     ref = motion.reference(cartpole_clip(task.mj_model), task.mj_model, dt=ctrl_dt, loop=False)
     if reference_init:
         task = resets.with_resets(task, resets.reference_state(ref, reference_init), observe=_observe)

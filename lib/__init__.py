@@ -28,6 +28,7 @@ with contextlib.redirect_stdout(io.StringIO()):  # mjx prints a notice when its 
     from mujoco import mjx  # noqa: F401
 
 from mjzoo import checks, lazy, names, physics, tree, worlds
+from mjzoo.checks import RetraceHazardWarning
 from mjzoo.combinators import (
     with_action_repeat,
     with_auto_reset,
@@ -37,7 +38,6 @@ from mjzoo.combinators import (
     with_reward_clip,
     with_time_limit,
 )
-from mjzoo.checks import RetraceHazardWarning
 from mjzoo.kit import task
 from mjzoo.parameters import params, with_params
 from mjzoo.perturbations import with_action_noise, with_domain_randomization, with_observation_noise

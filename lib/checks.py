@@ -35,8 +35,9 @@ def _floats(value) -> np.ndarray:
         return np.full((), np.nan)
 
 
-def number(who: str, name: str, value: float, low: float = -math.inf, high: float = math.inf, *,
-           open_low: bool = False) -> Array:  # fmt: skip
+def number(
+    who: str, name: str, value: float, low: float = -math.inf, high: float = math.inf, *, open_low: bool = False
+) -> Array:
     """`value` as a float32 [] leaf; it must be finite, >= low (> low if `open_low`) and <= high."""
     if not (_is_real(value) and (value > low if open_low else value >= low) and value <= high):
         bounds = [f"{'>' if open_low else '>='} {low:.6g}"] if low > -math.inf else []

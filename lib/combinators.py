@@ -26,9 +26,16 @@ from mjzoo.running import OUTCOME, complete, reset, reward_terms, transition_wit
 from mjzoo.types import State, Task, bind
 
 __all__ = [
-    "with_observation", "with_time_limit", "with_auto_reset", "with_action_repeat", "with_reward",
-    "with_reward_clip", "with_divergence_guard", "runs_transitions", "record",
-]  # fmt: skip
+    "with_observation",
+    "with_time_limit",
+    "with_auto_reset",
+    "with_action_repeat",
+    "with_reward",
+    "with_reward_clip",
+    "with_divergence_guard",
+    "runs_transitions",
+    "record",
+]
 
 Array = jax.Array
 RESET_STREAM = 0x5E7  # fold_in tag: combinators pass keys through and derive their own
@@ -170,8 +177,10 @@ def resets_itself(task: Task) -> bool:
 
     def found(node) -> bool:
         partials = jax.tree.leaves(node, is_leaf=lambda x: isinstance(x, jax.tree_util.Partial))
-        return any(isinstance(p, jax.tree_util.Partial) and (p.func is _auto_reset_step or found((p.args, p.keywords)))
-                   for p in partials)  # fmt: skip
+        return any(
+            isinstance(p, jax.tree_util.Partial) and (p.func is _auto_reset_step or found((p.args, p.keywords)))
+            for p in partials
+        )
 
     return found(task.replace(model=None))
 
@@ -221,7 +230,9 @@ def _restarted_batch(axis_size: int, in_batched: list, inner: Task, done: Array,
         out = jax.tree.leaves(_restarted_select(task, done, key, state))
         return [x for x, k in zip(out, kept) if not k]
 
-    fresh = jax.lax.cond(jnp.any(done), jax.vmap(restart), lambda *_: moving, mapped, done, key, moving)  # one branch for all
+    fresh = jax.lax.cond(
+        jnp.any(done), jax.vmap(restart), lambda *_: moving, mapped, done, key, moving
+    )  # one branch for all
     out = jax.tree.unflatten(ended_def, _merge(ended_leaves, kept, fresh))
     return out, jax.tree.unflatten(ended_def, [not k for k in kept])
 
@@ -257,8 +268,12 @@ def _repeat_step(repeats: tree.Static, inner: Task, model, state: State, action:
         total = {k: total[k] + jnp.where(done, 0.0, v) for k, v in terms.items()}
         metrics = tree.where(done, state.metrics, next_state.metrics)
         state = _select(done, state, next_state).replace(metrics=metrics)
-        return (state, total, terminated | (~done & next_state.terminated),
-                truncated | (~done & next_state.truncated)), None  # fmt: skip
+        return (
+            state,
+            total,
+            terminated | (~done & next_state.terminated),
+            truncated | (~done & next_state.truncated),
+        ), None
 
     state = complete(inner, state)  # adds what only inner transitions write (while `reset` traces)
     shape = jax.eval_shape(lambda: transition_with_terms(inner, state, action, key))
@@ -340,9 +355,21 @@ def _clipped_reward(reward_fn, low, high, model, state, action, next_state) -> d
 
 # The fields of mjx.Data a step integrates from; everything else in it is recomputed.
 INTEGRATION_STATE = (
-    "time", "qpos", "qvel", "act", "history", "qacc_warmstart", "plugin_state", "ctrl",
-    "qfrc_applied", "xfrc_applied", "eq_active", "mocap_pos", "mocap_quat", "userdata",
-)  # fmt: skip
+    "time",
+    "qpos",
+    "qvel",
+    "act",
+    "history",
+    "qacc_warmstart",
+    "plugin_state",
+    "ctrl",
+    "qfrc_applied",
+    "xfrc_applied",
+    "eq_active",
+    "mocap_pos",
+    "mocap_quat",
+    "userdata",
+)
 
 
 def with_divergence_guard(task: Task, max_qvel: float = 1e3) -> Task:

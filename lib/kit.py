@@ -45,7 +45,8 @@ import mujoco
 import numpy as np
 from mujoco import mjx
 
-from mjzoo import checks, physics as physics_lib
+from mjzoo import checks
+from mjzoo import physics as physics_lib
 from mjzoo.combinators import with_divergence_guard, with_time_limit
 from mjzoo.tree import Static
 from mjzoo.types import State, Task, bind
@@ -97,8 +98,10 @@ def task(
         _identifier("rewards", name)
         if isinstance(weight, str):
             if weight not in p:
-                raise ValueError(f"mjzoo.task: the weight of reward term {name!r} names the parameter {weight!r}, "
-                                 f"which params lacks; params: {', '.join(p) or 'none'}")  # fmt: skip
+                raise ValueError(
+                    f"mjzoo.task: the weight of reward term {name!r} names the parameter {weight!r}, "
+                    f"which params lacks; params: {', '.join(p) or 'none'}"
+                )
         else:
             value = checks.number("mjzoo.task", f"the weight of {name!r}", weight)
             weight, p = f"{name}_weight", _add(p, f"{name}_weight", value)
@@ -209,8 +212,10 @@ def _numeric(value) -> bool:
 
 def _add(p: dict, name: str, value: Array) -> dict:
     if name in p:
-        raise ValueError(f"mjzoo.task: the parameter {name!r} is given in params and as a reward term's weight; "
-                         f"give the term the weight {name!r} (its name) or drop it from params")  # fmt: skip
+        raise ValueError(
+            f"mjzoo.task: the parameter {name!r} is given in params and as a reward term's weight; "
+            f"give the term the weight {name!r} (its name) or drop it from params"
+        )
     return {**p, name: value}
 
 
@@ -222,13 +227,15 @@ def _identifier(where: str, name) -> None:
 def _physics(model, options: dict[str, Any]) -> physics_lib.Physics:
     unknown = sorted(set(options) - set(physics_lib.OPTIONS))
     if unknown:
-        raise TypeError(f"mjzoo.task: unknown physics option {', '.join(unknown)}; "
-                        f"options: {', '.join(physics_lib.OPTIONS)}")  # fmt: skip
+        raise TypeError(
+            f"mjzoo.task: unknown physics option {', '.join(unknown)}; options: {', '.join(physics_lib.OPTIONS)}"
+        )
     if not isinstance(model, mujoco.MjModel):
         return physics_lib.load(model, **options)
     if set(options) - {"ctrl_dt", "impl", "max_contacts", "max_constraints"}:
-        raise ValueError("mjzoo.task: for an MjModel, set physics options other than ctrl_dt, impl and the "
-                         "capacities on model.opt")
+        raise ValueError(
+            "mjzoo.task: for an MjModel, set physics options other than ctrl_dt, impl and the capacities on model.opt"
+        )
     dt = float(model.opt.timestep)
     ctrl_dt = checks.number("mjzoo.task", "ctrl_dt", options.get("ctrl_dt", dt), 0.0, open_low=True)
     n_substeps = round(float(ctrl_dt) / dt)
@@ -236,5 +243,7 @@ def _physics(model, options: dict[str, Any]) -> physics_lib.Physics:
         raise ValueError(f"mjzoo.task: ctrl_dt={float(ctrl_dt)} must be a whole multiple of the model's dt={dt}")
     impl = options.get("impl") or physics_lib.default_impl()
     if impl not in physics_lib.IMPLS:
-        raise ValueError(f"mjzoo.task: physics option impl={impl!r} is invalid; expected one of {list(physics_lib.IMPLS)}")
+        raise ValueError(
+            f"mjzoo.task: physics option impl={impl!r} is invalid; expected one of {list(physics_lib.IMPLS)}"
+        )
     return physics_lib.of_model(model, n_substeps, impl, options.get("max_contacts"), options.get("max_constraints"))

@@ -21,9 +21,17 @@ import mujoco
 import numpy as np
 
 __all__ = [
-    "KINDS", "Names", "all_names", "ids", "index", "base_body", "free_joint", "free_joint_addresses",
-    "joints", "joint_addresses",
-]  # fmt: skip
+    "KINDS",
+    "Names",
+    "all_names",
+    "ids",
+    "index",
+    "base_body",
+    "free_joint",
+    "free_joint_addresses",
+    "joints",
+    "joint_addresses",
+]
 
 Names = str | Sequence[str]
 # kind -> (MuJoCo object type, attribute of MjModel counting them)
@@ -126,8 +134,9 @@ def joints(mj_model: mujoco.MjModel, names: Names | None, who: str, *, limited: 
     for j in found:
         name = all_names(mj_model, "joint", [j])[0]
         if j not in movable:
-            raise ValueError(f"{who}: {name!r} is not a hinge or slide joint; those are "
-                             f"{all_names(mj_model, 'joint', movable)}")  # fmt: skip
+            raise ValueError(
+                f"{who}: {name!r} is not a hinge or slide joint; those are {all_names(mj_model, 'joint', movable)}"
+            )
         if limited and not mj_model.jnt_limited[j]:
             raise ValueError(f"{who}: joint {name!r} has no range; give joints with a range (limited)")
     return found

@@ -52,8 +52,10 @@ def with_params(task: Task, **values: Any) -> Task:
     known = params(task)
     unknown = sorted(set(values) - set(known))
     if unknown:
-        raise KeyError(f"with_params: the task has no parameter named {', '.join(map(repr, unknown))}; "
-                       f"its named parameters: {', '.join(known) or 'none'}")  # fmt: skip
+        raise KeyError(
+            f"with_params: the task has no parameter named {', '.join(map(repr, unknown))}; "
+            f"its named parameters: {', '.join(known) or 'none'}"
+        )
 
     def replace(path, leaf):
         name = _name(path)
@@ -62,8 +64,10 @@ def with_params(task: Task, **values: Any) -> Task:
         shape, dtype = np.shape(leaf), getattr(leaf, "dtype", None) or np.asarray(leaf).dtype
         new = np.asarray(values[name])
         if new.shape != shape:
-            raise ValueError(f"with_params: {name}={values[name]!r} has shape {new.shape}, but the task's "
-                             f"{name} has shape {shape} ({jax.tree_util.keystr(path)})")  # fmt: skip
+            raise ValueError(
+                f"with_params: {name}={values[name]!r} has shape {new.shape}, but the task's "
+                f"{name} has shape {shape} ({jax.tree_util.keystr(path)})"
+            )
         return jnp.asarray(new, dtype)
 
     functions = {f: getattr(task, f) for f in _FUNCTIONS}

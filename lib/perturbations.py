@@ -36,9 +36,10 @@ def add_noise(tree, scale: Array, key: Array):
     keys = jax.random.split(key, max(len(leaves), 1))
     noisy = [
         leaf + scale * jax.random.normal(k, jnp.shape(leaf), leaf.dtype)
-        if jnp.issubdtype(leaf.dtype, jnp.inexact) else leaf
+        if jnp.issubdtype(leaf.dtype, jnp.inexact)
+        else leaf
         for leaf, k in zip(leaves, keys)
-    ]  # fmt: skip
+    ]
     return jax.tree.unflatten(treedef, noisy)
 
 
@@ -52,9 +53,7 @@ def with_observation_noise(task: Task, scale: float) -> Task:
     in `info`.
     """
     scale = _check_scale("with_observation_noise", scale)
-    return task.replace(
-        start=bind(_noisy_reset, task.start, scale), step=bind(_noisy_obs_step, task.step, scale)
-    )
+    return task.replace(start=bind(_noisy_reset, task.start, scale), step=bind(_noisy_obs_step, task.step, scale))
 
 
 def _noisy_reset(reset_fn, scale, model, key) -> State:
@@ -113,7 +112,9 @@ def _check_fields(model: mjx.Model, randomize) -> None:
     """Fails at construction if `randomize` names unknown fields or changes shapes."""
     drawn = jax.eval_shape(randomize, model, jax.random.key(0))
     if not isinstance(drawn, dict):
-        raise TypeError(f"with_domain_randomization: randomize must return a dict of model fields, got {type(drawn).__name__}")
+        raise TypeError(
+            f"with_domain_randomization: randomize must return a dict of model fields, got {type(drawn).__name__}"
+        )
     fields = {f.name for f in dataclasses.fields(model)}
     for name, value in drawn.items():
         if name not in fields:

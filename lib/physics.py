@@ -31,15 +31,24 @@ from typing import Any
 
 import jax
 import mujoco
-import numpy as np
 from mujoco import mjx
 
 from mjzoo.worlds import clear_overflow, probe_capacity
 
 __all__ = [
-    "Physics", "load", "of_model", "step", "substep", "forward", "StandIn", "OPTIONS", "IMPLS", "default_impl",
-    "check_differentiable", "quiet",
-]  # fmt: skip
+    "Physics",
+    "load",
+    "of_model",
+    "step",
+    "substep",
+    "forward",
+    "StandIn",
+    "OPTIONS",
+    "IMPLS",
+    "default_impl",
+    "check_differentiable",
+    "quiet",
+]
 
 SOLVERS = {"cg": mujoco.mjtSolver.mjSOL_CG, "newton": mujoco.mjtSolver.mjSOL_NEWTON}
 INTEGRATORS = {
@@ -48,9 +57,18 @@ INTEGRATORS = {
     "rk4": mujoco.mjtIntegrator.mjINT_RK4,
 }
 OPTIONS = (
-    "dt", "ctrl_dt", "solver", "iterations", "ls_iterations", "integrator", "tolerance",
-    "disable_euler_damping", "impl", "max_contacts", "max_constraints",
-)  # fmt: skip
+    "dt",
+    "ctrl_dt",
+    "solver",
+    "iterations",
+    "ls_iterations",
+    "integrator",
+    "tolerance",
+    "disable_euler_damping",
+    "impl",
+    "max_contacts",
+    "max_constraints",
+)
 IMPLS = ("jax", "warp")
 WARP_ON_CPU = "MJZOO_WARP_ON_CPU"  # =1: let impl="warp" run on Warp's CPU backend (slow; for debugging)
 _KINDS = {
@@ -89,8 +107,9 @@ class Physics:
         device = jax.local_devices()[0]  # this process's (MJX's default is process 0's in a multi-process run)
         if self.impl == "jax":
             return mjx.make_data(self.mj_model, device=device, impl="jax")
-        data = mjx.make_data(self.mj_model, device=device, impl="warp", naconmax=self.max_contacts,
-                             njmax=self.max_constraints)  # fmt: skip
+        data = mjx.make_data(
+            self.mj_model, device=device, impl="warp", naconmax=self.max_contacts, njmax=self.max_constraints
+        )
         return data.replace(_impl=data._impl.replace(nworld=1))  # nworld: the worlds the pool is sized for
 
     @property
@@ -126,8 +145,14 @@ class Physics:
     def _kind(self, kind: str) -> tuple[Any, int]:
         if kind not in _KINDS:
             raise ValueError(f"unknown element kind {kind!r}; expected one of {sorted(_KINDS)}")
-        counts = {"body": "nbody", "joint": "njnt", "geom": "ngeom", "site": "nsite",
-                  "sensor": "nsensor", "actuator": "nu"}  # fmt: skip
+        counts = {
+            "body": "nbody",
+            "joint": "njnt",
+            "geom": "ngeom",
+            "site": "nsite",
+            "sensor": "nsensor",
+            "actuator": "nu",
+        }
         return _KINDS[kind], int(getattr(self.mj_model, counts[kind]))
 
 
@@ -171,11 +196,18 @@ def load(
     """
     text, label, mtime = _read(source)
     options = dict(
-        dt=dt, ctrl_dt=ctrl_dt, solver=solver, iterations=iterations,
-        ls_iterations=ls_iterations, integrator=integrator, tolerance=tolerance,
-        disable_euler_damping=disable_euler_damping, impl=impl, max_contacts=max_contacts,
+        dt=dt,
+        ctrl_dt=ctrl_dt,
+        solver=solver,
+        iterations=iterations,
+        ls_iterations=ls_iterations,
+        integrator=integrator,
+        tolerance=tolerance,
+        disable_euler_damping=disable_euler_damping,
+        impl=impl,
+        max_contacts=max_contacts,
         max_constraints=max_constraints,
-    )  # fmt: skip
+    )
     _validate(label, options)
     options["impl"] = impl or default_impl()
     options = {k: v.item() if hasattr(v, "item") else v for k, v in options.items()}  # numpy scalars
@@ -267,7 +299,7 @@ def check_differentiable(data: mjx.Data, who: str) -> None:
 
 
 def default_impl() -> str:
-    """"warp" where MuJoCo Warp is installed and JAX sees a CUDA GPU, else "jax"."""
+    """ "warp" where MuJoCo Warp is installed and JAX sees a CUDA GPU, else "jax"."""
     return "warp" if _warp_installed() and _has_cuda() else "jax"
 
 
@@ -392,6 +424,11 @@ def of_model(
     model = quiet(model)
     contacts, constraints = probe_capacity(mj_model)
     return Physics(
-        source=source, mj_model=mj_model, model=model, n_substeps=n_substeps, impl=impl,
-        max_contacts=max_contacts or contacts, max_constraints=max_constraints or constraints,
-    )  # fmt: skip
+        source=source,
+        mj_model=mj_model,
+        model=model,
+        n_substeps=n_substeps,
+        impl=impl,
+        max_contacts=max_contacts or contacts,
+        max_constraints=max_constraints or constraints,
+    )

@@ -17,8 +17,15 @@ from mjzoo import checks, tree
 from mjzoo.types import State, Task, Trajectory
 
 __all__ = [
-    "reset", "complete", "transition", "transition_with_terms", "rollout", "reward_terms", "control_dt", "Policy",
-]  # fmt: skip
+    "reset",
+    "complete",
+    "transition",
+    "transition_with_terms",
+    "rollout",
+    "reward_terms",
+    "control_dt",
+    "Policy",
+]
 
 Array = jax.Array
 OUTCOME = "outcome"  # info key through which a step may hand a whole transition's outcome
@@ -35,13 +42,13 @@ def transition(task: Task, state: State, action: Array, key: Array) -> State:
     return transition_with_terms(task, state, action, key)[0]
 
 
-def transition_with_terms(
-    task: Task, state: State, action: Array, key: Array
-) -> tuple[State, dict[str, Array]]:
+def transition_with_terms(task: Task, state: State, action: Array, key: Array) -> tuple[State, dict[str, Array]]:
     """`transition`, also returning this task's reward terms by name (float32 scalars)."""
     if jnp.shape(action) != (task.action_size,):  # no silent broadcasting of a wrong action
-        raise ValueError(f"transition: the action has shape {jnp.shape(action)}, but the task takes "
-                         f"({task.action_size},): one number per actuator of its model")  # fmt: skip
+        raise ValueError(
+            f"transition: the action has shape {jnp.shape(action)}, but the task takes "
+            f"({task.action_size},): one number per actuator of its model"
+        )
     next_state = task.step(task.model, state, action, key)
     terms = _scalar_terms(task.reward(task.model, state, action, next_state))
     terminated, truncated = _two_flags(task.terminate(task.model, next_state))
@@ -63,8 +70,10 @@ def _scalar_terms(terms: dict) -> dict[str, Array]:
         raise TypeError(f"transition: the task's reward must return a dict of named terms, got {type(terms).__name__}")
     for name, value in terms.items():
         if jnp.shape(value) != ():
-            raise ValueError(f"transition: reward term {name!r} has shape {jnp.shape(value)}; each term must be "
-                             "a scalar (reduce it, e.g. jnp.sum or jnp.mean)")  # fmt: skip
+            raise ValueError(
+                f"transition: reward term {name!r} has shape {jnp.shape(value)}; each term must be "
+                "a scalar (reduce it, e.g. jnp.sum or jnp.mean)"
+            )
     return {k: jnp.asarray(v, jnp.float32) for k, v in terms.items()}
 
 
@@ -117,8 +126,10 @@ def _check_observation(reset_obs, step_obs) -> None:
     for (path, a), (_, b) in zip(reset_leaves, step_leaves):
         (sa, da), (sb, db) = (jnp.shape(a), jnp.result_type(a)), (jnp.shape(b), jnp.result_type(b))
         if (sa, da) != (sb, db):
-            raise ValueError(f"the observation{jax.tree_util.keystr(path)} differs between reset ({da}{list(sa)}) "
-                             f"and step ({db}{list(sb)}): a step must observe what the reset does")  # fmt: skip
+            raise ValueError(
+                f"the observation{jax.tree_util.keystr(path)} differs between reset ({da}{list(sa)}) "
+                f"and step ({db}{list(sb)}): a step must observe what the reset does"
+            )
 
 
 _SHAPES: dict = {}
@@ -140,9 +151,7 @@ def _transition_shape(task: Task, state: State) -> State:
     return _SHAPES[signature]
 
 
-def rollout(
-    task: Task, policy: Policy, state: State, key: Array, num_steps: int
-) -> tuple[State, Trajectory]:
+def rollout(task: Task, policy: Policy, state: State, key: Array, num_steps: int) -> tuple[State, Trajectory]:
     """Runs `policy(obs, key) -> action` for `num_steps` transitions with `lax.scan`.
 
     `num_steps` must be static under jit. Returns the final state and the `Trajectory`

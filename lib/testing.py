@@ -124,8 +124,12 @@ def check_task(
     check("scalars", lambda: _scalar_problems(states, num_envs, num_steps))
     check("reward_terms", lambda: _reward_terms_problem(states))
     check("finite", lambda: _non_finite(first, states))
-    check("deterministic", lambda: _differences((first, trajectory), _episodes(task, keys, policy, num_steps),
-                                                ("first run", "second run"), values=True))  # fmt: skip
+    check(
+        "deterministic",
+        lambda: _differences(
+            (first, trajectory), _episodes(task, keys, policy, num_steps), ("first run", "second run"), values=True
+        ),
+    )
     check("keys_differ", lambda: _same_across_keys(trajectory))
     check("no_retrace", lambda: _retraces(task, keys, policy, num_steps))
     if task.time_limit is None:
@@ -190,10 +194,16 @@ def _scalar_problems(states: State, num_envs: int, num_steps: int) -> str | None
     batch = (num_envs, num_steps)
     expected = {".reward": jnp.float32, ".terminated": jnp.bool_, ".truncated": jnp.bool_}
     leaves = _leaves(states)
-    problems = [f"{p} is {_type(leaves[p], 2)}, expected {jnp.dtype(d).name}[]"
-                for p, d in expected.items() if leaves[p].shape != batch or leaves[p].dtype != d]  # fmt: skip
-    problems += [f"{p} has shape {leaves[p].shape[2:]}, not a scalar"
-                 for p in leaves if p.startswith(".metrics") and leaves[p].shape != batch]  # fmt: skip
+    problems = [
+        f"{p} is {_type(leaves[p], 2)}, expected {jnp.dtype(d).name}[]"
+        for p, d in expected.items()
+        if leaves[p].shape != batch or leaves[p].dtype != d
+    ]
+    problems += [
+        f"{p} has shape {leaves[p].shape[2:]}, not a scalar"
+        for p in leaves
+        if p.startswith(".metrics") and leaves[p].shape != batch
+    ]
     floating = {p: jnp.issubdtype(leaves[p].dtype, jnp.floating) for p in leaves if p.startswith(".obs")}
     problems += [f"{p} is {_type(leaves[p], 2)}, not floating" for p, ok in floating.items() if not ok]
     return _listed(problems)
@@ -215,8 +225,13 @@ def _non_finite(first: State, states: State) -> str | None:
     """Each leaf with NaN or inf, with the first (env, step) it appears at."""
     problems = []
     for name, tree in (("reset", first), ("transition", states)):
-        watched = {"obs": tree.obs, "reward": tree.reward, "metrics": tree.metrics,
-                   "qpos": tree.data.qpos, "qvel": tree.data.qvel}  # fmt: skip
+        watched = {
+            "obs": tree.obs,
+            "reward": tree.reward,
+            "metrics": tree.metrics,
+            "qpos": tree.data.qpos,
+            "qvel": tree.data.qvel,
+        }
         for path, leaf in _leaves(watched).items():
             bad = ~np.isfinite(np.asarray(leaf))
             if bad.any():
@@ -330,8 +345,9 @@ def _blame(task: Task, key: jax.Array) -> tuple[str, str | None]:
         except Exception:
             return "traces", None
         traced = False
-    not_scalar = [f"{name} has shape {x.shape}" for name, x in _leaves({"reward": terms, "done": done}).items()
-                  if x.shape != ()]  # fmt: skip
+    not_scalar = [
+        f"{name} has shape {x.shape}" for name, x in _leaves({"reward": terms, "done": done}).items() if x.shape != ()
+    ]
     if not_scalar:  # first: a non-scalar reward also makes the reset's differ from a transition's
         return "scalars", _listed(not_scalar)
     mismatch = _differences(first, after) if traced else _differences({"obs": first.obs}, {"obs": after.obs})

@@ -79,9 +79,7 @@ class StepFn(Protocol):
 
 
 class RewardFn(Protocol):
-    def __call__(
-        self, model: mjx.Model, state: State, action: Array, next_state: State
-    ) -> dict[str, Array]: ...
+    def __call__(self, model: mjx.Model, state: State, action: Array, next_state: State) -> dict[str, Array]: ...
 
 
 class TerminateFn(Protocol):

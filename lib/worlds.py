@@ -24,9 +24,23 @@ from mujoco import mjx
 from mjzoo.tree import where as leafwise_where
 
 __all__ = [
-    "AXIS", "sized", "own", "shared", "where", "partition", "mesh_devices", "vmap_transition", "Contacts", "contacts", "overflow",
-    "overflow_metrics", "clear_overflow", "probe_capacity", "OVERFLOW_CAPACITY", "OVERFLOW_SOLVER",
-]  # fmt: skip
+    "AXIS",
+    "sized",
+    "own",
+    "shared",
+    "where",
+    "partition",
+    "mesh_devices",
+    "vmap_transition",
+    "Contacts",
+    "contacts",
+    "overflow",
+    "overflow_metrics",
+    "clear_overflow",
+    "probe_capacity",
+    "OVERFLOW_CAPACITY",
+    "OVERFLOW_SOLVER",
+]
 
 # MuJoCo Warp's overflow bits (mujoco_warp OverflowType): capacities a run outgrew (its
 # physics then drops contacts or constraints) and solver iteration limits (it stops early).
@@ -55,16 +69,20 @@ def _sized(data: mjx.Data, worlds: int) -> mjx.Data:
     if data.impl != mjx.Impl.WARP or impl.nworld == worlds:
         return data
     per_world = impl.naconmax // impl.nworld
-    pool = {name: jnp.zeros((per_world * worlds,) + value.shape[1:], value.dtype)
-            for name, value in _pool(data).items()}  # fmt: skip
+    pool = {
+        name: jnp.zeros((per_world * worlds,) + value.shape[1:], value.dtype) for name, value in _pool(data).items()
+    }
     return _counted(data.replace(_impl=impl.replace(**pool)), worlds)
 
 
 def _pool(data: mjx.Data) -> dict[str, jax.Array]:
     """Warp's contact pool: the fields of `data._impl` with a row per contact slot."""
     impl = data._impl
-    return {f.name: getattr(impl, f.name) for f in dataclasses.fields(impl)
-            if f.name.startswith("contact__") and np.shape(getattr(impl, f.name))[:1] == (impl.naconmax,)}  # fmt: skip
+    return {
+        f.name: getattr(impl, f.name)
+        for f in dataclasses.fields(impl)
+        if f.name.startswith("contact__") and np.shape(getattr(impl, f.name))[:1] == (impl.naconmax,)
+    }
 
 
 def _counted(data: mjx.Data, worlds: int) -> mjx.Data:
@@ -98,8 +116,11 @@ def _own_fields(data: mjx.Data) -> mjx.Data:
 
 def _array_fields(data: mjx.Data, names: set[str]) -> list[str]:
     """The fields of Warp's `data._impl` among `names` that hold arrays (not None)."""
-    return [f.name for f in dataclasses.fields(data._impl)
-            if f.name in names and isinstance(getattr(data._impl, f.name), jax.Array)]  # fmt: skip
+    return [
+        f.name
+        for f in dataclasses.fields(data._impl)
+        if f.name in names and isinstance(getattr(data._impl, f.name), jax.Array)
+    ]
 
 
 def shared(tree: Any) -> Any:
@@ -132,8 +153,11 @@ def where(cond: jax.Array, on_true: mjx.Data, on_false: mjx.Data) -> mjx.Data:
         for f in dataclasses.fields(on_false._impl)
         if f.name not in DATA_NON_VMAP and isinstance(getattr(on_false._impl, f.name), jax.Array)
     }
-    public = {f.name: pick(getattr(on_true, f.name), getattr(on_false, f.name))
-              for f in dataclasses.fields(on_false) if f.name != "_impl"}  # fmt: skip
+    public = {
+        f.name: pick(getattr(on_true, f.name), getattr(on_false, f.name))
+        for f in dataclasses.fields(on_false)
+        if f.name != "_impl"
+    }
     return on_false.replace(**public, _impl=on_false._impl.replace(**impl))
 
 
@@ -207,8 +231,9 @@ def vmap_transition(step: Any, task: Any, states: Any, *per_world: Any) -> Any:
 
     specs = partition(states)
     whole = jax.tree.map(lambda _: PartitionSpec(), task)
-    return jax.shard_map(local, in_specs=(whole, specs, *map(partition, per_world)), out_specs=specs,
-                         check_vma=False)(task, states, *per_world)  # fmt: skip
+    return jax.shard_map(local, in_specs=(whole, specs, *map(partition, per_world)), out_specs=specs, check_vma=False)(
+        task, states, *per_world
+    )
 
 
 class Contacts(NamedTuple):
@@ -275,8 +300,10 @@ def overflow_metrics(data: mjx.Data) -> dict[str, jax.Array]:
     if data.impl != mjx.Impl.WARP:
         return {}
     flags = overflow(data)
-    return {"physics/capacity_overflow": ((flags & OVERFLOW_CAPACITY) != 0).astype(jnp.float32),
-            "physics/solver_limit": ((flags & OVERFLOW_SOLVER) != 0).astype(jnp.float32)}  # fmt: skip
+    return {
+        "physics/capacity_overflow": ((flags & OVERFLOW_CAPACITY) != 0).astype(jnp.float32),
+        "physics/solver_limit": ((flags & OVERFLOW_SOLVER) != 0).astype(jnp.float32),
+    }
 
 
 def clear_overflow(data: mjx.Data) -> mjx.Data:

@@ -43,8 +43,11 @@ def check_one(name: str, episode_length: int, num_steps: int) -> dict:
 
     record = {"env": name, "suite": suite(name)}
     if playground.needs_network(name):
-        return {**record, "status": "skipped", "why": "loading it clones robot assets (mujoco_menagerie) from "
-                "GitHub; they are not on this machine"}  # fmt: skip
+        return {
+            **record,
+            "status": "skipped",
+            "why": "loading it clones robot assets (mujoco_menagerie) from GitHub; they are not on this machine",
+        }
     started = time.perf_counter()
     try:
         overrides = {"episode_length": episode_length} if episode_length else {}
@@ -54,16 +57,22 @@ def check_one(name: str, episode_length: int, num_steps: int) -> dict:
     built = time.perf_counter()
     shape = jax.eval_shape(lambda k: mjzoo.reset(task, k), jax.random.key(0))
     record.update(
-        action_size=task.action_size, obs=jax.tree.map(lambda x: list(x.shape), shape.obs),
+        action_size=task.action_size,
+        obs=jax.tree.map(lambda x: list(x.shape), shape.obs),
         episode_length=None if task.time_limit is None else int(task.time_limit),
-        control_dt=float(mjzoo.control_dt(task)), build_s=round(built - started, 2),
-    )  # fmt: skip
+        control_dt=float(mjzoo.control_dt(task)),
+        build_s=round(built - started, 2),
+    )
     try:
         report = mjzoo.testing.check_task(task, num_steps=num_steps)
         record.update(status="pass", passed=list(report.passed), not_checked=report.skipped, traces=report.traces)
     except mjzoo.testing.TaskCheckError as error:
-        record.update(status="fail", failures=error.failures, not_checked=error.skipped,
-                      why="; ".join(f"{k}: {v}" for k, v in error.failures.items())[:400])  # fmt: skip
+        record.update(
+            status="fail",
+            failures=error.failures,
+            not_checked=error.skipped,
+            why="; ".join(f"{k}: {v}" for k, v in error.failures.items())[:400],
+        )
     record["check_s"] = round(time.perf_counter() - built, 2)
     return record
 
@@ -73,8 +82,10 @@ def table(records: list[dict]) -> str:
     for r in records:
         obs = json.dumps(r.get("obs", "")).replace("|", "/")
         why = r.get("why", "").replace("|", "/")
-        lines.append(f"| {r['env']} | {r['suite']} | {r['status']} | {obs} | {r.get('action_size', '')} "
-                     f"| {r.get('check_s', '')} | {why} |")  # fmt: skip
+        lines.append(
+            f"| {r['env']} | {r['suite']} | {r['status']} | {obs} | {r.get('action_size', '')} "
+            f"| {r.get('check_s', '')} | {why} |"
+        )
     counts = {s: sum(r["status"] == s for r in records) for s in ("pass", "fail", "skipped")}
     lines.append("")
     lines.append(f"{counts['pass']} pass, {counts['fail']} fail, {counts['skipped']} skipped of {len(records)}")
@@ -104,19 +115,28 @@ def main() -> None:
             try:
                 record = future.result()
             except Exception as error:  # noqa: BLE001 (a worker that died: its env failed)
-                record = {"env": name, "suite": suite(name), "status": "fail",
-                          "why": f"worker died: {type(error).__name__}: {error}"[:400]}  # fmt: skip
+                record = {
+                    "env": name,
+                    "suite": suite(name),
+                    "status": "fail",
+                    "why": f"worker died: {type(error).__name__}: {error}"[:400],
+                }
             records.append(record)
             print(f"{name}: {record['status']} {record.get('why', '')}".rstrip(), flush=True)
-    import mujoco_playground  # noqa: F401 (its version, below)
     from importlib import metadata
+
+    import mujoco_playground  # noqa: F401 (its version, below)
 
     result = {
         "machine": f"{platform.machine()}, {multiprocessing.cpu_count()} CPUs, {args.jobs} jobs",
-        "playground": metadata.version("playground"), "jax": metadata.version("jax"),
-        "mujoco_mjx": metadata.version("mujoco-mjx"), "episode_length": args.episode_length or "own",
-        "num_steps": args.num_steps, "seconds": round(time.perf_counter() - started, 1), "envs": records,
-    }  # fmt: skip
+        "playground": metadata.version("playground"),
+        "jax": metadata.version("jax"),
+        "mujoco_mjx": metadata.version("mujoco-mjx"),
+        "episode_length": args.episode_length or "own",
+        "num_steps": args.num_steps,
+        "seconds": round(time.perf_counter() - started, 1),
+        "envs": records,
+    }
     args.out.parent.mkdir(parents=True, exist_ok=True)
     args.out.write_text(json.dumps(result, indent=2) + "\n")
     text = table(records)

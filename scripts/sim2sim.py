@@ -68,29 +68,51 @@ def main() -> None:
     for i in range(args.episodes):
         start = jax.tree.map(lambda x, i=i: x[i], starts)
         begin = time.perf_counter()
-        rollout = sim2sim.run_in_mujoco(loaded, task.mj_model, steps, qpos=np.asarray(start.data.qpos),
-                                        qvel=np.asarray(start.data.qvel))  # fmt: skip
+        rollout = sim2sim.run_in_mujoco(
+            loaded, task.mj_model, steps, qpos=np.asarray(start.data.qpos), qvel=np.asarray(start.data.qvel)
+        )
         seconds = time.perf_counter() - begin
         scored = sim2sim.replay(task, start, rollout)
         if i == 0:  # how far the two simulators' states drift apart, seen through the observation
             gap = np.abs(rollout.obs[: scored.length] - jax_obs[: scored.length]).max(axis=1)
             divergence = {f"step_{t}": float(gap[t]) for t in (1, 10, 100) if t < len(gap)} | {"max": float(gap.max())}
-        rows.append(dict(episode=i, jax_return=float(jax_returns[i]), c_return=scored.episode_return,
-                         relative_difference=scored.episode_return / float(jax_returns[i]) - 1, c_length=scored.length,
-                         obs_error=scored.obs_error, c_seconds=seconds))  # fmt: skip
-        print(f"episode {i:3d}: JAX {jax_returns[i]:10.2f}   C MuJoCo {scored.episode_return:10.2f} "
-              f"({scored.length} steps, {seconds:.1f} s)   obs error {scored.obs_error:.1e}")
+        rows.append(
+            dict(
+                episode=i,
+                jax_return=float(jax_returns[i]),
+                c_return=scored.episode_return,
+                relative_difference=scored.episode_return / float(jax_returns[i]) - 1,
+                c_length=scored.length,
+                obs_error=scored.obs_error,
+                c_seconds=seconds,
+            )
+        )
+        print(
+            f"episode {i:3d}: JAX {jax_returns[i]:10.2f}   C MuJoCo {scored.episode_return:10.2f} "
+            f"({scored.length} steps, {seconds:.1f} s)   obs error {scored.obs_error:.1e}"
+        )
     c_returns = np.array([r["c_return"] for r in rows])
-    summary = dict(env=trained.spec, run=str(args.run), artifact=str(artifact), episodes=args.episodes, steps=steps,
-                   jax_mean=float(jax_returns.mean()), jax_std=float(jax_returns.std()),
-                   c_mean=float(c_returns.mean()), c_std=float(c_returns.std()),
-                   relative_difference_of_means=float(c_returns.mean() / jax_returns.mean() - 1),
-                   max_abs_relative_difference=float(max(abs(r["relative_difference"]) for r in rows)),
-                   max_obs_error=float(max(r["obs_error"] for r in rows)), episode0_obs_divergence=divergence,
-                   rows=rows)  # fmt: skip
-    print(f"mean return: JAX {summary['jax_mean']:.2f} ± {summary['jax_std']:.2f}   C MuJoCo "
-          f"{summary['c_mean']:.2f} ± {summary['c_std']:.2f}   (C / JAX - 1 = "
-          f"{summary['relative_difference_of_means']:+.2%})")
+    summary = dict(
+        env=trained.spec,
+        run=str(args.run),
+        artifact=str(artifact),
+        episodes=args.episodes,
+        steps=steps,
+        jax_mean=float(jax_returns.mean()),
+        jax_std=float(jax_returns.std()),
+        c_mean=float(c_returns.mean()),
+        c_std=float(c_returns.std()),
+        relative_difference_of_means=float(c_returns.mean() / jax_returns.mean() - 1),
+        max_abs_relative_difference=float(max(abs(r["relative_difference"]) for r in rows)),
+        max_obs_error=float(max(r["obs_error"] for r in rows)),
+        episode0_obs_divergence=divergence,
+        rows=rows,
+    )
+    print(
+        f"mean return: JAX {summary['jax_mean']:.2f} ± {summary['jax_std']:.2f}   C MuJoCo "
+        f"{summary['c_mean']:.2f} ± {summary['c_std']:.2f}   (C / JAX - 1 = "
+        f"{summary['relative_difference_of_means']:+.2%})"
+    )
     text = json.dumps(summary, indent=2)
     print(text)
     if args.json:

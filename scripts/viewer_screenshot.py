@@ -62,9 +62,19 @@ def chromium(binary: str, width: int, height: int) -> Iterator[str]:
     websocket address of its page."""
     port = free_port("127.0.0.1")
     with tempfile.TemporaryDirectory() as profile:
-        args = [binary, "--headless=new", "--no-sandbox", "--use-angle=swiftshader", "--enable-unsafe-swiftshader",
-                "--ignore-gpu-blocklist", f"--remote-debugging-port={port}", f"--user-data-dir={profile}",
-                f"--window-size={width},{height}", "--no-first-run", "about:blank"]  # fmt: skip
+        args = [
+            binary,
+            "--headless=new",
+            "--no-sandbox",
+            "--use-angle=swiftshader",
+            "--enable-unsafe-swiftshader",
+            "--ignore-gpu-blocklist",
+            f"--remote-debugging-port={port}",
+            f"--user-data-dir={profile}",
+            f"--window-size={width},{height}",
+            "--no-first-run",
+            "about:blank",
+        ]
         process = subprocess.Popen(args, stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
         try:
             yield _page_socket(port)
@@ -156,8 +166,13 @@ def main() -> int:
         source = viewer.env(mjzoo.envs.make(args.env), controls="random", num_envs=args.num_envs)
     shown = viewer.serve(source, port=0, host="127.0.0.1")
     try:
-        result = shoot(f"http://127.0.0.1:{shown.port}", args.out, binary,
-                       lambda: bool(shown.server.get_clients()) and shown.frames_shown > 30, args.timeout)  # fmt: skip
+        result = shoot(
+            f"http://127.0.0.1:{shown.port}",
+            args.out,
+            binary,
+            lambda: bool(shown.server.get_clients()) and shown.frames_shown > 30,
+            args.timeout,
+        )
     finally:
         shown.stop()
     print(json.dumps({**result, "total_seconds": round(time.time() - begin, 1)}))

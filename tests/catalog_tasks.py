@@ -58,6 +58,7 @@ BASE_AND_ARM = physics_lib.load("""
 MJ = BASE_AND_ARM.mj_model
 DT, MASS = 0.02, 2.0  # s per step, base mass kg
 QPOS0 = np.array([0, 0, 0.5, 1, 0, 0, 0, 0, 0, 0], np.float32)
+QVEL0 = np.zeros(9, np.float32)
 T, B = 24, 3  # steps per run, runs per batch of `run`
 
 BLOCK = physics_lib.load("""
@@ -104,11 +105,17 @@ def _terminate(p: Params, model, state):
     return jnp.zeros((), bool), jnp.zeros((), bool)
 
 
-def make_task(qpos=QPOS0, qvel=np.zeros(9)) -> Task:
+def make_task(qpos=QPOS0, qvel=QVEL0) -> Task:
     """The BASE_AND_ARM task, reset to `qpos` [10] and `qvel` [9]."""
     p = Params(jnp.asarray(qpos, jnp.float32), jnp.asarray(qvel, jnp.float32))
-    return Task(model=BASE_AND_ARM.model, start=bind(_reset, p), step=bind(_step, p), reward=bind(_reward, p),
-                terminate=bind(_terminate, p), mj_model=MJ)  # fmt: skip
+    return Task(
+        model=BASE_AND_ARM.model,
+        start=bind(_reset, p),
+        step=bind(_step, p),
+        reward=bind(_reward, p),
+        terminate=bind(_terminate, p),
+        mj_model=MJ,
+    )
 
 
 @jax.jit

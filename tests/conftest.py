@@ -18,17 +18,27 @@ def _xla_accepts(flag: str) -> bool:
     """Whether this jaxlib's XLA knows `flag`: XLA aborts the process on a flag it does
     not know, and flags come and go between releases. Asked once per run, in a child."""
     if _CLASSIC_FUSION_OK not in os.environ:
-        probe = subprocess.run([sys.executable, "-c", "import jax; jax.numpy.zeros(1).block_until_ready()"],
-                               env={**os.environ, "XLA_FLAGS": flag, "JAX_PLATFORMS": "cpu"},
-                               capture_output=True, timeout=120, check=False)  # fmt: skip
+        probe = subprocess.run(
+            [sys.executable, "-c", "import jax; jax.numpy.zeros(1).block_until_ready()"],
+            env={**os.environ, "XLA_FLAGS": flag, "JAX_PLATFORMS": "cpu"},
+            capture_output=True,
+            timeout=120,
+            check=False,
+        )
         os.environ[_CLASSIC_FUSION_OK] = "1" if probe.returncode == 0 else "0"
     return os.environ[_CLASSIC_FUSION_OK] == "1"
 
 
 os.environ.setdefault("MJZOO_COMPILE_CACHE", "0")  # tests compile afresh: no cache shared between runs
 os.environ["XLA_FLAGS"] = " ".join(  # the caller's own XLA_FLAGS last: they win
-    filter(None, ["--xla_backend_optimization_level=0", _CLASSIC_FUSION if _xla_accepts(_CLASSIC_FUSION) else "",
-                  os.environ.get("XLA_FLAGS", "")])
+    filter(
+        None,
+        [
+            "--xla_backend_optimization_level=0",
+            _CLASSIC_FUSION if _xla_accepts(_CLASSIC_FUSION) else "",
+            os.environ.get("XLA_FLAGS", ""),
+        ],
+    )
 )
 
 

@@ -271,8 +271,8 @@ def test_a_batch_resets_only_on_steps_where_an_env_ended():
         jax.effects_barrier()
         assert bool(_RESETS) == resets_expected, (len(_RESETS), resets_expected)
         for env in range(3):
-            _, alone = run(task, jax.tree.map(lambda x: x[env], states), actions[env], keys[env])
-            chex.assert_trees_all_equal(jax.tree.map(lambda x: x[env], s), alone)
+            _, alone = run(task, jax.tree.map(lambda x, env=env: x[env], states), actions[env], keys[env])
+            chex.assert_trees_all_equal(jax.tree.map(lambda x, env=env: x[env], s), alone)
     np.testing.assert_array_equal(s.terminated[1], [False, False, True, False, False, True])
 
 
@@ -616,7 +616,9 @@ def test_reset_state_has_the_structure_of_a_transition(name):
     after = jax.eval_shape(lambda s: mjzoo.transition(task, s, jnp.ones((1,)), KEY), start)
     after2 = jax.eval_shape(lambda s: mjzoo.transition(task, s, jnp.ones((1,)), KEY), after)
     assert jax.tree.structure(start) == jax.tree.structure(after), (
-        jax.tree.structure(start), jax.tree.structure(after))  # fmt: skip
+        jax.tree.structure(start),
+        jax.tree.structure(after),
+    )
     assert [(l.shape, l.dtype) for l in jax.tree.leaves(start)] == [(l.shape, l.dtype) for l in jax.tree.leaves(after)]
     assert jax.tree.structure(after2) == jax.tree.structure(after)
     # Scalars where the State contract says so.
@@ -703,8 +705,9 @@ def test_rollout_of_a_diverging_stack_stays_finite():
     # NaN; the guard ends each episode at once, nothing non-finite escapes.
     task = stack(make_task(nan_above=5.0))
     final, traj = rollout6(task, reset(task, KEY), KEY, jnp.array([10.0]))
-    assert _finite(traj.obs, traj.next_state.obs, traj.next_state.reward, traj.next_state.metrics,
-                   final.data.qpos, final.data.qvel)  # fmt: skip
+    assert _finite(
+        traj.obs, traj.next_state.obs, traj.next_state.reward, traj.next_state.metrics, final.data.qpos, final.data.qvel
+    )
     np.testing.assert_array_equal(traj.next_state.terminated, [True] * 6)
     np.testing.assert_array_equal(traj.next_state.reward, [0.0] * 6)
     np.testing.assert_array_equal(traj.next_state.metrics["diverged"], [1.0] * 6)

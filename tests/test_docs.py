@@ -31,15 +31,25 @@ def _blocks(doc: str) -> list[tuple[int, str]]:
 
 BLOCKS = {doc: _blocks(doc) for doc in DOCS}
 
-_PPO_TRAIN = ("ppo.train compiles two more programs (a chunk of updates and the evaluation) and runs them: "
-              "minutes on a 2-core CPU. The harness it calls is tested in tests/algorithms/test_ppo.py.")  # fmt: skip
-_EXPORTED = ("needs a trained run's exported policy (runs/cb): tests/interop/test_export.py exports one and "
-             "runs export.load, sim2sim.run_in_mujoco and sim2sim.replay on it.")  # fmt: skip
+_PPO_TRAIN = (
+    "ppo.train compiles two more programs (a chunk of updates and the evaluation) and runs them: "
+    "minutes on a 2-core CPU. The harness it calls is tested in tests/algorithms/test_ppo.py."
+)
+_EXPORTED = (
+    "needs a trained run's exported policy (runs/cb): tests/interop/test_export.py exports one and "
+    "runs export.load, sim2sim.run_in_mujoco and sim2sim.replay on it."
+)
 # Lines the block tests leave out, by document (matched by what the line contains), and why.
 NOT_RUN = {
-    "README.md": {"ppo.train(": _PPO_TRAIN, "amp.train(": _PPO_TRAIN.replace("ppo.train", "amp.train")
-                  .replace("tests/algorithms/test_ppo.py", "tests/algorithms/test_amp.py"),
-                  **dict.fromkeys(('export.load("runs/cb', "act(obs)", 'run_in_mujoco("runs/cb', "sim2sim.replay(task, start"), _EXPORTED)},
+    "README.md": {
+        "ppo.train(": _PPO_TRAIN,
+        "amp.train(": _PPO_TRAIN.replace("ppo.train", "amp.train").replace(
+            "tests/algorithms/test_ppo.py", "tests/algorithms/test_amp.py"
+        ),
+        **dict.fromkeys(
+            ('export.load("runs/cb', "act(obs)", 'run_in_mujoco("runs/cb', "sim2sim.replay(task, start"), _EXPORTED
+        ),
+    },
     "docs/own-task.md": {"ppo.train(": _PPO_TRAIN},
 }
 
@@ -59,8 +69,10 @@ def docs(tmp_path_factory):
     cwd = os.getcwd()
     os.chdir(tmp_path_factory.mktemp("docs"))
     try:
-        yield {doc: {"namespace": {"__name__": Path(doc).stem.replace("-", "_")}, "done": set(), "failed": set()}
-               for doc in DOCS}  # fmt: skip
+        yield {
+            doc: {"namespace": {"__name__": Path(doc).stem.replace("-", "_")}, "done": set(), "failed": set()}
+            for doc in DOCS
+        }
     finally:
         os.chdir(cwd)
 

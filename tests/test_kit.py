@@ -57,8 +57,13 @@ def past(p, model, state):
 
 
 def make(**kwargs):
-    spec = dict(observe=observe, rewards={"reach": (reach, 2.0), "push": (push, "gain")}, terminate=past,
-                resets=(goal,), params={"goal_low": 0.5, "gain": 0.5, "limit": 0.005})  # fmt: skip
+    spec = dict(
+        observe=observe,
+        rewards={"reach": (reach, 2.0), "push": (push, "gain")},
+        terminate=past,
+        resets=(goal,),
+        params={"goal_low": 0.5, "gain": 0.5, "limit": 0.005},
+    )
     return mjzoo.task(XML, **{**spec, **kwargs})
 
 
@@ -87,7 +92,8 @@ def test_a_kit_task_resets_steps_and_rewards_as_its_functions_say():
 def test_params_list_every_named_number_and_change_without_retracing():
     task = make()
     assert {k: float(v) for k, v in mjzoo.params(task).items()} == pytest.approx(
-        {"gain": 0.5, "goal_low": 0.5, "limit": 0.005, "reach_weight": 2.0})  # fmt: skip
+        {"gain": 0.5, "goal_low": 0.5, "limit": 0.005, "reach_weight": 2.0}
+    )
     _, before = step(task, jax.random.key(1))
     traces = len(TRACES)
     _, after = step(task.with_params(reach_weight=4.0, gain=-1.0), jax.random.key(1))
@@ -124,8 +130,9 @@ def test_default_observation_no_reward_and_time_limit():
 
 
 def test_an_mjmodel_and_a_partial_that_carries_its_own_numbers():
-    task = mjzoo.task(mujoco.MjModel.from_xml_string(XML), ctrl_dt=0.2,
-                      rewards={"push": mjzoo.bind(_scaled_push, jnp.float32(3.0))})  # fmt: skip
+    task = mjzoo.task(
+        mujoco.MjModel.from_xml_string(XML), ctrl_dt=0.2, rewards={"push": mjzoo.bind(_scaled_push, jnp.float32(3.0))}
+    )
     _, after = step(task, jax.random.key(0))
     np.testing.assert_allclose(after.data.qpos, [0.03], rtol=1e-5)  # two 0.1 s steps of 1 N
     assert float(mjzoo.reward_terms(after)["push"]) == 3.0

@@ -66,7 +66,9 @@ def imported(path: Path, module: str) -> set[str]:
         elif isinstance(node, ast.ImportFrom):
             base = node.module or ""
             if node.level:
-                base = ".".join(package.split(".")[: len(package.split(".")) - node.level + 1] + ([base] if base else []))
+                base = ".".join(
+                    package.split(".")[: len(package.split(".")) - node.level + 1] + ([base] if base else [])
+                )
             # `from mjzoo import catalog` imports the subpackage, `from mjzoo import tree` a core module
             names |= {f"{base}.{a.name}" if base == "mjzoo" else base for a in node.names}
     return {n for n in names if n == "mjzoo" or n.startswith("mjzoo.")}
@@ -111,4 +113,3 @@ def test_every_package_is_installed():
     listed = set(tomllib.loads((ROOT / "pyproject.toml").read_text())["tool"]["setuptools"]["packages"])
     packages = {m for m, p in modules().items() if p.name == "__init__.py"}
     assert packages <= listed, f"pyproject.toml [tool.setuptools] packages lacks {sorted(packages - listed)}"
-

@@ -16,16 +16,17 @@ import types
 import catalog_tasks
 import jax
 import jax.numpy as jnp
-import mjzoo
-import mjzoo.envs
 import mujoco
 import numpy as np
 import pytest
+from mujoco import mjx
+
+import mjzoo
+import mjzoo.envs
 from mjzoo import physics, running, worlds
 from mjzoo.catalog import contacts as catalog_contacts
 from mjzoo.harness import cli, training
 from mjzoo.testing import check_task
-from mujoco import mjx
 
 # A 2 kg box resting on the floor: four corner contacts carrying m g between them.
 BOX_MASS = 2.0
@@ -103,8 +104,9 @@ def test_warp_not_installed_says_how_to_install_it(no_warp):
         physics.load(PENDULUM, impl="warp")
 
 
-@pytest.mark.parametrize("machine, words", [("no_cuda", ["CUDA", "impl='jax'"]),
-                                            ("no_warp", ["pip install -e '.[warp]'"])])  # fmt: skip
+@pytest.mark.parametrize(
+    "machine, words", [("no_cuda", ["CUDA", "impl='jax'"]), ("no_warp", ["pip install -e '.[warp]'"])]
+)
 def test_warp_through_the_registry_fails_the_same_way(request, machine, words):
     request.getfixturevalue(machine)
     with pytest.raises(ValueError) as error:
@@ -226,14 +228,16 @@ def test_catalog_contacts_read_what_they_read_before(settled_box):
     geoms, others = catalog_contacts.geom_sets(box.mj_model, ["box"], ["floor"], "test")
     contact = data._impl.contact
     pairs = ((contact.geom1 == geoms[:, None]) & jnp.isin(contact.geom2, others)) | (
-        (contact.geom2 == geoms[:, None]) & jnp.isin(contact.geom1, others))  # fmt: skip
+        (contact.geom2 == geoms[:, None]) & jnp.isin(contact.geom1, others)
+    )
     active = contact.dist < contact.includemargin
     rows = 2 * (np.asarray(contact.dim) - 1)  # pyramidal cones (the default): the edge forces add up
     address = np.asarray(contact.efc_address)
     normal = jnp.stack([jnp.sum(data._impl.efc_force[a : a + r]) if a >= 0 else 0.0 for a, r in zip(address, rows)])
     np.testing.assert_array_equal(catalog_contacts.touching(data, geoms, others), jnp.any(pairs & active, axis=1))
-    np.testing.assert_allclose(catalog_contacts.forces(box.model, data, geoms, others),
-                               jnp.sum(pairs * normal[None, :], axis=1), rtol=1e-6)  # fmt: skip
+    np.testing.assert_allclose(
+        catalog_contacts.forces(box.model, data, geoms, others), jnp.sum(pairs * normal[None, :], axis=1), rtol=1e-6
+    )
     assert bool(catalog_contacts.touching(data, geoms, others)[0])
 
 
@@ -339,7 +343,9 @@ def test_a_warp_batch_resets_as_each_env_would(monkeypatch):
         actions = jnp.linspace(-1.0, 1.0, 4)[:, None] * jnp.ones((4, task.action_size))
 
         def body(states, key):
-            states = jax.vmap(lambda s, a, k: running.transition(task, s, a, k))(states, actions, jax.random.split(key, 4))
+            states = jax.vmap(lambda s, a, k: running.transition(task, s, a, k))(
+                states, actions, jax.random.split(key, 4)
+            )
             return states, (states.obs, states.data.qpos, states.truncated)
 
         return jax.jit(lambda s: jax.lax.scan(body, s, jax.random.split(jax.random.key(1), 14))[1])(states)
@@ -400,9 +406,13 @@ def test_warp_training_on_two_devices_matches_one_device():
     """Each device steps its own worlds with its share of Warp's contact pool
     (`worlds.vmap_transition` under the mesh): two updates of PPO on the hopper give one
     device's states, and the devices' contact counts add up to one device's."""
-    env = {**os.environ, "XLA_FLAGS": os.environ.get("XLA_FLAGS", "") + " --xla_force_host_platform_device_count=2",
-           "JAX_PLATFORMS": "cpu"}  # fmt: skip
-    result = subprocess.run([sys.executable, "-c", WARP_TWO_DEVICES], env=env, capture_output=True, text=True,
-                            timeout=900)  # fmt: skip
+    env = {
+        **os.environ,
+        "XLA_FLAGS": os.environ.get("XLA_FLAGS", "") + " --xla_force_host_platform_device_count=2",
+        "JAX_PLATFORMS": "cpu",
+    }
+    result = subprocess.run(
+        [sys.executable, "-c", WARP_TWO_DEVICES], env=env, capture_output=True, text=True, timeout=900
+    )
     assert result.returncode == 0, result.stderr[-3000:]
     assert "max qpos difference" in result.stdout

@@ -52,8 +52,14 @@ def per_joint(model, state):
 
 def make(obs_size=1, reward=scalar_reward, terminate=never) -> Task:
     physics = mjzoo.physics.load(XML)
-    return Task(model=physics.model, start=bind(start, mjzoo.tree.Static(obs_size)), step=bind(step),
-                reward=bind(reward), terminate=bind(terminate), mj_model=physics.mj_model)  # fmt: skip
+    return Task(
+        model=physics.model,
+        start=bind(start, mjzoo.tree.Static(obs_size)),
+        step=bind(step),
+        reward=bind(reward),
+        terminate=bind(terminate),
+        mj_model=physics.mj_model,
+    )
 
 
 def reset_shape(task):
@@ -70,7 +76,9 @@ def test_a_reward_term_that_is_not_a_scalar_is_named_with_its_shape():
         reset_shape(make(reward=vector_reward))
 
 
-@pytest.mark.parametrize("terminate, got", [(one_flag, r"one value of shape \(\)"), (per_joint, r"shapes \[\(1,\), \(\)\]")])
+@pytest.mark.parametrize(
+    "terminate, got", [(one_flag, r"one value of shape \(\)"), (per_joint, r"shapes \[\(1,\), \(\)\]")]
+)
 def test_a_terminate_that_is_not_two_scalars_is_named(terminate, got):
     with pytest.raises(ValueError, match=f"terminate must return two scalars \\(terminated, truncated\\), got {got}"):
         reset_shape(make(terminate=terminate))

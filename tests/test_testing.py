@@ -53,8 +53,14 @@ def _terminate(p: Params, model, state):
 
 def make(step=_step, reward=_reward, limit: int | None = 4, weight=1.0, start=_start) -> Task:
     p = Params(jnp.float32(0.5), weight if isinstance(weight, tree.Static) else jnp.float32(weight))
-    task = Task(model=BLOCK.model, start=bind(start, p), step=bind(step, p), reward=bind(reward, p),
-                terminate=bind(_terminate, p), mj_model=BLOCK.mj_model)  # fmt: skip
+    task = Task(
+        model=BLOCK.model,
+        start=bind(start, p),
+        step=bind(step, p),
+        reward=bind(reward, p),
+        terminate=bind(_terminate, p),
+        mj_model=BLOCK.mj_model,
+    )
     return task if limit is None else mjzoo.with_time_limit(task, limit)
 
 

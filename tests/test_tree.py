@@ -56,12 +56,22 @@ def test_a_changed_structure_or_shape_is_named():
 
 
 def test_strongly_typed_makes_python_numbers_and_weak_arrays_strong_and_keeps_the_rest():
-    tree = {"time": 0.0, "count": 3, "weak": jnp.asarray(2.0), "strong": jnp.float32(1.5), "key": jax.random.key(1),
-            "half": jnp.ones(2, jnp.bfloat16)}  # fmt: skip
+    tree = {
+        "time": 0.0,
+        "count": 3,
+        "weak": jnp.asarray(2.0),
+        "strong": jnp.float32(1.5),
+        "key": jax.random.key(1),
+        "half": jnp.ones(2, jnp.bfloat16),
+    }
     for strong in (strongly_typed(tree), jax.jit(strongly_typed)(tree)):  # eagerly, and as a jit traces it
         assert {k: (x.dtype, jax.typeof(x).weak_type) for k, x in strong.items()} == {
-            "time": (jnp.float32, False), "count": (jnp.int32, False), "weak": (jnp.float32, False),
-            "strong": (jnp.float32, False), "key": (tree["key"].dtype, False), "half": (jnp.bfloat16, False),
-        }  # fmt: skip
+            "time": (jnp.float32, False),
+            "count": (jnp.int32, False),
+            "weak": (jnp.float32, False),
+            "strong": (jnp.float32, False),
+            "key": (tree["key"].dtype, False),
+            "half": (jnp.bfloat16, False),
+        }
         assert float(strong["time"]) == 0.0 and int(strong["count"]) == 3 and float(strong["weak"]) == 2.0
     assert strongly_typed(tree)["strong"] is tree["strong"]  # nothing to do: the same array

@@ -78,19 +78,27 @@ def _motors(mj_model: mujoco.MjModel, torque_limit: Numbers | None, who: str) ->
     joints = mj_model.actuator_trnid[:, 0]
     for i, name in enumerate(labels):
         joint_ok = mj_model.actuator_trntype[i] == mujoco.mjtTrn.mjTRN_JOINT and int(mj_model.jnt_type[joints[i]]) in (
-            int(mujoco.mjtJoint.mjJNT_HINGE), int(mujoco.mjtJoint.mjJNT_SLIDE))  # fmt: skip
-        motor = (mj_model.actuator_dyntype[i] == mujoco.mjtDyn.mjDYN_NONE
-                 and mj_model.actuator_gaintype[i] == mujoco.mjtGain.mjGAIN_FIXED
-                 and mj_model.actuator_gainprm[i, 0] == 1.0
-                 and mj_model.actuator_biastype[i] == mujoco.mjtBias.mjBIAS_NONE)  # fmt: skip
+            int(mujoco.mjtJoint.mjJNT_HINGE),
+            int(mujoco.mjtJoint.mjJNT_SLIDE),
+        )
+        motor = (
+            mj_model.actuator_dyntype[i] == mujoco.mjtDyn.mjDYN_NONE
+            and mj_model.actuator_gaintype[i] == mujoco.mjtGain.mjGAIN_FIXED
+            and mj_model.actuator_gainprm[i, 0] == 1.0
+            and mj_model.actuator_biastype[i] == mujoco.mjtBias.mjBIAS_NONE
+        )
         if not (joint_ok and motor and mj_model.actuator_gear[i, 0] != 0):
-            raise ValueError(f"{who}: actuator {name!r} must be a <motor> with a nonzero gear on a hinge or slide "
-                             f"joint (ctrl = force); the model's actuators: {labels}")  # fmt: skip
+            raise ValueError(
+                f"{who}: actuator {name!r} must be a <motor> with a nonzero gear on a hinge or slide "
+                f"joint (ctrl = force); the model's actuators: {labels}"
+            )
     gear = mj_model.actuator_gear[:, 0].astype(np.float64)
     if torque_limit is None:
         limit = np.full(mj_model.nu, np.inf)
-        for limited, bounds in ((mj_model.actuator_ctrllimited, mj_model.actuator_ctrlrange),
-                                (mj_model.actuator_forcelimited, mj_model.actuator_forcerange)):  # fmt: skip
+        for limited, bounds in (
+            (mj_model.actuator_ctrllimited, mj_model.actuator_ctrlrange),
+            (mj_model.actuator_forcelimited, mj_model.actuator_forcerange),
+        ):
             symmetric = np.minimum(-bounds[:, 0], bounds[:, 1]) * np.abs(gear)
             limit = np.where(limited.astype(bool), np.minimum(limit, symmetric), limit)
         if not np.isfinite(limit).all():
@@ -165,8 +173,9 @@ def pd(
     `default_pose` defaults to the joints' ``qpos0``; `torque_limit` as in `torque`. The
     model's actuators must be motors, so that MuJoCo adds no gains of its own.
     """
-    return bind(_pd, _pd_params(mj_model, "pd", kp, kd, action_scale, 0.0, default_pose, torque_limit,
-                                gain_noise, torque_noise))  # fmt: skip
+    return bind(
+        _pd, _pd_params(mj_model, "pd", kp, kd, action_scale, 0.0, default_pose, torque_limit, gain_noise, torque_noise)
+    )
 
 
 def position_velocity(
@@ -192,13 +201,26 @@ def position_velocity(
     ``task.replace(action_dim=2 * nu)`` so that `Task.action_size`, which algorithms and
     random policies size actions by, says so.
     """
-    return bind(_position_velocity, _pd_params(mj_model, "position_velocity", kp, kd, position_scale,
-                                               velocity_scale, default_pose, torque_limit, gain_noise,
-                                               torque_noise))  # fmt: skip
+    return bind(
+        _position_velocity,
+        _pd_params(
+            mj_model,
+            "position_velocity",
+            kp,
+            kd,
+            position_scale,
+            velocity_scale,
+            default_pose,
+            torque_limit,
+            gain_noise,
+            torque_noise,
+        ),
+    )
 
 
-def _pd_params(mj_model, who, kp, kd, position_scale, velocity_scale, default_pose, torque_limit,
-               gain_noise, torque_noise) -> PDParams:  # fmt: skip
+def _pd_params(
+    mj_model, who, kp, kd, position_scale, velocity_scale, default_pose, torque_limit, gain_noise, torque_noise
+) -> PDParams:
     motors = _motors(mj_model, torque_limit, who)
     if default_pose is None:
         default_pose = mj_model.qpos0[np.asarray(motors.qpos)]
@@ -210,10 +232,15 @@ def _pd_params(mj_model, who, kp, kd, position_scale, velocity_scale, default_po
         return checks.numbers(who, name, value, mj_model.nu, minimum)
 
     return PDParams(
-        motors=motors, kp=per(kp, "kp"), kd=per(kd, "kd"), default_pose=per(default_pose, "default_pose", -np.inf),
-        position_scale=per(position_scale, "position_scale"), velocity_scale=per(velocity_scale, "velocity_scale"),
-        gain_noise=jnp.float32(gain_noise), torque_noise=torque_noise,
-    )  # fmt: skip
+        motors=motors,
+        kp=per(kp, "kp"),
+        kd=per(kd, "kd"),
+        default_pose=per(default_pose, "default_pose", -np.inf),
+        position_scale=per(position_scale, "position_scale"),
+        velocity_scale=per(velocity_scale, "velocity_scale"),
+        gain_noise=jnp.float32(gain_noise),
+        torque_noise=torque_noise,
+    )
 
 
 def _pd_ctrl(p: PDParams, data: mjx.Data, target_q: Array, target_qdot: Array, key: Array) -> Array:
@@ -321,8 +348,9 @@ def _drop_step(step_fn, probability, model, state, action, key) -> State:
     dropped = jax.random.uniform(jax.random.fold_in(key, DROP_STREAM)) < probability
     applied = jnp.where(dropped, previous, jnp.asarray(action, jnp.float32))
     next_state = step_fn(model, state, applied, key)
-    return _with_info(next_state, "action_drop", {"previous": applied},
-                      **{"action_drop/dropped": dropped.astype(jnp.float32)})  # fmt: skip
+    return _with_info(
+        next_state, "action_drop", {"previous": applied}, **{"action_drop/dropped": dropped.astype(jnp.float32)}
+    )
 
 
 def with_action_filter(task: Task, alpha: float) -> Task:

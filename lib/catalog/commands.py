@@ -147,8 +147,10 @@ def with_velocity_command(
         **_probabilities(who, zero_probability=zero_probability, stand_probability=stand_probability),
         zeroable=jnp.ones(3, bool),
         publish=bind(_identity),
-        name="velocity_command", output="command", observe=bool(observe),
-    )  # fmt: skip
+        name="velocity_command",
+        output="command",
+        observe=bool(observe),
+    )
     return _with_command(task, command)
 
 
@@ -188,8 +190,10 @@ def with_heading_command(
         **_probabilities(who, zero_probability=zero_probability, stand_probability=stand_probability),
         zeroable=jnp.array([True, True, False]),
         publish=bind(_steer, jnp.asarray(qpos_idx[3:]), gain, max_yaw_rate),
-        name="heading_command", output="command", observe=bool(observe),
-    )  # fmt: skip
+        name="heading_command",
+        output="command",
+        observe=bool(observe),
+    )
     return _with_command(task, command)
 
 
@@ -233,6 +237,8 @@ def with_joint_position_command(
         stand_probability=jnp.float32(0.0),
         zeroable=jnp.zeros(len(ids), bool),
         publish=bind(_identity),
-        name="joint_position_command", output="joint_command", observe=bool(observe),
-    )  # fmt: skip
+        name="joint_position_command",
+        output="joint_command",
+        observe=bool(observe),
+    )
     return _with_command(task, command)

@@ -52,8 +52,10 @@ def geom_sets(
             raise ValueError(f"{who}: geom {name!r} is listed both as watched and as what it touches")
         if not any(can_touch(mj_model, g, o) for o in other if o != g):
             target = repr(others) if others is not None else "any geom"
-            raise ValueError(f"{who}: geom {name!r} can never touch {target}: their contype/conaffinity bits "
-                             f"exclude it and no <pair> lists it")  # fmt: skip
+            raise ValueError(
+                f"{who}: geom {name!r} can never touch {target}: their contype/conaffinity bits "
+                f"exclude it and no <pair> lists it"
+            )
     return jnp.asarray(ids), jnp.asarray(other)
 
 

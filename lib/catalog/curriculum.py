@@ -95,8 +95,10 @@ def _ramp(trees: list[PyTree], what: str) -> _Ramp:
         if np.array_equal(a, b) and np.array_equal(a, m):
             continue
         if not np.issubdtype(a.dtype, np.floating):
-            raise ValueError(f"with_curriculum: {name} is a {a.dtype} number that changes with the level; "
-                             "only float numbers can follow a curriculum")  # fmt: skip
+            raise ValueError(
+                f"with_curriculum: {name} is a {a.dtype} number that changes with the level; "
+                "only float numbers can follow a curriculum"
+            )
         if not np.allclose(m, a + 0.5 * (b - a), rtol=1e-5, atol=1e-6):
             raise ValueError(f"with_curriculum: {name} is not affine in the level: {a} at 0, {m} at 0.5, {b} at 1")
         index.append(i)
@@ -134,8 +136,10 @@ def with_curriculum(make: Callable[[float], Task], rule: Rule) -> Task:
         if not isinstance(task, Task):
             raise TypeError(f"with_curriculum: make({level}) must return a Task, got {type(task).__name__}")
         if jax.tree.structure(task) != jax.tree.structure(tasks[0]):
-            raise ValueError(f"with_curriculum: make({level}) and make(0.0) give tasks of different structure; "
-                             "the level may change numbers only")  # fmt: skip
+            raise ValueError(
+                f"with_curriculum: make({level}) and make(0.0) give tasks of different structure; "
+                "the level may change numbers only"
+            )
     functions = _ramp([t.replace(model=None) for t in tasks], "task")
     model = _ramp([t.model for t in tasks], "model")
     easy = tasks[0]
@@ -172,8 +176,9 @@ def _curriculum_step(functions, model_ramp, rule, inner, model, state, action, k
 
 def _check(who: str, **values: float) -> dict[str, Array]:
     """Each value finite and >= 0; `initial` a level in [0, 1]."""
-    return {k: checks.number(f"curriculum.{who}", k, v, 0.0, 1.0 if k == "initial" else np.inf)
-            for k, v in values.items()}  # fmt: skip
+    return {
+        k: checks.number(f"curriculum.{who}", k, v, 0.0, 1.0 if k == "initial" else np.inf) for k, v in values.items()
+    }
 
 
 def by_steps(ramp_steps: int) -> Rule:
@@ -200,8 +205,9 @@ def _move(level, ended, good, up, down) -> Array:
     return jnp.clip(level + jnp.where(ended, jnp.where(good, up, -down), 0.0), 0.0, 1.0)
 
 
-def by_episode_length(max_steps: int, fraction: float = 0.8, up: float = 0.05, down: float = 0.05,
-                      initial: float = 0.0) -> Rule:  # fmt: skip
+def by_episode_length(
+    max_steps: int, fraction: float = 0.8, up: float = 0.05, down: float = 0.05, initial: float = 0.0
+) -> Rule:
     """At each episode end: level += up if the episode lasted >= fraction * max_steps
     transitions (of this task), else level -= down; clipped to [0, 1]. Memory: int32
     transitions of the current episode."""
@@ -216,8 +222,14 @@ def _by_episode_length(threshold, up, down, steps, level, model, state, next_sta
     return _move(level, ended, steps >= threshold, up, down), jnp.where(ended, 0, steps)
 
 
-def by_distance(mj_model: mujoco.MjModel, target: float, up: float = 0.05, down: float = 0.05,
-                initial: float = 0.0, body: str | None = None) -> Rule:  # fmt: skip
+def by_distance(
+    mj_model: mujoco.MjModel,
+    target: float,
+    up: float = 0.05,
+    down: float = 0.05,
+    initial: float = 0.0,
+    body: str | None = None,
+) -> Rule:
     """At each episode end: level += up if the base moved >= `target` m (horizontal
     distance from where the episode started), else level -= down; clipped to [0, 1].
 

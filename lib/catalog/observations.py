@@ -41,13 +41,32 @@ from mjzoo.perturbations import add_noise
 from mjzoo.types import State, Task, bind
 
 __all__ = [
-    "joint_positions", "joint_velocities", "joint_positions_of", "joint_velocities_of",
-    "base_position", "base_height", "base_orientation", "base_linear_velocity", "base_angular_velocity",
-    "projected_gravity", "body_positions", "body_velocities", "site_positions", "site_velocities",
-    "point_velocity", "sensors", "actuator_forces", "geom_contacts", "foot_contacts", "foot_forces",
-    "last_action", "concat",
-    "with_observation_history", "with_observation_bias", "with_multiplicative_observation_noise",
-]  # fmt: skip
+    "joint_positions",
+    "joint_velocities",
+    "joint_positions_of",
+    "joint_velocities_of",
+    "base_position",
+    "base_height",
+    "base_orientation",
+    "base_linear_velocity",
+    "base_angular_velocity",
+    "projected_gravity",
+    "body_positions",
+    "body_velocities",
+    "site_positions",
+    "site_velocities",
+    "point_velocity",
+    "sensors",
+    "actuator_forces",
+    "geom_contacts",
+    "foot_contacts",
+    "foot_forces",
+    "last_action",
+    "concat",
+    "with_observation_history",
+    "with_observation_bias",
+    "with_multiplicative_observation_noise",
+]
 
 Array = jax.Array
 Partial = jax.tree_util.Partial

@@ -99,8 +99,12 @@ def scale_friction(mj_model: mujoco.MjModel, low: float = 0.5, high: float = 1.5
     alone (``geoms=["floor"]``) suffices only if it is the more frictional of the pair.
     """
     who = "scale_friction"
-    return bind(_scale_field, Static("geom_friction"), jnp.asarray(names.ids(mj_model, "geom", geoms, who)),
-                *_range(who, low, high, 0.0))  # fmt: skip
+    return bind(
+        _scale_field,
+        Static("geom_friction"),
+        jnp.asarray(names.ids(mj_model, "geom", geoms, who)),
+        *_range(who, low, high, 0.0),
+    )
 
 
 def scale_armature(mj_model: mujoco.MjModel, low: float = 0.8, high: float = 1.2, joints: Names = None) -> Randomizer:
@@ -110,8 +114,9 @@ def scale_armature(mj_model: mujoco.MjModel, low: float = 0.8, high: float = 1.2
     Edits ``dof_armature`` [nv]. One factor per dof.
     """
     who = "scale_armature"
-    return bind(_scale_field, Static("dof_armature"), jnp.asarray(_dofs(mj_model, joints, who)),
-                *_range(who, low, high, 0.0))  # fmt: skip
+    return bind(
+        _scale_field, Static("dof_armature"), jnp.asarray(_dofs(mj_model, joints, who)), *_range(who, low, high, 0.0)
+    )
 
 
 def scale_damping(mj_model: mujoco.MjModel, low: float = 0.8, high: float = 1.2, joints: Names = None) -> Randomizer:
@@ -122,8 +127,9 @@ def scale_damping(mj_model: mujoco.MjModel, low: float = 0.8, high: float = 1.2,
     undamped.
     """
     who = "scale_damping"
-    return bind(_scale_field, Static("dof_damping"), jnp.asarray(_dofs(mj_model, joints, who)),
-                *_range(who, low, high, 0.0))  # fmt: skip
+    return bind(
+        _scale_field, Static("dof_damping"), jnp.asarray(_dofs(mj_model, joints, who)), *_range(who, low, high, 0.0)
+    )
 
 
 # --- masses and centres of mass ---------------------------------------------------------
@@ -137,8 +143,11 @@ def scale_masses(mj_model: mujoco.MjModel, low: float = 0.9, high: float = 1.1, 
     Edits ``body_mass`` [nbody] (kg) and ``body_inertia`` [nbody, 3] (kg m^2).
     """
     who = "scale_masses"
-    return bind(_scale_masses, jnp.asarray(names.ids(mj_model, "body", bodies, who, world=False)),
-                *_range(who, low, high, 0.0, strict=True))  # fmt: skip
+    return bind(
+        _scale_masses,
+        jnp.asarray(names.ids(mj_model, "body", bodies, who, world=False)),
+        *_range(who, low, high, 0.0, strict=True),
+    )
 
 
 def _scale_masses(ids, low, high, model, key) -> dict[str, Array]:
@@ -162,8 +171,10 @@ def add_masses(mj_model: mujoco.MjModel, low: float = -0.5, high: float = 0.5, b
     lightest = ids[np.argmin(mj_model.body_mass[ids])]
     if mj_model.body_mass[lightest] + float(low) <= 0:
         name = mujoco.mj_id2name(mj_model, mujoco.mjtObj.mjOBJ_BODY, lightest)
-        raise ValueError(f"{who}: low={float(low)} kg would leave body {name!r} "
-                         f"({mj_model.body_mass[lightest]:.4g} kg) without positive mass")  # fmt: skip
+        raise ValueError(
+            f"{who}: low={float(low)} kg would leave body {name!r} "
+            f"({mj_model.body_mass[lightest]:.4g} kg) without positive mass"
+        )
     return bind(_add_masses, jnp.asarray(ids), low, high)
 
 
@@ -180,8 +191,11 @@ def shift_com(mj_model: mujoco.MjModel, low=-0.02, high=0.02, bodies: Names = No
     [nbody, 3] (m); the inertia about the centre of mass is unchanged.
     """
     who = "shift_com"
-    return bind(_shift_com, jnp.asarray(names.ids(mj_model, "body", bodies, who, world=False)),
-                *_range(who, low, high, -np.inf, shape=(3,)))  # fmt: skip
+    return bind(
+        _shift_com,
+        jnp.asarray(names.ids(mj_model, "body", bodies, who, world=False)),
+        *_range(who, low, high, -np.inf, shape=(3,)),
+    )
 
 
 def _shift_com(ids, low, high, model, key) -> dict[str, Array]:
@@ -208,12 +222,17 @@ def scale_position_gains(
     ids = names.ids(mj_model, "actuator", actuators, who)
     for i in ids:
         kp = mj_model.actuator_gainprm[i, 0]
-        if (mj_model.actuator_gaintype[i] != mujoco.mjtGain.mjGAIN_FIXED
-                or mj_model.actuator_biastype[i] != mujoco.mjtBias.mjBIAS_AFFINE
-                or not kp > 0 or mj_model.actuator_biasprm[i, 1] != -kp):  # fmt: skip
+        if (
+            mj_model.actuator_gaintype[i] != mujoco.mjtGain.mjGAIN_FIXED
+            or mj_model.actuator_biastype[i] != mujoco.mjtBias.mjBIAS_AFFINE
+            or not kp > 0
+            or mj_model.actuator_biasprm[i, 1] != -kp
+        ):
             name = mujoco.mj_id2name(mj_model, mujoco.mjtObj.mjOBJ_ACTUATOR, i)
-            raise ValueError(f"{who}: actuator {name!r} is not a position actuator (fixed gain kp > 0, "
-                             f"affine bias with biasprm[1] = -kp); select position actuators by name")  # fmt: skip
+            raise ValueError(
+                f"{who}: actuator {name!r} is not a position actuator (fixed gain kp > 0, "
+                f"affine bias with biasprm[1] = -kp); select position actuators by name"
+            )
     return bind(_scale_position_gains, jnp.asarray(ids), *_range(who, low, high, 0.0, strict=True))
 
 

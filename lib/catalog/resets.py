@@ -114,8 +114,10 @@ def _check(task: Task, items, observe) -> None:
         out = jax.eval_shape(item, task.model, state.data, key)
         data, info = out if isinstance(out, tuple) and len(out) == 2 else (out, {})
         if jax.tree.structure(data) != jax.tree.structure(state.data) or not isinstance(info, dict):
-            raise ValueError(f"with_resets: item {i} must return an mjx.Data or (mjx.Data, dict of info entries), "
-                             f"got {type(out).__name__}")  # fmt: skip
+            raise ValueError(
+                f"with_resets: item {i} must return an mjx.Data or (mjx.Data, dict of info entries), "
+                f"got {type(out).__name__}"
+            )
         state = state.replace(info={**state.info, **info})
     seen = _shapes(jax.eval_shape(lambda s: observe(task.model, s), state))
     if seen != _shapes(state.obs):
@@ -139,12 +141,14 @@ def _free_joint(mj_model: mujoco.MjModel, body: str | None, who: str) -> tuple[A
 def _quat_mul(a: Array, b: Array) -> Array:
     w1, x1, y1, z1 = a
     w2, x2, y2, z2 = b
-    return jnp.stack([
-        w1 * w2 - x1 * x2 - y1 * y2 - z1 * z2,
-        w1 * x2 + x1 * w2 + y1 * z2 - z1 * y2,
-        w1 * y2 - x1 * z2 + y1 * w2 + z1 * x2,
-        w1 * z2 + x1 * y2 - y1 * x2 + z1 * w2,
-    ])  # fmt: skip
+    return jnp.stack(
+        [
+            w1 * w2 - x1 * x2 - y1 * y2 - z1 * z2,
+            w1 * x2 + x1 * w2 + y1 * z2 - z1 * y2,
+            w1 * y2 - x1 * z2 + y1 * w2 + z1 * x2,
+            w1 * z2 + x1 * y2 - y1 * x2 + z1 * w2,
+        ]
+    )
 
 
 def _axis_quat(axis: int, angle: Array) -> Array:
@@ -253,8 +257,9 @@ def _base_tilt(qpos_idx, limits, model, data, key):
     return data.replace(qpos=data.qpos.at[qpos_idx[3:]].set(quat))
 
 
-def base_velocity(mj_model: mujoco.MjModel, linear=(0.0, 0.0, 0.0), angular=(0.0, 0.0, 0.0),
-                  body: str | None = None) -> ResetItem:  # fmt: skip
+def base_velocity(
+    mj_model: mujoco.MjModel, linear=(0.0, 0.0, 0.0), angular=(0.0, 0.0, 0.0), body: str | None = None
+) -> ResetItem:
     """Adds U(-linear_i, linear_i) m/s to each axis of the base's world-frame linear
     velocity and U(-angular_i, angular_i) rad/s to its body-frame angular velocity;
     `linear`, `angular`: 3 numbers >= 0 each."""
@@ -285,16 +290,19 @@ def reference_state(reference: motion.Reference, probability: float = 1.0) -> Re
     """
     who = "resets.reference_state"
     if not isinstance(reference, motion.Reference):
-        raise TypeError(f"{who}: reference must be a motion.Reference (motion.reference(...)), "
-                        f"got {type(reference).__name__}")  # fmt: skip
+        raise TypeError(
+            f"{who}: reference must be a motion.Reference (motion.reference(...)), got {type(reference).__name__}"
+        )
     return bind(_reference_state, reference, checks.number(who, "probability", probability, 0.0, 1.0))
 
 
 def _reference_state(reference, probability, model, data, key):
     if reference.qpos.shape[1:] != data.qpos.shape or reference.qvel.shape[1:] != data.qvel.shape:
-        raise ValueError(f"resets.reference_state: the reference has nq={reference.qpos.shape[1]}, "
-                         f"nv={reference.qvel.shape[1]} but the task's model nq={data.qpos.shape[0]}, "
-                         f"nv={data.qvel.shape[0]}")  # fmt: skip
+        raise ValueError(
+            f"resets.reference_state: the reference has nq={reference.qpos.shape[1]}, "
+            f"nv={reference.qvel.shape[1]} but the task's model nq={data.qpos.shape[0]}, "
+            f"nv={data.qvel.shape[0]}"
+        )
     use_key, frame_key = jax.random.split(key)
     clip, t = motion.sample_frame(reference, frame_key)
     index = motion.frame_index(reference, clip, t)

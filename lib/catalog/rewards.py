@@ -26,20 +26,38 @@ import mujoco
 import numpy as np
 
 from mjzoo import checks, names
-from mjzoo.combinators import with_rewards
 from mjzoo.catalog.shapes import SIGMOIDS, tolerance
+from mjzoo.combinators import with_rewards
 from mjzoo.types import State, Task, bind
 
 __all__ = [
-    "tolerance", "SIGMOIDS", "terms", "alive",
-    "linear_velocity_tracking", "command_progress", "angular_velocity_tracking",
-    "vertical_velocity", "roll_pitch_velocity",
-    "base_height", "flat_orientation", "upright",
-    "joint_deviation", "joint_limits", "symmetry",
-    "action_rate", "action_acceleration", "action_jerk", "torque", "energy",
-    "feet_air_time", "foot_slip", "foot_clearance",
-    "forward_velocity", "body_height", "effort",
-]  # fmt: skip
+    "tolerance",
+    "SIGMOIDS",
+    "terms",
+    "alive",
+    "linear_velocity_tracking",
+    "command_progress",
+    "angular_velocity_tracking",
+    "vertical_velocity",
+    "roll_pitch_velocity",
+    "base_height",
+    "flat_orientation",
+    "upright",
+    "joint_deviation",
+    "joint_limits",
+    "symmetry",
+    "action_rate",
+    "action_acceleration",
+    "action_jerk",
+    "torque",
+    "energy",
+    "feet_air_time",
+    "foot_slip",
+    "foot_clearance",
+    "forward_velocity",
+    "body_height",
+    "effort",
+]
 
 Array = jax.Array
 Partial = jax.tree_util.Partial
@@ -160,9 +178,7 @@ def _roll_pitch_velocity(base, model, state, action, next_state) -> Array:
     return jnp.sum(jnp.square(_base_state(next_state, base)[2][:2]))
 
 
-def base_height(
-    mj_model: mujoco.MjModel, lower: float, upper: float | None = None, body: str | None = None
-) -> Partial:
+def base_height(mj_model: mujoco.MjModel, lower: float, upper: float | None = None, body: str | None = None) -> Partial:
     """Cost: squared distance (m^2) of the base's world height z outside [lower, upper]
     (m): (z - target)^2 for a target (``upper=None``), 0 anywhere inside a range."""
     upper = lower if upper is None else upper
@@ -298,8 +314,10 @@ def _difference(next_state: State, order: int, who: str) -> Array:
     history = next_state.info.get("action_history")
     if history is None or history.shape[0] < order + 1:
         have = "none" if history is None else f"length {history.shape[0]}"
-        raise ValueError(f"{who} needs info['action_history'] of length >= {order + 1} (has {have}): "
-                         f"wrap the task with trackers.with_action_history(task, length={order + 1})")  # fmt: skip
+        raise ValueError(
+            f"{who} needs info['action_history'] of length >= {order + 1} (has {have}): "
+            f"wrap the task with trackers.with_action_history(task, length={order + 1})"
+        )
     coefficients = [(-1) ** k * math.comb(order, k) for k in range(order + 1)]
     return sum(c * history[k] for k, c in enumerate(coefficients))
 

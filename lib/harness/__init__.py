@@ -26,8 +26,23 @@ TensorBoard and matplotlib, which a planner on a robot does not need.
 
 from mjzoo import lazy
 
-MODULES = ("training", "contract", "settings", "devices", "distributed", "compilation", "metrics", "checkpoints",
-           "plotting", "rendering", "render_config", "plan_report", "datasets", "viewer", "cli")  # fmt: skip
+MODULES = (
+    "training",
+    "contract",
+    "settings",
+    "devices",
+    "distributed",
+    "compilation",
+    "metrics",
+    "checkpoints",
+    "plotting",
+    "rendering",
+    "render_config",
+    "plan_report",
+    "datasets",
+    "viewer",
+    "cli",
+)
 
 __all__ = list(MODULES)
 

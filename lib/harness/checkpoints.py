@@ -36,8 +36,16 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
-__all__ = ["save", "restore", "restore_newest_intact", "set_aside", "latest_step", "all_steps",
-           "CheckpointError", "DamagedCheckpointWarning"]
+__all__ = [
+    "save",
+    "restore",
+    "restore_newest_intact",
+    "set_aside",
+    "latest_step",
+    "all_steps",
+    "CheckpointError",
+    "DamagedCheckpointWarning",
+]
 
 PyTree = Any
 _ARRAYS, _TREE = "arrays", "tree"  # the two items of every checkpoint step
@@ -181,8 +189,11 @@ def restore_newest_intact(directory: str | Path, like: PyTree) -> tuple[PyTree, 
             skipped.append((step, _reason(e)))
             continue
         if skipped:
-            warnings.warn(f"{directory}: {_damaged(skipped)}; restored checkpoint {step}, the newest intact one",
-                          DamagedCheckpointWarning, stacklevel=2)  # fmt: skip
+            warnings.warn(
+                f"{directory}: {_damaged(skipped)}; restored checkpoint {step}, the newest intact one",
+                DamagedCheckpointWarning,
+                stacklevel=2,
+            )
         return tree, step, skipped
     if not skipped:
         raise FileNotFoundError(f"no complete checkpoint in {directory}")

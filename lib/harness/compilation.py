@@ -26,7 +26,15 @@ from typing import Any
 import jax
 from jax.experimental.compilation_cache import compilation_cache
 
-__all__ = ["cache_directory", "compile_ahead", "described", "enable_cache", "overlaps_safely", "still_compiling", "wait"]
+__all__ = [
+    "cache_directory",
+    "compile_ahead",
+    "described",
+    "enable_cache",
+    "overlaps_safely",
+    "still_compiling",
+    "wait",
+]
 
 _OFF = ("0", "off", "false", "no", "")
 
@@ -64,8 +72,10 @@ def enable_cache(directory: str | Path | None = None) -> Path | None:
     try:
         directory.mkdir(parents=True, exist_ok=True)
     except OSError as error:  # a read-only home: run uncached rather than not at all
-        message = (f"compilation cache: cannot create {directory} ({error.strerror}); running without it "
-                   "(set MJZOO_COMPILE_CACHE to a writable directory, or 0 to silence this)")  # fmt: skip
+        message = (
+            f"compilation cache: cannot create {directory} ({error.strerror}); running without it "
+            "(set MJZOO_COMPILE_CACHE to a writable directory, or 0 to silence this)"
+        )
         warnings.warn(message, stacklevel=2)
         return None
     compilation_cache.set_cache_dir(str(directory))

@@ -67,8 +67,10 @@ def check_algorithm(algorithm: Any, config: Any) -> None:
     missing += [f"config.{name}" for name in ("num_updates", "steps_per_update") if not hasattr(config, name)]
     if missing:
         name = getattr(algorithm, "__name__", type(algorithm).__name__)
-        raise TypeError(f"training.run: {name} is not an algorithm of the training.Algorithm contract; "
-                        f"it lacks {', '.join(missing)}")  # fmt: skip
+        raise TypeError(
+            f"training.run: {name} is not an algorithm of the training.Algorithm contract; "
+            f"it lacks {', '.join(missing)}"
+        )
 
 
 def check_state(algorithm: Algorithm, state: Any) -> None:
@@ -84,5 +86,7 @@ def check_state(algorithm: Algorithm, state: Any) -> None:
 
     wrong = [n for n in ("updates", *algorithm.PER_ENV_FIELDS) if not has(n)]
     if wrong:
-        raise TypeError(f"training.run: the state {algorithm.__name__}.init returns ({type(state).__name__}) must be "
-                        f"a dataclass with the fields {wrong} (updates, and each of PER_ENV_FIELDS)")  # fmt: skip
+        raise TypeError(
+            f"training.run: the state {algorithm.__name__}.init returns ({type(state).__name__}) must be "
+            f"a dataclass with the fields {wrong} (updates, and each of PER_ENV_FIELDS)"
+        )

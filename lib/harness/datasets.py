@@ -93,8 +93,10 @@ class Dataset:
         for name, array in self.arrays().items():
             lead = (n,) if name == "length" else (n, t + 1) if _is_state(name) else (n, t)
             if array.shape[: len(lead)] != lead:
-                raise ValueError(f"Dataset: {name} has shape {array.shape}; expected {list(lead)} leading "
-                                 f"(N={n} episodes, T={t} steps)")  # fmt: skip
+                raise ValueError(
+                    f"Dataset: {name} has shape {array.shape}; expected {list(lead)} leading "
+                    f"(N={n} episodes, T={t} steps)"
+                )
 
     @property
     def num_episodes(self) -> int:
@@ -114,18 +116,32 @@ class Dataset:
         """Every array under its name in dataset.npz: obs or obs/KEY, reward/NAME."""
         obs = self.obs if isinstance(self.obs, dict) else {"": self.obs}
         fields = ("qpos", "qvel", "time", "xpos", "xquat", "action", "ctrl", "reward")
-        return {**{f: getattr(self, f) for f in fields}, **{f"obs/{k}" if k else "obs": v for k, v in obs.items()},
-                **{f"reward/{k}": v for k, v in self.reward_terms.items()},
-                "terminated": self.terminated, "truncated": self.truncated, "length": self.length}  # fmt: skip
+        return {
+            **{f: getattr(self, f) for f in fields},
+            **{f"obs/{k}" if k else "obs": v for k, v in obs.items()},
+            **{f"reward/{k}": v for k, v in self.reward_terms.items()},
+            "terminated": self.terminated,
+            "truncated": self.truncated,
+            "length": self.length,
+        }
 
     def meta(self) -> dict[str, Any]:
         """What meta.json holds: everything but the arrays, and each array's shape and dtype."""
         shapes = {k: {"shape": list(v.shape), "dtype": str(v.dtype)} for k, v in self.arrays().items()}
-        return {"format": FORMAT, "episodes": self.num_episodes, "steps": self.num_steps, "dt": self.dt,
-                "source": self.source, "seed": self.seed, "deterministic": self.deterministic,
-                "joint_names": list(self.joint_names), "body_names": list(self.body_names),
-                "actuator_names": list(self.actuator_names), "reward_terms": list(self.reward_terms),
-                "arrays": shapes}  # fmt: skip
+        return {
+            "format": FORMAT,
+            "episodes": self.num_episodes,
+            "steps": self.num_steps,
+            "dt": self.dt,
+            "source": self.source,
+            "seed": self.seed,
+            "deterministic": self.deterministic,
+            "joint_names": list(self.joint_names),
+            "body_names": list(self.body_names),
+            "actuator_names": list(self.actuator_names),
+            "reward_terms": list(self.reward_terms),
+            "arrays": shapes,
+        }
 
 
 def _is_state(name: str) -> bool:
@@ -142,8 +158,17 @@ def episode_lengths(terminated: np.ndarray, truncated: np.ndarray) -> np.ndarray
 # --- recording ------------------------------------------------------------------------
 
 
-def record_policy(task: Task, act: Act, params: Any, key: jax.Array | int, episodes: int, steps: int, *,
-                  deterministic: bool | None = None, source: dict[str, Any] | None = None) -> Dataset:  # fmt: skip
+def record_policy(
+    task: Task,
+    act: Act,
+    params: Any,
+    key: jax.Array | int,
+    episodes: int,
+    steps: int,
+    *,
+    deterministic: bool | None = None,
+    source: dict[str, Any] | None = None,
+) -> Dataset:
     """Runs ``act(params, obs, key) -> action`` (e.g. ``ppo.policy(config, task,
     deterministic)``) on `task` from `episodes` resets for `steps` control steps each.
 
@@ -161,8 +186,14 @@ def record_policy(task: Task, act: Act, params: Any, key: jax.Array | int, episo
     return _assemble(task, raw, seed, deterministic, source)
 
 
-def record_planner(problem: Problem, key: jax.Array | int, episodes: int, steps: int | None = None, *,
-                   source: dict[str, Any] | None = None) -> Dataset:  # fmt: skip
+def record_planner(
+    problem: Problem,
+    key: jax.Array | int,
+    episodes: int,
+    steps: int | None = None,
+    *,
+    source: dict[str, Any] | None = None,
+) -> Dataset:
     """Runs `problem`'s planner closed loop (`closed_loop.run`: the planner plans on
     `problem.plan_task`, the world is `problem.sim_task`) from `episodes` resets.
 
@@ -175,9 +206,19 @@ def record_planner(problem: Problem, key: jax.Array | int, episodes: int, steps:
     total = problem.num_replans * every if steps is None else _count("record_planner", "steps", steps)
     key, seed = _key(key)
     limited = _ctrl_limited(problem.sim_task)
-    raw = _planner_episodes(problem.planner, problem.config, math.ceil(total / every), every, total, problem.sim_task,
-                            problem.plan_task, problem.hooks, problem.terminal_value, jax.random.split(key, episodes),
-                            limited)  # fmt: skip
+    raw = _planner_episodes(
+        problem.planner,
+        problem.config,
+        math.ceil(total / every),
+        every,
+        total,
+        problem.sim_task,
+        problem.plan_task,
+        problem.hooks,
+        problem.terminal_value,
+        jax.random.split(key, episodes),
+        limited,
+    )
     return _assemble(problem.sim_task, raw, seed, None, source)
 
 
@@ -220,9 +261,19 @@ def _policy_episodes(act: Act, steps: int, task: Task, params: Any, keys: jax.Ar
 
 
 @functools.partial(jax.jit, static_argnums=(0, 1, 2, 3, 4))
-def _planner_episodes(planner: ModuleType, config: Any, num_replans: int, every: int, steps: int, sim_task: Task,
-                      plan_task: Any, hooks: closed_loop.Hooks, value: Any, keys: jax.Array,
-                      limited: jax.Array):  # fmt: skip
+def _planner_episodes(
+    planner: ModuleType,
+    config: Any,
+    num_replans: int,
+    every: int,
+    steps: int,
+    sim_task: Task,
+    plan_task: Any,
+    hooks: closed_loop.Hooks,
+    value: Any,
+    keys: jax.Array,
+    limited: jax.Array,
+):
     """keys [N] -> the raw record of N closed-loop episodes, cut at `steps`."""
 
     def one(key):
@@ -262,24 +313,43 @@ def _record(task: Task, first: State, after: State, actions: jax.Array, limited:
     low, high = task.model.actuator_ctrlrange[:, 0], task.model.actuator_ctrlrange[:, 1]
     ctrl = jnp.where(limited, jnp.clip(after.data.ctrl, low, high), after.data.ctrl)
     obs = jax.tree.map(stack, first.obs, after.obs)
-    return {"qpos": data.qpos, "qvel": data.qvel, "time": data.time, "xpos": posed.xpos, "xquat": posed.xquat,
-            "obs": obs, "action": actions, "ctrl": ctrl, "reward": after.reward, "terms": reward_terms(after),
-            "terminated": after.terminated, "truncated": after.truncated}  # fmt: skip
+    return {
+        "qpos": data.qpos,
+        "qvel": data.qvel,
+        "time": data.time,
+        "xpos": posed.xpos,
+        "xquat": posed.xquat,
+        "obs": obs,
+        "action": actions,
+        "ctrl": ctrl,
+        "reward": after.reward,
+        "terms": reward_terms(after),
+        "terminated": after.terminated,
+        "truncated": after.truncated,
+    }
 
 
-def _assemble(task: Task, raw: dict[str, Any], seed: Any, deterministic: bool | None,
-              source: dict[str, Any] | None) -> Dataset:  # fmt: skip
+def _assemble(
+    task: Task, raw: dict[str, Any], seed: Any, deterministic: bool | None, source: dict[str, Any] | None
+) -> Dataset:
     """The host `Dataset` of a raw record, with the task's names and control step."""
     raw = jax.device_get(raw)
     obs_leaves = jax.tree_util.tree_leaves_with_path(raw["obs"])
     obs = {jax.tree_util.keystr(p, simple=True, separator="/"): np.asarray(v) for p, v in obs_leaves}
     arrays = {k: np.asarray(v) for k, v in raw.items() if k not in ("obs", "terms")}
-    return Dataset(**arrays, obs=obs[""] if list(obs) == [""] else obs,
-                   reward_terms={k: np.asarray(v) for k, v in raw["terms"].items()},
-                   length=episode_lengths(raw["terminated"], raw["truncated"]), dt=_control_dt(arrays["time"]),
-                   joint_names=_names(task, "joint"), body_names=_names(task, "body"),
-                   actuator_names=_names(task, "actuator"), source=dict(source or {}), seed=seed,
-                   deterministic=deterministic)  # fmt: skip
+    return Dataset(
+        **arrays,
+        obs=obs[""] if list(obs) == [""] else obs,
+        reward_terms={k: np.asarray(v) for k, v in raw["terms"].items()},
+        length=episode_lengths(raw["terminated"], raw["truncated"]),
+        dt=_control_dt(arrays["time"]),
+        joint_names=_names(task, "joint"),
+        body_names=_names(task, "body"),
+        actuator_names=_names(task, "actuator"),
+        source=dict(source or {}),
+        seed=seed,
+        deterministic=deterministic,
+    )
 
 
 def _control_dt(time: np.ndarray) -> float:
@@ -317,14 +387,18 @@ def save(directory: str | Path, dataset: Dataset, overwrite: bool = False) -> li
         raise NotADirectoryError(f"datasets.save: {directory} is a file, not a directory")
     found = existing(directory)
     if found and not overwrite:
-        raise FileExistsError(f"datasets.save: {directory} already holds a dataset ({', '.join(found[:3])}"
-                              f"{', ...' if len(found) > 3 else ''}); pass overwrite=True to replace it")  # fmt: skip
+        raise FileExistsError(
+            f"datasets.save: {directory} already holds a dataset ({', '.join(found[:3])}"
+            f"{', ...' if len(found) > 3 else ''}); pass overwrite=True to replace it"
+        )
     (directory / ARRAYS).unlink(missing_ok=True)  # gone until the new one is complete
     keep = {f"{MOTIONS}/{_clip_name(i)}.npz" for i in range(dataset.num_episodes)}
     for stale in (f for f in found if f.startswith(f"{MOTIONS}/") and f not in keep):
         (directory / stale).unlink()  # the old dataset's clips beyond this one's episodes
-    written = [_atomic(directory / MOTIONS / f"{_clip_name(i)}.npz", functools.partial(_save_clip, dataset, i))
-               for i in range(dataset.num_episodes)]  # fmt: skip
+    written = [
+        _atomic(directory / MOTIONS / f"{_clip_name(i)}.npz", functools.partial(_save_clip, dataset, i))
+        for i in range(dataset.num_episodes)
+    ]
     text = json.dumps(dataset.meta(), indent=2, default=str) + "\n"
     written.append(_atomic(directory / META, lambda path: path.write_text(text)))
     written.append(_atomic(directory / ARRAYS, lambda path: np.savez(path, **dataset.arrays())))
@@ -370,11 +444,18 @@ def load(directory: str | Path) -> Dataset:
             raise ValueError(f"datasets.load: {ARRAYS}'s {name} is {got}; {META} says {spec['dtype']}{spec['shape']}")
     obs = {k[len("obs/") :]: v for k, v in arrays.items() if k.startswith("obs/")}
     plain = ("qpos", "qvel", "time", "xpos", "xquat", "action", "ctrl", "reward", "terminated", "truncated", "length")
-    return Dataset(**{k: arrays[k] for k in plain}, obs=arrays.get("obs", obs),
-                   reward_terms={k: arrays[f"reward/{k}"] for k in meta["reward_terms"]}, dt=float(meta["dt"]),
-                   joint_names=tuple(meta["joint_names"]), body_names=tuple(meta["body_names"]),
-                   actuator_names=tuple(meta["actuator_names"]), source=meta["source"], seed=meta["seed"],
-                   deterministic=meta["deterministic"])  # fmt: skip
+    return Dataset(
+        **{k: arrays[k] for k in plain},
+        obs=arrays.get("obs", obs),
+        reward_terms={k: arrays[f"reward/{k}"] for k in meta["reward_terms"]},
+        dt=float(meta["dt"]),
+        joint_names=tuple(meta["joint_names"]),
+        body_names=tuple(meta["body_names"]),
+        actuator_names=tuple(meta["actuator_names"]),
+        source=meta["source"],
+        seed=meta["seed"],
+        deterministic=meta["deterministic"],
+    )
 
 
 def clip(dataset: Dataset, episode: int, name: str | None = None) -> motion.Clip:
@@ -383,7 +464,13 @@ def clip(dataset: Dataset, episode: int, name: str | None = None) -> motion.Clip
     if not 0 <= episode < dataset.num_episodes:
         raise IndexError(f"datasets.clip: episode {episode} is out of range; the dataset has {dataset.num_episodes}")
     frames = int(dataset.length[episode]) + 1
-    return motion.Clip(name=name or _clip_name(episode), fps=1.0 / dataset.dt, qpos=dataset.qpos[episode, :frames],
-                       qvel=dataset.qvel[episode, :frames], joint_names=dataset.joint_names,
-                       body_names=dataset.body_names, body_pos=dataset.xpos[episode, :frames],
-                       body_quat=dataset.xquat[episode, :frames])  # fmt: skip
+    return motion.Clip(
+        name=name or _clip_name(episode),
+        fps=1.0 / dataset.dt,
+        qpos=dataset.qpos[episode, :frames],
+        qvel=dataset.qvel[episode, :frames],
+        joint_names=dataset.joint_names,
+        body_names=dataset.body_names,
+        body_pos=dataset.xpos[episode, :frames],
+        body_quat=dataset.xquat[episode, :frames],
+    )

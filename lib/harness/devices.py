@@ -58,14 +58,18 @@ def env_shardings(train_state: Any, per_env_fields: Sequence[str], devices: list
         if [] in paths:  # this node is per-env
             specs = worlds.partition(node)
             _check_even(node, specs, devices)
-            return jax.tree.map(lambda x, spec: NamedSharding(mesh, spec) if np.prod(np.shape(x)) else whole,
-                                node, specs)  # fmt: skip
+            return jax.tree.map(
+                lambda x, spec: NamedSharding(mesh, spec) if np.prod(np.shape(x)) else whole, node, specs
+            )
         if not paths or not dataclasses.is_dataclass(node):
             return jax.tree.map(lambda _: whole, node)
-        return dataclasses.replace(node, **{
-            f.name: place(getattr(node, f.name), [p[1:] for p in paths if p[0] == f.name])
-            for f in dataclasses.fields(node)
-        })  # fmt: skip
+        return dataclasses.replace(
+            node,
+            **{
+                f.name: place(getattr(node, f.name), [p[1:] for p in paths if p[0] == f.name])
+                for f in dataclasses.fields(node)
+            },
+        )
 
     return place(train_state, [path.split(".") for path in per_env_fields])
 
@@ -75,8 +79,10 @@ def check_split(num_envs: int, devices: list | None = None) -> None:
     over `devices` (default `jax.devices()`; JAX's own error names a sharding and a shape)."""
     count = len(devices or jax.devices())
     if num_envs % count:
-        raise ValueError(f"{num_envs} envs do not split evenly over {count} devices; make num_envs a "
-                         f"multiple of {count}, or use fewer devices (CUDA_VISIBLE_DEVICES)")  # fmt: skip
+        raise ValueError(
+            f"{num_envs} envs do not split evenly over {count} devices; make num_envs a "
+            f"multiple of {count}, or use fewer devices (CUDA_VISIBLE_DEVICES)"
+        )
 
 
 def _check_even(node: Any, specs: Any, devices: list) -> None:

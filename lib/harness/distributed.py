@@ -31,12 +31,19 @@ from jax.experimental import multihost_utils
 __all__ = ["initialize", "is_primary", "barrier", "agree", "fetch", "free_port"]
 
 # Each argument's environment variable (JAX reads the first itself, but not the others).
-_VARIABLES = {"coordinator": "JAX_COORDINATOR_ADDRESS", "num_processes": "JAX_NUM_PROCESSES",
-              "process_id": "JAX_PROCESS_ID"}  # fmt: skip
+_VARIABLES = {
+    "coordinator": "JAX_COORDINATOR_ADDRESS",
+    "num_processes": "JAX_NUM_PROCESSES",
+    "process_id": "JAX_PROCESS_ID",
+}
 
 
-def initialize(coordinator: str | None = None, num_processes: int | None = None, process_id: int | None = None,
-               local_device_ids: int | list[int] | None = None) -> bool:  # fmt: skip
+def initialize(
+    coordinator: str | None = None,
+    num_processes: int | None = None,
+    process_id: int | None = None,
+    local_device_ids: int | list[int] | None = None,
+) -> bool:
     """Joins this process to a multi-process run (`jax.distributed.initialize`) when the
     arguments or the environment ask for one; returns whether this is one (True also
     when JAX was already initialized so, e.g. by an earlier call with the same values).
@@ -64,24 +71,31 @@ def initialize(coordinator: str | None = None, num_processes: int | None = None,
     if not values and launcher is None:
         return jax.distributed.is_initialized()
     if (count := values.get("num_processes")) is not None and values.get("process_id", -1) >= count:
-        raise ValueError(f"distributed: process_id={values['process_id']} is out of range for "
-                         f"num_processes={count}: it must be 0 .. {count - 1}")  # fmt: skip
+        raise ValueError(
+            f"distributed: process_id={values['process_id']} is out of range for "
+            f"num_processes={count}: it must be 0 .. {count - 1}"
+        )
     if launcher is None and (missing := [n for n in _VARIABLES if n not in values]):
-        raise ValueError(f"distributed: {' and '.join(missing)} missing; give coordinator, num_processes and "
-                         f"process_id together (or set {', '.join(_VARIABLES.values())})")  # fmt: skip
+        raise ValueError(
+            f"distributed: {' and '.join(missing)} missing; give coordinator, num_processes and "
+            f"process_id together (or set {', '.join(_VARIABLES.values())})"
+        )
     if jax.distributed.is_initialized():  # idempotent, but not with other values
         now = {"num_processes": jax.process_count(), "process_id": jax.process_index()}
         if clash := [f"{n}={values[n]} (it is {now[n]})" for n in now if n in values and values[n] != now[n]]:
             raise ValueError(f"distributed: already initialized otherwise: {', '.join(clash)}")
         return True
     try:
-        jax.distributed.initialize(values.get("coordinator"), values.get("num_processes"), values.get("process_id"),
-                                   local_device_ids)  # fmt: skip
+        jax.distributed.initialize(
+            values.get("coordinator"), values.get("num_processes"), values.get("process_id"), local_device_ids
+        )
     except RuntimeError as e:
         if "must be called before" not in str(e):
             raise
-        raise RuntimeError("distributed: JAX already runs on this process's devices alone; initialize first, "
-                           "before any JAX computation (jax.devices() included)") from None  # fmt: skip
+        raise RuntimeError(
+            "distributed: JAX already runs on this process's devices alone; initialize first, "
+            "before any JAX computation (jax.devices() included)"
+        ) from None
     return True
 
 

@@ -1,10 +1,10 @@
 """The files a closed-loop planning run writes (`mjzoo plan`):
 
-    out/summary.json   success, score, final_cost, backend, physics, plan_hz, plan_latency_ms, ...
-                       (on Warp also the simulation's physics/capacity_overflow and
-                       physics/solver_limit: shares of its steps)
-    out/plan.png       cost and controls over time
-    out/plan.mp4       the run (where an OpenGL backend exists)
+out/summary.json   success, score, final_cost, backend, physics, plan_hz, plan_latency_ms, ...
+                   (on Warp also the simulation's physics/capacity_overflow and
+                   physics/solver_limit: shares of its steps)
+out/plan.png       cost and controls over time
+out/plan.mp4       the run (where an OpenGL backend exists)
 """
 
 from __future__ import annotations
@@ -24,8 +24,15 @@ from mjzoo.types import Task
 __all__ = ["write"]
 
 
-def write(out: Path, problem: Problem, result: Result, stats: dict[str, float], video: bool = True,
-          render: rendering.RenderConfig = rendering.RenderConfig(), **extra: Any) -> dict:  # noqa: B008 (frozen)
+def write(
+    out: Path,
+    problem: Problem,
+    result: Result,
+    stats: dict[str, float],
+    video: bool = True,
+    render: rendering.RenderConfig = rendering.RenderConfig(),
+    **extra: Any,
+) -> dict:  # noqa: B008 (frozen)
     """Writes summary.json, plan.png and (where GL exists) plan.mp4, drawn as `render`
     says, to `out`; returns the summary with `extra` in it.
 
@@ -35,21 +42,31 @@ def write(out: Path, problem: Problem, result: Result, stats: dict[str, float], 
     time_s = np.asarray(states.data.time)
     costs, controls = np.asarray(result.costs), np.asarray(result.controls)
     solved, score = problem.success(states) if problem.success else (None, None)
-    summary = {**extra, "success": solved, "score": score,
-               "final_cost": float(np.mean(costs[time_s >= time_s[-1] - 1.0 + 1e-6])),
-               "physics": "c-mujoco" if problem.physics == "native" else problem.sim_task.model.impl.value,
-               "backend": problem.physics,
-               **{k: float(np.mean(v)) for k, v in states.metrics.items() if k.startswith("physics/")},
-               **{k: float(v) for k, v in stats.items()}}  # fmt: skip
+    summary = {
+        **extra,
+        "success": solved,
+        "score": score,
+        "final_cost": float(np.mean(costs[time_s >= time_s[-1] - 1.0 + 1e-6])),
+        "physics": "c-mujoco" if problem.physics == "native" else problem.sim_task.model.impl.value,
+        "backend": problem.physics,
+        **{k: float(np.mean(v)) for k, v in states.metrics.items() if k.startswith("physics/")},
+        **{k: float(v) for k, v in stats.items()},
+    }
     # null, not NaN, for what was not measured (plan_physics_ms on MJX): strict JSON readers reject NaN.
     summary = {k: None if isinstance(v, float) and not np.isfinite(v) else v for k, v in summary.items()}
     (out / "summary.json").write_text(json.dumps(summary, indent=2, allow_nan=False))
     _plot(out / "plan.png", time_s, costs, controls, problem.sim_task)
     if video:
         mj = problem.sim_task.mj_model
-        rendering.render_video(mj, np.asarray(states.data.qpos), out / "plan.mp4", dt=problem.sim_dt,
-                               mocap_pos=np.asarray(states.data.mocap_pos), mocap_quat=np.asarray(states.data.mocap_quat),
-                               config=rendering.with_model_camera(render, mj))  # fmt: skip
+        rendering.render_video(
+            mj,
+            np.asarray(states.data.qpos),
+            out / "plan.mp4",
+            dt=problem.sim_dt,
+            mocap_pos=np.asarray(states.data.mocap_pos),
+            mocap_quat=np.asarray(states.data.mocap_quat),
+            config=rendering.with_model_camera(render, mj),
+        )
     return summary
 
 

@@ -21,6 +21,7 @@ from collections.abc import Sequence
 from pathlib import Path
 
 import numpy as np
+
 from mjzoo.harness.metrics import read_metrics
 from mjzoo.harness.render_config import RenderConfig
 

@@ -67,8 +67,10 @@ class Settings:
     def __post_init__(self):
         problems = [_problem(name, getattr(self, name)) for name in _LOWEST]
         if self.eval_steps is not None and self.eval_seconds is not None:
-            problems.append(f"eval_steps={self.eval_steps!r} and eval_seconds={self.eval_seconds!r} both give the "
-                            "evaluation's length; give one")  # fmt: skip
+            problems.append(
+                f"eval_steps={self.eval_steps!r} and eval_seconds={self.eval_seconds!r} both give the "
+                "evaluation's length; give one"
+            )
         budget = self.eval_budget
         if isinstance(budget, bool) or not isinstance(budget, numbers.Real) or not 0 < budget <= 1:
             problems.append(f"eval_budget={self.eval_budget!r} must be a share of the time, in (0, 1]")
@@ -85,11 +87,28 @@ class Settings:
 
 
 # Settings' numeric fields: the lowest value allowed; "> 0" where it is excluded.
-_LOWEST = {"updates_per_chunk": 1, "eval_envs": 1, "eval_steps": 1, "eval_seconds": "> 0", "eval_every": 0,
-           "eval_every_seconds": "> 0", "eval_first_seconds": 0, "video_every": 0, "log_every": 1,
-           "checkpoint_every": 0, "checkpoint_every_seconds": "> 0"}  # fmt: skip
-_OPTIONAL = ("eval_steps", "eval_seconds", "eval_every", "eval_every_seconds", "eval_first_seconds",
-             "checkpoint_every", "checkpoint_every_seconds")  # None allowed  # fmt: skip
+_LOWEST = {
+    "updates_per_chunk": 1,
+    "eval_envs": 1,
+    "eval_steps": 1,
+    "eval_seconds": "> 0",
+    "eval_every": 0,
+    "eval_every_seconds": "> 0",
+    "eval_first_seconds": 0,
+    "video_every": 0,
+    "log_every": 1,
+    "checkpoint_every": 0,
+    "checkpoint_every_seconds": "> 0",
+}
+_OPTIONAL = (
+    "eval_steps",
+    "eval_seconds",
+    "eval_every",
+    "eval_every_seconds",
+    "eval_first_seconds",
+    "checkpoint_every",
+    "checkpoint_every_seconds",
+)  # None allowed
 
 
 def _problem(name: str, value: Any) -> str | None:

@@ -31,18 +31,33 @@ from typing import Any
 import jax
 import jax.numpy as jnp
 import numpy as np
+from mujoco import mjx
+
 from mjzoo import tree
-from mjzoo.harness import checkpoints, compilation, distributed, metrics as metrics_lib, plotting, rendering
+from mjzoo.harness import checkpoints, compilation, distributed, plotting, rendering
+from mjzoo.harness import metrics as metrics_lib
 from mjzoo.harness.contract import Algorithm, AlgorithmConfig, check_algorithm, check_state
 from mjzoo.harness.devices import env_mesh_scope, env_shardings, replicate, shard_envs, template_data
 from mjzoo.harness.settings import EvalSchedule, Settings, checkpoint_due, config_dict
 from mjzoo.running import control_dt
 from mjzoo.types import Task
-from mujoco import mjx
 
-__all__ = ["RUN_FILES", "Algorithm", "AlgorithmConfig", "PhysicsCapacityError", "Settings", "TrainingWarning",
-           "check_algorithm", "config_dict", "existing", "physics_info", "replicate", "run", "seconds_to_steps",
-           "shard_envs"]  # fmt: skip
+__all__ = [
+    "RUN_FILES",
+    "Algorithm",
+    "AlgorithmConfig",
+    "PhysicsCapacityError",
+    "Settings",
+    "TrainingWarning",
+    "check_algorithm",
+    "config_dict",
+    "existing",
+    "physics_info",
+    "replicate",
+    "run",
+    "seconds_to_steps",
+    "shard_envs",
+]
 
 
 class TrainingWarning(UserWarning):
@@ -51,7 +66,15 @@ class TrainingWarning(UserWarning):
 
 # A chunk still compiling this long after init is a cold compile (a cached one loads in ~2 s).
 COLD_GRACE_S = 5.0
-RUN_FILES = ("config.json", "metrics.jsonl", "checkpoints", "tensorboard", "curves.png", "eval.mp4", "videos")  # `run` writes
+RUN_FILES = (
+    "config.json",
+    "metrics.jsonl",
+    "checkpoints",
+    "tensorboard",
+    "curves.png",
+    "eval.mp4",
+    "videos",
+)  # `run` writes
 
 
 def existing(out: Path, names: tuple[str, ...] = RUN_FILES) -> list[str]:
@@ -64,8 +87,10 @@ def _claim(out: Path, settings: Settings) -> None:
     a user's files are never overwritten without asking."""
     found = [] if settings.resume else existing(out)
     if found and not settings.overwrite:
-        raise FileExistsError(f"training: {out} already holds a run ({', '.join(found)}); resume it "
-                              "(Settings(resume=True)), choose another out_dir, or replace it (overwrite=True)")  # fmt: skip
+        raise FileExistsError(
+            f"training: {out} already holds a run ({', '.join(found)}); resume it "
+            "(Settings(resume=True)), choose another out_dir, or replace it (overwrite=True)"
+        )
     distributed.barrier("mjzoo.training: out_dir checked")  # by all before it changes (the others write after chunk 1)
     for path in [out / name.rstrip("/") for name in found] if distributed.is_primary() else []:
         shutil.rmtree(path) if path.is_dir() else path.unlink()
@@ -116,8 +141,10 @@ def _eval_steps(task: Task, settings: Settings) -> int:
     if settings.eval_seconds is not None:
         return seconds_to_steps(task, settings.eval_seconds)
     if getattr(task, "time_limit", None) is None:
-        raise ValueError("training.Settings: eval_steps=None evaluates the task's own episode length, but the task "
-                         "has no time limit (mjzoo.with_time_limit); give eval_steps or eval_seconds")  # fmt: skip
+        raise ValueError(
+            "training.Settings: eval_steps=None evaluates the task's own episode length, but the task "
+            "has no time limit (mjzoo.with_time_limit); give eval_steps or eval_seconds"
+        )
     return int(task.time_limit)
 
 
@@ -162,9 +189,19 @@ class _Loop:
     """`run`'s host loop, one chunk at a time: train, evaluate when due, write the
     metrics line, checkpoint, show progress, check capacity and diagnose."""
 
-    def __init__(self, algorithm: Algorithm, config: AlgorithmConfig, task: Task, settings: Settings,
-                 out: Path | None, key: jax.Array, eval_steps: int, launched: float, shown: dict[str, str],
-                 chunk_ahead: threading.Thread | None = None) -> None:  # fmt: skip
+    def __init__(
+        self,
+        algorithm: Algorithm,
+        config: AlgorithmConfig,
+        task: Task,
+        settings: Settings,
+        out: Path | None,
+        key: jax.Array,
+        eval_steps: int,
+        launched: float,
+        shown: dict[str, str],
+        chunk_ahead: threading.Thread | None = None,
+    ) -> None:
         self.algorithm, self.config, self.settings = algorithm, config, settings
         self.task, self.host_task = replicate(task), task  # videos are drawn by one process, from its own copy
         self.out, self.key, self.launched, self.shown = out, key, launched, shown
@@ -175,8 +212,11 @@ class _Loop:
         self.evaluate, self.eval_steps = _evaluate_fn(algorithm), eval_steps
         self.total_updates = -(-config.num_updates // self.per_chunk) * self.per_chunk
         self.writer = metrics_lib.MetricsWriter(out) if out is not None and distributed.is_primary() else None
-        self.progress = metrics_lib.Progress(self.total_updates * config.steps_per_update, "train",
-                                             file=None if distributed.is_primary() else io.StringIO())  # fmt: skip
+        self.progress = metrics_lib.Progress(
+            self.total_updates * config.steps_per_update,
+            "train",
+            file=None if distributed.is_primary() else io.StringIO(),
+        )
         self.last: dict[str, float] = {}
         self.history: list[dict[str, float]] = []
         self.warned: str | None = None
@@ -188,9 +228,12 @@ class _Loop:
         self.overlaps = compilation.overlaps_safely(getattr(task, "model", None))  # not Warp on a GPU
         self.saved = launched  # when the last checkpoint was written
         if settings.profile_memory and (silent := metrics_lib.device_memory()[1]):
-            warnings.warn(f"training: profile_memory: {', '.join(silent)} report no memory statistics "
-                          "(memory_stats() is None, as on XLA's CPU); nothing is recorded for them",
-                          TrainingWarning, stacklevel=3)  # fmt: skip
+            warnings.warn(
+                f"training: profile_memory: {', '.join(silent)} report no memory statistics "
+                "(memory_stats() is None, as on XLA's CPU); nothing is recorded for them",
+                TrainingWarning,
+                stacklevel=3,
+            )
 
     def done(self, state: Any) -> bool:
         return int(state.updates) >= self.total_updates
@@ -213,15 +256,20 @@ class _Loop:
         end = _clock()
         updates, per_chunk = int(state.updates), self.per_chunk
         step, number = updates * self.config.steps_per_update, updates // per_chunk
-        metrics = {"perf/steps_per_s": per_chunk * self.config.steps_per_update / max(end - start, 1e-9),
-                   **{k: float(v) for k, v in distributed.fetch(chunk_metrics).items() if np.isfinite(v)}}  # fmt: skip
+        metrics = {
+            "perf/steps_per_s": per_chunk * self.config.steps_per_update / max(end - start, 1e-9),
+            **{k: float(v) for k, v in distributed.fetch(chunk_metrics).items() if np.isfinite(v)},
+        }
         if not self.history:  # this launch's first chunk: compile (and init) included
             metrics["perf/first_update_s"] = self.pending["perf/first_update_s"] = end - self.launched
             self.shown["first"] = f"{end - self.launched:.1f}s"
         with self.progress.paused():  # the bar's steps/s is the training rate
             final = updates >= self.total_updates
             compiled = not compilation.still_compiling(self.ahead, 0.0)  # else the budget puts the evaluation off
-            due = (self.schedule.due(number, final, end, compiled), checkpoint_due(self.settings, number, final, end - self.saved))
+            due = (
+                self.schedule.due(number, final, end, compiled),
+                checkpoint_due(self.settings, number, final, end - self.saved),
+            )
             evaluated, save = (bool(x) for x in distributed.agree(due))  # process 0's clock: one collective for both
             metrics.update(self._evaluate(state, step, final) if evaluated else {"perf/eval_s": 0.0})
         metrics["perf/elapsed_s"] = _clock() - self.launched
@@ -244,8 +292,9 @@ class _Loop:
         calls it before the chunk runs (`compilation.overlaps_safely`)."""
         key = jax.random.fold_in(self.key, 0)
         s = self.settings
-        self.ahead = compilation.compile_ahead(self.evaluate, self.config, self.task, state, key, s.eval_envs,
-                                               self.eval_steps, background=self.overlaps)  # fmt: skip
+        self.ahead = compilation.compile_ahead(
+            self.evaluate, self.config, self.task, state, key, s.eval_envs, self.eval_steps, background=self.overlaps
+        )
 
     def _evaluate(self, state: Any, step: int, final: bool) -> dict[str, float]:
         """Evaluates (`settings.eval_envs` episodes) and writes a video when one is due."""
@@ -268,8 +317,9 @@ class _Loop:
             result["perf/video_s"] = _clock() - start
         return result
 
-    def _write(self, state: Any, step: int, number: int, metrics: dict[str, float], evaluated: bool,
-               save: bool) -> None:  # fmt: skip
+    def _write(
+        self, state: Any, step: int, number: int, metrics: dict[str, float], evaluated: bool, save: bool
+    ) -> None:
         """The metrics line (every `log_every` chunks and at each evaluation) and the checkpoint."""
         if self.out is None:
             return
@@ -297,8 +347,15 @@ def _owned(state: Any) -> Any:
     return jax.tree.map(jnp.copy, tree.strongly_typed(state))
 
 
-def _start(algorithm: Algorithm, config: AlgorithmConfig, task: Task, settings: Settings, out: Path | None,
-           key: jax.Array, physics: dict[str, Any]) -> Any:  # fmt: skip
+def _start(
+    algorithm: Algorithm,
+    config: AlgorithmConfig,
+    task: Task,
+    settings: Settings,
+    out: Path | None,
+    key: jax.Array,
+    physics: dict[str, Any],
+) -> Any:
     """The initial (or resumed) train state, placed on the devices, config.json written."""
     state = _init_fn(algorithm)(config, task, key)
     check_state(algorithm, state)
@@ -308,8 +365,12 @@ def _start(algorithm: Algorithm, config: AlgorithmConfig, task: Task, settings: 
         if settings.resume and checkpoints.latest_step(out / "checkpoints") is not None:
             state = _resume(out, state)
         out.mkdir(parents=True, exist_ok=True)
-        run_info = {"algorithm": algorithm.__name__.split(".")[-1], "config": config_dict(config), "physics": physics,
-                    "settings": {k: str(v) if isinstance(v, Path) else v for k, v in dataclasses.asdict(settings).items()}}  # fmt: skip
+        run_info = {
+            "algorithm": algorithm.__name__.split(".")[-1],
+            "config": config_dict(config),
+            "physics": physics,
+            "settings": {k: str(v) if isinstance(v, Path) else v for k, v in dataclasses.asdict(settings).items()},
+        }
         if distributed.is_primary():
             (out / "config.json").write_text(json.dumps(run_info, indent=2))
     return state
@@ -351,8 +412,9 @@ def _per_chunk(config: AlgorithmConfig, settings: Settings) -> int:
     return min(settings.updates_per_chunk, max(1, config.num_updates))
 
 
-def _compile_chunk_ahead(algorithm: Algorithm, config: AlgorithmConfig, task: Task, settings: Settings,
-                         key: jax.Array) -> threading.Thread | None:  # fmt: skip
+def _compile_chunk_ahead(
+    algorithm: Algorithm, config: AlgorithmConfig, task: Task, settings: Settings, key: jax.Array
+) -> threading.Thread | None:
     """Starts compiling the training chunk on a thread (or loading it from the cache) from
     the shapes init will return (`eval_shape`, whose trace init's call reuses) and the
     shardings `shard_envs` will give them, while init compiles. Traced here: tracing

@@ -70,8 +70,10 @@ def env_model(kind: Kind, env: Any) -> mjx.Model:
     """The mjx.Model the bare env steps; TypeError naming the env if it keeps none."""
     model = getattr(env.unwrapped, kind.model_attr, None)
     if not isinstance(model, mjx.Model):
-        raise TypeError(f"{kind.name}.task: {type(env.unwrapped).__name__}.{kind.model_attr} is not an mjx.Model, "
-                        "so the task's model could not be handed to it")  # fmt: skip
+        raise TypeError(
+            f"{kind.name}.task: {type(env.unwrapped).__name__}.{kind.model_attr} is not an mjx.Model, "
+            "so the task's model could not be handed to it"
+        )
     return model
 
 
@@ -127,17 +129,21 @@ def _step(kind: tree.Static, env: tree.Static, model: mjx.Model, state: State, a
     kind = kind.value
     prefix = f"{kind.name}/"
     own = kind.state_type(
-        **{kind.data_field: state.data}, obs=state.obs, reward=state.reward,
+        **{kind.data_field: state.data},
+        obs=state.obs,
+        reward=state.reward,
         done=state.terminated.astype(jnp.float32),
-        metrics={k[len(prefix):]: v for k, v in state.metrics.items() if k.startswith(prefix)},
+        metrics={k[len(prefix) :]: v for k, v in state.metrics.items() if k.startswith(prefix)},
         info=dict(state.info[kind.name]),  # fresh dicts: both libraries' envs write into the ones they get
-    )  # fmt: skip
+    )
     with _holding(kind, env.value, model) as held:
         after = held.step(own, action)
     next_state = state.replace(
-        data=getattr(after, kind.data_field), obs=after.obs, info={**state.info, kind.name: dict(after.info)},
+        data=getattr(after, kind.data_field),
+        obs=after.obs,
+        info={**state.info, kind.name: dict(after.info)},
         metrics={**state.metrics, **_prefixed(kind, after.metrics)},
-    )  # fmt: skip
+    )
     done = jnp.asarray(after.done) != 0
     limit = jnp.zeros((), bool)
     if kind.truncation_key is not None:

@@ -42,13 +42,17 @@ __all__ = ["task", "NAME"]
 
 NAME = "brax"  # the reward term's name, the info key and the metrics prefix
 # Brax's State keeps the mjx.Data as pipeline_state and flags a time limit's done in info.
-_KIND = _foreign.Kind(NAME, model_attr="sys", data_field="pipeline_state", state_type=brax_base.State,
-                      truncation_key="truncation")  # fmt: skip
+_KIND = _foreign.Kind(
+    NAME, model_attr="sys", data_field="pipeline_state", state_type=brax_base.State, truncation_key="truncation"
+)
 # Brax's training wrappers batch, limit or reset episodes: mjzoo's algorithms and combinators do that.
 _TRAINING_WRAPPERS = (
-    brax_training.VmapWrapper, brax_training.DomainRandomizationVmapWrapper, brax_training.EpisodeWrapper,
-    brax_training.AutoResetWrapper, brax_training.EvalWrapper,
-)  # fmt: skip
+    brax_training.VmapWrapper,
+    brax_training.DomainRandomizationVmapWrapper,
+    brax_training.EpisodeWrapper,
+    brax_training.AutoResetWrapper,
+    brax_training.EvalWrapper,
+)
 
 
 def task(env: brax_base.Env, episode_length: int | None = 1000) -> Task:
@@ -69,12 +73,16 @@ def task(env: brax_base.Env, episode_length: int | None = 1000) -> Task:
     layer = env
     while isinstance(layer, brax_base.Wrapper):
         if isinstance(layer, _TRAINING_WRAPPERS):
-            raise TypeError(f"brax.task: the env is inside Brax's {type(layer).__name__}; pass the env before "
-                            "brax.envs.training.wrap (mjzoo batches, limits and resets episodes itself)")  # fmt: skip
+            raise TypeError(
+                f"brax.task: the env is inside Brax's {type(layer).__name__}; pass the env before "
+                "brax.envs.training.wrap (mjzoo batches, limits and resets episodes itself)"
+            )
         layer = layer.env
     if env.backend != "mjx":
-        raise ValueError(f"brax.task: the env's backend is {env.backend!r}; only 'mjx' gives an mjx.Data to carry "
-                         "(brax.envs.get_environment(name, backend='mjx'))")  # fmt: skip
+        raise ValueError(
+            f"brax.task: the env's backend is {env.backend!r}; only 'mjx' gives an mjx.Data to carry "
+            "(brax.envs.get_environment(name, backend='mjx'))"
+        )
     model = _foreign.env_model(_KIND, env)
     mj_model = getattr(env.unwrapped, "mj_model", None)  # `to_brax_env`'s envs: their task's
     mj_model = getattr(model, "mj_model", None) if mj_model is None else mj_model  # Brax's: sys.mj_model
@@ -85,4 +93,3 @@ def task(env: brax_base.Env, episode_length: int | None = 1000) -> Task:
     # Brax's System keeps viscosity and density weakly typed: as float32 arrays like every
     # other number, an edit to them shares the trace instead of changing the argument's type.
     return _foreign.task(_KIND, env, tree.strongly_typed(model), mj_model, episode_length)
-

@@ -46,13 +46,35 @@ import numpy as np
 from mjzoo import names
 from mjzoo.types import Task
 
-__all__ = ["FORMAT", "SOURCES", "ContractError", "register_observation", "observation_terms", "frame", "frame_size",
-           "action_mapping", "model_section"]  # fmt: skip
+__all__ = [
+    "FORMAT",
+    "SOURCES",
+    "ContractError",
+    "register_observation",
+    "observation_terms",
+    "frame",
+    "frame_size",
+    "action_mapping",
+    "model_section",
+]
 
 FORMAT = "mjzoo.policy/1"
-SOURCES = ("qpos", "qvel", "cos_qpos", "sin_qpos", "body_position", "body_orientation", "site_position",
-           "body_linear_velocity_local", "body_angular_velocity_local", "projected_gravity", "point_velocity_world",
-           "sensordata", "actuator_force", "previous_action")  # fmt: skip
+SOURCES = (
+    "qpos",
+    "qvel",
+    "cos_qpos",
+    "sin_qpos",
+    "body_position",
+    "body_orientation",
+    "site_position",
+    "body_linear_velocity_local",
+    "body_angular_velocity_local",
+    "projected_gravity",
+    "point_velocity_world",
+    "sensordata",
+    "actuator_force",
+    "previous_action",
+)
 _FREE = int(mujoco.mjtJoint.mjJNT_FREE)
 Describer = Callable[..., list[dict[str, Any]]]  # (mj_model, *bound params) -> terms
 _OBSERVATIONS: dict[str, Describer] = {}  # "module:qualname" of an observation item -> describer
@@ -97,8 +119,9 @@ def _joints_of(m: mujoco.MjModel, index: np.ndarray, velocity: bool) -> list[str
 def _indexed(source: str, name: str, m: mujoco.MjModel, index) -> dict[str, Any]:
     index = np.asarray(index, np.int64).ravel()
     velocity = source == "qvel"
-    return dict(name=name, size=int(index.size), source=source, index=index.tolist(),
-                joints=_joints_of(m, index, velocity))  # fmt: skip
+    return dict(
+        name=name, size=int(index.size), source=source, index=index.tolist(), joints=_joints_of(m, index, velocity)
+    )
 
 
 def _not_free(m: mujoco.MjModel, velocity: bool) -> np.ndarray:
@@ -110,18 +133,35 @@ def _gathered(m, field, index) -> list[dict[str, Any]]:
     if field in ("qpos", "qvel"):
         return [_indexed(field, f"{field}({', '.join(dict.fromkeys(_joints_of(m, ids, field == 'qvel')))})", m, ids)]
     if field == "sensordata":
-        found = [_name(m, "sensor", s) for s in range(m.nsensor)
-                 if np.isin(m.sensor_adr[s] + np.arange(m.sensor_dim[s]), ids).any()]  # fmt: skip
-        return [dict(name=f"sensors({', '.join(found)})", size=int(ids.size), source="sensordata", sensors=found,
-                     index=ids.tolist())]  # fmt: skip
-    kinds = {"xpos": ("body", "body_position"), "xquat": ("body", "body_orientation"),
-             "site_xpos": ("site", "site_position")}  # fmt: skip
+        found = [
+            _name(m, "sensor", s)
+            for s in range(m.nsensor)
+            if np.isin(m.sensor_adr[s] + np.arange(m.sensor_dim[s]), ids).any()
+        ]
+        return [
+            dict(
+                name=f"sensors({', '.join(found)})",
+                size=int(ids.size),
+                source="sensordata",
+                sensors=found,
+                index=ids.tolist(),
+            )
+        ]
+    kinds = {
+        "xpos": ("body", "body_position"),
+        "xquat": ("body", "body_orientation"),
+        "site_xpos": ("site", "site_position"),
+    }
     if field not in kinds:
         raise ContractError(f"the observation reads data.{field}, which the contract's vocabulary does not cover")
     kind, source = kinds[field]
     labels = [_name(m, kind, i) for i in ids]
-    term = dict(name=f"{source}({', '.join(labels)})", size=int(ids.size * (4 if field == "xquat" else 3)),
-                source=source, **{"bodies" if kind == "body" else "sites": labels})  # fmt: skip
+    term = dict(
+        name=f"{source}({', '.join(labels)})",
+        size=int(ids.size * (4 if field == "xquat" else 3)),
+        source=source,
+        **{"bodies" if kind == "body" else "sites": labels},
+    )
     return [{**term, "components": [0, 1, 2]} if field == "xpos" else term]
 
 
@@ -134,16 +174,24 @@ def _in_base(m, quantity, body) -> list[dict[str, Any]]:
     label, q = _name(m, "body", body), quantity.value
     if q == "gravity":
         g = np.asarray(m.opt.gravity, float)
-        return [dict(name=f"projected_gravity({label})", size=3, source="projected_gravity", body=label,
-                     gravity=g.tolist())]  # fmt: skip
+        return [
+            dict(name=f"projected_gravity({label})", size=3, source="projected_gravity", body=label, gravity=g.tolist())
+        ]
     return [dict(name=f"base_{q}_velocity({label})", size=3, source=f"body_{q}_velocity_local", body=label)]
 
 
 def _point_velocities(m, field, points, bodies) -> list[dict[str, Any]]:
     kind = "body" if field.value == "xpos" else "site"
     labels = [_name(m, kind, i) for i in np.atleast_1d(np.asarray(points))]
-    return [dict(name=f"{kind}_velocities({', '.join(labels)})", size=6 * len(labels), source="point_velocity_world",
-                 kind=kind, names=labels)]  # fmt: skip
+    return [
+        dict(
+            name=f"{kind}_velocities({', '.join(labels)})",
+            size=6 * len(labels),
+            source="point_velocity_world",
+            kind=kind,
+            names=labels,
+        )
+    ]
 
 
 def _concat(m, fns) -> list[dict[str, Any]]:
@@ -152,23 +200,31 @@ def _concat(m, fns) -> list[dict[str, Any]]:
 
 def _cartpole(m, params) -> list[dict[str, Any]]:
     """`mjzoo.envs.cartpole.observe`: [cart position, cos, sin of the pole angle, both velocities]."""
-    return [_indexed("qpos", "cart_position", m, [0]), _indexed("cos_qpos", "pole_angle_cos", m, [1]),
-            _indexed("sin_qpos", "pole_angle_sin", m, [1]), _indexed("qvel", "cart_velocity", m, [0]),
-            _indexed("qvel", "pole_angular_velocity", m, [1])]  # fmt: skip
+    return [
+        _indexed("qpos", "cart_position", m, [0]),
+        _indexed("cos_qpos", "pole_angle_cos", m, [1]),
+        _indexed("sin_qpos", "pole_angle_sin", m, [1]),
+        _indexed("qvel", "cart_velocity", m, [0]),
+        _indexed("qvel", "pole_angular_velocity", m, [1]),
+    ]
 
 
 _CATALOG = "mjzoo.catalog.observations"
-_OBSERVATIONS.update({
-    f"{_CATALOG}:_gathered": _gathered,
-    f"{_CATALOG}:_height": _height,
-    f"{_CATALOG}:_in_base": _in_base,
-    f"{_CATALOG}:_point_velocities": _point_velocities,
-    f"{_CATALOG}:_concat": _concat,
-    f"{_CATALOG}:joint_positions": lambda m: [_indexed("qpos", "joint_positions", m, _not_free(m, False))],
-    f"{_CATALOG}:joint_velocities": lambda m: [_indexed("qvel", "joint_velocities", m, _not_free(m, True))],
-    f"{_CATALOG}:actuator_forces": lambda m: [dict(name="actuator_forces", size=int(m.nu), source="actuator_force")],
-    f"{_CATALOG}:last_action": lambda m: [dict(name="last_action", size=-1, source="previous_action")],
-})  # fmt: skip
+_OBSERVATIONS.update(
+    {
+        f"{_CATALOG}:_gathered": _gathered,
+        f"{_CATALOG}:_height": _height,
+        f"{_CATALOG}:_in_base": _in_base,
+        f"{_CATALOG}:_point_velocities": _point_velocities,
+        f"{_CATALOG}:_concat": _concat,
+        f"{_CATALOG}:joint_positions": lambda m: [_indexed("qpos", "joint_positions", m, _not_free(m, False))],
+        f"{_CATALOG}:joint_velocities": lambda m: [_indexed("qvel", "joint_velocities", m, _not_free(m, True))],
+        f"{_CATALOG}:actuator_forces": lambda m: [
+            dict(name="actuator_forces", size=int(m.nu), source="actuator_force")
+        ],
+        f"{_CATALOG}:last_action": lambda m: [dict(name="last_action", size=-1, source="previous_action")],
+    }
+)
 _STEPS["mjzoo.envs.cartpole:step"] = _cartpole
 
 
@@ -177,10 +233,12 @@ def describe_item(m: mujoco.MjModel, fn: Any) -> list[dict[str, Any]]:
     func, args = (fn.func, fn.args) if isinstance(fn, jax.tree_util.Partial) else (fn, ())
     describe = _OBSERVATIONS.get(function_key(func))
     if describe is None:
-        raise ContractError(f"cannot describe the observation term {function_key(func)}: the contract's vocabulary "
-                            f"covers {', '.join(SOURCES)} (the catalog's joint, base, body, site, sensor, "
-                            "actuator-force and last-action items); describe it with "
-                            "mjzoo.interop.contract.register_observation")  # fmt: skip
+        raise ContractError(
+            f"cannot describe the observation term {function_key(func)}: the contract's vocabulary "
+            f"covers {', '.join(SOURCES)} (the catalog's joint, base, body, site, sensor, "
+            "actuator-force and last-action items); describe it with "
+            "mjzoo.interop.contract.register_observation"
+        )
     return describe(m, *args)
 
 
@@ -195,8 +253,10 @@ def _find(m: mujoco.MjModel, node: Any, depth: int = 0) -> list[dict[str, Any]] 
         if key in _STEPS:
             return _STEPS[key](m, *node.args)
         if key == "mjzoo.combinators:_observed_step":  # with_observation: a function of the observation
-            raise ContractError(f"the task's observation passes through mjzoo.with_observation("
-                                f"{function_key(node.args[1].func)}), which the contract's vocabulary cannot describe")
+            raise ContractError(
+                f"the task's observation passes through mjzoo.with_observation("
+                f"{function_key(node.args[1].func)}), which the contract's vocabulary cannot describe"
+            )
         for arg in node.args:
             if dataclasses.is_dataclass(arg) and not isinstance(arg, type) and hasattr(arg, "observe"):
                 return describe_item(m, arg.observe)
@@ -217,9 +277,11 @@ def observation_terms(task: Task) -> list[dict[str, Any]]:
     m = task.mj_model
     terms = _find(m, task.step)
     if terms is None:
-        raise ContractError(f"cannot find how the task observes: its step ({function_key(task.step.func)}) is not a "
-                            "known task step, and none of the steps it wraps holds a catalog observation (`observe`); "
-                            "describe it with mjzoo.interop.contract.register_observation(..., step=True)")  # fmt: skip
+        raise ContractError(
+            f"cannot find how the task observes: its step ({function_key(task.step.func)}) is not a "
+            "known task step, and none of the steps it wraps holds a catalog observation (`observe`); "
+            "describe it with mjzoo.interop.contract.register_observation(..., step=True)"
+        )
     size = task.action_size
     return [{**t, "size": size} if t["source"] == "previous_action" else t for t in terms]
 
@@ -292,8 +354,9 @@ def frame(terms: list[dict[str, Any]], m: mujoco.MjModel, d: mujoco.MjData, prev
     parts = [np.ravel(_term(m, d, t, np.asarray(previous_action, float))) for t in terms]
     for t, p in zip(terms, parts):
         if p.size != t["size"]:
-            raise ContractError(f"observation term {t['name']!r} has {p.size} values on this model; the contract "
-                                f"says {t['size']}")  # fmt: skip
+            raise ContractError(
+                f"observation term {t['name']!r} has {p.size} values on this model; the contract says {t['size']}"
+            )
     return np.concatenate(parts).astype(np.float32) if parts else np.zeros(0, np.float32)
 
 
@@ -316,9 +379,11 @@ def _actuator_partial(node: Any, depth: int = 0) -> jax.tree_util.Partial | None
             inner = getattr(arg, "actuator", None) if dataclasses.is_dataclass(arg) else None
             found = _actuator_partial(inner if inner is not None else arg, depth + 1)
             if inner is not None and found is None:
-                raise ContractError(f"the task drives its motors with {function_key(getattr(inner, 'func', inner))}, "
-                                    "which the contract's vocabulary cannot describe (it knows the catalog's pd, "
-                                    "position_velocity and torque actuators)")  # fmt: skip
+                raise ContractError(
+                    f"the task drives its motors with {function_key(getattr(inner, 'func', inner))}, "
+                    "which the contract's vocabulary cannot describe (it knows the catalog's pd, "
+                    "position_velocity and torque actuators)"
+                )
             if found is not None:
                 return found
     return None
@@ -335,9 +400,13 @@ def action_mapping(task: Task) -> dict[str, Any]:
     m = task.mj_model
     low, high = m.actuator_ctrlrange[:, 0], m.actuator_ctrlrange[:, 1]
     if task.action_dim is None:
-        to_task = dict(type="ctrlrange_affine", formula="limited: low + (a + 1) / 2 * (high - low); else a",
-                       low=_floats(low), high=_floats(high),
-                       limited=np.asarray(m.actuator_ctrllimited, bool).tolist())  # fmt: skip
+        to_task = dict(
+            type="ctrlrange_affine",
+            formula="limited: low + (a + 1) / 2 * (high - low); else a",
+            low=_floats(low),
+            high=_floats(high),
+            limited=np.asarray(m.actuator_ctrllimited, bool).tolist(),
+        )
     else:
         to_task = dict(type="identity")
     actuator = _actuator_partial(task.step)
@@ -347,41 +416,77 @@ def action_mapping(task: Task) -> dict[str, Any]:
         p = actuator.args[0]
         motors = p.motors if hasattr(p, "motors") else p
         kind = function_key(actuator.func).split(":_")[1]
-        to_ctrl = dict(type=kind, qpos_index=np.asarray(motors.qpos).tolist(),
-                       dof_index=np.asarray(motors.dof).tolist(), gear=_floats(motors.gear),
-                       torque_limit=_floats(motors.limit))  # fmt: skip
+        to_ctrl = dict(
+            type=kind,
+            qpos_index=np.asarray(motors.qpos).tolist(),
+            dof_index=np.asarray(motors.dof).tolist(),
+            gear=_floats(motors.gear),
+            torque_limit=_floats(motors.limit),
+        )
         if kind == "torque":
             to_ctrl["formula"] = "ctrl = clip(clip(a, -1, 1) * torque_limit, -torque_limit, torque_limit) / gear"
         else:
-            to_ctrl.update(kp=_floats(p.kp), kd=_floats(p.kd), default_pose=_floats(p.default_pose),
-                           position_scale=_floats(p.position_scale), velocity_scale=_floats(p.velocity_scale),
-                           formula="every substep: a = clip(a, -1, 1); q* = default_pose + position_scale * a[:nu]; "
-                                   "qd* = velocity_scale * a[nu:] (position_velocity) or 0 (pd); ctrl = "
-                                   "clip(kp (q* - qpos[qpos_index]) + kd (qd* - qvel[dof_index]), -torque_limit, "
-                                   "torque_limit) / gear",
-                           training_noise=dict(gain=float(p.gain_noise), torque=float(p.torque_noise)))  # fmt: skip
+            to_ctrl.update(
+                kp=_floats(p.kp),
+                kd=_floats(p.kd),
+                default_pose=_floats(p.default_pose),
+                position_scale=_floats(p.position_scale),
+                velocity_scale=_floats(p.velocity_scale),
+                formula="every substep: a = clip(a, -1, 1); q* = default_pose + position_scale * a[:nu]; "
+                "qd* = velocity_scale * a[nu:] (position_velocity) or 0 (pd); ctrl = "
+                "clip(kp (q* - qpos[qpos_index]) + kd (qd* - qvel[dof_index]), -torque_limit, "
+                "torque_limit) / gear",
+                training_noise=dict(gain=float(p.gain_noise), torque=float(p.torque_noise)),
+            )
     return dict(size=task.action_size, to_task=to_task, to_ctrl=to_ctrl)
 
 
 def model_section(m: mujoco.MjModel) -> dict[str, Any]:
     """Names in MuJoCo's order, addresses, control ranges and the physics options."""
     kinds = {int(getattr(mujoco.mjtJoint, f"mjJNT_{k.upper()}")): k for k in ("free", "ball", "slide", "hinge")}
-    joints = [dict(name=_name(m, "joint", j), type=kinds[int(m.jnt_type[j])], qpos_address=int(m.jnt_qposadr[j]),
-                   dof_address=int(m.jnt_dofadr[j])) for j in range(m.njnt)]  # fmt: skip
-    actuators = [dict(name=_name(m, "actuator", i), joint=_name(m, "joint", m.actuator_trnid[i, 0])
-                      if m.actuator_trntype[i] == mujoco.mjtTrn.mjTRN_JOINT else None,
-                      ctrl_range=_floats(m.actuator_ctrlrange[i]) if m.actuator_ctrllimited[i] else None,
-                      gear=float(m.actuator_gear[i, 0])) for i in range(m.nu)]  # fmt: skip
-    return dict(nq=int(m.nq), nv=int(m.nv), nu=int(m.nu), joints=joints, actuators=actuators,
-                joint_names=[j["name"] for j in joints], actuator_names=[a["name"] for a in actuators],
-                ctrl_range=np.asarray(m.actuator_ctrlrange, float).tolist(),
-                ctrl_limited=np.asarray(m.actuator_ctrllimited, bool).tolist())  # fmt: skip
+    joints = [
+        dict(
+            name=_name(m, "joint", j),
+            type=kinds[int(m.jnt_type[j])],
+            qpos_address=int(m.jnt_qposadr[j]),
+            dof_address=int(m.jnt_dofadr[j]),
+        )
+        for j in range(m.njnt)
+    ]
+    actuators = [
+        dict(
+            name=_name(m, "actuator", i),
+            joint=_name(m, "joint", m.actuator_trnid[i, 0])
+            if m.actuator_trntype[i] == mujoco.mjtTrn.mjTRN_JOINT
+            else None,
+            ctrl_range=_floats(m.actuator_ctrlrange[i]) if m.actuator_ctrllimited[i] else None,
+            gear=float(m.actuator_gear[i, 0]),
+        )
+        for i in range(m.nu)
+    ]
+    return dict(
+        nq=int(m.nq),
+        nv=int(m.nv),
+        nu=int(m.nu),
+        joints=joints,
+        actuators=actuators,
+        joint_names=[j["name"] for j in joints],
+        actuator_names=[a["name"] for a in actuators],
+        ctrl_range=np.asarray(m.actuator_ctrlrange, float).tolist(),
+        ctrl_limited=np.asarray(m.actuator_ctrllimited, bool).tolist(),
+    )
 
 
 def physics_section(m: mujoco.MjModel, control_dt: float) -> dict[str, Any]:
     """The control step, and the physics step and options C MuJoCo must run with."""
     dt = float(m.opt.timestep)
-    return dict(control_dt=control_dt, physics_dt=dt, substeps=round(control_dt / dt),
-                integrator=mujoco.mjtIntegrator(m.opt.integrator).name, solver=mujoco.mjtSolver(m.opt.solver).name,
-                iterations=int(m.opt.iterations), ls_iterations=int(m.opt.ls_iterations),
-                disable_flags=int(m.opt.disableflags))  # fmt: skip
+    return dict(
+        control_dt=control_dt,
+        physics_dt=dt,
+        substeps=round(control_dt / dt),
+        integrator=mujoco.mjtIntegrator(m.opt.integrator).name,
+        solver=mujoco.mjtSolver(m.opt.solver).name,
+        iterations=int(m.opt.iterations),
+        ls_iterations=int(m.opt.ls_iterations),
+        disable_flags=int(m.opt.disableflags),
+    )

@@ -78,8 +78,9 @@ class Loaded(NamedTuple):
     path: Path
 
 
-def describe(task: Task, policy: Policy, *, source: dict[str, Any] | None = None, key: Array | None = None,
-             check_steps: int = 8) -> dict[str, Any]:  # fmt: skip
+def describe(
+    task: Task, policy: Policy, *, source: dict[str, Any] | None = None, key: Array | None = None, check_steps: int = 8
+) -> dict[str, Any]:
     """The deployment contract of `policy` on `task`: model names and ranges, physics
     timing, the observation layout, the action mapping, the policy's inputs and outputs.
 
@@ -99,12 +100,19 @@ def describe(task: Task, policy: Policy, *, source: dict[str, Any] | None = None
     check = sim2sim.check_observation(task, terms, jax.random.key(0) if key is None else key, check_steps)
     size = check.history * contracts.frame_size(terms)
     if (policy.obs_size, policy.action_size) != (size, task.action_size):
-        raise ValueError(f"export.describe: the policy takes {policy.obs_size} observations and gives "
-                         f"{policy.action_size} actions; the task has {size} and {task.action_size}")  # fmt: skip
-    observation = dict(size=size, frame_size=contracts.frame_size(terms), history=check.history,
-                       history_order="newest first; every frame is the first one at an episode's start",
-                       normalization="inside the model", terms=terms,
-                       checked=dict(steps=check_steps, max_abs_error=check.max_error))  # fmt: skip
+        raise ValueError(
+            f"export.describe: the policy takes {policy.obs_size} observations and gives "
+            f"{policy.action_size} actions; the task has {size} and {task.action_size}"
+        )
+    observation = dict(
+        size=size,
+        frame_size=contracts.frame_size(terms),
+        history=check.history,
+        history_order="newest first; every frame is the first one at an episode's start",
+        normalization="inside the model",
+        terms=terms,
+        checked=dict(steps=check_steps, max_abs_error=check.max_error),
+    )
     inputs = [dict(name=INPUTS[0], shape=["B", size])]
     outputs = [dict(name=OUTPUTS[0], shape=["B", task.action_size], range=[-1.0, 1.0])]
     if policy.recurrent:
@@ -131,8 +139,10 @@ def sidecar(path: str | os.PathLike) -> Path:
 def _refuse(paths: list[Path], overwrite: bool) -> None:
     existing = [str(p) for p in paths if p.exists()]
     if existing and not overwrite:
-        raise FileExistsError(f"{', '.join(existing)} already exist{'s' if len(existing) == 1 else ''}; "
-                              "pass overwrite=True (--overwrite) to replace")  # fmt: skip
+        raise FileExistsError(
+            f"{', '.join(existing)} already exist{'s' if len(existing) == 1 else ''}; "
+            "pass overwrite=True (--overwrite) to replace"
+        )
 
 
 def _specs(policy: Policy, *batch) -> list[jax.ShapeDtypeStruct]:
@@ -174,9 +184,15 @@ def write_onnx(policy: Policy, contract: dict[str, Any], path: str | os.PathLike
 
     names_in, names_out = INPUTS[: 1 + policy.recurrent], OUTPUTS[: 1 + policy.recurrent]
     with _quiet("jax2onnx"):
-        model = jax2onnx.to_onnx(batched, [("B", s.shape[0]) for s in _specs(policy)], model_name="mjzoo_policy",
-                                 opset=_OPSET, input_names=list(names_in), output_names=list(names_out),
-                                 return_mode="proto")  # fmt: skip
+        model = jax2onnx.to_onnx(
+            batched,
+            [("B", s.shape[0]) for s in _specs(policy)],
+            model_name="mjzoo_policy",
+            opset=_OPSET,
+            input_names=list(names_in),
+            output_names=list(names_out),
+            return_mode="proto",
+        )
     del model.metadata_props[:]
     for section, value in contract.items():
         entry = model.metadata_props.add()
@@ -187,8 +203,14 @@ def write_onnx(policy: Policy, contract: dict[str, Any], path: str | os.PathLike
     return path
 
 
-def write_jax(policy: Policy, contract: dict[str, Any], path: str | os.PathLike, *, overwrite: bool = False,
-              platforms: tuple[str, ...] = ("cpu", "cuda")) -> Path:  # fmt: skip
+def write_jax(
+    policy: Policy,
+    contract: dict[str, Any],
+    path: str | os.PathLike,
+    *,
+    overwrite: bool = False,
+    platforms: tuple[str, ...] = ("cpu", "cuda"),
+) -> Path:
     """Serializes `policy`, vmapped over a symbolic batch size, with `jax.export`
     (lowered for `platforms`) to `path` and its contract to ``<path>.json``. Raises
     FileExistsError unless `overwrite`."""
@@ -252,8 +274,10 @@ def load(path: str | os.PathLike) -> Loaded:
     if path.suffix == ".onnx":
         return _load_onnx(path)
     if not sidecar(path).is_file():
-        raise FileNotFoundError(f"export.load: {path} is not .onnx, and has no contract beside it ({sidecar(path)}); "
-                                "expected an ONNX model or a jax.export artifact written by mjzoo")  # fmt: skip
+        raise FileNotFoundError(
+            f"export.load: {path} is not .onnx, and has no contract beside it ({sidecar(path)}); "
+            "expected an ONNX model or a jax.export artifact written by mjzoo"
+        )
     contract = json.loads(sidecar(path).read_text())
     try:
         exported = jax.export.deserialize(bytearray(path.read_bytes()))
@@ -276,10 +300,13 @@ def _load_onnx(path: Path) -> Loaded:
         model = onnx.load(str(path), load_external_data=False)
     except Exception as e:  # noqa: BLE001 (protobuf's DecodeError and others)
         raise ValueError(f"export.load: {path} is not an ONNX model ({type(e).__name__})") from None
-    contract = {p.key[len(_PREFIX):]: json.loads(p.value) for p in model.metadata_props if p.key.startswith(_PREFIX)}
+    contract = {p.key[len(_PREFIX) :]: json.loads(p.value) for p in model.metadata_props if p.key.startswith(_PREFIX)}
     if "policy" not in contract:
         raise ValueError(f"export.load: {path} carries no mjzoo contract in its metadata (not written by mjzoo export)")
     session = onnxruntime.InferenceSession(str(path), providers=["CPUExecutionProvider"])
     inputs = [i.name for i in session.get_inputs()]
-    return Loaded(_batched(lambda *args: session.run(None, dict(zip(inputs, args))), contract["policy"]["recurrent"]),
-                  contract, path)  # fmt: skip
+    return Loaded(
+        _batched(lambda *args: session.run(None, dict(zip(inputs, args))), contract["policy"]["recurrent"]),
+        contract,
+        path,
+    )

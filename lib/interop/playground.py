@@ -50,8 +50,7 @@ from mjzoo import physics
 from mjzoo.interop import _foreign
 from mjzoo.types import Task
 
-__all__ = ["task", "load", "names", "offline_names", "needs_network", "config_defaults", "ppo_hyperparameters",
-           "NAME"]  # fmt: skip
+__all__ = ["task", "load", "names", "offline_names", "needs_network", "config_defaults", "ppo_hyperparameters", "NAME"]
 
 NAME = "playground"  # the reward term's name, the info key and the metrics prefix
 DEFAULT_IMPL = "jax"  # runs on any device; Playground's DM Control configs default to Warp
@@ -81,8 +80,9 @@ def _checked_name(name: str) -> str:
     if name not in registry.ALL_ENVS:
         close = difflib.get_close_matches(name, registry.ALL_ENVS, n=3, cutoff=0.5)
         hint = f" (did you mean {', '.join(close)}?)" if close else ""
-        raise KeyError(f"unknown Playground env {name!r}{hint}; the DM Control Suite envs: "
-                       f"{', '.join(offline_names())}")  # fmt: skip
+        raise KeyError(
+            f"unknown Playground env {name!r}{hint}; the DM Control Suite envs: {', '.join(offline_names())}"
+        )
     return name
 
 
@@ -119,8 +119,10 @@ def load(name: str, **config_overrides: Any) -> MjxEnv:
     try:
         env = registry.load(name, config_overrides=overrides)
     except subprocess.CalledProcessError as error:  # locomotion and manipulation clone their robots
-        raise RuntimeError(f"playground:{name}: could not fetch its robot assets (mujoco_menagerie, cloned from "
-                           f"GitHub at first use): {error}") from error  # fmt: skip
+        raise RuntimeError(
+            f"playground:{name}: could not fetch its robot assets (mujoco_menagerie, cloned from "
+            f"GitHub at first use): {error}"
+        ) from error
     except (TypeError, ValueError) as error:  # ConfigDict's type check names the field
         raise TypeError(f"playground:{name}: config override rejected: {error}") from error
     env._mjx_model = physics.quiet(env._mjx_model)  # for whoever steps it: mjzoo, Brax
@@ -148,18 +150,23 @@ def task(env_or_name: str | MjxEnv, **config_overrides: Any) -> Task:
         env = load(env_or_name, **config_overrides)
     elif isinstance(env_or_name, MjxEnv):
         if config_overrides:
-            raise TypeError(f"playground.task: config overrides {sorted(config_overrides)} apply when loading by "
-                            "name; build the env with them instead")  # fmt: skip
+            raise TypeError(
+                f"playground.task: config overrides {sorted(config_overrides)} apply when loading by "
+                "name; build the env with them instead"
+            )
         env = env_or_name
     else:
         raise TypeError(f"playground.task: expected a Playground env name or MjxEnv, got {type(env_or_name).__name__}")
     if env.unwrapped is not env:
-        raise TypeError(f"playground.task: {type(env).__name__} is a Playground wrapper; pass the bare env "
-                        "(env.unwrapped) and use mjzoo's combinators (with_auto_reset, with_time_limit, "
-                        "with_domain_randomization) instead")  # fmt: skip
+        raise TypeError(
+            f"playground.task: {type(env).__name__} is a Playground wrapper; pass the bare env "
+            "(env.unwrapped) and use mjzoo's combinators (with_auto_reset, with_time_limit, "
+            "with_domain_randomization) instead"
+        )
     length = getattr(getattr(env, "_config", None), "episode_length", None)
-    return _foreign.task(_KIND, env, _foreign.env_model(_KIND, env), env.mj_model,
-                         None if length is None else int(length))  # fmt: skip
+    return _foreign.task(
+        _KIND, env, _foreign.env_model(_KIND, env), env.mj_model, None if length is None else int(length)
+    )
 
 
 # --- Playground's tuned PPO, in mjzoo's terms ------------------------------------------------
@@ -184,14 +191,23 @@ def ppo_hyperparameters(name: str) -> dict[str, Any]:
     unrolls = max(1, rl.batch_size * rl.num_minibatches // rl.num_envs)
     network = rl.get("network_factory", {})
     config = dict(
-        num_envs=rl.num_envs, unroll_length=rl.unroll_length * unrolls, num_minibatches=rl.num_minibatches,
-        num_epochs=rl.num_updates_per_batch, learning_rate=rl.learning_rate, entropy_coef=rl.entropy_cost,
-        discount=rl.discounting, reward_scaling=rl.reward_scaling, normalize_observations=rl.normalize_observations,
-        gae_lambda=0.95, clip_epsilon=rl.get("clipping_epsilon", 0.3), max_grad_norm=rl.get("max_grad_norm", None),
+        num_envs=rl.num_envs,
+        unroll_length=rl.unroll_length * unrolls,
+        num_minibatches=rl.num_minibatches,
+        num_epochs=rl.num_updates_per_batch,
+        learning_rate=rl.learning_rate,
+        entropy_coef=rl.entropy_cost,
+        discount=rl.discounting,
+        reward_scaling=rl.reward_scaling,
+        normalize_observations=rl.normalize_observations,
+        gae_lambda=0.95,
+        clip_epsilon=rl.get("clipping_epsilon", 0.3),
+        max_grad_norm=rl.get("max_grad_norm", None),
         policy_hidden_sizes=tuple(network.get("policy_hidden_layer_sizes", (32,) * 4)),
         value_hidden_sizes=tuple(network.get("value_hidden_layer_sizes", (256,) * 5)),
-        activation="swish", total_steps=rl.num_timesteps,
-    )  # fmt: skip
+        activation="swish",
+        total_steps=rl.num_timesteps,
+    )
     for key in ("policy_obs_key", "value_obs_key"):
         if key in network:
             config[key] = network[key]

@@ -33,8 +33,17 @@ from mjzoo.learning import to_controls
 from mjzoo.running import reset, transition
 from mjzoo.types import State, Task
 
-__all__ = ["Check", "Rollout", "Replayed", "check_observation", "without_observation_noise", "run_in_mujoco", "to_ctrl",
-           "replay", "starts"]
+__all__ = [
+    "Check",
+    "Rollout",
+    "Replayed",
+    "check_observation",
+    "without_observation_noise",
+    "run_in_mujoco",
+    "to_ctrl",
+    "replay",
+    "starts",
+]
 
 Array = jax.Array
 
@@ -80,9 +89,13 @@ class Replayed(NamedTuple):
 
 # --- the observation, checked on MJX's states ---------------------------------------------------------------------
 
-_NOISE = ("mjzoo.perturbations:_noisy_reset", "mjzoo.perturbations:_noisy_obs_step",
-          "mjzoo.catalog.observations:_bias_reset", "mjzoo.catalog.observations:_scaled_reset",
-          "mjzoo.catalog.observations:_scaled_step")  # fmt: skip  (each binds (inner function, scale, ...))
+_NOISE = (
+    "mjzoo.perturbations:_noisy_reset",
+    "mjzoo.perturbations:_noisy_obs_step",
+    "mjzoo.catalog.observations:_bias_reset",
+    "mjzoo.catalog.observations:_scaled_reset",
+    "mjzoo.catalog.observations:_scaled_step",
+)  # (each binds (inner function, scale, ...))
 
 
 def without_observation_noise(task: Task) -> Task:
@@ -122,8 +135,19 @@ def _random_run(task: Task, key: Array, steps: int):
     return state, jax.lax.scan(body, state, jax.random.split(run_key, steps))[1]
 
 
-_READ = ("qpos", "qvel", "act", "xpos", "xquat", "xmat", "site_xpos", "cvel", "subtree_com", "sensordata",
-         "actuator_force")  # fmt: skip  (the arrays the vocabulary reads)
+_READ = (
+    "qpos",
+    "qvel",
+    "act",
+    "xpos",
+    "xquat",
+    "xmat",
+    "site_xpos",
+    "cvel",
+    "subtree_com",
+    "sensordata",
+    "actuator_force",
+)  # (the arrays the vocabulary reads)
 
 
 def _c_data(m: mujoco.MjModel, data: mjx.Data) -> mujoco.MjData:
@@ -148,14 +172,18 @@ def check_observation(task: Task, terms: list[dict[str, Any]], key: Array, steps
     """
     first, (states, actions) = _random_run(without_observation_noise(task), key, steps)
     if not isinstance(first.obs, jax.Array) or first.obs.ndim != 1:
-        raise contracts.ContractError(f"the task's observation is {jax.tree.structure(first.obs)}; the contract "
-                                      "describes one flat array (a dict observation is not supported)")  # fmt: skip
+        raise contracts.ContractError(
+            f"the task's observation is {jax.tree.structure(first.obs)}; the contract "
+            "describes one flat array (a dict observation is not supported)"
+        )
     size = contracts.frame_size(terms)
     history = first.info.get("observation_history")
     length = 1 if history is None else int(history.shape[0])
     if first.obs.shape[0] != length * size:
-        raise contracts.ContractError(f"the task observes {first.obs.shape[0]} numbers; the described terms make "
-                                      f"{size} per frame x {length} frames: {[t['name'] for t in terms]}")  # fmt: skip
+        raise contracts.ContractError(
+            f"the task observes {first.obs.shape[0]} numbers; the described terms make "
+            f"{size} per frame x {length} frames: {[t['name'] for t in terms]}"
+        )
     m, previous, frames = task.mj_model, np.zeros(task.action_size), []
     errors, expected = [], []
     for t in range(steps + 1):
@@ -170,7 +198,7 @@ def check_observation(task: Task, terms: list[dict[str, Any]], key: Array, steps
     if not np.all(worst <= 1e-4) or not np.all(np.isfinite(worst)):
         per_term, start = [], 0
         for term in terms:
-            per_term.append((float(np.max(worst[: size].reshape(-1)[start : start + term["size"]])), term["name"]))
+            per_term.append((float(np.max(worst[:size].reshape(-1)[start : start + term["size"]])), term["name"]))
             start += term["size"]
         bad = ", ".join(f"{n} (error {e:.3g})" for e, n in sorted(per_term, reverse=True) if e > 1e-4)
         raise contracts.ContractError(f"the described observation does not reproduce the task's: {bad or 'history'}")
@@ -193,8 +221,9 @@ def to_ctrl(action: dict[str, Any], task_action: np.ndarray, d: mujoco.MjData) -
     nu = len(gear)
     target_q = np.asarray(c["default_pose"]) + np.asarray(c["position_scale"]) * a[:nu]
     target_qd = np.asarray(c["velocity_scale"]) * a[nu:] if c["type"] == "position_velocity" else 0.0
-    force = (np.asarray(c["kp"]) * (target_q - d.qpos[c["qpos_index"]])
-             + np.asarray(c["kd"]) * (target_qd - d.qvel[c["dof_index"]]))  # fmt: skip
+    force = np.asarray(c["kp"]) * (target_q - d.qpos[c["qpos_index"]]) + np.asarray(c["kd"]) * (
+        target_qd - d.qvel[c["dof_index"]]
+    )
     return np.clip(force, -limit, limit) / gear
 
 
@@ -212,15 +241,24 @@ def _check_model(contract: dict[str, Any], m: mujoco.MjModel) -> None:
     have = contracts.model_section(m)
     for field in ("nq", "nv", "nu", "joint_names", "actuator_names"):
         if have[field] != want[field]:
-            raise ValueError(f"run_in_mujoco: the model's {field} is {have[field]}; the policy was exported for "
-                             f"{want[field]}")  # fmt: skip
+            raise ValueError(
+                f"run_in_mujoco: the model's {field} is {have[field]}; the policy was exported for {want[field]}"
+            )
     if not np.isclose(m.opt.timestep, contract["physics"]["physics_dt"], rtol=1e-6):
-        raise ValueError(f"run_in_mujoco: the model's timestep is {m.opt.timestep} s; the policy's contract says "
-                         f"{contract['physics']['physics_dt']} s (set mj_model.opt.timestep)")  # fmt: skip
+        raise ValueError(
+            f"run_in_mujoco: the model's timestep is {m.opt.timestep} s; the policy's contract says "
+            f"{contract['physics']['physics_dt']} s (set mj_model.opt.timestep)"
+        )
 
 
-def run_in_mujoco(artifact: str | os.PathLike | Any, mj_model: mujoco.MjModel, steps: int, *,
-                  qpos: np.ndarray | None = None, qvel: np.ndarray | None = None) -> Rollout:  # fmt: skip
+def run_in_mujoco(
+    artifact: str | os.PathLike | Any,
+    mj_model: mujoco.MjModel,
+    steps: int,
+    *,
+    qpos: np.ndarray | None = None,
+    qvel: np.ndarray | None = None,
+) -> Rollout:
     """Runs the exported policy for `steps` control steps on `mj_model` in C MuJoCo.
 
     Each step: build the observation from the contract's terms and history, run the
@@ -255,7 +293,7 @@ def run_in_mujoco(artifact: str | os.PathLike | Any, mj_model: mujoco.MjModel, s
     for name in ("time", "qpos", "qvel", "act"):
         log[name].append(np.array(getattr(d, name)))
     for _ in range(steps):
-        frames = (frames + [contracts.frame(obs_spec["terms"], m, d, previous)])[-obs_spec["history"]:]
+        frames = (frames + [contracts.frame(obs_spec["terms"], m, d, previous)])[-obs_spec["history"] :]
         obs = _history(frames, obs_spec["history"])
         if recurrent:
             action, carry = loaded.act(obs, carry)
@@ -269,9 +307,17 @@ def run_in_mujoco(artifact: str | os.PathLike | Any, mj_model: mujoco.MjModel, s
                 log["before_qvel"].append(np.array(d.qvel))
             mujoco.mj_step(m, d)
         previous = task_action
-        for name, value in (("obs", obs), ("action", action), ("task_action", task_action), ("ctrl", d.ctrl),
-                            ("time", d.time), ("qpos", d.qpos), ("qvel", d.qvel), ("act", d.act),
-                            ("sensordata", d.sensordata)):  # fmt: skip
+        for name, value in (
+            ("obs", obs),
+            ("action", action),
+            ("task_action", task_action),
+            ("ctrl", d.ctrl),
+            ("time", d.time),
+            ("qpos", d.qpos),
+            ("qvel", d.qvel),
+            ("act", d.act),
+            ("sensordata", d.sensordata),
+        ):
             log[name].append(np.array(value))
     return Rollout(**{k: np.asarray(v) for k, v in log.items()})
 
@@ -319,8 +365,13 @@ def replay(task: Task, start: State, rollout: Rollout, key: Array | None = None)
         raise ValueError("replay: the rollout did not start from `start` (its qpos differ)")
     steps = rollout.action.shape[0]
     keys = jax.random.split(jax.random.key(0) if key is None else key, steps)
-    after = {"time": rollout.time[1:], "qpos": rollout.qpos[1:], "qvel": rollout.qvel[1:], "act": rollout.act[1:],
-             "sensordata": rollout.sensordata}  # fmt: skip
+    after = {
+        "time": rollout.time[1:],
+        "qpos": rollout.qpos[1:],
+        "qvel": rollout.qvel[1:],
+        "act": rollout.act[1:],
+        "sensordata": rollout.sensordata,
+    }
     before = {"qpos": rollout.before_qpos, "qvel": rollout.before_qvel}
     after, before, actions = jax.tree.map(lambda x: jnp.asarray(x, jnp.float32), (after, before, rollout.task_action))
     rewards, terminated, truncated, obs = jax.device_get(_replay(task, start, actions, keys, after, before))

@@ -36,8 +36,9 @@ def to_controls(task: Task, action: Array) -> Array:
       [..., action_size] controls.
     """
     if jnp.shape(action)[-1:] != (task.action_size,):
-        raise ValueError(f"to_controls: the action has shape {jnp.shape(action)}; the task takes "
-                         f"[..., {task.action_size}]")  # fmt: skip
+        raise ValueError(
+            f"to_controls: the action has shape {jnp.shape(action)}; the task takes [..., {task.action_size}]"
+        )
     if task.action_dim is not None:
         return action
     limited = np.asarray(task.mj_model.actuator_ctrllimited, bool)  # static: the model's structure

@@ -77,8 +77,6 @@ def gae(
         advantage = delta + decay_t * next_advantage
         return advantage, advantage
 
-    _, advantages = jax.lax.scan(
-        backward, jnp.zeros_like(deltas[0]), (deltas, decay), reverse=True
-    )
+    _, advantages = jax.lax.scan(backward, jnp.zeros_like(deltas[0]), (deltas, decay), reverse=True)
     advantages = advantages.astype(dtype)
     return advantages, advantages + values

@@ -50,8 +50,10 @@ def episode_steps(task: Task) -> int:
     if task.time_limit is None:
         raise ValueError("episode_steps: the task has no time limit (mjzoo.with_time_limit); give num_steps")
     if isinstance(task.time_limit, jax.core.Tracer):
-        raise TypeError("episode_steps: the task's time limit is traced (inside jit); read it outside "
-                        "with int(task.time_limit) and pass num_steps as a static argument")  # fmt: skip
+        raise TypeError(
+            "episode_steps: the task's time limit is traced (inside jit); read it outside "
+            "with int(task.time_limit) and pass num_steps as a static argument"
+        )
     return int(task.time_limit)
 
 
@@ -79,7 +81,9 @@ def evaluate(
     task = worlds.sized(task, num_envs)  # Warp: a contact pool for every env
     # Each env's keys as a lone env's would be: a reset key, then one key per step.
     reset_keys, run_keys = jnp.moveaxis(jax.vmap(jax.random.split)(jax.random.split(key, num_envs)), 1, 0)
-    step_keys = jnp.swapaxes(jax.vmap(lambda k: jax.random.split(k, num_steps))(run_keys), 0, 1)  # [num_steps, num_envs]
+    step_keys = jnp.swapaxes(
+        jax.vmap(lambda k: jax.random.split(k, num_steps))(run_keys), 0, 1
+    )  # [num_steps, num_envs]
     states = jax.vmap(reset, in_axes=(None, 0))(task, reset_keys)
     carries = jax.tree.map(lambda x: jnp.broadcast_to(x, (num_envs, *jnp.shape(x))), carry)
 

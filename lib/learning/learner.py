@@ -68,8 +68,10 @@ def learn(
     m = checks.integer("learn", "num_minibatches", num_minibatches)
     leaves = jax.tree.leaves(data)
     if not leaves or any(jnp.ndim(x) < 2 or jnp.shape(x)[:2] != jnp.shape(leaves[0])[:2] for x in leaves):
-        raise ValueError(f"learn: every leaf of data must be [T, N, ...] with the same T and N; got shapes "
-                         f"{[jnp.shape(x) for x in leaves]}")  # fmt: skip
+        raise ValueError(
+            f"learn: every leaf of data must be [T, N, ...] with the same T and N; got shapes "
+            f"{[jnp.shape(x) for x in leaves]}"
+        )
     t, n = jnp.shape(leaves[0])[:2]
     size = n if sequences else t * n
     if size % m:

@@ -103,36 +103,53 @@ def motion_features(mj_model: mujoco.MjModel, key_bodies: Sequence[str] = (), ro
     if isinstance(key_bodies, str):
         key_bodies = (key_bodies,)
     floating = root_body is not None or bool((mj_model.jnt_type == _FREE).any())
-    root_qpos, root_qvel = (names.free_joint_addresses(mj_model, root_body, who) if floating else ([], []))
+    root_qpos, root_qvel = names.free_joint_addresses(mj_model, root_body, who) if floating else ([], [])
     joints = [j for j in range(mj_model.njnt) if int(mj_model.jnt_type[j]) != _FREE]
     balls = [j for j in joints if int(mj_model.jnt_type[j]) == _BALL]
     scalars = [j for j in joints if int(mj_model.jnt_type[j]) != _BALL]
     bodies = names.ids(mj_model, "body", list(key_bodies), who, world=False) if len(key_bodies) else []
     leaves = [
-        root_qpos, root_qvel,
-        names.joint_addresses(mj_model, scalars, False), names.joint_addresses(mj_model, scalars, True),
+        root_qpos,
+        root_qvel,
+        names.joint_addresses(mj_model, scalars, False),
+        names.joint_addresses(mj_model, scalars, True),
         names.joint_addresses(mj_model, balls, False).reshape(-1, 4),
         names.joint_addresses(mj_model, balls, True).reshape(-1, 3),
         bodies,
-    ]  # fmt: skip
-    layout = Layout(_entries(mj_model, floating, scalars, balls, bodies), floating,
-                    (int(mj_model.nq), int(mj_model.nv), int(mj_model.nbody)))  # fmt: skip
+    ]
+    layout = Layout(
+        _entries(mj_model, floating, scalars, balls, bodies),
+        floating,
+        (int(mj_model.nq), int(mj_model.nv), int(mj_model.nbody)),
+    )
     return bind(_features, tree.Static(layout), *(jnp.asarray(x, jnp.int32) for x in leaves))
 
 
 def _entries(mj_model, floating: bool, scalars, balls, bodies) -> tuple[tuple[str, int], ...]:
     """The layout's (name, size) pairs, in the order `_features` concatenates them."""
+
     def joint(ids):
         return names.all_names(mj_model, "joint", ids)
 
-    root = [("root_height", 1), ("root_tangent", 3), ("root_normal", 3),
-            ("root_linear_velocity", 3), ("root_angular_velocity", 3)] if floating else []  # fmt: skip
+    root = (
+        [
+            ("root_height", 1),
+            ("root_tangent", 3),
+            ("root_normal", 3),
+            ("root_linear_velocity", 3),
+            ("root_angular_velocity", 3),
+        ]
+        if floating
+        else []
+    )
     return tuple(
         root
-        + [(f"qpos/{n}", 1) for n in joint(scalars)] + [(f"qpos/{n}", 6) for n in joint(balls)]
-        + [(f"qvel/{n}", 1) for n in joint(scalars)] + [(f"qvel/{n}", 3) for n in joint(balls)]
+        + [(f"qpos/{n}", 1) for n in joint(scalars)]
+        + [(f"qpos/{n}", 6) for n in joint(balls)]
+        + [(f"qvel/{n}", 1) for n in joint(scalars)]
+        + [(f"qvel/{n}", 3) for n in joint(balls)]
         + [(f"key_body/{n}", 3) for n in names.all_names(mj_model, "body", bodies)]
-    )  # fmt: skip
+    )
 
 
 def feature_layout(features: Partial) -> dict[str, slice]:
@@ -154,8 +171,18 @@ def _layout(who: str, features) -> Layout:
 # --- the features of one frame -----------------------------------------------------
 
 
-def _features(layout: tree.Static, root_qpos, root_qvel, scalar_qpos, scalar_qvel, ball_qpos, ball_qvel,
-              key_bodies, model: mjx.Model, data: mjx.Data) -> Array:  # fmt: skip
+def _features(
+    layout: tree.Static,
+    root_qpos,
+    root_qvel,
+    scalar_qpos,
+    scalar_qvel,
+    ball_qpos,
+    ball_qvel,
+    key_bodies,
+    model: mjx.Model,
+    data: mjx.Data,
+) -> Array:
     qpos, qvel = data.qpos.astype(jnp.float32), data.qvel.astype(jnp.float32)
     parts, to_heading, origin = [], jnp.eye(3), jnp.zeros(3)
     if layout.value.floating:
@@ -179,11 +206,13 @@ def _features(layout: tree.Static, root_qpos, root_qvel, scalar_qpos, scalar_qve
 def _rotation(quat: Array) -> Array:
     """The rotation matrix [3, 3] of a wxyz quaternion (normalized here: qpos drifts)."""
     w, x, y, z = quat / jnp.linalg.norm(quat)
-    return jnp.array([
-        [1 - 2 * (y * y + z * z), 2 * (x * y - w * z), 2 * (x * z + w * y)],
-        [2 * (x * y + w * z), 1 - 2 * (x * x + z * z), 2 * (y * z - w * x)],
-        [2 * (x * z - w * y), 2 * (y * z + w * x), 1 - 2 * (x * x + y * y)],
-    ])  # fmt: skip
+    return jnp.array(
+        [
+            [1 - 2 * (y * y + z * z), 2 * (x * y - w * z), 2 * (x * z + w * y)],
+            [2 * (x * y + w * z), 1 - 2 * (x * x + z * z), 2 * (y * z - w * x)],
+            [2 * (x * z - w * y), 2 * (y * z + w * x), 1 - 2 * (x * x + y * y)],
+        ]
+    )
 
 
 def _yaw(angle: Array) -> Array:
@@ -211,13 +240,16 @@ def frames_features(features: Partial, model: mjx.Model, template: mjx.Data, qpo
     nq, nv, _ = _layout("frames_features", features).model_sizes
     for arg, value, width in (("qpos", qpos, nq), ("qvel", qvel, nv)):
         if jnp.ndim(value) != 2 or jnp.shape(value)[1] != width:
-            raise ValueError(f"frames_features: {arg} must have shape [k, {width}] for this model, "
-                             f"got {list(jnp.shape(value))}")  # fmt: skip
+            raise ValueError(
+                f"frames_features: {arg} must have shape [k, {width}] for this model, got {list(jnp.shape(value))}"
+            )
     if jnp.shape(qpos)[0] != jnp.shape(qvel)[0]:
         raise ValueError(f"frames_features: qpos and qvel have {jnp.shape(qpos)[0]} and {jnp.shape(qvel)[0]} frames")
     if jnp.shape(template.qpos) != (nq,):
-        raise ValueError(f"frames_features: template must be one environment's Data (qpos [{nq}]), "
-                         f"got qpos {list(jnp.shape(template.qpos))}")  # fmt: skip
+        raise ValueError(
+            f"frames_features: template must be one environment's Data (qpos [{nq}]), "
+            f"got qpos {list(jnp.shape(template.qpos))}"
+        )
     dtype = template.qpos.dtype
 
     def one(q: Array, v: Array) -> Array:
@@ -247,12 +279,16 @@ def with_feature_window(task: Task, features: Partial, num_frames: int) -> Task:
     """
     layout = _layout("with_feature_window", features)
     if isinstance(num_frames, bool) or not isinstance(num_frames, int) or num_frames < 2:
-        raise ValueError(f"with_feature_window: num_frames={num_frames!r} must be an integer >= 2: the "
-                         "discriminator judges transitions, which take two frames")  # fmt: skip
+        raise ValueError(
+            f"with_feature_window: num_frames={num_frames!r} must be an integer >= 2: the "
+            "discriminator judges transitions, which take two frames"
+        )
     sizes = (int(task.mj_model.nq), int(task.mj_model.nv), int(task.mj_model.nbody))
     if sizes != layout.model_sizes:
-        raise ValueError(f"with_feature_window: features were built for a model with (nq, nv, nbody) = "
-                         f"{layout.model_sizes}, the task's has {sizes}: build them from task.mj_model")  # fmt: skip
+        raise ValueError(
+            f"with_feature_window: features were built for a model with (nq, nv, nbody) = "
+            f"{layout.model_sizes}, the task's has {sizes}: build them from task.mj_model"
+        )
     if WINDOW in jax.eval_shape(task.start, task.model, jax.random.key(0)).info:
         raise ValueError("with_feature_window: the task already keeps a motion window; raise its num_frames")
     restarts = tree.Static(resets_itself(task))

@@ -62,8 +62,9 @@ def check(clip: Clip, mj_model: mujoco.MjModel) -> Clip:
             bad = np.argwhere(~np.isfinite(array))[0]
             raise ValueError(f"{who}: {field}[{bad[0]}, {bad[1]}] is {array[tuple(bad)]}; values must be finite")
     if qpos.shape[0] != qvel.shape[0] or qpos.shape[0] < 2:
-        raise ValueError(f"{who}: qpos has {qpos.shape[0]} frames and qvel {qvel.shape[0]}; "
-                         "give the same number, at least 2")  # fmt: skip
+        raise ValueError(
+            f"{who}: qpos has {qpos.shape[0]} frames and qvel {qvel.shape[0]}; give the same number, at least 2"
+        )
     _check_bodies(who, clip)
     _check_quaternions(who, qpos, mj_model)
     _check_velocities(who, clip, mj_model)
@@ -76,8 +77,9 @@ def velocities_from_positions(qpos: np.ndarray, fps: float, mj_model: mujoco.MjM
     velocities were never recorded gets; quaternions through `mj_differentiatePos`)."""
     qpos = np.asarray(qpos, np.float64)
     if qpos.ndim != 2 or qpos.shape[1] != mj_model.nq or qpos.shape[0] < 2:
-        raise ValueError(f"motion.velocities_from_positions: qpos has shape {qpos.shape}; "
-                         f"give [T >= 2, nq={mj_model.nq}]")  # fmt: skip
+        raise ValueError(
+            f"motion.velocities_from_positions: qpos has shape {qpos.shape}; give [T >= 2, nq={mj_model.nq}]"
+        )
     d = differences(qpos, fps, mj_model)  # [T-1, nv], d[t] between frames t and t+1
     return np.concatenate([d[:1], 0.5 * (d[:-1] + d[1:]), d[-1:]])
 
@@ -101,11 +103,15 @@ def quaternion_addresses(mj_model: mujoco.MjModel) -> list[int]:
 def _check_joints(who: str, got: tuple[str, ...], expected: list[str]) -> None:
     for i, (g, e) in enumerate(zip(got, expected)):
         if g != e:
-            raise ValueError(f"{who}: joint {i} is {g!r} but the model's joint {i} is {e!r}; the clip's joints "
-                             f"must be the model's, in order: {expected}")  # fmt: skip
+            raise ValueError(
+                f"{who}: joint {i} is {g!r} but the model's joint {i} is {e!r}; the clip's joints "
+                f"must be the model's, in order: {expected}"
+            )
     if len(got) != len(expected):
-        raise ValueError(f"{who}: the clip has {len(got)} joints and the model {len(expected)}; "
-                         f"the clip's joints must be the model's, in order: {expected}")  # fmt: skip
+        raise ValueError(
+            f"{who}: the clip has {len(got)} joints and the model {len(expected)}; "
+            f"the clip's joints must be the model's, in order: {expected}"
+        )
 
 
 def _check_bodies(who: str, clip: Clip) -> None:
@@ -122,8 +128,10 @@ def _check_quaternions(who: str, qpos: np.ndarray, mj_model: mujoco.MjModel) -> 
         norm = np.linalg.norm(qpos[:, adr : adr + 4], axis=1)
         bad = np.flatnonzero(np.abs(norm - 1) > QUAT_TOLERANCE)
         if bad.size:
-            raise ValueError(f"{who}: the quaternion qpos[:, {adr}:{adr + 4}] has norm {norm[bad[0]]:.4g} at frame "
-                             f"{bad[0]} ({bad.size} frames off); quaternions must have unit norm")  # fmt: skip
+            raise ValueError(
+                f"{who}: the quaternion qpos[:, {adr}:{adr + 4}] has norm {norm[bad[0]]:.4g} at frame "
+                f"{bad[0]} ({bad.size} frames off); quaternions must have unit norm"
+            )
 
 
 def _check_velocities(who: str, clip: Clip, mj_model: mujoco.MjModel) -> None:
@@ -134,10 +142,15 @@ def _check_velocities(who: str, clip: Clip, mj_model: mujoco.MjModel) -> None:
         return
     mean_v = 0.5 * (v[:-1] + v[1:])
     scale = float(np.sum(mean_v * d) / max(np.sum(d * d), 1e-300))
-    hint = ("qvel looks unrecorded: build it with motion.velocities_from_positions" if abs(scale) < 1e-3
-            else "a velocity per frame, or the wrong fps?")  # fmt: skip
-    raise ValueError(f"{who}: qvel is {scale:.3g}x the qpos differences over 1/fps = {1 / clip.fps:.4g} s "
-                     f"(relative error {min(errors):.2f} > {VELOCITY_TOLERANCE}): {hint}")  # fmt: skip
+    hint = (
+        "qvel looks unrecorded: build it with motion.velocities_from_positions"
+        if abs(scale) < 1e-3
+        else "a velocity per frame, or the wrong fps?"
+    )
+    raise ValueError(
+        f"{who}: qvel is {scale:.3g}x the qpos differences over 1/fps = {1 / clip.fps:.4g} s "
+        f"(relative error {min(errors):.2f} > {VELOCITY_TOLERANCE}): {hint}"
+    )
 
 
 def _relative_error(d: np.ndarray, v: np.ndarray) -> float:

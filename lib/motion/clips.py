@@ -58,11 +58,18 @@ class Clip:
 def save(path: str | Path, clip: Clip) -> Path:
     """Writes `clip` to `path` (.npz) in the format above; returns the path."""
     path = Path(path)
-    arrays = dict(fps=np.float64(clip.fps), qpos=np.asarray(clip.qpos, np.float64),
-                  qvel=np.asarray(clip.qvel, np.float64), joint_names=np.array(clip.joint_names, dtype=str))  # fmt: skip
+    arrays = dict(
+        fps=np.float64(clip.fps),
+        qpos=np.asarray(clip.qpos, np.float64),
+        qvel=np.asarray(clip.qvel, np.float64),
+        joint_names=np.array(clip.joint_names, dtype=str),
+    )
     if clip.body_names:
-        arrays.update(body_names=np.array(clip.body_names, dtype=str), body_pos=np.asarray(clip.body_pos),
-                      body_quat=np.asarray(clip.body_quat))  # fmt: skip
+        arrays.update(
+            body_names=np.array(clip.body_names, dtype=str),
+            body_pos=np.asarray(clip.body_pos),
+            body_quat=np.asarray(clip.body_quat),
+        )
     path.parent.mkdir(parents=True, exist_ok=True)
     np.savez(path, **arrays)
     return path

@@ -52,8 +52,11 @@ from mjzoo.motion.resampling import slerp
 
 __all__ = ["Y_UP_TO_Z_UP", "load", "read", "to_z_up"]
 
-_FREE, _BALL, _HINGE = (int(mujoco.mjtJoint.mjJNT_FREE), int(mujoco.mjtJoint.mjJNT_BALL),
-                        int(mujoco.mjtJoint.mjJNT_HINGE))  # fmt: skip
+_FREE, _BALL, _HINGE = (
+    int(mujoco.mjtJoint.mjJNT_FREE),
+    int(mujoco.mjtJoint.mjJNT_BALL),
+    int(mujoco.mjtJoint.mjJNT_HINGE),
+)
 # The turn from DeepMimic's y-up world to MuJoCo's z-up one: +90 degrees about x.
 Y_UP_TO_Z_UP = np.array([[1.0, 0.0, 0.0], [0.0, 0.0, -1.0], [0.0, 1.0, 0.0]])
 _UNIFORM = 1e-3  # relative spread of frame durations still taken as one frame rate
@@ -70,8 +73,10 @@ def read(path: str | Path) -> tuple[np.ndarray, str]:
         data = json.loads(path.read_text())
         frames = np.asarray(data["Frames"], np.float64)
     except (json.JSONDecodeError, KeyError, TypeError, ValueError) as e:
-        raise ValueError(f"{who}: not a DeepMimic motion (JSON with a 'Frames' list of equal-length "
-                         f"number lists): {type(e).__name__}: {e}") from None  # fmt: skip
+        raise ValueError(
+            f"{who}: not a DeepMimic motion (JSON with a 'Frames' list of equal-length "
+            f"number lists): {type(e).__name__}: {e}"
+        ) from None
     if frames.ndim != 2 or frames.shape[0] < 2 or frames.shape[1] < 8:
         raise ValueError(f"{who}: 'Frames' has shape {frames.shape}; need [T >= 2, 1 + 7 + joint values]")
     if not np.isfinite(frames).all():
@@ -79,8 +84,15 @@ def read(path: str | Path) -> tuple[np.ndarray, str]:
     return frames, str(data.get("Loop", "none"))
 
 
-def load(path: str | Path, mj_model: mujoco.MjModel, joints: Sequence[str] | None = None, *,
-         name: str | None = None, up: str = "y", scale: float = 1.0) -> Clip:  # fmt: skip
+def load(
+    path: str | Path,
+    mj_model: mujoco.MjModel,
+    joints: Sequence[str] | None = None,
+    *,
+    name: str | None = None,
+    up: str = "y",
+    scale: float = 1.0,
+) -> Clip:
     """The DeepMimic motion in `path` as a checked `Clip` of `mj_model`.
 
     Args:
@@ -115,8 +127,13 @@ def load(path: str | Path, mj_model: mujoco.MjModel, joints: Sequence[str] | Non
     qpos, dt = _uniform(who, frames[:, 0], qpos, quats)
     d = differences(qpos, 1.0 / dt, mj_model)  # [T'-1, nv]: frame t to t+1, per second
     qvel = np.concatenate([d[:1], d])  # backward: qvel[t] carries qpos[t-1] to qpos[t]
-    clip = Clip(name=name or Path(path).stem, fps=1.0 / dt, qpos=qpos, qvel=qvel,
-                joint_names=tuple(names.all_names(mj_model, "joint")))  # fmt: skip
+    clip = Clip(
+        name=name or Path(path).stem,
+        fps=1.0 / dt,
+        qpos=qpos,
+        qvel=qvel,
+        joint_names=tuple(names.all_names(mj_model, "joint")),
+    )
     return check(clip, mj_model)
 
 
@@ -134,20 +151,26 @@ def _layout(who: str, m: mujoco.MjModel, joints: Sequence[str] | None, width: in
     kinds = [int(k) for k in m.jnt_type]
     model_names = names.all_names(m, "joint")
     if not kinds or kinds[0] != _FREE or _FREE in kinds[1:]:
-        raise ValueError(f"{who}: the model's first joint must be its only free joint (the root); "
-                         f"its joints: {model_names}")  # fmt: skip
+        raise ValueError(
+            f"{who}: the model's first joint must be its only free joint (the root); its joints: {model_names}"
+        )
     odd = [n for n, k in zip(model_names, kinds) if k not in (_FREE, _BALL, _HINGE)]
     if odd:
-        raise ValueError(f"{who}: the model has slide joints {odd}; DeepMimic characters have spherical "
-                         "(ball) and revolute (hinge) joints only")  # fmt: skip
+        raise ValueError(
+            f"{who}: the model has slide joints {odd}; DeepMimic characters have spherical "
+            "(ball) and revolute (hinge) joints only"
+        )
     order = list(model_names[1:] if joints is None else joints)
     if sorted(order) != sorted(model_names[1:]):
-        raise ValueError(f"{who}: joints={order} must name each of the model's joints but the root once: "
-                         f"{model_names[1:]}")  # fmt: skip
+        raise ValueError(
+            f"{who}: joints={order} must name each of the model's joints but the root once: {model_names[1:]}"
+        )
     if m.nq != width:
-        raise ValueError(f"{who}: a frame holds {width} numbers after its duration, but the model's joints take "
-                         f"{m.nq} (root 7, ball 4, hinge 1 each: {model_names}); the model must be the file's "
-                         "character")  # fmt: skip
+        raise ValueError(
+            f"{who}: a frame holds {width} numbers after its duration, but the model's joints take "
+            f"{m.nq} (root 7, ball 4, hinge 1 each: {model_names}); the model must be the file's "
+            "character"
+        )
     columns, column = np.zeros(m.nq, np.int64), 7
     columns[:7] = np.arange(7)
     for joint_name in order:

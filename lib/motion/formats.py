@@ -39,13 +39,23 @@ from mjzoo.motion.clips import Clip
 
 __all__ = ["isaaclab_npz", "ISAACLAB_FIELDS"]
 
-ISAACLAB_FIELDS = ("fps", "dof_names", "body_names", "dof_positions", "dof_velocities", "body_positions",
-                   "body_rotations", "body_linear_velocities", "body_angular_velocities")  # fmt: skip
+ISAACLAB_FIELDS = (
+    "fps",
+    "dof_names",
+    "body_names",
+    "dof_positions",
+    "dof_velocities",
+    "body_positions",
+    "body_rotations",
+    "body_linear_velocities",
+    "body_angular_velocities",
+)
 _FREE, _BALL = int(mujoco.mjtJoint.mjJNT_FREE), int(mujoco.mjtJoint.mjJNT_BALL)
 
 
-def isaaclab_npz(path: str | Path, mj_model: mujoco.MjModel, root_body: str | None = None,
-                 joint_map: Mapping[str, str] | None = None) -> Clip:  # fmt: skip
+def isaaclab_npz(
+    path: str | Path, mj_model: mujoco.MjModel, root_body: str | None = None, joint_map: Mapping[str, str] | None = None
+) -> Clip:
     """The IsaacLab humanoid-AMP motion in `path` as a `Clip` of `mj_model`, checked.
 
     Args:
@@ -77,10 +87,16 @@ def isaaclab_npz(path: str | Path, mj_model: mujoco.MjModel, root_body: str | No
     if free.size:
         _fill_root(who, f, body_names, mj_model, int(free[0]), root_body, qpos, qvel)
     body_quat = np.asarray(f["body_rotations"], np.float64)
-    clip = Clip(name=Path(path).stem, fps=float(f["fps"]), qpos=qpos, qvel=qvel,
-                joint_names=tuple(names.all_names(mj_model, "joint")), body_names=tuple(body_names),
-                body_pos=np.asarray(f["body_positions"], np.float64),
-                body_quat=body_quat / np.linalg.norm(body_quat, axis=-1, keepdims=True))  # fmt: skip
+    clip = Clip(
+        name=Path(path).stem,
+        fps=float(f["fps"]),
+        qpos=qpos,
+        qvel=qvel,
+        joint_names=tuple(names.all_names(mj_model, "joint")),
+        body_names=tuple(body_names),
+        body_pos=np.asarray(f["body_positions"], np.float64),
+        body_quat=body_quat / np.linalg.norm(body_quat, axis=-1, keepdims=True),
+    )
     return check(clip, mj_model)
 
 
@@ -93,8 +109,14 @@ def _read(path: Path, who: str) -> dict[str, np.ndarray]:
             raise ValueError(f"{who}: the file lacks {missing}; an IsaacLab motion holds {list(ISAACLAB_FIELDS)}")
         data = {k: np.asarray(f[k]) for k in ISAACLAB_FIELDS}
     t, d, b = data["dof_positions"].shape[0], len(data["dof_names"]), len(data["body_names"])
-    shapes = dict(dof_positions=(t, d), dof_velocities=(t, d), body_positions=(t, b, 3), body_rotations=(t, b, 4),
-                  body_linear_velocities=(t, b, 3), body_angular_velocities=(t, b, 3))  # fmt: skip
+    shapes = dict(
+        dof_positions=(t, d),
+        dof_velocities=(t, d),
+        body_positions=(t, b, 3),
+        body_rotations=(t, b, 4),
+        body_linear_velocities=(t, b, 3),
+        body_angular_velocities=(t, b, 3),
+    )
     for k, shape in shapes.items():
         if data[k].shape != shape:
             raise ValueError(f"{who}: {k} has shape {data[k].shape}; with T={t}, D={d}, B={b} it must be {shape}")
@@ -111,16 +133,26 @@ def _fill_joints(who: str, f, dof_names: list[str], m: mujoco.MjModel, qpos: np.
     lacking_in_model = [n for n in dof_names if n not in joint_names]
     lacking_in_file = [n for n in joint_names if n not in dof_names]
     if lacking_in_model or lacking_in_file:
-        raise ValueError(f"{who}: the model lacks the DOFs {lacking_in_model} and the file lacks the joints "
-                         f"{lacking_in_file}; rename with joint_map={{file DOF: model joint}}")  # fmt: skip
+        raise ValueError(
+            f"{who}: the model lacks the DOFs {lacking_in_model} and the file lacks the joints "
+            f"{lacking_in_file}; rename with joint_map={{file DOF: model joint}}"
+        )
     for j, name in zip(one_dof, joint_names):
         column = dof_names.index(name)
         qpos[:, m.jnt_qposadr[j]] = f["dof_positions"][:, column]
         qvel[:, m.jnt_dofadr[j]] = f["dof_velocities"][:, column]
 
 
-def _fill_root(who: str, f, body_names: list[str], m: mujoco.MjModel, joint: int, root_body: str | None,
-               qpos: np.ndarray, qvel: np.ndarray) -> None:  # fmt: skip
+def _fill_root(
+    who: str,
+    f,
+    body_names: list[str],
+    m: mujoco.MjModel,
+    joint: int,
+    root_body: str | None,
+    qpos: np.ndarray,
+    qvel: np.ndarray,
+) -> None:
     if int(np.sum(m.jnt_type == _FREE)) > 1:
         raise ValueError(f"{who}: the model has several free joints; IsaacLab motions drive one floating base")
     root = root_body or names.all_names(m, "body", [m.jnt_bodyid[joint]])[0]

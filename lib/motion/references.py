@@ -68,8 +68,13 @@ class Reference:
         return len(self.names)
 
 
-def reference(clips: Sequence[Clip] | Clip, mj_model: mujoco.MjModel, dt: float,
-              weights: Sequence[float] | None = None, loop: bool | Sequence[bool] = True) -> Reference:  # fmt: skip
+def reference(
+    clips: Sequence[Clip] | Clip,
+    mj_model: mujoco.MjModel,
+    dt: float,
+    weights: Sequence[float] | None = None,
+    loop: bool | Sequence[bool] = True,
+) -> Reference:
     """A `Reference` of `clips`, each checked against `mj_model` and resampled to 1/`dt`
     frames per second. `weights`: C numbers >= 0, not all 0 (normalized to sum 1);
     None: every clip equally likely. `loop`: one flag for all clips or one per clip."""
@@ -134,11 +139,15 @@ def with_reference(task: Task, ref: Reference) -> Task:
         raise TypeError(f"{who}: ref must be a motion.Reference (motion.reference(...)), got {type(ref).__name__}")
     m = task.mj_model
     if ref.qpos.shape[1] != m.nq or ref.qvel.shape[1] != m.nv:
-        raise ValueError(f"{who}: the reference has nq={ref.qpos.shape[1]}, nv={ref.qvel.shape[1]} "
-                         f"but the task's model nq={m.nq}, nv={m.nv}")  # fmt: skip
+        raise ValueError(
+            f"{who}: the reference has nq={ref.qpos.shape[1]}, nv={ref.qvel.shape[1]} "
+            f"but the task's model nq={m.nq}, nv={m.nv}"
+        )
     step = control_dt(task)
     if abs(float(ref.dt) - step) > 1e-6:
-        raise ValueError(f"{who}: the reference has a frame every {float(ref.dt):.6g} s but the task's control "
-                         f"step is {step:.6g} s; build it with motion.reference(clips, mj_model, "
-                         f"dt={step:.6g})")  # fmt: skip
+        raise ValueError(
+            f"{who}: the reference has a frame every {float(ref.dt):.6g} s but the task's control "
+            f"step is {step:.6g} s; build it with motion.reference(clips, mj_model, "
+            f"dt={step:.6g})"
+        )
     return task.replace(motion=ref)

@@ -42,8 +42,7 @@ def resample(clip: Clip, fps: float, mj_model: mujoco.MjModel) -> Clip:
     changes = dict(fps=float(fps), qpos=qpos, qvel=_lerp(clip.qvel, i0, blend))
     if clip.body_names:
         b = np.asarray(clip.body_quat)
-        changes.update(body_pos=_lerp(clip.body_pos, i0, blend),
-                       body_quat=slerp(b[i0], b[i0 + 1], blend[:, None]))  # fmt: skip
+        changes.update(body_pos=_lerp(clip.body_pos, i0, blend), body_quat=slerp(b[i0], b[i0 + 1], blend[:, None]))
     return clip.replace(**changes)
 
 

@@ -128,7 +128,11 @@ def first_plan(
 
 
 def sim_step(
-    config: SamplingConfig, sim_task: Task | Native, planner_state: PlannerState, sim_state: State, key: Array,
+    config: SamplingConfig,
+    sim_task: Task | Native,
+    planner_state: PlannerState,
+    sim_state: State,
+    key: Array,
     hooks: Hooks,
 ) -> tuple[State, Array]:
     """One simulation control step under the current plan: (next state, executed control);
@@ -171,6 +175,7 @@ def run(
         plan_key, sim_key = jax.random.split(key)
         planner_state = replan(planner, config, plan_task, planner_state, sim_state, plan_key, hooks, terminal_value)
         sim_state = after_rollout(hooks, sim_state, planner_state)
+
         def step(state: State, key: Array):
             next_state, control = sim_step(config, sim_task, planner_state, state, key, hooks)
             return next_state, (next_state, control)

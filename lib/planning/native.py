@@ -47,23 +47,27 @@ import jax
 import jax.numpy as jnp
 import mujoco
 import numpy as np
+from mujoco import mjx
+
 from mjzoo import physics
 from mjzoo.planning.learned import TerminalValue, as_terminal_value
 from mjzoo.planning.native_engine import APPLIED, Engine, physical_cores
 from mjzoo.planning.rollouts import Ensemble
 from mjzoo.running import complete, transition
 from mjzoo.types import State, Task
-from mujoco import mjx
 
 __all__ = ["Engine", "Native", "wrap", "physical_cores", "rollout_costs", "split", "transition_native"]
 
 Array = jax.Array
 FROM_C = ("time", "qpos", "qvel", "act", "sensordata")  # what C returns after each step
 _HINTS = {
-    "contact": "a touch or contact sensor", "efc": "a touch or force sensor", "cfrc": "a force or torque sensor",
-    "qacc": "an accelerometer or framelinacc sensor", "actuator_force": "an actuatorfrc sensor",
+    "contact": "a touch or contact sensor",
+    "efc": "a touch or force sensor",
+    "cfrc": "a force or torque sensor",
+    "qacc": "an accelerometer or framelinacc sensor",
+    "actuator_force": "an actuatorfrc sensor",
     "qfrc": "a jointactuatorfrc sensor",
-}  # fmt: skip
+}
 
 
 @jax.tree_util.register_dataclass
@@ -120,8 +124,10 @@ def wrap(task: Task | Ensemble, *, num_threads: int | None = None, chunk_size: i
     variants = task if isinstance(task, Ensemble) else Ensemble(task, {})
     base = variants.task
     if base.model.impl != mjx.Impl.JAX:
-        raise ValueError("planning.native: the task's physics is MuJoCo Warp; native rollouts replay C MuJoCo's "
-                         "states through MJX's JAX implementation: load the planning task with impl='jax'")  # fmt: skip
+        raise ValueError(
+            "planning.native: the task's physics is MuJoCo Warp; native rollouts replay C MuJoCo's "
+            "states through MJX's JAX implementation: load the planning task with impl='jax'"
+        )
     from mjzoo.planning import native_checks as checks  # built on this module
 
     start = checks.start_state(base)
@@ -129,9 +135,11 @@ def wrap(task: Task | Ensemble, *, num_threads: int | None = None, chunk_size: i
     present = [f for f in APPLIED if getattr(mujoco.MjData(models[0]), f).size > 0]
     probed = checks.probe(base, start, present)
     if probed.state_dependent:
-        raise ValueError("planning.native: the controls this task applies depend on the physics state (e.g. a PD "
-                         "actuator evaluated every physics step, or an action latency read from qpos); native "
-                         "rollouts need every control before the rollout starts: plan with backend='mjx'")  # fmt: skip
+        raise ValueError(
+            "planning.native: the controls this task applies depend on the physics state (e.g. a PD "
+            "actuator evaluated every physics step, or an action latency read from qpos); native "
+            "rollouts need every control before the rollout starts: plan with backend='mjx'"
+        )
     threads = physical_cores() if num_threads is None else num_threads
     engine = Engine(models, probed.n_substeps, threads, chunk_size)
     engine.vary(probed.changed)
@@ -195,8 +203,10 @@ def _replay(
     """The task's transitions over C's states (one rollout, [H x n_substeps] each):
     (final state, [H] rewards, [H] terminated)."""
     horizon = actions.shape[0]
-    with_start = {k: jnp.concatenate([getattr(start.data, k)[None].astype(jnp.float32), c_states[k]])
-                  for k in ("time", "qpos", "qvel", "act")}  # fmt: skip
+    with_start = {
+        k: jnp.concatenate([getattr(start.data, k)[None].astype(jnp.float32), c_states[k]])
+        for k in ("time", "qpos", "qvel", "act")
+    }
     after = {k: v[n_substeps::n_substeps] for k, v in with_start.items()}
     after["sensordata"] = c_states["sensordata"][n_substeps - 1 :: n_substeps]
     before = {k: with_start[k][n_substeps - 1 :: n_substeps][:horizon] for k in ("qpos", "qvel")}
@@ -221,8 +231,10 @@ def _roll(engine: Engine, base: Task, models: Any, start: State, controls: Array
         applied = jax.vmap(lambda model: jax.vmap(lambda c: applied_one(model, c))(controls))(models)
     applied = jnp.repeat(applied, engine.n_substeps, axis=2)  # the same inputs every physics step
     shape = applied.shape[:3]
-    out_shapes = (jax.ShapeDtypeStruct((*shape, engine.width), jnp.float32),
-                  jax.ShapeDtypeStruct((*shape, engine.sizes["sensordata"]), jnp.float32))  # fmt: skip
+    out_shapes = (
+        jax.ShapeDtypeStruct((*shape, engine.width), jnp.float32),
+        jax.ShapeDtypeStruct((*shape, engine.sizes["sensordata"]), jnp.float32),
+    )
     d = start.data
     history = d.history if d.history is not None else jnp.zeros((0,))
     args = (
@@ -276,8 +288,10 @@ def split(fn: Callable) -> Callable:
         finally:
             _HOST.reset(token)
         if len(calls) != 1:
-            raise NotImplementedError(f"native.split: the function ran C MuJoCo {len(calls)} times; it must run it "
-                                      "once (jit it whole instead: C is then called through jax.pure_callback)")  # fmt: skip
+            raise NotImplementedError(
+                f"native.split: the function ran C MuJoCo {len(calls)} times; it must run it "
+                "once (jit it whole instead: C is then called through jax.pure_callback)"
+            )
         engines[:] = [calls[0][0]]
         return calls[0][1]
 
@@ -294,8 +308,10 @@ def split(fn: Callable) -> Callable:
         # Flattened once, in Python (an mjx.Data flattens slowly); the jits take the list.
         leaves, treedef = jax.tree.flatten(args)
         if treedef not in treedefs:
-            treedefs[treedef] = (jax.jit(lambda ls: inputs(*jax.tree.unflatten(treedef, ls))),
-                                 jax.jit(lambda c, ls: outputs(c, *jax.tree.unflatten(treedef, ls))))  # fmt: skip
+            treedefs[treedef] = (
+                jax.jit(lambda ls: inputs(*jax.tree.unflatten(treedef, ls))),
+                jax.jit(lambda c, ls: outputs(c, *jax.tree.unflatten(treedef, ls))),
+            )
         first, second = treedefs[treedef]
         c_inputs = first(leaves)
         c_states = engines[0](*jax.tree.map(np.asarray, c_inputs))

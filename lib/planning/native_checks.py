@@ -13,6 +13,8 @@ import jax
 import jax.numpy as jnp
 import mujoco
 import numpy as np
+from mujoco import mjx
+
 from mjzoo.planning.native import (
     _HINTS,
     APPLIED,
@@ -27,7 +29,6 @@ from mjzoo.planning.native import (
 from mjzoo.planning.rollouts import Ensemble
 from mjzoo.running import transition
 from mjzoo.types import State, Task
-from mujoco import mjx
 
 __all__ = ["Probe", "probe", "reads", "start_state"]
 
@@ -44,9 +45,15 @@ def start_state(task: Task) -> State:
     data = mjx.put_data(task.mj_model, mj_data)
     data = jax.tree.map(lambda d, s: np.asarray(d, s.dtype).reshape(s.shape), data, shape.data)
     zeros = lambda s: np.zeros(s.shape, s.dtype)
-    state = shape.replace(data=data, obs=jax.tree.map(zeros, shape.obs), info=jax.tree.map(zeros, shape.info),
-                          metrics=jax.tree.map(zeros, shape.metrics), reward=np.float32(0),
-                          terminated=np.bool_(False), truncated=np.bool_(False))  # fmt: skip
+    state = shape.replace(
+        data=data,
+        obs=jax.tree.map(zeros, shape.obs),
+        info=jax.tree.map(zeros, shape.info),
+        metrics=jax.tree.map(zeros, shape.metrics),
+        reward=np.float32(0),
+        terminated=np.bool_(False),
+        truncated=np.bool_(False),
+    )
     return jax.tree.map(np.asarray, _complete(task, state))
 
 
@@ -83,27 +90,39 @@ def probe(task: Task, start: State, present: list[str]) -> Probe:
     own = task.action_size == task.mj_model.nu
     actions = np.where(limited, low + (u + 1) / 2 * (high - low), u) if own else u
     keys = jax.random.split(jax.random.key(2), 2)
-    moved = start.replace(data=start.data.replace(**_perturbed({k: getattr(start.data, k) for k in ("qpos", "qvel", "act", "time")}, 3)))  # fmt: skip
+    moved = start.replace(
+        data=start.data.replace(**_perturbed({k: getattr(start.data, k) for k in ("qpos", "qvel", "act", "time")}, 3))
+    )
     recording = task.replace(model=_Recorder(task.model))
 
     def run(start, moved):
         after = transition(recording, start, jnp.asarray(actions[0]), keys[0])
-        return (after.data.time, _applied(task, present, start, actions, keys), _applied(task, present, moved, actions, keys),
-                _applied(task, present, start, 2.0 * actions, keys))  # fmt: skip
+        return (
+            after.data.time,
+            _applied(task, present, start, actions, keys),
+            _applied(task, present, moved, actions, keys),
+            _applied(task, present, start, 2.0 * actions, keys),
+        )
 
     time, applied, applied_moved, applied_wide = jax.device_get(jax.jit(run)(start, moved))
     n_substeps = round(float(time - start.data.time) / float(task.mj_model.opt.timestep))
     if n_substeps < 1:
-        raise ValueError("planning.native: the task's step never reached mjzoo.physics.step or substep with the "
-                         "model it was given (e.g. it replaces model fields per episode, as domain randomization "
-                         "does); plan with backend='mjx', or randomize with planning.ensemble")  # fmt: skip
+        raise ValueError(
+            "planning.native: the task's step never reached mjzoo.physics.step or substep with the "
+            "model it was given (e.g. it replaces model fields per episode, as domain randomization "
+            "does); plan with backend='mjx', or randomize with planning.ensemble"
+        )
     sizes = [int(np.size(getattr(start.data, f))) for f in present]
     split = lambda x: dict(zip(present, np.split(x, np.cumsum(sizes)[:-1], axis=1)))
     parts, wide = split(applied), split(applied_wide)
     changed = [f for f in present if not np.allclose(parts[f], np.ravel(getattr(start.data, f)))]
     clamped = np.where(limited, np.clip(2.0 * actions, low, high), 2.0 * actions) if own else None
-    direct = own and set(changed) <= {"ctrl"} and "ctrl" in wide and any(
-        np.allclose(wide["ctrl"], target, atol=1e-6) for target in (2.0 * actions, clamped))  # fmt: skip
+    direct = (
+        own
+        and set(changed) <= {"ctrl"}
+        and "ctrl" in wide
+        and any(np.allclose(wide["ctrl"], target, atol=1e-6) for target in (2.0 * actions, clamped))
+    )
     state_dependent = not np.allclose(applied, applied_moved, atol=1e-6)
     return Probe(n_substeps, changed, actions, parts, state_dependent, bool(direct))
 
@@ -137,8 +156,16 @@ def reads(task: Native, start: State, probed: Probe) -> None:
         axis=1,
     )
     history = d.history if d.history is not None else np.zeros((0,))
-    out = engine(d.time, d.qpos, d.qvel, d.act, history, d.qacc_warmstart, [getattr(d, f) for f in engine.held],
-                 controls.reshape(1, 1, steps, -1))  # fmt: skip
+    out = engine(
+        d.time,
+        d.qpos,
+        d.qvel,
+        d.act,
+        history,
+        d.qacc_warmstart,
+        [getattr(d, f) for f in engine.held],
+        controls.reshape(1, 1, steps, -1),
+    )
     one = {k: v[0, 0] for k, v in _from_c(engine, *out).items()}
     outcome = jax.jit(lambda s: _replay(base, s, jnp.asarray(probed.actions), keys, one, engine.n_substeps)[1:])
     reference = outcome(start)
@@ -159,7 +186,9 @@ def reads(task: Native, start: State, probed: Probe) -> None:
             read.append(name.removeprefix("_impl."))
     if read:
         hints = sorted({hint for name in read for key, hint in _HINTS.items() if name.startswith(key)})
-        raise ValueError(f"planning.native: this task's reward or termination reads data.{', data.'.join(read)}, which "
-                         "exists only inside C MuJoCo's step (mujoco.rollout returns states and sensors)"
-                         + (f"; read {' or '.join(hints)} from data.sensordata instead" if hints else "")
-                         + ", or plan with backend='mjx'")  # fmt: skip
+        raise ValueError(
+            f"planning.native: this task's reward or termination reads data.{', data.'.join(read)}, which "
+            "exists only inside C MuJoCo's step (mujoco.rollout returns states and sensors)"
+            + (f"; read {' or '.join(hints)} from data.sensordata instead" if hints else "")
+            + ", or plan with backend='mjx'"
+        )

@@ -101,10 +101,18 @@ class Engine:
         tick = time_lib.perf_counter()
         # Every array already has rollout's exact shape and dtype: its Python checks are skipped.
         self._pool.rollout(
-            buffers["models"], self._datas, buffers["start"], buffers["controls"], control_spec=spec,
-            skip_checks=True, nstep=steps, initial_warmstart=buffers["warmstart"], state=buffers["states"],
-            sensordata=buffers["sensors"], chunk_size=self.chunk_size or max(1, -(-batch // max(1, self.num_threads))),
-        )  # fmt: skip
+            buffers["models"],
+            self._datas,
+            buffers["start"],
+            buffers["controls"],
+            control_spec=spec,
+            skip_checks=True,
+            nstep=steps,
+            initial_warmstart=buffers["warmstart"],
+            state=buffers["states"],
+            sensordata=buffers["sensors"],
+            chunk_size=self.chunk_size or max(1, -(-batch // max(1, self.num_threads))),
+        )
         self.seconds.append(time_lib.perf_counter() - tick)
         return self._split(buffers, float(time), (num_models, num_samples, steps))
 
@@ -125,10 +133,12 @@ class Engine:
             nstate = mujoco.mj_stateSize(first, self.full)
             self._batches[key] = {
                 "models": [m for m in self.models[:num_models] for _ in range(num_samples)],
-                "start": np.zeros((batch, nstate)), "warmstart": np.zeros((batch, first.nv)),
+                "start": np.zeros((batch, nstate)),
+                "warmstart": np.zeros((batch, first.nv)),
                 "controls": np.zeros((batch, steps, mujoco.mj_stateSize(first, spec))),
-                "states": np.zeros((batch, steps, nstate)), "sensors": np.zeros((batch, steps, first.nsensordata)),
-            }  # fmt: skip
+                "states": np.zeros((batch, steps, nstate)),
+                "sensors": np.zeros((batch, steps, first.nsensordata)),
+            }
         return self._batches[key]
 
     def close(self) -> None:

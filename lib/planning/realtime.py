@@ -33,8 +33,8 @@ from mjzoo.planning import closed_loop
 from mjzoo.planning.closed_loop import Hooks, Result
 from mjzoo.planning.learned import TerminalValue, as_terminal_value, committed
 from mjzoo.planning.native import Native
-from mjzoo.planning.native import wrap as native_wrap
 from mjzoo.planning.native import split as native_split
+from mjzoo.planning.native import wrap as native_wrap
 from mjzoo.planning.rollouts import Ensemble
 from mjzoo.planning.sampling import SamplingConfig
 from mjzoo.running import control_dt, reset
@@ -47,7 +47,7 @@ BACKENDS = ("auto", "mjx", "native")
 
 
 def default_backend() -> str:
-    """"native" (C MuJoCo rollouts) where JAX computes on a CPU, "mjx" on a GPU or TPU."""
+    """ "native" (C MuJoCo rollouts) where JAX computes on a CPU, "mjx" on a GPU or TPU."""
     return "native" if jax.default_backend() == "cpu" else "mjx"
 
 
@@ -130,8 +130,12 @@ def offline(
     start = time.perf_counter()
     result = jax.block_until_ready(compiled(*dynamic, *functions))
     wall = time.perf_counter() - start
-    return result, {"plan_hz": problem.num_replans / wall, "plan_latency_ms": 1e3 * wall / problem.num_replans,
-                    "realtime_factor": problem.seconds / wall, "compile_s": compile_s}  # fmt: skip
+    return result, {
+        "plan_hz": problem.num_replans / wall,
+        "plan_latency_ms": 1e3 * wall / problem.num_replans,
+        "realtime_factor": problem.seconds / wall,
+        "compile_s": compile_s,
+    }
 
 
 @dataclasses.dataclass
@@ -159,7 +163,9 @@ def _compiled(problem: Problem, key: jax.Array, total_steps: int) -> _Compiled:
     step_keys = list(committed(jax.random.split(key, total_steps + 1)))
     plan_keys = list(committed(jax.random.split(plan_key, total_steps + 1)))
     sim_state = committed(reset(problem.sim_task, reset_key))
-    planner_state = committed(jax.jit(lambda s: closed_loop.first_plan(planner, config, plan_task, s, hooks))(sim_state))
+    planner_state = committed(
+        jax.jit(lambda s: closed_loop.first_plan(planner, config, plan_task, s, hooks))(sim_state)
+    )
     # The loop carries both states packed, a few arrays each (`mjzoo.tree.Packing`): a
     # simulation state's ~100 leaves cost more to pass through a jit than a small step.
     sims, plans = Packing.of(sim_state), Packing.of(planner_state)
@@ -178,8 +184,9 @@ def _compiled(problem: Problem, key: jax.Array, total_steps: int) -> _Compiled:
     after_rollout = jax.jit(lambda s, p: sims.pack(closed_loop.after_rollout(hooks, sims.unpack(s), plans.unpack(p))))
     sim_state, planner_state = jax.jit(lambda s, p: (sims.pack(s), plans.pack(p)))(sim_state, planner_state)
     # Compile before the clock starts (every argument committed, of fixed dtypes: once).
-    jax.block_until_ready((replan(planner_state, sim_state, plan_keys[-1], value),
-                           step(planner_state, sim_state, step_keys[-1])))  # fmt: skip
+    jax.block_until_ready(
+        (replan(planner_state, sim_state, plan_keys[-1], value), step(planner_state, sim_state, step_keys[-1]))
+    )
     if hooks.post_rollout is not None:
         jax.block_until_ready(after_rollout(sim_state, planner_state))
     return _Compiled(replan, step, after_rollout, sims, plans, sim_state, planner_state, step_keys, plan_keys)
@@ -188,9 +195,15 @@ def _compiled(problem: Problem, key: jax.Array, total_steps: int) -> _Compiled:
 def _timings(wall: float, latencies: list, step_seconds: list, physics_seconds: list, simulated_s: float) -> dict:
     """`realtime`'s report of where the `wall` seconds went (see there)."""
     ms = lambda xs, q=50: 1e3 * float(np.percentile(xs, q)) if xs else float("nan")  # noqa: E731
-    return {"plan_hz": len(latencies) / wall, "plan_latency_ms": ms(latencies), "plan_latency_p95_ms": ms(latencies, 95),
-            "plan_physics_ms": ms(physics_seconds), "sim_step_ms": ms(step_seconds),
-            "busy": (sum(latencies) + sum(step_seconds)) / wall, "realtime_factor": simulated_s / wall}  # fmt: skip
+    return {
+        "plan_hz": len(latencies) / wall,
+        "plan_latency_ms": ms(latencies),
+        "plan_latency_p95_ms": ms(latencies, 95),
+        "plan_physics_ms": ms(physics_seconds),
+        "sim_step_ms": ms(step_seconds),
+        "busy": (sum(latencies) + sum(step_seconds)) / wall,
+        "realtime_factor": simulated_s / wall,
+    }
 
 
 def realtime(

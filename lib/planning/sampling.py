@@ -26,9 +26,20 @@ from mjzoo.planning.rollouts import RISKS, Ensemble, aggregate, base_task, rollo
 from mjzoo.types import State, Task
 
 __all__ = [
-    "SamplingConfig", "PlannerState", "control_limits", "half_range", "initial_state", "shift", "sample_knots",
-    "sample_around", "controls", "control_at", "sample_costs", "mppi_weights", "cem_update",
-]  # fmt: skip
+    "SamplingConfig",
+    "PlannerState",
+    "control_limits",
+    "half_range",
+    "initial_state",
+    "shift",
+    "sample_knots",
+    "sample_around",
+    "controls",
+    "control_at",
+    "sample_costs",
+    "mppi_weights",
+    "cem_update",
+]
 
 Array = jax.Array
 
@@ -60,11 +71,15 @@ class SamplingConfig:
     def __post_init__(self) -> None:
         name = type(self).__module__.rsplit(".", 1)[-1] + ".Config"
         checks = {
-            "num_samples": self.num_samples >= 2, "horizon_steps": self.horizon_steps >= 1,
-            "num_knots": 1 <= self.num_knots <= self.horizon_steps, "noise_scale": self.noise_scale >= 0,
-            "interpolation": self.interpolation in splines.METHODS, "risk": self.risk in RISKS,
-            "cvar_alpha": 0 < self.cvar_alpha <= 1, "unroll": self.unroll >= 1,
-        }  # fmt: skip
+            "num_samples": self.num_samples >= 2,
+            "horizon_steps": self.horizon_steps >= 1,
+            "num_knots": 1 <= self.num_knots <= self.horizon_steps,
+            "noise_scale": self.noise_scale >= 0,
+            "interpolation": self.interpolation in splines.METHODS,
+            "risk": self.risk in RISKS,
+            "cvar_alpha": 0 < self.cvar_alpha <= 1,
+            "unroll": self.unroll >= 1,
+        }
         for field, ok in checks.items():
             if not ok:
                 raise ValueError(f"{name}: invalid {field}={getattr(self, field)!r}")
@@ -108,7 +123,9 @@ def half_range(task: Task | Ensemble | native.Native) -> np.ndarray:
     return np.where(np.isfinite(high - low), (high - low) / 2, 1.0).astype(np.float32)
 
 
-def initial_state(config: SamplingConfig, task: Task | Ensemble | native.Native, knots: Array | None = None) -> PlannerState:
+def initial_state(
+    config: SamplingConfig, task: Task | Ensemble | native.Native, knots: Array | None = None
+) -> PlannerState:
     """A plan of `knots` ([K, nu]; default: zero controls, clipped into the limits) with
     std = noise_scale x half the control range (x 1 for unlimited actuators).
 

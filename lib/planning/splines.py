@@ -51,7 +51,9 @@ def evaluate(knots: Array, positions: Array, queries: Array, method: str = "cubi
         raise ValueError(f"splines.evaluate: unknown method {method!r}; choose one of {METHODS}")
     knots, positions, queries = jnp.asarray(knots), jnp.asarray(positions), jnp.asarray(queries)
     if knots.ndim != 2 or positions.shape != knots.shape[:1]:
-        raise ValueError(f"splines.evaluate: knots must be [K, nu] and positions [K], got {knots.shape} and {positions.shape}")
+        raise ValueError(
+            f"splines.evaluate: knots must be [K, nu] and positions [K], got {knots.shape} and {positions.shape}"
+        )
     if knots.shape[0] == 1:
         return jnp.broadcast_to(knots[0], queries.shape + knots.shape[1:])
     s = jnp.clip(queries, positions[0], positions[-1])
@@ -69,9 +71,7 @@ def evaluate(knots: Array, positions: Array, queries: Array, method: str = "cubi
     width = (p1 - p0)[:, None]
     m0, m1 = tangents[i] * width, tangents[i + 1] * width
     u2, u3 = u * u, u * u * u
-    return (
-        (2 * u3 - 3 * u2 + 1) * y0 + (u3 - 2 * u2 + u) * m0 + (-2 * u3 + 3 * u2) * y1 + (u3 - u2) * m1
-    )
+    return (2 * u3 - 3 * u2 + 1) * y0 + (u3 - 2 * u2 + u) * m0 + (-2 * u3 + 3 * u2) * y1 + (u3 - u2) * m1
 
 
 def _catmull_rom_tangents(knots: Array, positions: Array) -> Array:

@@ -26,12 +26,23 @@ from mjzoo.algorithms import amp
 from mjzoo.harness import training
 from mjzoo.learning import motion_features
 
-SMALL = amp.Config(num_envs=8, unroll_length=8, num_minibatches=2, num_epochs=1, disc_minibatches=2,
-                   disc_hidden_sizes=(16,), replay_size=64, total_steps=8 * 8 * 4, task_weight=0.0, style_weight=1.0)  # fmt: skip
+SMALL = amp.Config(
+    num_envs=8,
+    unroll_length=8,
+    num_minibatches=2,
+    num_epochs=1,
+    disc_minibatches=2,
+    disc_hidden_sizes=(16,),
+    replay_size=64,
+    total_steps=8 * 8 * 4,
+    task_weight=0.0,
+    style_weight=1.0,
+)
 
 
-def sway_clip(task: mjzoo.Task, tilt: float = 0.3, amplitude: float = 0.1, hz: float = 0.5,
-              seconds: float = 8.0) -> motion.Clip:  # fmt: skip
+def sway_clip(
+    task: mjzoo.Task, tilt: float = 0.3, amplitude: float = 0.1, hz: float = 0.5, seconds: float = 8.0
+) -> motion.Clip:
     """The pendulum held `tilt` rad off hanging, swaying `amplitude` rad at `hz`: tracked
     in C MuJoCo by feedforward (inertia, damping, gravity) plus PD, recorded every
     control step. Without torque the pendulum falls back to hanging; the task's own
@@ -48,12 +59,22 @@ def sway_clip(task: mjzoo.Task, tilt: float = 0.3, amplitude: float = 0.1, hz: f
         qvel.append(data.qvel.copy())
         for _ in range(round(dt / m.opt.timestep)):
             t = data.time
-            torque = (0.25 * amplitude * omega**2 * np.sin(omega * t) + 0.05 * rate(t) - 4.905 * np.sin(data.qpos[0])
-                      + 20.0 * (angle(t) - data.qpos[0]) + 2.0 * (rate(t) - data.qvel[0]))  # fmt: skip
+            torque = (
+                0.25 * amplitude * omega**2 * np.sin(omega * t)
+                + 0.05 * rate(t)
+                - 4.905 * np.sin(data.qpos[0])
+                + 20.0 * (angle(t) - data.qpos[0])
+                + 2.0 * (rate(t) - data.qvel[0])
+            )
             data.ctrl[0] = np.clip(torque / 2.5, -1.0, 1.0)
             mujoco.mj_step(m, data)
-    return motion.Clip(name="sway", fps=1.0 / dt, qpos=np.array(qpos), qvel=np.array(qvel),
-                       joint_names=tuple(names.all_names(m, "joint")))  # fmt: skip
+    return motion.Clip(
+        name="sway",
+        fps=1.0 / dt,
+        qpos=np.array(qpos),
+        qvel=np.array(qvel),
+        joint_names=tuple(names.all_names(m, "joint")),
+    )
 
 
 @pytest.fixture(scope="module")
@@ -111,9 +132,18 @@ def test_update_is_one_jit_that_does_not_retrace(swing, started, small_update):
     state, metrics = update(other, state)
     assert len(traces) == 1
     assert int(state.updates) == 3
-    for name in ("disc/accuracy_reference", "disc/accuracy_policy", "disc/logit_reference", "disc/logit_policy",
-                 "disc/gradient_penalty", "disc/loss", "amp/style_reward", "amp/style_reward_std",
-                 "loss/policy", "loss/value"):  # fmt: skip
+    for name in (
+        "disc/accuracy_reference",
+        "disc/accuracy_policy",
+        "disc/logit_reference",
+        "disc/logit_policy",
+        "disc/gradient_penalty",
+        "disc/loss",
+        "amp/style_reward",
+        "amp/style_reward_std",
+        "loss/policy",
+        "loss/value",
+    ):
         assert np.isfinite(float(metrics[name])), name
     # 3 updates of 64 windows kept with probability 0.05, and the rest of the replay empty
     assert 0 < float(metrics["amp/replay_size"]) <= 3 * 64
@@ -144,8 +174,10 @@ def test_reference_windows_are_consecutive_frames_featurized_like_the_simulation
     # and they match the features the simulation computes on the same states
     features = motion_features.motion_features(swing.mj_model)
     qpos, qvel = np.asarray(ref.qpos[5:7]), np.asarray(ref.qvel[5:7])
-    simulated = [features(swing.model, mjzoo.mjx.forward(swing.model, template.replace(qpos=q, qvel=v)))
-                 for q, v in zip(qpos, qvel)]  # fmt: skip
+    simulated = [
+        features(swing.model, mjzoo.mjx.forward(swing.model, template.replace(qpos=q, qvel=v)))
+        for q, v in zip(qpos, qvel)
+    ]
     np.testing.assert_allclose(np.stack(simulated), frames[5:7], atol=1e-6)
 
 
@@ -168,15 +200,33 @@ def test_diagnose_warns_when_the_discriminator_has_won():
 
 
 def test_train_writes_the_discriminators_diagnostics_and_warns_once(swing, monkeypatch, tmp_path):
-    monkeypatch.setattr(amp, "diagnose", lambda history: "amp: the discriminator has won" if len(history) >= 1 else None)
+    monkeypatch.setattr(
+        amp, "diagnose", lambda history: "amp: the discriminator has won" if len(history) >= 1 else None
+    )
     with pytest.warns(training.TrainingWarning, match="the discriminator has won") as caught:
-        amp.train(SMALL, swing, out_dir=tmp_path / "run", updates_per_chunk=2, eval_envs=2, eval_steps=20, video=False,
-                  progress=False)  # fmt: skip
+        amp.train(
+            SMALL,
+            swing,
+            out_dir=tmp_path / "run",
+            updates_per_chunk=2,
+            eval_envs=2,
+            eval_steps=20,
+            video=False,
+            progress=False,
+        )
     assert len([w for w in caught if issubclass(w.category, training.TrainingWarning)]) == 1  # not once per chunk
     lines = [json.loads(line) for line in (tmp_path / "run" / "metrics.jsonl").read_text().splitlines()]
     assert [line["step"] for line in lines] == [128, 256]
-    for name in ("disc/accuracy_reference", "disc/accuracy_policy", "disc/logit_reference", "disc/logit_policy",
-                 "disc/gradient_penalty", "amp/style_reward", "amp/style_reward_std", "eval/return"):  # fmt: skip
+    for name in (
+        "disc/accuracy_reference",
+        "disc/accuracy_policy",
+        "disc/logit_reference",
+        "disc/logit_policy",
+        "disc/gradient_penalty",
+        "amp/style_reward",
+        "amp/style_reward_std",
+        "eval/return",
+    ):
         assert name in lines[-1], name
     assert json.loads((tmp_path / "run" / "config.json").read_text())["algorithm"] == "amp"
 

@@ -22,16 +22,34 @@ import mjzoo
 import mjzoo.envs
 from mjzoo import motion
 from mjzoo.algorithms import amp, ppo
-
 from tests.algorithms.test_amp import sway_clip
 
 STEPS = 64 * 32 * 80  # 164k env steps
-AMP = amp.Config(num_envs=64, unroll_length=32, num_minibatches=4, num_epochs=4, learning_rate=1e-3,
-                 entropy_coef=1e-3, task_weight=0.0, style_weight=1.0, disc_hidden_sizes=(64, 64),
-                 disc_learning_rate=1e-3, disc_minibatches=4, replay_size=10_000, gradient_penalty_weight=1.0,
-                 total_steps=STEPS)  # fmt: skip
-PPO = ppo.Config(num_envs=64, unroll_length=32, num_minibatches=4, num_epochs=4, learning_rate=1e-3,
-                 entropy_coef=1e-3, total_steps=STEPS)  # fmt: skip
+AMP = amp.Config(
+    num_envs=64,
+    unroll_length=32,
+    num_minibatches=4,
+    num_epochs=4,
+    learning_rate=1e-3,
+    entropy_coef=1e-3,
+    task_weight=0.0,
+    style_weight=1.0,
+    disc_hidden_sizes=(64, 64),
+    disc_learning_rate=1e-3,
+    disc_minibatches=4,
+    replay_size=10_000,
+    gradient_penalty_weight=1.0,
+    total_steps=STEPS,
+)
+PPO = ppo.Config(
+    num_envs=64,
+    unroll_length=32,
+    num_minibatches=4,
+    num_epochs=4,
+    learning_rate=1e-3,
+    entropy_coef=1e-3,
+    total_steps=STEPS,
+)
 
 
 def style_errors(task: mjzoo.Task, act, params, seed: int = 1) -> list[float]:

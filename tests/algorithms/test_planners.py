@@ -17,9 +17,9 @@ import pytest
 import mjzoo
 import mjzoo.envs
 from mjzoo import planning
-from mjzoo.planning import closed_loop, realtime
 from mjzoo.algorithms import cem, mppi, predictive_sampling
 from mjzoo.envs import cylinder_push, point_mass
+from mjzoo.planning import closed_loop, realtime
 
 # The suite compiles at XLA -O0 (conftest) for short tests; a closed-loop run is long,
 # and at -O3 it runs about 6x faster for the same compile time.
@@ -105,7 +105,9 @@ def test_robust_planning_over_an_ensemble_swings_up_a_heavier_pendulum(risk):
     4 models with masses 0.9-1.5x and aggregates with the risk measure (8 s: the heavier
     pendulum needs more swings)."""
     setup = setup_for("pendulum_swingup", "predictive_sampling")
-    sim_task = setup.sim_task.replace(model=setup.sim_task.model.replace(body_mass=setup.sim_task.model.body_mass * 1.3))
+    sim_task = setup.sim_task.replace(
+        model=setup.sim_task.model.replace(body_mass=setup.sim_task.model.body_mass * 1.3)
+    )
     models = planning.ensemble(setup.plan_task, jax.tree_util.Partial(_heavier, 0.9, 1.5), 4, jax.random.key(7))
     config = dataclasses.replace(setup.config, risk=risk, cvar_alpha=0.5)
     robust = dataclasses.replace(setup, sim_task=sim_task, plan_task=models, config=config, seconds=8.0)
@@ -117,7 +119,9 @@ def test_robust_planning_over_an_ensemble_swings_up_a_heavier_pendulum(risk):
 def test_plan_cli_runs_in_real_time_and_writes_its_files(tmp_path):
     from mjzoo.harness import cli
 
-    cli.main(["plan", "predictive_sampling", "pendulum_swingup", "--seconds", "0.5", "--out", str(tmp_path), "--no-video"])
+    cli.main(
+        ["plan", "predictive_sampling", "pendulum_swingup", "--seconds", "0.5", "--out", str(tmp_path), "--no-video"]
+    )
     summary = json.loads((tmp_path / "summary.json").read_text())
     assert {"success", "final_cost", "plan_hz", "plan_latency_ms"} <= set(summary)
     assert summary["mode"] == "realtime" and summary["plan_hz"] > 0 and summary["plan_latency_ms"] > 0

@@ -4,7 +4,6 @@ exact resume, multi-device equivalence, vmapped seeds, user networks and optimiz
 from __future__ import annotations
 
 import dataclasses
-
 import json
 import os
 import subprocess
@@ -20,9 +19,9 @@ import pytest
 
 import mjzoo
 import mjzoo.envs
+from mjzoo.algorithms import ppo
 from mjzoo.harness import checkpoints, training
 from mjzoo.learning import networks
-from mjzoo.algorithms import ppo
 
 SMALL = ppo.Config(num_envs=8, unroll_length=8, num_minibatches=2, num_epochs=1, total_steps=8 * 8 * 4)
 
@@ -117,7 +116,9 @@ def test_vmapped_seeds_equal_separate_runs(pendulum):
     states, _ = batched(jax.vmap(lambda k: ppo.init(SMALL, pendulum, k))(keys))
     for i, key in enumerate(keys):
         single, _ = update(pendulum, ppo.init(SMALL, pendulum, key))
-        chex.assert_trees_all_close(jax.tree.map(lambda x: x[i], states.params), single.params, rtol=1e-5, atol=1e-6)
+        chex.assert_trees_all_close(
+            jax.tree.map(lambda x, i=i: x[i], states.params), single.params, rtol=1e-5, atol=1e-6
+        )
     assert not np.allclose(states.params["value"][0]["kernel"][0], states.params["value"][0]["kernel"][1])
 
 
@@ -132,8 +133,9 @@ def test_user_network_and_optimizer(pendulum):
 
     module = Tiny()
     net = networks.Network(init=lambda key, x: module.init(key, x), apply=module.apply)
-    config = ppo.Config(num_envs=8, unroll_length=8, num_minibatches=2, num_epochs=1,
-                        policy_network=net, optimizer=optax.sgd(1e-2))  # fmt: skip
+    config = ppo.Config(
+        num_envs=8, unroll_length=8, num_minibatches=2, num_epochs=1, policy_network=net, optimizer=optax.sgd(1e-2)
+    )
     state = ppo.init(config, pendulum, jax.random.key(4))
     new, metrics = jax.jit(lambda t, s: ppo.update(config, t, s))(pendulum, state)
     assert "params" in new.params["policy"]  # flax's own layout, untouched by us
@@ -143,8 +145,17 @@ def test_user_network_and_optimizer(pendulum):
 
 def _train(tmp_path, name: str, resume: bool = False):
     config = ppo.Config(num_envs=8, unroll_length=8, num_minibatches=2, num_epochs=2, total_steps=8 * 8 * 4)
-    settings = training.Settings(out_dir=tmp_path / name, updates_per_chunk=2, eval_envs=2, eval_steps=20, eval_every=1,
-                                 checkpoint_every=1, video=False, resume=resume, progress=False)  # fmt: skip
+    settings = training.Settings(
+        out_dir=tmp_path / name,
+        updates_per_chunk=2,
+        eval_envs=2,
+        eval_steps=20,
+        eval_every=1,
+        checkpoint_every=1,
+        video=False,
+        resume=resume,
+        progress=False,
+    )
     return ppo.train(config, mjzoo.envs.make("cartpole_balance"), settings)
 
 
@@ -170,8 +181,12 @@ def test_a_crashed_run_resumes_to_the_same_result(tmp_path, monkeypatch):
     assert [line["step"] for line in lines] == [128, 256]  # the crashed chunk's line was cut back
     assert all("eval/return" in line for line in lines)
     assert sorted(p.name for p in (tmp_path / "crashed").iterdir()) == [
-        "checkpoints", "config.json", "curves.png", "metrics.jsonl", "tensorboard",
-    ]  # fmt: skip
+        "checkpoints",
+        "config.json",
+        "curves.png",
+        "metrics.jsonl",
+        "tensorboard",
+    ]
 
 
 TWO_DEVICES = textwrap.dedent(
@@ -228,8 +243,11 @@ TWO_DEVICES = textwrap.dedent(
 
 
 def test_two_devices_match_one_device():
-    env = {**os.environ, "XLA_FLAGS": os.environ.get("XLA_FLAGS", "") + " --xla_force_host_platform_device_count=2",
-           "JAX_PLATFORMS": "cpu"}  # fmt: skip
+    env = {
+        **os.environ,
+        "XLA_FLAGS": os.environ.get("XLA_FLAGS", "") + " --xla_force_host_platform_device_count=2",
+        "JAX_PLATFORMS": "cpu",
+    }
     result = subprocess.run([sys.executable, "-c", TWO_DEVICES], env=env, capture_output=True, text=True, timeout=600)
     assert result.returncode == 0, result.stderr[-3000:]
     assert "max param difference" in result.stdout

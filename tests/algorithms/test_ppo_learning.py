@@ -9,8 +9,8 @@ import numpy as np
 
 import mjzoo
 import mjzoo.envs
-from mjzoo.harness import training
 from mjzoo.algorithms import ppo
+from mjzoo.harness import training
 
 
 def test_learns_cartpole_balance():
@@ -18,7 +18,9 @@ def test_learns_cartpole_balance():
     task = mjzoo.envs.make("cartpole_balance")
     config = ppo.Config(**{**mjzoo.envs.hyperparameters("cartpole_balance", "ppo"), "total_steps": 163_840})
     before = ppo.evaluate(config, task, ppo.init(config, task, jax.random.key(0)), jax.random.key(1), 16, 500)[0]
-    state, last = ppo.train(config, task, training.Settings(updates_per_chunk=10, eval_envs=16, eval_steps=500, progress=False))
+    state, last = ppo.train(
+        config, task, training.Settings(updates_per_chunk=10, eval_envs=16, eval_steps=500, progress=False)
+    )
     assert float(before) < 150
     assert last["eval/return"] > 500
 
@@ -35,9 +37,20 @@ def test_recurrent_gru_policy_learns_a_partially_observed_task():
     seeds learned and lost it again (544 then 384 at the end), and which ones changed with
     XLA's rounding; with 0.1, 11 runs (seeds 0-7, two auto-reset forms) all ended >= 527."""
     task = mjzoo.with_observation(mjzoo.envs.make("cartpole_balance"), positions_only)
-    config = ppo.Config(num_envs=64, unroll_length=32, num_minibatches=4, num_epochs=4, learning_rate=1e-3,
-                        clip_epsilon=0.1, entropy_coef=1e-3, recurrent=True, total_steps=163_840)  # fmt: skip
-    state, last = ppo.train(config, task, training.Settings(updates_per_chunk=20, eval_envs=16, eval_steps=500, progress=False))
+    config = ppo.Config(
+        num_envs=64,
+        unroll_length=32,
+        num_minibatches=4,
+        num_epochs=4,
+        learning_rate=1e-3,
+        clip_epsilon=0.1,
+        entropy_coef=1e-3,
+        recurrent=True,
+        total_steps=163_840,
+    )
+    state, last = ppo.train(
+        config, task, training.Settings(updates_per_chunk=20, eval_envs=16, eval_steps=500, progress=False)
+    )
     assert jax.tree.leaves(state.collector.carry)[0].shape == (64, config.gru_hidden_size)
     assert last["eval/return"] > 450
 
@@ -47,7 +60,9 @@ def test_learns_pendulum_swingup():
     a mean deterministic return >= 380 of ~500 means upright within ~3 s and held."""
     task = mjzoo.envs.make("pendulum_swingup")
     config = ppo.Config(**mjzoo.envs.hyperparameters("pendulum_swingup", "ppo"))
-    state, last = ppo.train(config, task, training.Settings(updates_per_chunk=10, eval_envs=16, eval_steps=500, progress=False))
+    state, last = ppo.train(
+        config, task, training.Settings(updates_per_chunk=10, eval_envs=16, eval_steps=500, progress=False)
+    )
     assert last["eval/return"] >= 380
     _, _, trajectory = ppo.evaluate(config, task, state, jax.random.key(7), 4, 500)
     angle = np.asarray(trajectory.next_state.data.qpos[-50:, 0])  # the last second

@@ -100,8 +100,9 @@ def test_pd_default_pose_is_qpos0_unless_given():
 
 
 def test_position_velocity_by_hand():
-    pv = actuators.position_velocity(JOINTS, kp=[20.0, 10.0], kd=[1.0, 2.0], position_scale=[0.5, 1.0],
-                                     velocity_scale=[2.0, 4.0])  # fmt: skip
+    pv = actuators.position_velocity(
+        JOINTS, kp=[20.0, 10.0], kd=[1.0, 2.0], position_scale=[0.5, 1.0], velocity_scale=[2.0, 4.0]
+    )
     data = joint_data([0.1, -0.3], [2.0, -1.0])
     # j1: target q 0.4, target qdot 2 * 0.5 = 1: 20 * 0.3 + 1 * (1 - 2) = 5.
     # j2: target q 0.2, target qdot 4 * -0.5 = -2: 10 * 0.5 + 2 * (-2 + 1) = 3, ctrl 1.5.
@@ -137,8 +138,9 @@ def test_new_gains_do_not_retrace():
         return actuator(JOINTS_MODEL, joint_data([0.0, 0.0], [0.0, 0.0]), jnp.ones(2), KEY)
 
     for kp in (1.0, 2.0, 3.0):
-        np.testing.assert_allclose(ctrl(actuators.pd(JOINTS, kp, 0.5, default_pose=0.0, action_scale=0.1)),
-                                   [0.1 * kp, 0.1 * kp / 2], rtol=1e-5)  # fmt: skip
+        np.testing.assert_allclose(
+            ctrl(actuators.pd(JOINTS, kp, 0.5, default_pose=0.0, action_scale=0.1)), [0.1 * kp, 0.1 * kp / 2], rtol=1e-5
+        )
     assert len(traces) == 1
 
 
@@ -276,19 +278,24 @@ def test_actuators_must_be_motors():
             make(servo)
 
 
-@pytest.mark.parametrize("make, match", [
-    (lambda: actuators.pd(JOINTS, [1.0, 2.0, 3.0], 0.1), r"kp=\[1.0, 2.0, 3.0\] must be .* or 2 of them"),
-    (lambda: actuators.pd(JOINTS, 1.0, -0.1), "kd=-0.1 must be a finite number >= 0"),
-    (lambda: actuators.pd(JOINTS, 1.0, 0.1, gain_noise=1.0), "gain_noise"),
-    (lambda: actuators.pd(JOINTS, 1.0, 0.1, torque_noise=-1.0), "torque_noise"),
-    (lambda: actuators.torque(JOINTS, torque_limit=0.0), "must be > 0"),
-    (lambda: actuators.torque(mujoco.MjModel.from_xml_string(JOINTS_XML.replace('ctrlrange="-3 5"', ""))),
-     r"\['m2'\] have no ctrlrange or forcerange; pass torque_limit"),
-    (lambda: actuators.with_action_latency(block_task(), -1), "max_latency"),
-    (lambda: actuators.with_action_latency(block_task(), 1.5), "max_latency"),
-    (lambda: actuators.with_action_drop(block_task(), 1.5), "probability"),
-    (lambda: actuators.with_action_filter(block_task(), 0.0), "alpha"),
-])  # fmt: skip
+@pytest.mark.parametrize(
+    "make, match",
+    [
+        (lambda: actuators.pd(JOINTS, [1.0, 2.0, 3.0], 0.1), r"kp=\[1.0, 2.0, 3.0\] must be .* or 2 of them"),
+        (lambda: actuators.pd(JOINTS, 1.0, -0.1), "kd=-0.1 must be a finite number >= 0"),
+        (lambda: actuators.pd(JOINTS, 1.0, 0.1, gain_noise=1.0), "gain_noise"),
+        (lambda: actuators.pd(JOINTS, 1.0, 0.1, torque_noise=-1.0), "torque_noise"),
+        (lambda: actuators.torque(JOINTS, torque_limit=0.0), "must be > 0"),
+        (
+            lambda: actuators.torque(mujoco.MjModel.from_xml_string(JOINTS_XML.replace('ctrlrange="-3 5"', ""))),
+            r"\['m2'\] have no ctrlrange or forcerange; pass torque_limit",
+        ),
+        (lambda: actuators.with_action_latency(block_task(), -1), "max_latency"),
+        (lambda: actuators.with_action_latency(block_task(), 1.5), "max_latency"),
+        (lambda: actuators.with_action_drop(block_task(), 1.5), "probability"),
+        (lambda: actuators.with_action_filter(block_task(), 0.0), "alpha"),
+    ],
+)
 def test_bad_input_is_reported(make, match):
     with pytest.raises(ValueError, match=match):
         make()

@@ -77,8 +77,15 @@ def test_heading_command_steers_by_the_heading_error():
     # Target heading 1 rad; the base turns at 1 rad/s, so after n steps its heading is
     # 0.02 n and the yaw rate is clip(0.5 (1 - 0.02 n), +-0.3): 0.3 up to n = 20, then
     # 0.5 * 0.58 = 0.29 at n = 21, 0.28, 0.27, 0.26.
-    task = commands.with_heading_command(base_task(spin=1.0), vx=(0.5, 0.5), vy=(-0.2, -0.2), heading=(1.0, 1.0),
-                                         gain=0.5, max_yaw_rate=0.3, resample_interval=(0.1, 0.1))  # fmt: skip
+    task = commands.with_heading_command(
+        base_task(spin=1.0),
+        vx=(0.5, 0.5),
+        vy=(-0.2, -0.2),
+        heading=(1.0, 1.0),
+        gain=0.5,
+        max_yaw_rate=0.3,
+        resample_interval=(0.1, 0.1),
+    )
     start, s = run(task, KEY)
     n = np.arange(1, T + 1)
     expected = np.clip(0.5 * (1.0 - DT * n), -0.3, 0.3)
@@ -91,8 +98,15 @@ def test_heading_command_steers_by_the_heading_error():
 
 def test_heading_command_turns_the_short_way():
     # Heading -3 rad, target 3 rad: the error is 6 - 2 pi = -0.283 rad, not +6.
-    task = commands.with_heading_command(base_task(yaw=-3.0), vx=(0.5, 0.5), vy=(-0.2, -0.2), heading=(3.0, 3.0),
-                                         gain=0.5, max_yaw_rate=1.0, resample_interval=(0.1, 0.1))  # fmt: skip
+    task = commands.with_heading_command(
+        base_task(yaw=-3.0),
+        vx=(0.5, 0.5),
+        vy=(-0.2, -0.2),
+        heading=(3.0, 3.0),
+        gain=0.5,
+        max_yaw_rate=1.0,
+        resample_interval=(0.1, 0.1),
+    )
     start, _ = run(task, KEY)
     np.testing.assert_allclose(start.info["command"][:, 2], 0.5 * (6.0 - 2 * np.pi), atol=1e-5)
 

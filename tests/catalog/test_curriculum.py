@@ -27,8 +27,8 @@ from mujoco import mjx
 
 import mjzoo
 import mjzoo.envs
-from mjzoo.catalog import curriculum, events
 from mjzoo import physics as physics_lib
+from mjzoo.catalog import curriculum, events
 from mjzoo.types import State, Task, bind
 
 XML = """
@@ -81,8 +81,14 @@ def _terminate(p, model, state):
 def make(level: float, *, speed=0.0, spawn=0.0, threshold=np.inf, push=0.0, gravity=0.0, limit=100) -> Task:
     p = Params(jnp.float32(speed), jnp.float32(spawn), jnp.float32(threshold))
     model = PHYSICS.model.replace(opt=PHYSICS.model.opt.replace(gravity=jnp.array([0.0, 0.0, -gravity * level])))
-    task = Task(model=model, start=bind(_reset, p), step=bind(_step, p), reward=bind(_reward, p),
-                terminate=bind(_terminate, p), mj_model=MJ)  # fmt: skip
+    task = Task(
+        model=model,
+        start=bind(_reset, p),
+        step=bind(_step, p),
+        reward=bind(_reward, p),
+        terminate=bind(_terminate, p),
+        mj_model=MJ,
+    )
     task = events.with_velocity_pushes(task, interval=(DT, DT), linear=(push * level, 0.0, 0.0))
     return mjzoo.with_auto_reset(mjzoo.with_time_limit(task, limit))
 
@@ -148,13 +154,17 @@ def test_by_episode_length_moves_the_level_at_episode_ends():
 def test_by_distance_measures_from_the_episode_start():
     # Episodes of 5 steps at 1 m/s from x = 1: the distance at the state before the final
     # transition is 4 * 0.02 = 0.08 m (from the start, not from the origin).
-    task = curriculum.with_curriculum(functools.partial(make, speed=1.0, spawn=1.0, limit=5),
-                                      curriculum.by_distance(MJ, target=0.07, up=0.25, down=0.1, initial=0.5))
+    task = curriculum.with_curriculum(
+        functools.partial(make, speed=1.0, spawn=1.0, limit=5),
+        curriculum.by_distance(MJ, target=0.07, up=0.25, down=0.1, initial=0.5),
+    )
     _, s = run(task, KEYS)
     np.testing.assert_allclose(s.metrics["curriculum/level"][0], [0.5] * 5 + [0.75] * 5 + [1.0] * 2)
     np.testing.assert_allclose(s.info["curriculum"]["memory"][0], np.broadcast_to([1.0, 0.0], (T, 2)))
-    task = curriculum.with_curriculum(functools.partial(make, speed=1.0, spawn=1.0, limit=5),
-                                      curriculum.by_distance(MJ, target=0.09, up=0.25, down=0.1, initial=0.5))
+    task = curriculum.with_curriculum(
+        functools.partial(make, speed=1.0, spawn=1.0, limit=5),
+        curriculum.by_distance(MJ, target=0.09, up=0.25, down=0.1, initial=0.5),
+    )
     _, s = run(task, KEYS)
     np.testing.assert_allclose(s.metrics["curriculum/level"][0], [0.5] * 5 + [0.4] * 5 + [0.3] * 2, rtol=1e-6)
 
@@ -166,12 +176,13 @@ def test_tasks_the_level_cannot_interpolate_are_refused():
     rule = curriculum.by_steps(10)
     # The message names the bound function and argument: _velocity_step's 4th, its limits.
     with pytest.raises(ValueError, match=r"<_velocity_step>\[3\] is not affine in the level: .* \[0\.5 0\. .* at 0\.5"):
-        curriculum.with_curriculum(lambda level: make(level ** 2, push=2.0), rule)
+        curriculum.with_curriculum(lambda level: make(level**2, push=2.0), rule)
     with pytest.raises(ValueError, match="<_time_limit_terminate>.* int32 number that changes with the level"):
         curriculum.with_curriculum(lambda level: make(level, limit=int(5 + 10 * level)), rule)
     with pytest.raises(ValueError, match="different structure"):
         curriculum.with_curriculum(
-            lambda level: make(level) if level < 1 else mjzoo.with_reward(make(level), "y", _reward_y), rule)
+            lambda level: make(level) if level < 1 else mjzoo.with_reward(make(level), "y", _reward_y), rule
+        )
     with pytest.raises(TypeError, match="must return a Task"):
         curriculum.with_curriculum(lambda level: 3, rule)
     with pytest.raises(TypeError, match="curriculum.Rule"):

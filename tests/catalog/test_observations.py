@@ -23,8 +23,8 @@ from catalog_tasks import BLOCK
 from mujoco import mjx
 
 import mjzoo
-from mjzoo.catalog import observations as obs
 from mjzoo import physics as physics_lib
+from mjzoo.catalog import observations as obs
 from mjzoo.types import State, Task, bind
 
 XML = """
@@ -84,8 +84,11 @@ INFO_B = dict(action_history=jnp.array([[-0.1], [0.2]]), feet={"contact": jnp.ar
 ITEMS = {
     "joint_positions": (obs.joint_positions, [0.3], [0.0]),  # the free joint is left out
     "joint_velocities": (obs.joint_velocities, [0.5], [0.0]),
-    "joint_positions_of": (obs.joint_positions_of(MJ, ["yaw", "root"]), [0.3, 1, 2, 0.5, C, 0, 0, C],
-                           [0, 0, 0, 1, C, C, 0, 0]),  # fmt: skip
+    "joint_positions_of": (
+        obs.joint_positions_of(MJ, ["yaw", "root"]),
+        [0.3, 1, 2, 0.5, C, 0, 0, C],
+        [0, 0, 0, 1, C, C, 0, 0],
+    ),
     "joint_velocities_of": (obs.joint_velocities_of(MJ, "root"), [1, 2, 3, 0, 0, 1], [0] * 6),
     "base_position": (obs.base_position(MJ), [1, 2, 0.5], [0, 0, 1]),
     "base_orientation": (obs.base_orientation(MJ), [C, 0, 0, C], [C, C, 0, 0]),
@@ -162,8 +165,12 @@ def test_foot_forces_carry_the_weight_at_rest(cone):
 def test_names_are_checked_at_construction():
     with pytest.raises(ValueError, match="no body named 'tail'.*'base', 'turret'"):
         obs.body_positions(MJ, ["base", "tail"])
-    for make, kind in [(obs.site_positions, "site"), (obs.joint_positions_of, "joint"),
-                       (obs.sensors, "sensor"), (obs.geom_contacts, "geom")]:  # fmt: skip
+    for make, kind in [
+        (obs.site_positions, "site"),
+        (obs.joint_positions_of, "joint"),
+        (obs.sensors, "sensor"),
+        (obs.geom_contacts, "geom"),
+    ]:
         with pytest.raises(ValueError, match=f"no {kind} named 'nope'"):
             make(MJ, "nope")
     with pytest.raises(ValueError, match="at least one body"):

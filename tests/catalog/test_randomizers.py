@@ -62,8 +62,9 @@ SLIDE_V, BALL_VZ, ARM_V = 0, 3, 7
 def one_step(model: mjx.Model, v_slide, q_arm, ctrl) -> jax.Array:
     """qvel after one step from rest, with the block moving at v_slide and the arm at q_arm."""
     data = mjx.make_data(model)
-    data = data.replace(qpos=data.qpos.at[8].set(q_arm), qvel=data.qvel.at[SLIDE_V].set(v_slide),
-                        ctrl=jnp.full((1,), ctrl))  # fmt: skip
+    data = data.replace(
+        qpos=data.qpos.at[8].set(q_arm), qvel=data.qvel.at[SLIDE_V].set(v_slide), ctrl=jnp.full((1,), ctrl)
+    )
     return mjx.step(model, data).qvel
 
 
@@ -98,8 +99,16 @@ IDENTITIES = {
 def test_zero_range_gives_the_nominal_model():
     combined = randomizers.combine(*(make() for make in IDENTITIES.values()))
     fields = jax.jit(combined)(MODEL, KEY)
-    assert set(fields) == {"geom_friction", "dof_armature", "dof_damping", "body_mass", "body_inertia",
-                           "body_ipos", "actuator_gainprm", "actuator_biasprm"}  # fmt: skip
+    assert set(fields) == {
+        "geom_friction",
+        "dof_armature",
+        "dof_damping",
+        "body_mass",
+        "body_inertia",
+        "body_ipos",
+        "actuator_gainprm",
+        "actuator_biasprm",
+    }
     for name, value in fields.items():
         np.testing.assert_array_equal(value, getattr(MODEL, name), err_msg=name)
         assert value.dtype == getattr(MODEL, name).dtype
@@ -178,8 +187,11 @@ def test_draws_are_in_range_independent_and_ranges_are_leaves():
 
 
 def test_heavier_bodies_fall_the_same_but_accelerate_less_under_damping():
-    model = drawn(randomizers.combine(randomizers.scale_masses(MJ, 3.0, 3.0, ["ball", "block"]),
-                                      randomizers.add_masses(MJ, 2.0, 2.0, ["ball"])))  # fmt: skip
+    model = drawn(
+        randomizers.combine(
+            randomizers.scale_masses(MJ, 3.0, 3.0, ["ball", "block"]), randomizers.add_masses(MJ, 2.0, 2.0, ["ball"])
+        )
+    )
     qvel = one_step(model, 1.0, 0.0, 0.0)
     np.testing.assert_allclose(qvel[BALL_VZ], -G * DT, rtol=1e-5)  # 8 kg falls like 2 kg
     np.testing.assert_allclose(qvel[SLIDE_V], block_v1(m=4.5), rtol=1e-5)  # damping slows 4.5 kg less
@@ -227,8 +239,12 @@ def _terminate(model, state):
 
 def test_with_domain_randomization_draws_each_episode_and_steps_with_it():
     task = Task(MODEL, bind(_reset), bind(_step), bind(_reward), bind(_terminate), MJ)
-    task = mjzoo.with_domain_randomization(task, randomizers.combine(
-        randomizers.scale_damping(MJ, 0.0, 10.0, ["slide"]), randomizers.add_masses(MJ, 0.0, 3.0, ["block"])))
+    task = mjzoo.with_domain_randomization(
+        task,
+        randomizers.combine(
+            randomizers.scale_damping(MJ, 0.0, 10.0, ["slide"]), randomizers.add_masses(MJ, 0.0, 3.0, ["block"])
+        ),
+    )
 
     @jax.jit
     def episode(key):
@@ -292,23 +308,27 @@ def test_unknown_names_are_reported_with_what_exists():
         randomizers.shift_com(MJ, bodies=["arm", "arm"])
 
 
-@pytest.mark.parametrize("make, match", [
-    (lambda: randomizers.scale_friction(MJ, 1.5, 0.5), "low <= high"),
-    (lambda: randomizers.scale_damping(MJ, -0.1, 1.0), ">= 0"),
-    (lambda: randomizers.scale_masses(MJ, 0.0, 1.0), "> 0"),
-    (lambda: randomizers.scale_armature(MJ, float("nan"), 1.0), "finite"),
-    (lambda: randomizers.add_masses(MJ, -1.0, 0.0), "'arm'.*positive mass"),
-    (lambda: randomizers.shift_com(MJ, [0.0, 0.0], 0.1), "range"),
-    (lambda: randomizers.scale_position_gains(PUCK), "actuator"),
-])  # fmt: skip
+@pytest.mark.parametrize(
+    "make, match",
+    [
+        (lambda: randomizers.scale_friction(MJ, 1.5, 0.5), "low <= high"),
+        (lambda: randomizers.scale_damping(MJ, -0.1, 1.0), ">= 0"),
+        (lambda: randomizers.scale_masses(MJ, 0.0, 1.0), "> 0"),
+        (lambda: randomizers.scale_armature(MJ, float("nan"), 1.0), "finite"),
+        (lambda: randomizers.add_masses(MJ, -1.0, 0.0), "'arm'.*positive mass"),
+        (lambda: randomizers.shift_com(MJ, [0.0, 0.0], 0.1), "range"),
+        (lambda: randomizers.scale_position_gains(PUCK), "actuator"),
+    ],
+)
 def test_bad_ranges_are_reported(make, match):
     with pytest.raises(ValueError, match=match):
         make()
 
 
 def test_gains_need_position_actuators_and_combine_needs_callables():
-    motor = mujoco.MjModel.from_xml_string(XML.replace('<position name="servo" joint="hinge" kp="4" kv="0.5"/>',
-                                                       '<motor name="servo" joint="hinge"/>'))  # fmt: skip
+    motor = mujoco.MjModel.from_xml_string(
+        XML.replace('<position name="servo" joint="hinge" kp="4" kv="0.5"/>', '<motor name="servo" joint="hinge"/>')
+    )
     with pytest.raises(ValueError, match="'servo' is not a position actuator"):
         randomizers.scale_position_gains(motor)
     with pytest.raises(ValueError, match="at least one"):

@@ -13,7 +13,7 @@ import mujoco
 import numpy as np
 import pytest
 from catalog_tasks import BASE_AND_ARM as PHYSICS
-from catalog_tasks import MJ, QPOS0, make_task, observe
+from catalog_tasks import MJ, QPOS0, QVEL0, make_task, observe
 from mujoco import mjx
 
 import mjzoo
@@ -35,7 +35,7 @@ def resets_of(task: Task, keys: jax.Array) -> State:
 KEYS = jax.random.split(jax.random.key(0), N)
 
 
-def joints_stack(fraction=0.5, qpos=QPOS0, qvel=np.zeros(9), velocity_scale=(0.1, 0.2, 0.3)) -> Task:
+def joints_stack(fraction=0.5, qpos=QPOS0, qvel=QVEL0, velocity_scale=(0.1, 0.2, 0.3)) -> Task:
     return resets.with_resets(
         make_task(qpos, qvel),
         resets.joint_positions(MJ, fraction),
@@ -100,8 +100,9 @@ def test_joint_position_noise_is_clipped_to_limited_ranges_only():
 # --- base items -----------------------------------------------------------------------
 
 
-def base_stack(yaw=(-np.pi, np.pi), height=(0.5, 0.5), roll=0.0, pitch=0.0, qvel=np.zeros(9), linear=(0, 0, 0),
-               angular=(0, 0, 0)) -> Task:  # fmt: skip
+def base_stack(
+    yaw=(-np.pi, np.pi), height=(0.5, 0.5), roll=0.0, pitch=0.0, qvel=QVEL0, linear=(0, 0, 0), angular=(0, 0, 0)
+) -> Task:
     return resets.with_resets(
         make_task(qvel=qvel),
         resets.base_heading(MJ, yaw),
@@ -226,11 +227,19 @@ def arm_reference():
     glide[:, 0], glide[:, 7] = 0.4 * t, 0.3 * np.sin(3 * t)
     spin = np.tile(QPOS0.astype(np.float64), (10, 1))
     spin[:, 9] = 2.0 * t[:10]
-    clips = [motion.Clip(name=name, fps=50.0, qpos=q, qvel=motion.velocities_from_positions(q, 50.0, MJ),
-                         joint_names=("root", "hip", "wrist", "spin"))
-             for name, q in (("glide", glide), ("spin", spin))]  # fmt: skip
+    clips = [
+        motion.Clip(
+            name=name,
+            fps=50.0,
+            qpos=q,
+            qvel=motion.velocities_from_positions(q, 50.0, MJ),
+            joint_names=("root", "hip", "wrist", "spin"),
+        )
+        for name, q in (("glide", glide), ("spin", spin))
+    ]
     hinge = mujoco.MjModel.from_xml_string(
-        '<mujoco><worldbody><body><joint name="j"/><geom size="0.1"/></body></worldbody></mujoco>')
+        '<mujoco><worldbody><body><joint name="j"/><geom size="0.1"/></body></worldbody></mujoco>'
+    )
     other = motion.Clip(name="other", fps=50.0, qpos=np.zeros((3, 1)), qvel=np.zeros((3, 1)), joint_names=("j",))
     return motion.reference(clips, MJ, dt=0.02), motion.reference(other, hinge, dt=0.02)
 

@@ -213,8 +213,16 @@ TILT = 0.6  # rad, about the world x axis
 ROLL = [math.cos(TILT / 2), math.sin(TILT / 2), 0, 0]
 
 
-def biped_state(quat=YAW90, height=0.45, linear=(0, 1, 0.3), angular=(0.1, -0.2, 0.3),
-                joints=(0.95, 0.3, -1.2, -0.2), joint_vel=(2, 5, 3, 7), ctrl=(0.5, -1), **info) -> State:  # fmt: skip
+def biped_state(
+    quat=YAW90,
+    height=0.45,
+    linear=(0, 1, 0.3),
+    angular=(0.1, -0.2, 0.3),
+    joints=(0.95, 0.3, -1.2, -0.2),
+    joint_vel=(2, 5, 3, 7),
+    ctrl=(0.5, -1),
+    **info,
+) -> State:
     d = mujoco.MjData(BIPED)
     d.qpos[:11] = [0, 0, height, *quat, *joints]
     d.qvel[:10] = [*linear, *angular, *joint_vel]
@@ -407,8 +415,9 @@ def _fall_terminate(p, model, state):
 
 def fall_task() -> Task:
     p = Fall(jnp.float32(0.2))
-    return Task(BIPED_MJX, bind(_fall_reset, p), bind(_fall_step, p), bind(lambda p, *a: {}, p),
-                bind(_fall_terminate, p), BIPED)  # fmt: skip
+    return Task(
+        BIPED_MJX, bind(_fall_reset, p), bind(_fall_step, p), bind(lambda p, *a: {}, p), bind(_fall_terminate, p), BIPED
+    )
 
 
 @jax.jit
@@ -422,11 +431,14 @@ def fall_run(task, heights):
 
 def test_alive_and_terms():
     base = trackers.with_action_history(fall_task(), length=2)
-    task = rewards.terms(base, {
-        "alive": (rewards.alive(base), 2.0),
-        "rate": (rewards.action_rate, -0.5),
-        "height": (rewards.base_height(BIPED, 0.5), -1.0),
-    })  # fmt: skip
+    task = rewards.terms(
+        base,
+        {
+            "alive": (rewards.alive(base), 2.0),
+            "rate": (rewards.action_rate, -0.5),
+            "height": (rewards.base_height(BIPED, 0.5), -1.0),
+        },
+    )
     states = fall_run(task, jnp.array([0.4, 0.1]))
     np.testing.assert_array_equal(states.terminated, [False, True])
     np.testing.assert_allclose(states.metrics["reward/alive"], [2.0, 0.0])

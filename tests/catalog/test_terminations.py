@@ -146,8 +146,14 @@ def _terminate(threshold, model, state):  # the block's own termination: qpos be
 
 def block_task(threshold: float = 1e9, max_steps: int | None = 100) -> Task:
     t = jnp.float32(threshold)
-    task = Task(model=BLOCK.model, start=bind(_reset, t), step=bind(_step, t), reward=bind(_reward, t),
-                terminate=bind(_terminate, t), mj_model=BLOCK.mj_model)  # fmt: skip
+    task = Task(
+        model=BLOCK.model,
+        start=bind(_reset, t),
+        step=bind(_step, t),
+        reward=bind(_reward, t),
+        terminate=bind(_terminate, t),
+        mj_model=BLOCK.mj_model,
+    )
     return task if max_steps is None else mjzoo.with_time_limit(task, max_steps)
 
 

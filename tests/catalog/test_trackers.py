@@ -91,34 +91,42 @@ def _no_reward(p: Params, model, state, action, next_state):
 
 def kinematic_task() -> Task:
     p = Params(jnp.asarray(INIT, jnp.float32), jnp.float32(DT))
-    return Task(PHYSICS.model, bind(_reset, p), bind(_step, p), bind(_no_reward, p), bind(_terminate, p),
-                PHYSICS.mj_model)  # fmt: skip
+    return Task(
+        PHYSICS.model, bind(_reset, p), bind(_step, p), bind(_no_reward, p), bind(_terminate, p), PHYSICS.mj_model
+    )
 
 
 def tracked(threshold: float = 0.05) -> Task:
     """The stack under test: trackers inside a 5-step auto-resetting episode, with the
     reward terms that read them."""
-    task = trackers.with_feet(trackers.with_action_history(kinematic_task(), length=4),
-                              feet=["foot_a", "foot_b"], floor="floor")  # fmt: skip
-    task = rewards.terms(task, {
-        "air": (rewards.feet_air_time(threshold), 1.0),
-        "slip": (rewards.foot_slip, 1.0),
-        "rate": (rewards.action_rate, 1.0),
-        "jerk": (rewards.action_jerk, 1.0),
-    })  # fmt: skip
+    task = trackers.with_feet(
+        trackers.with_action_history(kinematic_task(), length=4), feet=["foot_a", "foot_b"], floor="floor"
+    )
+    task = rewards.terms(
+        task,
+        {
+            "air": (rewards.feet_air_time(threshold), 1.0),
+            "slip": (rewards.foot_slip, 1.0),
+            "rate": (rewards.action_rate, 1.0),
+            "jerk": (rewards.action_jerk, 1.0),
+        },
+    )
     return mjzoo.with_auto_reset(mjzoo.with_time_limit(task, 5))
 
 
 # Sequence A: steps 1-5 are one episode (the 5th is truncated and returns the reset
 # state), step 6 starts the next one. Sequence B holds the reset pose throughout.
-A = np.array([
-    [0.0, 0.1, 0.2, 0.0],     # 1: both feet in the air
-    [0.0, 0.1, 0.055, 0.0],   # 2: foot_b lands, 5 mm up (within its 1 cm margin)
-    [0.01, 0.0, 0.055, 0.0],  # 3: foot_a lands sliding 1 cm in x (0.5 m/s)
-    [0.01, 0.0, 0.5, 0.02],   # 4: foot_b up into the ball, yawing at 1 rad/s
-    [0.01, 0.0, 0.1, 0.02],   # 5: truncated: the episode restarts
-    [0.0, 0.1, 0.2, 0.0],     # 6: as step 1, from the reset pose
-], np.float32)  # fmt: skip
+A = np.array(
+    [
+        [0.0, 0.1, 0.2, 0.0],  # 1: both feet in the air
+        [0.0, 0.1, 0.055, 0.0],  # 2: foot_b lands, 5 mm up (within its 1 cm margin)
+        [0.01, 0.0, 0.055, 0.0],  # 3: foot_a lands sliding 1 cm in x (0.5 m/s)
+        [0.01, 0.0, 0.5, 0.02],  # 4: foot_b up into the ball, yawing at 1 rad/s
+        [0.01, 0.0, 0.1, 0.02],  # 5: truncated: the episode restarts
+        [0.0, 0.1, 0.2, 0.0],  # 6: as step 1, from the reset pose
+    ],
+    np.float32,
+)
 B = np.tile(np.asarray(INIT, np.float32), (6, 1))
 
 
@@ -218,11 +226,14 @@ def test_new_threshold_does_not_retrace(runs):
     np.testing.assert_allclose(states.metrics["reward/air"][0], [0, 0.04, 0.06, 0, 0, 0], atol=1e-6)
 
 
-@pytest.mark.parametrize("qpos,on_floor,on_ball", [
-    ([0, 0.01, 0.059, 0], [True, True], [False, False]),  # a 4 cm in; b 9 mm up, within its 1 cm margin
-    ([0, 0.049, 0.061, 0], [True, False], [False, False]),  # a 1 mm in; b 11 mm up, past its margin
-    ([0, 0.051, 0.5, 0], [False, False], [False, True]),  # a 1 mm up; b inside the ball
-])  # fmt: skip
+@pytest.mark.parametrize(
+    "qpos,on_floor,on_ball",
+    [
+        ([0, 0.01, 0.059, 0], [True, True], [False, False]),  # a 4 cm in; b 9 mm up, within its 1 cm margin
+        ([0, 0.049, 0.061, 0], [True, False], [False, False]),  # a 1 mm in; b 11 mm up, past its margin
+        ([0, 0.051, 0.5, 0], [False, False], [False, True]),  # a 1 mm up; b inside the ball
+    ],
+)
 def test_foot_contacts_directly(qpos, on_floor, on_ball):
     # Contacts from MuJoCo's own forward pass (put_data pads the unused slots with
     # distance 1e10); only contacts with the given geom count.

@@ -24,6 +24,7 @@ import pytest
 
 import mjzoo
 import mjzoo.envs
+from mjzoo import names
 from mjzoo.catalog import (
     actuators,
     commands,
@@ -36,7 +37,6 @@ from mjzoo.catalog import (
     terminations,
     trackers,
 )
-from mjzoo import names
 from mjzoo.envs import pendulum
 from mjzoo.testing import TaskReport, check_task
 
@@ -78,29 +78,39 @@ def _pushed(t: mjzoo.Task, level: float) -> mjzoo.Task:
 def _randomized(t: mjzoo.Task) -> mjzoo.Task:
     m = t.mj_model
     draw = randomizers.combine(
-        randomizers.scale_masses(m), randomizers.add_masses(m, -0.01, 0.01), randomizers.shift_com(m),
-        randomizers.scale_damping(m), randomizers.scale_armature(m), randomizers.scale_friction(m),
-    )  # fmt: skip
+        randomizers.scale_masses(m),
+        randomizers.add_masses(m, -0.01, 0.01),
+        randomizers.shift_com(m),
+        randomizers.scale_damping(m),
+        randomizers.scale_armature(m),
+        randomizers.scale_friction(m),
+    )
     return mjzoo.with_domain_randomization(t, draw)
 
 
 def _terminated(t: mjzoo.Task) -> mjzoo.Task:
-    return terminations.with_terminations(t, {
-        "fast": terminations.bad_velocity(100.0),
-        "long": terminations.episode_length(1000),
-        "low": terminations.base_too_low(t.mj_model, -10.0, body=_last_body(t)),
-    })  # fmt: skip
+    return terminations.with_terminations(
+        t,
+        {
+            "fast": terminations.bad_velocity(100.0),
+            "long": terminations.episode_length(1000),
+            "low": terminations.base_too_low(t.mj_model, -10.0, body=_last_body(t)),
+        },
+    )
 
 
 def _scored(t: mjzoo.Task) -> mjzoo.Task:
-    return rewards.terms(trackers.with_action_history(t, 4), {
-        "stay_alive": (rewards.alive(t), 0.1),
-        "rate_cost": (rewards.action_rate, -0.01),  # names no env uses itself
-        "jerk_cost": (rewards.action_jerk, -0.01),
-        "torque": (rewards.torque, -0.01),
-        "energy": (rewards.energy, -0.01),
-        "joint_deviation": (rewards.joint_deviation(t.mj_model), -0.01),
-    })  # fmt: skip
+    return rewards.terms(
+        trackers.with_action_history(t, 4),
+        {
+            "stay_alive": (rewards.alive(t), 0.1),
+            "rate_cost": (rewards.action_rate, -0.01),  # names no env uses itself
+            "jerk_cost": (rewards.action_jerk, -0.01),
+            "torque": (rewards.torque, -0.01),
+            "energy": (rewards.energy, -0.01),
+            "joint_deviation": (rewards.joint_deviation(t.mj_model), -0.01),
+        },
+    )
 
 
 def _reset_noise(t: mjzoo.Task) -> mjzoo.Task:
@@ -136,20 +146,40 @@ COMBINATORS = {
     "force_pushes": lambda t: events.with_force_pushes(t, _last_body(t), (0.04, 0.1), (2, 2, 0), 0.04),
     "velocity_command": lambda t: commands.with_velocity_command(t, resample_interval=(0.04, 0.1)),
     "joint_position_command": lambda t: commands.with_joint_position_command(
-        t, [_first_joint(t)], ranges=[(-0.5, 0.5)], resample_interval=(0.04, 0.1)),
+        t, [_first_joint(t)], ranges=[(-0.5, 0.5)], resample_interval=(0.04, 0.1)
+    ),
     "curriculum": lambda t: curriculum.with_curriculum(functools.partial(_pushed, t), curriculum.by_steps(10)),
 }
 ALL = (  # innermost first
-    "action_latency", "action_drop", "action_filter", "reward_terms", "velocity_command",
-    "joint_position_command", "observation_history", "observation_bias", "multiplicative_observation_noise",
-    "terminations", "action_repeat", "reward", "observation_noise", "action_noise", "randomizers",
-    "divergence_guard", "reward_clip", "curriculum", "observation",
-)  # fmt: skip
+    "action_latency",
+    "action_drop",
+    "action_filter",
+    "reward_terms",
+    "velocity_command",
+    "joint_position_command",
+    "observation_history",
+    "observation_bias",
+    "multiplicative_observation_noise",
+    "terminations",
+    "action_repeat",
+    "reward",
+    "observation_noise",
+    "action_noise",
+    "randomizers",
+    "divergence_guard",
+    "reward_clip",
+    "curriculum",
+    "observation",
+)
 COMBINATORS["all"] = lambda t: functools.reduce(lambda task, name: COMBINATORS[name](task), ALL, t)
 # The envs on Brax's models run in test_conformance_locomotion(_stacked).py: one process compiling
 # every case crashed inside XLA's CPU compiler, and the suite frees compiled code per module.
-LOCOMOTION = [e for e in mjzoo.envs.names() if mjzoo.envs.factory(e).__module__ in ("mjzoo.envs.locomotion",
-              "mjzoo.envs.joystick", "mjzoo.envs.humanoid_amp", "mjzoo.envs.deepmimic")]  # fmt: skip
+LOCOMOTION = [
+    e
+    for e in mjzoo.envs.names()
+    if mjzoo.envs.factory(e).__module__
+    in ("mjzoo.envs.locomotion", "mjzoo.envs.joystick", "mjzoo.envs.humanoid_amp", "mjzoo.envs.deepmimic")
+]
 ENVS = [e for e in mjzoo.envs.names() if e not in LOCOMOTION]
 CASES = [(env, comb) for env in ENVS for comb in ("bare", "all")]
 CASES += [("pendulum_swingup", comb) for comb in COMBINATORS if comb not in ("bare", "all")]

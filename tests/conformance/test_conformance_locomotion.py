@@ -5,7 +5,6 @@ are in test_conformance_locomotion_stacked.py, so that xdist runs the two side b
 from __future__ import annotations
 
 import pytest
-
 from test_conformance import LOCOMOTION, check_conformance, check_new_numbers_do_not_retrace
 
 

@@ -7,7 +7,6 @@ env passes the bare conformance in test_conformance_locomotion.py."""
 from __future__ import annotations
 
 import pytest
-
 from test_conformance import LOCOMOTION, check_conformance, check_new_numbers_do_not_retrace
 
 STACKED = ("hopper", "ant_joystick")

@@ -12,10 +12,11 @@ import importlib.util
 
 import jax
 import jax.numpy as jnp
-import mjzoo
 import mujoco
 import numpy as np
 import pytest
+
+import mjzoo
 from mjzoo import motion
 from mjzoo.envs import deepmimic
 
@@ -25,7 +26,9 @@ HINGES = ("right_knee", "right_elbow", "left_knee", "left_elbow")
 
 def test_without_pybullet_the_error_says_how_to_install_it(monkeypatch):
     real = importlib.util.find_spec
-    monkeypatch.setattr(importlib.util, "find_spec", lambda name, *a: None if name == "pybullet_data" else real(name, *a))
+    monkeypatch.setattr(
+        importlib.util, "find_spec", lambda name, *a: None if name == "pybullet_data" else real(name, *a)
+    )
     with pytest.raises(ModuleNotFoundError, match="pip install pybullet"):
         deepmimic.data_path()
     with pytest.raises(ModuleNotFoundError, match="pybullet_data"):
@@ -63,9 +66,20 @@ def test_the_humanoid_has_the_urdf_joints_masses_and_a_motor_per_dof(model):
     gear = {m.actuator(a).name: m.actuator_gear[a, :3] for a in range(m.nu)}
     np.testing.assert_allclose(gear["right_hip_y"], [0, deepmimic.MAX_TORQUE["right_hip"], 0])
     np.testing.assert_allclose(gear["left_elbow"][0], 60.0)
-    assert deepmimic.character_joints() == ("chest", "neck", "right_hip", "right_knee", "right_ankle",
-                                            "right_shoulder", "right_elbow", "left_hip", "left_knee",
-                                            "left_ankle", "left_shoulder", "left_elbow")  # fmt: skip
+    assert deepmimic.character_joints() == (
+        "chest",
+        "neck",
+        "right_hip",
+        "right_knee",
+        "right_ankle",
+        "right_shoulder",
+        "right_elbow",
+        "left_hip",
+        "left_knee",
+        "left_ankle",
+        "left_shoulder",
+        "left_elbow",
+    )
 
 
 def _lowest_foot_points(m, qpos: np.ndarray) -> np.ndarray:

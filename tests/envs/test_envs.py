@@ -15,14 +15,22 @@ import mjzoo.envs
 
 def test_names_and_unknown_name():
     assert set(mjzoo.envs.names()) >= {
-        "pendulum_swingup", "cartpole_balance", "cartpole_swingup", "point_mass", "cylinder_push",
-    }  # fmt: skip
-    with pytest.raises(KeyError, match=r"unknown env 'cartpole_balanse' \(did you mean 'cartpole_balance'\?\).*point_mass"):
+        "pendulum_swingup",
+        "cartpole_balance",
+        "cartpole_swingup",
+        "point_mass",
+        "cylinder_push",
+    }
+    with pytest.raises(
+        KeyError, match=r"unknown env 'cartpole_balanse' \(did you mean 'cartpole_balance'\?\).*point_mass"
+    ):
         mjzoo.envs.make("cartpole_balanse")
 
 
 def test_unknown_override_lists_allowed():
-    with pytest.raises(TypeError, match=r"unknown override\(s\) \['upright_wieght'\]; allowed: .*'ctrl_dt'.*'upright_weight'"):
+    with pytest.raises(
+        TypeError, match=r"unknown override\(s\) \['upright_wieght'\]; allowed: .*'ctrl_dt'.*'upright_weight'"
+    ):
         mjzoo.envs.make("cartpole_swingup", upright_wieght=2.0)
 
 
@@ -54,7 +62,9 @@ def _run(name: str, steps: int, **overrides):
     return task, run(task, jax.random.key(3))
 
 
-@pytest.mark.parametrize("name", ["pendulum_swingup", "cartpole_balance", "cartpole_swingup", "point_mass", "cylinder_push"])
+@pytest.mark.parametrize(
+    "name", ["pendulum_swingup", "cartpole_balance", "cartpole_swingup", "point_mass", "cylinder_push"]
+)
 def test_reward_terms_are_bounded_by_their_weights(name):
     task, (_, trajectory) = _run(name, 40)
     weights = {k[: -len("_weight")]: v for k, v in mjzoo.envs.defaults(name).items() if k.endswith("_weight")}
@@ -97,9 +107,12 @@ def test_point_mass_reach_is_one_on_the_target_and_falls_to_a_tenth_at_the_margi
     pm = mjzoo.envs.point_mass
     task = mjzoo.envs.make("point_mass")
     params = pm.Params(
-        **mjzoo.envs.base.floats(reach_weight=1.0, effort_weight=0.01, target_radius=0.03, reach_margin=0.5, spawn_range=0.4),
-        data0=mjzoo.reset(task, jax.random.key(0)).data, n_substeps=2,
-    )  # fmt: skip
+        **mjzoo.envs.base.floats(
+            reach_weight=1.0, effort_weight=0.01, target_radius=0.03, reach_margin=0.5, spawn_range=0.4
+        ),
+        data0=mjzoo.reset(task, jax.random.key(0)).data,
+        n_substeps=2,
+    )
     state = mjzoo.reset(task, jax.random.key(0))
     goal = state.info["goal"]
     at = lambda xy: state.replace(data=state.data.replace(qpos=xy))  # noqa: E731
@@ -157,20 +170,33 @@ def test_an_override_of_a_compatible_type_is_accepted(monkeypatch):
 
     task, received = mjzoo.envs.make("cartpole_balance"), []
 
-    def typed(*, steps: int = 5, weight: float = 1.0, height: float | None = 1.0, sizes: tuple = (64,),
-              flag: bool = False, hook: Callable | None = None, extra=None, **physics_options):  # fmt: skip
+    def typed(
+        *,
+        steps: int = 5,
+        weight: float = 1.0,
+        height: float | None = 1.0,
+        sizes: tuple = (64,),
+        flag: bool = False,
+        hook: Callable | None = None,
+        extra=None,
+        **physics_options,
+    ):
         received.append(dict(steps=steps, weight=weight, height=height, sizes=sizes, flag=flag, hook=hook, extra=extra))
         return task  # a factory returns a Task: make refuses anything else
 
     monkeypatch.setitem(mjzoo.envs._REGISTRY, "typed", typed)
-    accepted = dict(steps=np.int64(7), weight=2, height=None, sizes=[32, 32], flag=np.bool_(True), hook=print, extra="x")
+    accepted = dict(
+        steps=np.int64(7), weight=2, height=None, sizes=[32, 32], flag=np.bool_(True), hook=print, extra="x"
+    )
     assert mjzoo.envs.make("typed", **accepted) is task and received == [accepted]
     mjzoo.envs.make("typed", weight=np.float32(0.5))
     mjzoo.envs.make("typed", weight=jnp.asarray(0.02))
-    for overrides, message in [(dict(sizes=64), "sizes=64 must be a tuple or list"),
-                               (dict(flag=1), "flag=1 must be True or False"),
-                               (dict(weight=jnp.zeros(2)), "must be a number"),
-                               (dict(steps=None), "steps=None must be an int")]:  # fmt: skip
+    for overrides, message in [
+        (dict(sizes=64), "sizes=64 must be a tuple or list"),
+        (dict(flag=1), "flag=1 must be True or False"),
+        (dict(weight=jnp.zeros(2)), "must be a number"),
+        (dict(steps=None), "steps=None must be an int"),
+    ]:
         with pytest.raises(TypeError, match=message):
             mjzoo.envs.make("typed", **overrides)
     assert mjzoo.envs.make("cartpole_balance", upright_weight=2).action_size == 1

@@ -40,8 +40,16 @@ def resets(walk):
 def _reference(qpos, dt=0.5) -> motion.Reference:
     """A one-clip Reference of positions qpos [M, nq] (velocities 0)."""
     qpos = np.asarray(qpos, np.float32)
-    return motion.Reference(qpos=qpos, qvel=np.zeros_like(qpos), start=np.array([0]), length=np.array([len(qpos)]),
-                            weight=np.ones(1), loop=np.array([False]), dt=np.float32(dt), names=("c",))  # fmt: skip
+    return motion.Reference(
+        qpos=qpos,
+        qvel=np.zeros_like(qpos),
+        start=np.array([0]),
+        length=np.array([len(qpos)]),
+        weight=np.ones(1),
+        loop=np.array([False]),
+        dt=np.float32(dt),
+        names=("c",),
+    )
 
 
 # --- the reference --------------------------------------------------------------------
@@ -81,11 +89,12 @@ def test_a_reset_with_probability_one_starts_exactly_at_a_reference_frame(walk, 
 
 
 def test_steps_observe_and_reward_without_forward_velocity(walk, joystick):
-    for task, obs, terms in ((walk, 45, {"alive", "effort"}),
-                             (joystick, 48, {"alive", "effort", "tracking", "yaw_tracking"})):  # fmt: skip
+    for task, obs, terms in (
+        (walk, 45, {"alive", "effort"}),
+        (joystick, 48, {"alive", "effort", "tracking", "yaw_tracking"}),
+    ):
         state = jax.eval_shape(mjzoo.reset, task, jax.random.key(0))
-        after = jax.eval_shape(mjzoo.transition, task, state, np.zeros(task.action_size, np.float32),
-                               jax.random.key(1))  # fmt: skip
+        after = jax.eval_shape(mjzoo.transition, task, state, np.zeros(task.action_size, np.float32), jax.random.key(1))
         assert state.obs.shape == after.obs.shape == (obs,) and task.action_size == 17
         assert {k.removeprefix("reward/") for k in after.metrics if k.startswith("reward/")} == terms
         assert int(task.time_limit) == 1000

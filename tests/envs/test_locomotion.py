@@ -10,13 +10,13 @@ from __future__ import annotations
 
 import functools
 
+import catalog_tasks as ct
 import jax
 import jax.numpy as jnp
 import numpy as np
 import pytest
 from mujoco import mjx
 
-import catalog_tasks as ct
 import mjzoo
 import mjzoo.envs
 from mjzoo.catalog import actuators, curriculum, observations, rewards
@@ -37,11 +37,14 @@ def _rollout(task, key):
 def test_forward_velocity_is_the_com_speed_capped_and_body_height_the_lagged_z():
     qvel = np.zeros(9)
     qvel[0], qvel[2] = 1.5, 1.0  # vx 1.5 m/s, vz 1 m/s
-    task = rewards.terms(ct.make_task(qvel=qvel), {
-        "forward": (rewards.forward_velocity(ct.MJ), 1.0),
-        "capped": (rewards.forward_velocity(ct.MJ, "base", max_speed=1.0), 2.0),
-        "height": (rewards.body_height(ct.MJ, "base"), 1.0),
-    })  # fmt: skip
+    task = rewards.terms(
+        ct.make_task(qvel=qvel),
+        {
+            "forward": (rewards.forward_velocity(ct.MJ), 1.0),
+            "capped": (rewards.forward_velocity(ct.MJ, "base", max_speed=1.0), 2.0),
+            "height": (rewards.body_height(ct.MJ, "base"), 1.0),
+        },
+    )
     _, states = ct.run(task, jax.random.key(0))
     terms = mjzoo.reward_terms(states)
     # The reset state is not forwarded (its com is 0), so from the second step on:
@@ -85,10 +88,19 @@ def _one(model, state, action, next_state):
 # --- the tasks ----------------------------------------------------------------------
 
 
-@pytest.mark.parametrize("name,obs_size,nu", [
-    ("hopper", 11, 3), ("walker", 17, 6), ("cheetah", 17, 6), ("ant", 27, 8), ("humanoid_walk", 45, 17),
-    ("humanoid_run", 45, 17), ("humanoid_standup", 45, 17), ("ant_joystick", 29, 8),
-])  # fmt: skip
+@pytest.mark.parametrize(
+    "name,obs_size,nu",
+    [
+        ("hopper", 11, 3),
+        ("walker", 17, 6),
+        ("cheetah", 17, 6),
+        ("ant", 27, 8),
+        ("humanoid_walk", 45, 17),
+        ("humanoid_run", 45, 17),
+        ("humanoid_standup", 45, 17),
+        ("ant_joystick", 29, 8),
+    ],
+)
 def test_documented_sizes(name, obs_size, nu):
     task = mjzoo.envs.make(name)
     state = jax.eval_shape(mjzoo.reset, task, jax.random.key(0))
@@ -126,8 +138,9 @@ def test_hopper_ends_when_the_torso_drops_or_tilts():
         state = state.replace(data=state.data.replace(qpos=qpos, qvel=jnp.zeros_like(state.data.qvel)))
         return mjzoo.transition(task, state, jnp.zeros(3), jax.random.key(1))
 
-    upright, low, tilted = (from_pose(jnp.array(q, jnp.float32)) for q in
-                            ([0, 0, 0, 0, 0, 0], [0, -0.6, 0, 0, 0, 0], [0, 0, 0.4, 0, 0, 0]))  # fmt: skip
+    upright, low, tilted = (
+        from_pose(jnp.array(q, jnp.float32)) for q in ([0, 0, 0, 0, 0, 0], [0, -0.6, 0, 0, 0, 0], [0, 0, 0.4, 0, 0, 0])
+    )
     assert not upright.terminated and float(mjzoo.reward_terms(upright)["alive"]) == 1.0
     assert low.terminated and low.metrics["termination/too_low"] == 1.0
     assert tilted.terminated and tilted.metrics["termination/tilted"] == 1.0
@@ -143,8 +156,11 @@ def test_standup_starts_lying_and_rewards_the_torso_height():
 
 def test_only_noise_and_pushes_follow_the_joystick_level():
     easy, hard = joystick.joystick(level=0.0), joystick.joystick(level=1.0)
-    moved = {(np.asarray(a).tobytes(), np.asarray(b).tobytes()): (np.asarray(a), np.asarray(b))
-             for a, b in zip(jax.tree.leaves(easy), jax.tree.leaves(hard)) if not np.array_equal(a, b)}  # fmt: skip
+    moved = {
+        (np.asarray(a).tobytes(), np.asarray(b).tobytes()): (np.asarray(a), np.asarray(b))
+        for a, b in zip(jax.tree.leaves(easy), jax.tree.leaves(hard))
+        if not np.array_equal(a, b)
+    }
     assert len(moved) == 2  # the noise scale and the push limits (each bound where used), nothing else
     (noise_0, noise_1), (push_0, push_1) = sorted(moved.values(), key=lambda pair: pair[0].size)
     assert float(noise_0) == 0.0 and float(noise_1) == pytest.approx(0.05)

@@ -5,9 +5,10 @@ from __future__ import annotations
 
 import jax
 import jax.numpy as jnp
-import mjzoo
 import numpy as np
 import pytest
+
+import mjzoo
 from mjzoo import motion
 from mjzoo.envs import cartpole, teachers
 
@@ -60,9 +61,16 @@ def test_resets_hang_or_start_at_a_clip_frame(task):
 
 def _with_reference_qpos(task, qpos):
     qpos = jnp.asarray(qpos, jnp.float32)
-    ref = motion.Reference(qpos=qpos, qvel=jnp.zeros_like(qpos), start=jnp.zeros(1, jnp.int32),
-                           length=jnp.array([len(qpos)], jnp.int32), weight=jnp.ones(1), loop=jnp.zeros(1, bool),
-                           dt=jnp.float32(0.02), names=("tiny",))  # fmt: skip
+    ref = motion.Reference(
+        qpos=qpos,
+        qvel=jnp.zeros_like(qpos),
+        start=jnp.zeros(1, jnp.int32),
+        length=jnp.array([len(qpos)], jnp.int32),
+        weight=jnp.ones(1),
+        loop=jnp.zeros(1, bool),
+        dt=jnp.float32(0.02),
+        names=("tiny",),
+    )
     return task.replace(motion=ref)
 
 

@@ -248,7 +248,10 @@ def test_restore_newest_intact_when_none_is_intact_or_none_exists(tmp_path):
     for step in (1, 2):
         checkpoints.save(tmp_path, step, make_state(step))
         _damage(tmp_path, step)
-    with pytest.raises(checkpoints.CheckpointError, match=r"no intact checkpoint in .*: checkpoint 2 is damaged \(.*\); checkpoint 1 is damaged"):
+    with pytest.raises(
+        checkpoints.CheckpointError,
+        match=r"no intact checkpoint in .*: checkpoint 2 is damaged \(.*\); checkpoint 1 is damaged",
+    ):
         checkpoints.restore_newest_intact(tmp_path, make_state(0))
     with pytest.raises(FileNotFoundError, match="no complete checkpoint"):
         checkpoints.restore_newest_intact(tmp_path / "absent", make_state(0))

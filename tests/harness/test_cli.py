@@ -79,12 +79,21 @@ def damage(directory: Path, step: int) -> None:
         (["train", "ppo", ENV, "--config", "nonsense=1"], ["--config: unknown field(s) ['nonsense']", "num_envs"]),
         (["train", "ppo", ENV, "--config", "num_envs"], ["--config: expected NAME=VALUE, got 'num_envs'"]),
         (["train", "ppo", ENV, "--config", "learning_rate=abc"], ["learning_rate='abc' must be a number"]),
-        (["train", "ppo", ENV, "--config", "policy_hidden_sizes=64"], ["policy_hidden_sizes=64 must be a tuple of int"]),
+        (
+            ["train", "ppo", ENV, "--config", "policy_hidden_sizes=64"],
+            ["policy_hidden_sizes=64 must be a tuple of int"],
+        ),
         (["train", "ppo", ENV, "--config", "activation=gelu"], ["activation='gelu' must be one of 'swish'"]),
         (["plan", "mppi", ENV, "--config", "num_samples=many"], ["num_samples='many' must be an int"]),
         (["train", "ppo", ENV, "--env-overrides", "nope=1"], ["unknown override(s) ['nope']", "upright_weight"]),
-        (["train", "ppo", ENV, "--env-overrides", "episode_steps=abc"], [f"{ENV}: override episode_steps='abc' must be an int"]),
-        (["train", "ppo", ENV, "--env-overrides", "upright_weight=[1,2]"], ["override upright_weight=[1, 2] must be a number"]),
+        (
+            ["train", "ppo", ENV, "--env-overrides", "episode_steps=abc"],
+            [f"{ENV}: override episode_steps='abc' must be an int"],
+        ),
+        (
+            ["train", "ppo", ENV, "--env-overrides", "upright_weight=[1,2]"],
+            ["override upright_weight=[1, 2] must be a number"],
+        ),
         (["train", "ppo", ENV, "--env-overrides", "solver=pgs"], ["physics option solver='pgs'"]),
         (["demo", "--num-envs", "0"], ["--num-envs must be >= 1, got 0"]),
         (["plan", "mppi", ENV, "--seconds", "-1"], ["--seconds must be > 0"]),
@@ -102,8 +111,12 @@ def test_envs_that_do_not_split_over_the_devices_are_one_line(capsys, tmp_path, 
     """Three devices (this one, thrice) and 8 envs: refused before anything is written."""
     monkeypatch.chdir(tmp_path)
     monkeypatch.setattr(jax, "devices", lambda *backend: [jax.local_devices()[0]] * 3)
-    assert_usage_error(capsys, ["train", "ppo", ENV, "--config", "num_envs=8"],
-                       "8 envs do not split evenly over 3 devices", "multiple of 3")  # fmt: skip
+    assert_usage_error(
+        capsys,
+        ["train", "ppo", ENV, "--config", "num_envs=8"],
+        "8 envs do not split evenly over 3 devices",
+        "multiple of 3",
+    )
     assert list(tmp_path.iterdir()) == []
 
 
@@ -121,7 +134,9 @@ def test_an_incomplete_run_directory_is_named(capsys, tmp_path, command):
 
     flag = "--resume " if command == "train" else ""
     (tmp_path / "empty").mkdir()
-    assert_usage_error(capsys, argv(tmp_path / "empty"), f"{flag}{tmp_path / 'empty'}: not a complete run", "no config.json")
+    assert_usage_error(
+        capsys, argv(tmp_path / "empty"), f"{flag}{tmp_path / 'empty'}: not a complete run", "no config.json"
+    )
     run = write_run(tmp_path / "run")
     (run / "config.json").unlink()
     assert_usage_error(capsys, argv(run), "no config.json")
@@ -139,10 +154,16 @@ def test_resume_must_match_the_run_it_continues(capsys, tmp_path):
     run = write_run(tmp_path / "run")
     checkpoints.save(run / "checkpoints", 64, {"x": jnp.zeros(1)})
     before = snapshot(run)
-    assert_usage_error(capsys, ["train", "ppo", "cartpole_balance", "--resume", str(run)],
-                       f"that run's env is {ENV}, not cartpole_balance")  # fmt: skip
-    assert_usage_error(capsys, ["train", "ppo", ENV, "--resume", str(run), "--env-overrides", "episode_steps=9"],
-                       "--env-overrides: a resumed run keeps")  # fmt: skip
+    assert_usage_error(
+        capsys,
+        ["train", "ppo", "cartpole_balance", "--resume", str(run)],
+        f"that run's env is {ENV}, not cartpole_balance",
+    )
+    assert_usage_error(
+        capsys,
+        ["train", "ppo", ENV, "--resume", str(run), "--env-overrides", "episode_steps=9"],
+        "--env-overrides: a resumed run keeps",
+    )
     assert_usage_error(capsys, ["train", "ppo", ENV, "--resume", str(run), "--out", str(tmp_path / "b")], "give one")
     assert snapshot(run) == before
 
@@ -169,7 +190,9 @@ def test_plan_refuses_an_out_that_holds_a_plan_run(capsys, tmp_path):
     (tmp_path / "run" / "summary.json").write_text("{}")
     (tmp_path / "file").write_text("")
     before = snapshot(tmp_path)
-    assert_usage_error(capsys, ["plan", "mppi", ENV, "--out", str(tmp_path / "run")], "already holds a run (summary.json)")
+    assert_usage_error(
+        capsys, ["plan", "mppi", ENV, "--out", str(tmp_path / "run")], "already holds a run (summary.json)"
+    )
     assert_usage_error(capsys, ["plan", "mppi", ENV, "--out", str(tmp_path / "file")], "is a file, not a directory")
     assert snapshot(tmp_path) == before
 
@@ -211,7 +234,9 @@ def test_only_damaged_checkpoints_is_status_2_and_touches_nothing(capsys, tmp_pa
         damage(run / "checkpoints", step)
     before = snapshot(run)
     argv = ["eval", str(run)] if command == "eval" else ["train", "ppo", ENV, "--resume", str(run)]
-    line = assert_usage_error(capsys, argv, f"no intact checkpoint in {run / 'checkpoints'}: checkpoint 128 is damaged (")
+    line = assert_usage_error(
+        capsys, argv, f"no intact checkpoint in {run / 'checkpoints'}: checkpoint 128 is damaged ("
+    )
     assert "; checkpoint 64 is damaged (" in line
     assert snapshot(run) == before
 
@@ -222,8 +247,11 @@ def test_resuming_a_checkpoint_of_another_state_is_status_2(capsys, tmp_path, pp
     checkpoints.save(run / "checkpoints", 64, ppo_state)
     checkpoints.save(run / "checkpoints", 128, {"params": jnp.zeros(3)})
     before = snapshot(run)
-    assert_usage_error(capsys, ["train", "ppo", ENV, "--resume", str(run)],
-                       f"checkpoint 128 in {run / 'checkpoints'} does not match the template")  # fmt: skip
+    assert_usage_error(
+        capsys,
+        ["train", "ppo", ENV, "--resume", str(run)],
+        f"checkpoint 128 in {run / 'checkpoints'} does not match the template",
+    )
     assert snapshot(run) == before
 
 
@@ -251,8 +279,9 @@ COUNTER.PER_ENV_FIELDS = ()
 def test_training_resumes_from_the_newest_intact_checkpoint(tmp_path):
     """A resume skips a damaged newest checkpoint (warning), sets it aside, cuts
     metrics.jsonl back and trains on to the same end, saving that step anew."""
-    settings = training.Settings(out_dir=tmp_path, updates_per_chunk=1, eval_steps=1, video=False, progress=False,
-                                 checkpoint_every=1)  # fmt: skip
+    settings = training.Settings(
+        out_dir=tmp_path, updates_per_chunk=1, eval_steps=1, video=False, progress=False, checkpoint_every=1
+    )
     training.run(COUNTER, CountConfig(num_updates=3), {}, settings)
     damage(tmp_path / "checkpoints", 30)
     with pytest.warns(checkpoints.DamagedCheckpointWarning, match="checkpoint 30 is damaged .*restored checkpoint 20"):
@@ -276,8 +305,13 @@ def test_a_bug_past_the_checks_keeps_its_exception(tmp_path, monkeypatch):
 
 
 def test_subprocess_errors_have_no_traceback(tmp_path):
-    result = subprocess.run([sys.executable, "-m", "mjzoo", "train", "ppo", ENV, "--config", "num_envs=-3"],
-                            cwd=tmp_path, capture_output=True, text=True, timeout=120)  # fmt: skip
+    result = subprocess.run(
+        [sys.executable, "-m", "mjzoo", "train", "ppo", ENV, "--config", "num_envs=-3"],
+        cwd=tmp_path,
+        capture_output=True,
+        text=True,
+        timeout=120,
+    )
     assert result.returncode == 2 and result.stdout == ""
     assert result.stderr.splitlines() == ["mjzoo train: ppo.Config: num_envs=-3 is invalid; expected an integer >= 1"]
     assert list(tmp_path.iterdir()) == []
@@ -290,16 +324,21 @@ def test_only_damaged_checkpoints_in_a_fresh_process_is_one_line(tmp_path, ppo_s
     for step in (64, 128):
         checkpoints.save(run / "checkpoints", step, ppo_state)
         damage(run / "checkpoints", step)
-    result = subprocess.run([sys.executable, "-m", "mjzoo", "eval", "run"], cwd=tmp_path, capture_output=True,
-                            text=True, timeout=300)  # fmt: skip
+    result = subprocess.run(
+        [sys.executable, "-m", "mjzoo", "eval", "run"], cwd=tmp_path, capture_output=True, text=True, timeout=300
+    )
     assert result.returncode == 2 and result.stdout == ""
     (line,) = result.stderr.splitlines()
-    assert line.startswith("mjzoo eval: no intact checkpoint in run/checkpoints: checkpoint 128 is damaged (ValueError: ")
+    assert line.startswith(
+        "mjzoo eval: no intact checkpoint in run/checkpoints: checkpoint 128 is damaged (ValueError: "
+    )
 
 
 def test_a_closed_stdout_ends_quietly():
     """`mjzoo envs | head -1`: the reader is gone before anything is written."""
-    with subprocess.Popen([sys.executable, "-m", "mjzoo", "envs"], stdout=subprocess.PIPE, stderr=subprocess.PIPE) as process:
+    with subprocess.Popen(
+        [sys.executable, "-m", "mjzoo", "envs"], stdout=subprocess.PIPE, stderr=subprocess.PIPE
+    ) as process:
         process.stdout.close()
         err = process.stderr.read().decode()
         assert process.wait(timeout=120) == 1
@@ -326,15 +365,49 @@ def test_schedule_and_render_flags_reach_the_settings_and_a_resume_keeps_them(tm
     """KSim's validation, logging and render options on the command line; a resumed run
     keeps what it started with (config.json) unless the flag is given again."""
     seen, configs = [], []
-    monkeypatch.setattr(ppo, "train", lambda config, task, settings: (seen.append(settings), configs.append(config), (None, {}))[2])
+    monkeypatch.setattr(
+        ppo, "train", lambda config, task, settings: (seen.append(settings), configs.append(config), (None, {}))[2]
+    )
     run = tmp_path / "run"
-    cli.main(["train", "ppo", ENV, "--out", str(run), "--rollout-seconds", "0.5", "--eval-every", "3", "--eval-seconds", "0.5", "--log-every", "2",
-              "--no-log-train-metrics", "--video-every", "4", "--profile-memory", "--checkpoint-every-seconds", "300",
-              "--render.width", "64",
-              "--render.contact-points", "--render.lookat", "0", "0", "1"])  # fmt: skip
+    cli.main(
+        [
+            "train",
+            "ppo",
+            ENV,
+            "--out",
+            str(run),
+            "--rollout-seconds",
+            "0.5",
+            "--eval-every",
+            "3",
+            "--eval-seconds",
+            "0.5",
+            "--log-every",
+            "2",
+            "--no-log-train-metrics",
+            "--video-every",
+            "4",
+            "--profile-memory",
+            "--checkpoint-every-seconds",
+            "300",
+            "--render.width",
+            "64",
+            "--render.contact-points",
+            "--render.lookat",
+            "0",
+            "0",
+            "1",
+        ]
+    )
     new = seen[-1]
     assert configs[-1].unroll_length == 25  # KSim's rollout_length_seconds: 0.5 s of 0.02 s control steps
-    assert (new.eval_every, new.eval_seconds, new.log_every, new.log_train_metrics, new.video_every) == (3, 0.5, 2, False, 4)
+    assert (new.eval_every, new.eval_seconds, new.log_every, new.log_train_metrics, new.video_every) == (
+        3,
+        0.5,
+        2,
+        False,
+        4,
+    )
     assert (new.checkpoint_every_seconds, new.checkpoint_every) == (300.0, None)
     assert new.profile_memory and new.render == rendering.RenderConfig(width=64, contact_points=True, lookat=(0, 0, 1))
     info = json.loads((write_run(tmp_path / "resumed") / "config.json").read_text())

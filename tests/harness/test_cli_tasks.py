@@ -12,16 +12,15 @@ from pathlib import Path
 
 import numpy as np
 import pytest
+from test_cli import TINY, assert_usage_error, snapshot  # the command's shared test helpers
 
 import mjzoo.envs
 from mjzoo.algorithms import ppo, predictive_sampling
 from mjzoo.harness import cli, datasets, training
 
-from test_cli import TINY, assert_usage_error, snapshot  # the command's shared test helpers
-
 MODULE = "mjzoo_cli_user_tasks"  # unique: imported modules stay in sys.modules
 SPEC = f"{MODULE}:make_pendulum"
-USER_TASKS = '''
+USER_TASKS = """
 import mjzoo, mjzoo.envs
 from mjzoo.envs import base
 
@@ -38,14 +37,14 @@ def not_a_task():
     return 3
 
 NUMBER = 3
-'''
-PLANNED_TASKS = '''
+"""
+PLANNED_TASKS = """
 from mjzoo.envs import base
 from mjzoo_cli_user_tasks import make_pendulum
 
 PLANNING = base.PlanningSetup(seconds=0.1, replan_every=5, plan_overrides={}, configs={"mppi": {"num_samples": 6}},
                               success=None)
-'''
+"""
 BROKEN_TASKS = "import mjzoo_cli_no_such_dependency\n"
 PLAN_CONFIG = ["--config", "num_samples=4", "horizon_steps=4", "num_knots=2"]
 
@@ -55,8 +54,11 @@ def user_dir(tmp_path_factory) -> Path:
     """A directory holding the user's modules (not on sys.path: the CLI finds them from
     the current directory)."""
     directory = tmp_path_factory.mktemp("user")
-    for name, text in ((MODULE, USER_TASKS), ("mjzoo_cli_planned_tasks", PLANNED_TASKS),
-                       ("mjzoo_cli_broken_tasks", BROKEN_TASKS)):  # fmt: skip
+    for name, text in (
+        (MODULE, USER_TASKS),
+        ("mjzoo_cli_planned_tasks", PLANNED_TASKS),
+        ("mjzoo_cli_broken_tasks", BROKEN_TASKS),
+    ):
         (directory / f"{name}.py").write_text(textwrap.dedent(text))
     return directory
 
@@ -100,16 +102,30 @@ def test_a_factory_without_planning_plans_one_episode(user_dir, monkeypatch):
 @pytest.mark.parametrize(
     "argv, words",
     [
-        (["train", "ppo", "mjzoo_cli_nowhere:make"], ["task spec 'mjzoo_cli_nowhere:make': no module named 'mjzoo_cli_nowhere'"]),
+        (
+            ["train", "ppo", "mjzoo_cli_nowhere:make"],
+            ["task spec 'mjzoo_cli_nowhere:make': no module named 'mjzoo_cli_nowhere'"],
+        ),
         (["train", "ppo", f"{MODULE}.sub:make"], [f"no module named '{MODULE}.sub'"]),
         (["train", "ppo", f"{MODULE}:nothing"], [f"module '{MODULE}' has no attribute 'nothing'"]),
         (["train", "ppo", f"{MODULE}:NUMBER"], ["NUMBER is not callable (type int)"]),
-        (["train", "ppo", f"{MODULE}:not_a_task"], [f"{MODULE}:not_a_task: returned a value of type int, not a mjzoo.Task"]),
+        (
+            ["train", "ppo", f"{MODULE}:not_a_task"],
+            [f"{MODULE}:not_a_task: returned a value of type int, not a mjzoo.Task"],
+        ),
         (["train", "ppo", f"{MODULE}:"], ["expected a registered env or package.module:factory"]),
-        (["train", "ppo", SPEC, "--env-overrides", "mass=2"],
-         ["unknown override(s) ['mass']; make_pendulum takes ['episode_steps', 'upright_weight']"]),
-        (["train", "ppo", SPEC, "--env-overrides", "episode_steps=abc"], [f"{SPEC}: override episode_steps='abc' must be an int"]),
-        (["train", "ppo", f"{MODULE}:make_heavy"], ["required argument(s) ['mass'] not given; make_heavy takes ['mass', 'episode_steps']"]),
+        (
+            ["train", "ppo", SPEC, "--env-overrides", "mass=2"],
+            ["unknown override(s) ['mass']; make_pendulum takes ['episode_steps', 'upright_weight']"],
+        ),
+        (
+            ["train", "ppo", SPEC, "--env-overrides", "episode_steps=abc"],
+            [f"{SPEC}: override episode_steps='abc' must be an int"],
+        ),
+        (
+            ["train", "ppo", f"{MODULE}:make_heavy"],
+            ["required argument(s) ['mass'] not given; make_heavy takes ['mass', 'episode_steps']"],
+        ),
         (["train", "ppo", SPEC, "--config", "num_envs=-3"], ["num_envs=-3", "integer >= 1"]),
         (["train", "ppo", f"{MODULE}:make_endless"], ["make_endless: the task has no time limit"]),
         (["plan", "mppi", f"{MODULE}:make_endless"], ["make_endless: the task has no time limit", "give seconds"]),
@@ -124,7 +140,7 @@ def test_a_factory_without_planning_plans_one_episode(user_dir, monkeypatch):
         (["collect", "mppi", "--task", SPEC, "--out", "data", "--episodes", "0"], ["--episodes must be >= 1, got 0"]),
         (["collect", "mppi", "--task", SPEC, "--out", "data", "--steps", "0"], ["--steps must be >= 1, got 0"]),
     ],
-)  # fmt: skip
+)
 def test_a_mistake_in_a_users_task_is_one_line_and_status_2(capsys, in_user_dir, argv, words):
     before = snapshot(in_user_dir)
     assert_usage_error(capsys, argv, *words)
@@ -138,7 +154,15 @@ def test_a_missing_import_inside_the_users_module_keeps_its_traceback(in_user_di
         cli.main(["train", "ppo", "mjzoo_cli_broken_tasks:make"])
 
 
-TRAIN = ["--config", *(f"{k}={v}" for k, v in TINY.items()), "--eval-envs", "2", "--updates-per-chunk", "2", "--no-video"]
+TRAIN = [
+    "--config",
+    *(f"{k}={v}" for k, v in TINY.items()),
+    "--eval-envs",
+    "2",
+    "--updates-per-chunk",
+    "2",
+    "--no-video",
+]
 
 
 @pytest.fixture(scope="module")
@@ -154,7 +178,9 @@ def test_train_writes_the_spec_and_eval_runs_its_episode_length(capsys, cli_run,
     assert json.loads((cli_run / "task.json").read_text()) == {"env": SPEC, "overrides": {"upright_weight": 2.0}}
     built, lengths = [], []
     make, evaluate = mjzoo.envs.make, ppo.evaluate
-    monkeypatch.setattr(mjzoo.envs, "make", lambda spec, **overrides: (built.append((spec, overrides)), make(spec, **overrides))[1])  # fmt: skip
+    monkeypatch.setattr(
+        mjzoo.envs, "make", lambda spec, **overrides: (built.append((spec, overrides)), make(spec, **overrides))[1]
+    )
     monkeypatch.setattr(ppo, "evaluate", lambda *args: (lengths.append(args[4:]), evaluate(*args))[1])
     monkeypatch.setattr(training, "write_video", lambda task, trajectory, path, config=None: None)
     cli.main(["eval", str(cli_run), "--episodes", "2"])
@@ -171,12 +197,21 @@ def test_eval_of_a_run_trained_from_python_needs_task(capsys, in_user_dir, monke
     --env-overrides set it up as it was trained."""
     monkeypatch.syspath_prepend(str(in_user_dir))
     run = in_user_dir / "runs" / "python"
-    ppo.train(ppo.Config(**TINY), mjzoo.envs.make(SPEC, episode_steps=10), out_dir=run, eval_envs=2,
-              updates_per_chunk=2, video=False, progress=False)  # fmt: skip (the CLI run's compiles serve)
+    ppo.train(
+        ppo.Config(**TINY),
+        mjzoo.envs.make(SPEC, episode_steps=10),
+        out_dir=run,
+        eval_envs=2,
+        updates_per_chunk=2,
+        video=False,
+        progress=False,
+    )  # (the CLI run's compiles serve)
     assert not (run / "task.json").exists()
     assert_usage_error(capsys, ["eval", str(run)], f"{run}: has no task.json (trained from Python?)", "--task")
     seen = []
-    monkeypatch.setattr(ppo, "evaluate", lambda config, task, state, key, n, steps: (seen.append(steps), (0.0, np.zeros(n), None))[1])  # fmt: skip
+    monkeypatch.setattr(
+        ppo, "evaluate", lambda config, task, state, key, n, steps: (seen.append(steps), (0.0, np.zeros(n), None))[1]
+    )
     monkeypatch.setattr(training, "write_video", lambda task, trajectory, path, config=None: None)
     cli.main(["eval", str(run), "--task", SPEC, "--env-overrides", "episode_steps=10", "--episodes", "2"])
     assert capsys.readouterr().out.startswith(f"{SPEC}: mean return 0.00")
@@ -194,13 +229,22 @@ def test_collect_writes_a_runs_deterministic_episodes(capsys, cli_run, in_user_d
     data, lines = _collected(capsys, ["collect", str(cli_run), "--out", str(out), "--episodes", "3"])
     files = ["dataset.npz", "meta.json", *(f"motions/episode_{i:03d}.npz" for i in range(3))]
     assert sorted(lines[:-1]) == sorted(str(out / f) for f in files)  # one line per file written
-    assert lines[-1] == (f"{out}: 3 episodes of 20 steps on {SPEC}, mean length 20.0, "
-                         f"mean return {data.returns().mean():.2f}")  # fmt: skip
-    assert (data.qpos.shape, data.action.shape, data.obs.shape, data.xpos.shape) == ((3, 21, 1), (3, 20, 1),
-                                                                                    (3, 21, 3), (3, 21, 2, 3))
+    assert lines[-1] == (
+        f"{out}: 3 episodes of 20 steps on {SPEC}, mean length 20.0, mean return {data.returns().mean():.2f}"
+    )
+    assert (data.qpos.shape, data.action.shape, data.obs.shape, data.xpos.shape) == (
+        (3, 21, 1),
+        (3, 20, 1),
+        (3, 21, 3),
+        (3, 21, 2, 3),
+    )
     assert data.deterministic is True and data.seed == 0 and set(data.reward_terms) == {"upright", "velocity", "effort"}
-    assert data.source == {"run": str(cli_run), "algorithm": "ppo", "task": SPEC,
-                           "env_overrides": {"upright_weight": 2.0}}  # fmt: skip
+    assert data.source == {
+        "run": str(cli_run),
+        "algorithm": "ppo",
+        "task": SPEC,
+        "env_overrides": {"upright_weight": 2.0},
+    }
     angle, speed = data.qpos[..., 0], data.qvel[..., 0]
     np.testing.assert_allclose(data.obs, np.stack([np.cos(angle), np.sin(angle), speed], -1), atol=1e-5)
     np.testing.assert_allclose(np.diff(data.time, axis=1), 0.02, atol=1e-6)  # the control step
@@ -213,15 +257,21 @@ def test_collect_writes_a_runs_deterministic_episodes(capsys, cli_run, in_user_d
     clip = mjzoo.motion.load_file(out / "motions" / "episode_002.npz")
     assert clip.num_frames == 21 and clip.joint_names == data.joint_names and clip.fps == pytest.approx(50.0)
     before = snapshot(out.parent)
-    assert_usage_error(capsys, ["collect", str(cli_run), "--out", str(out)], f"--out {out} already holds a dataset",
-                       "give --overwrite")  # fmt: skip
+    assert_usage_error(
+        capsys, ["collect", str(cli_run), "--out", str(out)], f"--out {out} already holds a dataset", "give --overwrite"
+    )
     assert snapshot(out.parent) == before
-    assert_usage_error(capsys, ["collect", str(cli_run), "--out", str(out), "--overwrite", "--task", f"{MODULE}:make_endless"],
-                       "make_endless: the task has no time limit", "give --steps")  # fmt: skip
+    assert_usage_error(
+        capsys,
+        ["collect", str(cli_run), "--out", str(out), "--overwrite", "--task", f"{MODULE}:make_endless"],
+        "make_endless: the task has no time limit",
+        "give --steps",
+    )
     again, _ = _collected(capsys, ["collect", str(cli_run), "--out", str(out), "--episodes", "3", "--overwrite"])
     assert all(np.array_equal(a, b) for a, b in zip(data.arrays().values(), again.arrays().values()))  # same seed
-    sampled, _ = _collected(capsys, ["collect", str(cli_run), "--out", str(out.parent / "sampled"), "--episodes", "3",
-                                     "--sampled"])  # fmt: skip
+    sampled, _ = _collected(
+        capsys, ["collect", str(cli_run), "--out", str(out.parent / "sampled"), "--episodes", "3", "--sampled"]
+    )
     assert sampled.deterministic is False and sampled.action.shape == data.action.shape
     assert not np.allclose(sampled.action, data.action)  # sampled actions differ from the mean's
     np.testing.assert_array_equal(sampled.qpos[:, 0], data.qpos[:, 0])  # from the same resets
@@ -230,14 +280,41 @@ def test_collect_writes_a_runs_deterministic_episodes(capsys, cli_run, in_user_d
 def test_plan_and_collect_with_a_planner_on_a_users_task(capsys, in_user_dir):
     """Default planning setup: one episode (10 steps here), no success test."""
     out = in_user_dir / "runs" / "plan"
-    cli.main(["plan", "predictive_sampling", SPEC, "--offline", "--no-video", "--out", str(out),
-              "--env-overrides", "episode_steps=10", *PLAN_CONFIG])  # fmt: skip
+    cli.main(
+        [
+            "plan",
+            "predictive_sampling",
+            SPEC,
+            "--offline",
+            "--no-video",
+            "--out",
+            str(out),
+            "--env-overrides",
+            "episode_steps=10",
+            *PLAN_CONFIG,
+        ]
+    )
     summary = json.loads((out / "summary.json").read_text())
     assert summary["success"] is None and summary["env"] == SPEC and np.isfinite(summary["final_cost"])
     capsys.readouterr()
-    data, lines = _collected(capsys, ["collect", "predictive_sampling", "--task", SPEC, "--env-overrides",
-                                      "episode_steps=10", "--out", str(in_user_dir / "planned"), "--episodes", "2",
-                                      "--steps", "9", *PLAN_CONFIG])  # fmt: skip
+    data, lines = _collected(
+        capsys,
+        [
+            "collect",
+            "predictive_sampling",
+            "--task",
+            SPEC,
+            "--env-overrides",
+            "episode_steps=10",
+            "--out",
+            str(in_user_dir / "planned"),
+            "--episodes",
+            "2",
+            "--steps",
+            "9",
+            *PLAN_CONFIG,
+        ],
+    )
     assert len(lines) == 5 and lines[-1].startswith(f"{in_user_dir / 'planned'}: 2 episodes of 9 steps on {SPEC}")
     assert data.qpos.shape == (2, 10, 1) and data.action.shape == (2, 9, 1) and (data.length == 9).all()
     assert not np.array_equal(data.qpos[0], data.qpos[1])  # episodes from their own resets

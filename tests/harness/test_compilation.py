@@ -156,7 +156,9 @@ def test_the_train_state_is_owned_by_one_program_whatever_its_shapes():
     pointers += [x.unsafe_buffer_pointer() for x in jax.tree.leaves(owned)]
     assert len(set(pointers)) == len(pointers) == 5
     assert pointers[1] != zeros.unsafe_buffer_pointer()
-    jax.tree.map(lambda x, y: jnp.array_equal(x, y) or pytest.fail("a copy differs"), owned, {k: tree[k] for k in owned})
+    jax.tree.map(
+        lambda x, y: jnp.array_equal(x, y) or pytest.fail("a copy differs"), owned, {k: tree[k] for k in owned}
+    )
 
 
 @dataclasses.dataclass(frozen=True)
@@ -176,11 +178,22 @@ def test_the_chunk_compiled_ahead_from_inits_shapes_serves_every_chunk(monkeypat
 
     algorithm = types.ModuleType("stepper")
     algorithm.PER_ENV_FIELDS = ("per_env",)
-    algorithm.init = lambda config, task, key: {"updates": jnp.zeros((), jnp.int32), "per_env": jnp.zeros(4),
-                                                "scale": jnp.asarray(1.0), "key": key}  # fmt: skip
-    algorithm.update = lambda config, task, s: ({**s, "updates": s["updates"] + 1, "per_env": s["per_env"] * s["scale"],
-                                                 "scale": s["scale"] * task["gain"][0],  # strong, as data.time steps
-                                                 "key": jax.random.fold_in(s["key"], 1)}, {})  # fmt: skip
+    algorithm.init = lambda config, task, key: {
+        "updates": jnp.zeros((), jnp.int32),
+        "per_env": jnp.zeros(4),
+        "scale": jnp.asarray(1.0),
+        "key": key,
+    }
+    algorithm.update = lambda config, task, s: (
+        {
+            **s,
+            "updates": s["updates"] + 1,
+            "per_env": s["per_env"] * s["scale"],
+            "scale": s["scale"] * task["gain"][0],  # strong, as data.time steps
+            "key": jax.random.fold_in(s["key"], 1),
+        },
+        {},
+    )
     config = Updates(num_updates=4)
     settings = training.Settings(updates_per_chunk=2, video=False, progress=False)
     task, key = {"gain": jnp.ones(3)}, jax.random.key(0)
@@ -190,7 +203,9 @@ def test_the_chunk_compiled_ahead_from_inits_shapes_serves_every_chunk(monkeypat
     ahead = training._compile_chunk_ahead(algorithm, config, task, settings, key)
     assert ahead is not None  # one device
     ahead.join()
-    state = devices.shard_envs(training._owned(training._init_fn(algorithm)(config, task, key)), algorithm.PER_ENV_FIELDS)
+    state = devices.shard_envs(
+        training._owned(training._init_fn(algorithm)(config, task, key)), algorithm.PER_ENV_FIELDS
+    )
     _compiles.clear()
     state, _ = training._chunk_fn(algorithm, config, 2)(devices.replicate(task), state)
     state, _ = training._chunk_fn(algorithm, config, 2)(devices.replicate(task), state)
@@ -235,10 +250,14 @@ def test_the_chunk_compiles_ahead_for_the_env_batch_split_over_two_devices():
     """With several devices the chunk is compiled ahead for the shardings `shard_envs`
     gives (`devices.env_shardings`): the call compiles nothing. (It used to compile only
     after init there: on two H200s the first chunk ended 43 s later than on one.)"""
-    env = {**os.environ, "JAX_PLATFORMS": "cpu",
-           "XLA_FLAGS": os.environ.get("XLA_FLAGS", "") + " --xla_force_host_platform_device_count=2"}  # fmt: skip
-    done = subprocess.run([sys.executable, "-c", CHUNK_AHEAD_ON_TWO_DEVICES], env=env, capture_output=True, text=True,
-                          timeout=300)  # fmt: skip
+    env = {
+        **os.environ,
+        "JAX_PLATFORMS": "cpu",
+        "XLA_FLAGS": os.environ.get("XLA_FLAGS", "") + " --xla_force_host_platform_device_count=2",
+    }
+    done = subprocess.run(
+        [sys.executable, "-c", CHUNK_AHEAD_ON_TWO_DEVICES], env=env, capture_output=True, text=True, timeout=300
+    )
     assert done.returncode == 0, done.stderr[-3000:]
     assert "chunks 2" in done.stdout
 
@@ -247,7 +266,6 @@ def test_the_evaluation_compiled_ahead_serves_the_first_evaluation(monkeypatch):
     """`training.run` traces and compiles the evaluation on a thread while the first chunk
     runs: the first evaluation's call compiles nothing more on the main thread."""
     from mjzoo.harness import training
-
     from tests.harness.test_training import TASK, CountConfig, counter
 
     algorithm = counter(evaluate=lambda config, task, s, key, n, steps: (s.per_env.sum() * steps, jnp.zeros(n), None))
@@ -280,7 +298,6 @@ def test_beside_warp_on_a_gpu_the_evaluation_compiles_alone_before_the_first_chu
     evaluation then compiles on the main thread, after init has run and before the chunk
     is called, and the chunk is not compiled ahead; the first evaluation still finds it."""
     from mjzoo.harness import training
-
     from tests.harness.test_training import TASK, CountConfig, counter
 
     algorithm = counter(evaluate=lambda config, task, s, key, n, steps: (s.per_env.sum() * steps, jnp.zeros(n), None))
@@ -311,13 +328,15 @@ def test_the_evaluation_compiles_beside_a_cold_chunk_and_after_a_cached_one(monk
     evaluation's compile starts then, beside it, not once the chunk runs. A chunk done
     by then (loaded from the cache) runs first, and the evaluation compiles while it does."""
     from mjzoo.harness import training
-
     from tests.harness.test_training import TASK, CountConfig, counter
 
     algorithm = counter(evaluate=lambda config, task, s, key, n, steps: (s.per_env.sum() * steps, jnp.zeros(n), None))
     events = []
-    compile_for_real, chunk_fn, ahead_for_real = (training._Loop.compile_evaluation_ahead, training._chunk_fn,
-                                                  training._compile_chunk_ahead)  # fmt: skip
+    compile_for_real, chunk_fn, ahead_for_real = (
+        training._Loop.compile_evaluation_ahead,
+        training._chunk_fn,
+        training._compile_chunk_ahead,
+    )
 
     def chunk_ahead(*args):  # the real compile, then 0.5 s more of "compiling" when cold
         real = ahead_for_real(*args)

@@ -35,17 +35,29 @@ def task() -> mjzoo.Task:
 
 @pytest.fixture(scope="module")
 def data(task) -> datasets.Dataset:
-    return datasets.record_policy(task, _act, jnp.float32(2.0), 0, EPISODES, STEPS, deterministic=False,
-                                  source={"policy": "random pushes"})  # fmt: skip
+    return datasets.record_policy(
+        task, _act, jnp.float32(2.0), 0, EPISODES, STEPS, deterministic=False, source={"policy": "random pushes"}
+    )
 
 
 def test_shapes_names_and_meta(data):
     n, t = EPISODES, STEPS
     shapes = {k: v.shape for k, v in data.arrays().items()}
-    assert shapes == {"qpos": (n, t + 1, 2), "qvel": (n, t + 1, 2), "time": (n, t + 1), "xpos": (n, t + 1, 3, 3),
-                      "xquat": (n, t + 1, 3, 4), "obs": (n, t + 1, 5), "action": (n, t, 1), "ctrl": (n, t, 1),
-                      "reward": (n, t), **{f"reward/{k}": (n, t) for k in TERMS}, "terminated": (n, t),
-                      "truncated": (n, t), "length": (n,)}  # fmt: skip
+    assert shapes == {
+        "qpos": (n, t + 1, 2),
+        "qvel": (n, t + 1, 2),
+        "time": (n, t + 1),
+        "xpos": (n, t + 1, 3, 3),
+        "xquat": (n, t + 1, 3, 4),
+        "obs": (n, t + 1, 5),
+        "action": (n, t, 1),
+        "ctrl": (n, t, 1),
+        "reward": (n, t),
+        **{f"reward/{k}": (n, t) for k in TERMS},
+        "terminated": (n, t),
+        "truncated": (n, t),
+        "length": (n,),
+    }
     assert (data.num_episodes, data.num_steps) == (n, t)
     assert data.joint_names == ("slider", "hinge") and data.body_names == ("world", "cart", "pole")
     assert data.actuator_names == ("slide",) and tuple(data.reward_terms) == TERMS
@@ -135,10 +147,23 @@ def test_save_load_round_trip_and_meta(data, tmp_path):
 
 def _first(data: datasets.Dataset, n: int) -> datasets.Dataset:
     """The first `n` episodes."""
-    fields = ("qpos", "qvel", "time", "xpos", "xquat", "obs", "action", "ctrl", "reward", "terminated", "truncated",
-              "length")  # fmt: skip
-    return dataclasses.replace(data, **{f: getattr(data, f)[:n] for f in fields},
-                               reward_terms={k: v[:n] for k, v in data.reward_terms.items()})  # fmt: skip
+    fields = (
+        "qpos",
+        "qvel",
+        "time",
+        "xpos",
+        "xquat",
+        "obs",
+        "action",
+        "ctrl",
+        "reward",
+        "terminated",
+        "truncated",
+        "length",
+    )
+    return dataclasses.replace(
+        data, **{f: getattr(data, f)[:n] for f in fields}, reward_terms={k: v[:n] for k, v in data.reward_terms.items()}
+    )
 
 
 def test_overwrite_is_refused_unless_asked_and_keeps_other_files(data, tmp_path):

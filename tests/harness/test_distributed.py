@@ -38,9 +38,24 @@ XML = """
 SPEC = "tests.harness.test_distributed:block_task"
 AMP_SPEC = "tests.harness.test_distributed:block_amp_task"
 AMP_FLAGS = ["disc_minibatches=2", "disc_hidden_sizes=(16,)", "replay_size=64"]  # after --config
-FLAGS = ["--config", "num_envs=8", "unroll_length=8", "num_minibatches=2", "num_epochs=1",
-         "policy_hidden_sizes=(16,)", "value_hidden_sizes=(16,)", "--updates-per-chunk", "2", "--eval-envs", "2",
-         "--eval-every", "1", "--checkpoint-every", "1", "--no-video"]  # fmt: skip (every chunk evaluates and
+FLAGS = [
+    "--config",
+    "num_envs=8",
+    "unroll_length=8",
+    "num_minibatches=2",
+    "num_epochs=1",
+    "policy_hidden_sizes=(16,)",
+    "value_hidden_sizes=(16,)",
+    "--updates-per-chunk",
+    "2",
+    "--eval-envs",
+    "2",
+    "--eval-every",
+    "1",
+    "--checkpoint-every",
+    "1",
+    "--no-video",
+]  # (every chunk evaluates and
 # saves, whatever the clocks say)
 STEPS_PER_CHUNK = 2 * 8 * 8
 RTOL, ATOL = 1e-5, 1e-6  # the runs agree to the bit here; this allows another order of summing
@@ -61,33 +76,62 @@ def block_amp_task() -> mjzoo.Task:
     task = block_task()
     dt = mjzoo.control_dt(task)
     t = np.arange(200) * dt
-    clip = mjzoo.motion.Clip(name="slide", fps=1 / dt, qpos=0.3 * np.sin(t)[:, None], qvel=0.3 * np.cos(t)[:, None],
-                             joint_names=("x",))  # fmt: skip
+    clip = mjzoo.motion.Clip(
+        name="slide", fps=1 / dt, qpos=0.3 * np.sin(t)[:, None], qvel=0.3 * np.cos(t)[:, None], joint_names=("x",)
+    )
     return mjzoo.motion.with_reference(task, mjzoo.motion.reference(clip, task.mj_model, dt))
 
 
 Launched = list[tuple[subprocess.Popen, Path]]  # each process with the stem of its log files
 
 
-def _launch(out: Path | None, logs: Path, *args: str, processes: int = 1, devices: int = 1,
-            spec: str = SPEC, algorithm: str = "ppo") -> Launched:  # fmt: skip
+def _launch(
+    out: Path | None,
+    logs: Path,
+    *args: str,
+    processes: int = 1,
+    devices: int = 1,
+    spec: str = SPEC,
+    algorithm: str = "ppo",
+) -> Launched:
     """`mjzoo train algorithm spec` in `processes` processes of `devices` CPU devices each,
     writing their output to files in `logs` (a pipe nobody reads could fill and stall one)."""
     cache = logs.parent / "cache"  # process 0 of the resumed run finds its executables there
     env = {k: v for k, v in os.environ.items() if not k.startswith(("JAX_COORDINATOR", "JAX_NUM_PROC", "JAX_PROCESS"))}
-    env.update(JAX_PLATFORMS="cpu", MJZOO_COMPILE_CACHE=str(cache), JAX_COMPILATION_CACHE_DIR=str(cache),
-               XLA_FLAGS=f"{env.get('XLA_FLAGS', '')} --xla_force_host_platform_device_count={devices}")  # fmt: skip
+    env.update(
+        JAX_PLATFORMS="cpu",
+        MJZOO_COMPILE_CACHE=str(cache),
+        JAX_COMPILATION_CACHE_DIR=str(cache),
+        XLA_FLAGS=f"{env.get('XLA_FLAGS', '')} --xla_force_host_platform_device_count={devices}",
+    )
     flags = FLAGS[:1] + AMP_FLAGS + FLAGS[1:] if algorithm == "amp" else FLAGS
-    command = [sys.executable, "-m", "mjzoo", "train", algorithm, spec, *args, *flags, *(["--out", str(out)] if out else [])]
+    command = [
+        sys.executable,
+        "-m",
+        "mjzoo",
+        "train",
+        algorithm,
+        spec,
+        *args,
+        *flags,
+        *(["--out", str(out)] if out else []),
+    ]
     port = distributed.free_port("localhost")
-    joined = [[f"--coordinator=localhost:{port}", f"--num-processes={processes}", f"--process-id={i}"]
-              for i in range(processes)] if processes > 1 else [[]]  # fmt: skip
+    joined = (
+        [
+            [f"--coordinator=localhost:{port}", f"--num-processes={processes}", f"--process-id={i}"]
+            for i in range(processes)
+        ]
+        if processes > 1
+        else [[]]
+    )
     logs.mkdir(parents=True, exist_ok=True)
     launched = []
     for i, flags in enumerate(joined):
         with open(logs / f"{i}.out", "w") as stdout, open(logs / f"{i}.err", "w") as stderr:
-            launched.append((subprocess.Popen([*command, *flags], cwd=ROOT, env=env, stdout=stdout, stderr=stderr),
-                             logs / str(i)))  # fmt: skip
+            launched.append(
+                (subprocess.Popen([*command, *flags], cwd=ROOT, env=env, stdout=stdout, stderr=stderr), logs / str(i))
+            )
     return launched
 
 
@@ -123,11 +167,18 @@ def _saved_arrays(run: Path, step: int) -> dict[str, np.ndarray]:
 def test_two_processes_train_as_one_process_with_two_devices_and_resume(tmp_path, algorithm, spec):
     two, one = tmp_path / "two", tmp_path / "one"
     run = dict(spec=spec, algorithm=algorithm)
-    first, second = _finish(_launch(two, tmp_path / "logs-two", "--total-steps", str(2 * STEPS_PER_CHUNK), processes=2,
-                                    **run))  # fmt: skip
+    first, second = _finish(
+        _launch(two, tmp_path / "logs-two", "--total-steps", str(2 * STEPS_PER_CHUNK), processes=2, **run)
+    )
     assert "final eval/return" in first and "final eval/return" not in second  # process 0 reports
-    assert sorted(p.name for p in two.iterdir()) == ["checkpoints", "config.json", "curves.png", "metrics.jsonl",
-                                                    "task.json", "tensorboard"]  # fmt: skip
+    assert sorted(p.name for p in two.iterdir()) == [
+        "checkpoints",
+        "config.json",
+        "curves.png",
+        "metrics.jsonl",
+        "task.json",
+        "tensorboard",
+    ]
     assert [line["step"] for line in _lines(two)] == [STEPS_PER_CHUNK, 2 * STEPS_PER_CHUNK]  # written once
     assert len(list((two / "tensorboard").iterdir())) == 1
     assert sorted(int(p.name) for p in (two / "checkpoints").iterdir()) == [STEPS_PER_CHUNK, 2 * STEPS_PER_CHUNK]
@@ -150,16 +201,21 @@ def test_two_processes_train_as_one_process_with_two_devices_and_resume(tmp_path
         np.testing.assert_allclose(final[name], wanted[name], rtol=RTOL, atol=ATOL, err_msg=name)
 
 
-@pytest.mark.skipif(importlib.util.find_spec("warp") is None or os.environ.get("MJZOO_WARP_ON_CPU") != "1",
-                    reason="needs MuJoCo Warp installed and MJZOO_WARP_ON_CPU=1 (Warp's slow CPU backend)")
+@pytest.mark.skipif(
+    importlib.util.find_spec("warp") is None or os.environ.get("MJZOO_WARP_ON_CPU") != "1",
+    reason="needs MuJoCo Warp installed and MJZOO_WARP_ON_CPU=1 (Warp's slow CPU backend)",
+)
 def test_two_processes_on_warp_train_as_one_process_with_two_devices(tmp_path):
     """One process per device is how Warp runs on several GPUs: each process's physics on
     its own device (MJX's default device for Warp is process 0's), each device its own
     worlds and share of the contact pool. The hopper: its worlds touch the floor."""
     two, one = tmp_path / "two", tmp_path / "one"
     args = ["--total-steps", str(STEPS_PER_CHUNK), "--env-overrides", "impl=warp"]
-    _finish(_launch(two, tmp_path / "logs-two", *args, processes=2, spec="hopper")
-            + _launch(one, tmp_path / "logs-one", *args, devices=2, spec="hopper"), timeout=900)  # fmt: skip
+    _finish(
+        _launch(two, tmp_path / "logs-two", *args, processes=2, spec="hopper")
+        + _launch(one, tmp_path / "logs-one", *args, devices=2, spec="hopper"),
+        timeout=900,
+    )
     assert json.loads((two / "config.json").read_text())["physics"]["impl"] == "warp"
     (line,), (wanted,) = _lines(two), _lines(one)
     for name in ("eval/return", "loss/total", "train/episode_return"):
@@ -185,10 +241,15 @@ def clean_env(monkeypatch):
         (("localhost:1234", 0, 0), "num_processes=0 must be an int >= 1"),
         (("localhost:1234", 2, -1), "process_id=-1 must be an int >= 0"),
         (("localhost:1234", 2.0, 0), "num_processes=2.0 must be an int >= 1"),
-        (("localhost:1234", None, None), "num_processes and process_id missing; give coordinator, num_processes and "
-                                         "process_id together"),
-        ((None, 2, 1), "coordinator missing; give coordinator, num_processes and process_id together (or set "
-                        "JAX_COORDINATOR_ADDRESS, JAX_NUM_PROCESSES, JAX_PROCESS_ID)"),
+        (
+            ("localhost:1234", None, None),
+            "num_processes and process_id missing; give coordinator, num_processes and process_id together",
+        ),
+        (
+            (None, 2, 1),
+            "coordinator missing; give coordinator, num_processes and process_id together (or set "
+            "JAX_COORDINATOR_ADDRESS, JAX_NUM_PROCESSES, JAX_PROCESS_ID)",
+        ),
     ],
 )
 def test_initialize_refuses_bad_or_partial_input(clean_env, args, message):
@@ -225,8 +286,19 @@ def test_several_processes_of_a_launcher_ask_for_a_run(clean_env):
 
 def test_the_cli_reports_a_bad_coordinator_in_one_line(clean_env, capsys):
     with pytest.raises(SystemExit) as exit_info:
-        cli.main(["train", "ppo", "pendulum_swingup", "--coordinator", "nowhere", "--num-processes", "2",
-                  "--process-id", "0"])  # fmt: skip
+        cli.main(
+            [
+                "train",
+                "ppo",
+                "pendulum_swingup",
+                "--coordinator",
+                "nowhere",
+                "--num-processes",
+                "2",
+                "--process-id",
+                "0",
+            ]
+        )
     err = capsys.readouterr().err
     assert exit_info.value.code == 2 and err.splitlines() == [
         "mjzoo train: distributed: coordinator='nowhere' is not HOST:PORT (e.g. 10.0.0.1:1234, port 1 .. 65535)"
@@ -248,7 +320,12 @@ except ValueError as e:
 
 def test_initialize_is_idempotent_but_not_with_other_values(clean_env):
     env = {**os.environ, "JAX_PLATFORMS": "cpu"}
-    result = subprocess.run([sys.executable, "-c", IDEMPOTENT, f"localhost:{distributed.free_port('localhost')}"], env=env,
-                            capture_output=True, text=True, timeout=120)  # fmt: skip
+    result = subprocess.run(
+        [sys.executable, "-c", IDEMPOTENT, f"localhost:{distributed.free_port('localhost')}"],
+        env=env,
+        capture_output=True,
+        text=True,
+        timeout=120,
+    )
     assert result.returncode == 0, result.stderr[-3000:]
     assert result.stdout.strip() == "distributed: already initialized otherwise: num_processes=2 (it is 1)"

@@ -13,9 +13,10 @@ import sys
 import jax.numpy as jnp
 import numpy as np
 import pytest
+from tensorboardX.proto import event_pb2
+
 from mjzoo.harness import metrics
 from mjzoo.harness.metrics import MetricsWriter, Progress, read_metrics
-from tensorboardX.proto import event_pb2
 
 
 def tensorboard_events(directory) -> list[list[event_pb2.Event]]:
@@ -205,11 +206,17 @@ class FakeDevice:
 
 
 def test_device_memory_names_each_device_and_those_without_statistics():
-    devices = [FakeDevice("gpu", 0, {"bytes_in_use": 5, "peak_bytes_in_use": 9, "bytes_limit": 100}),
-               FakeDevice("gpu", 1, {"bytes_in_use": 7}), FakeDevice("cpu", 0, None)]  # fmt: skip
+    devices = [
+        FakeDevice("gpu", 0, {"bytes_in_use": 5, "peak_bytes_in_use": 9, "bytes_limit": 100}),
+        FakeDevice("gpu", 1, {"bytes_in_use": 7}),
+        FakeDevice("cpu", 0, None),
+    ]
     values, silent = metrics.device_memory(devices)
-    assert values == {"memory/gpu0/bytes_in_use": 5.0, "memory/gpu0/peak_bytes_in_use": 9.0,
-                      "memory/gpu1/bytes_in_use": 7.0}  # fmt: skip
+    assert values == {
+        "memory/gpu0/bytes_in_use": 5.0,
+        "memory/gpu0/peak_bytes_in_use": 9.0,
+        "memory/gpu1/bytes_in_use": 7.0,
+    }
     assert silent == ["cpu0"]
     assert metrics.device_memory() == ({}, ["cpu0"])  # what XLA's CPU reports: nothing
 
@@ -220,10 +227,14 @@ def test_tensorboard_logging_does_not_import_pytorch(tmp_path):
     (tmp_path / "torch").mkdir()
     marker = tmp_path / "imported"
     (tmp_path / "torch" / "__init__.py").write_text(f"open({str(marker)!r}, 'w').close()\n")
-    code = (f"import os\nfrom mjzoo.harness.metrics import MetricsWriter\nw = MetricsWriter({str(tmp_path / 'run')!r})\n"
-            f"w.write(1, {{'loss': 1.0}})\nw.close()\nprint(os.path.exists({str(marker)!r}))\n"
-            f"import torch\nprint(os.path.exists({str(marker)!r}))\n")  # fmt: skip
+    code = (
+        f"import os\nfrom mjzoo.harness.metrics import MetricsWriter\nw = MetricsWriter({str(tmp_path / 'run')!r})\n"
+        f"w.write(1, {{'loss': 1.0}})\nw.close()\nprint(os.path.exists({str(marker)!r}))\n"
+        f"import torch\nprint(os.path.exists({str(marker)!r}))\n"
+    )
     env = {**os.environ, "PYTHONPATH": os.pathsep.join(filter(None, [str(tmp_path), os.environ.get("PYTHONPATH")]))}
-    result = subprocess.run([sys.executable, "-c", code], env=env, capture_output=True, text=True, check=True, timeout=120)
+    result = subprocess.run(
+        [sys.executable, "-c", code], env=env, capture_output=True, text=True, check=True, timeout=120
+    )
     assert list((tmp_path / "run" / "tensorboard").glob("events.out.tfevents.*"))  # TensorBoard's file was written
     assert result.stdout.split() == ["False", "True"]  # not imported by logging; the stand-in itself works

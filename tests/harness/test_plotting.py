@@ -7,6 +7,7 @@ import sys
 
 import imageio.v3 as iio
 import numpy as np
+
 from mjzoo.harness.metrics import MetricsWriter, read_metrics
 from mjzoo.harness.plotting import _panels, plot_curves
 from mjzoo.harness.rendering import RenderConfig

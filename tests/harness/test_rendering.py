@@ -17,6 +17,7 @@ import imageio.v3 as iio
 import mujoco
 import numpy as np
 import pytest
+
 from mjzoo.harness import rendering
 from mjzoo.harness.rendering import RenderConfig
 
@@ -149,7 +150,7 @@ def drawn(tmp_path_factory) -> dict[str, SimpleNamespace]:
                     close_fds=False,  # lets Python use posix_spawn: no fork of this multithreaded (JAX) process
                 ),
             )
-    for out, process in runs.values():
+    for _, process in runs.values():
         process.wait(timeout=120)
     return {
         backend: SimpleNamespace(

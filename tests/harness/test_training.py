@@ -15,12 +15,12 @@ from pathlib import Path
 
 import jax
 import jax.numpy as jnp
-import mjzoo
 import numpy as np
 import pytest
+
+import mjzoo
 from mjzoo.harness import metrics, rendering, training
 from mjzoo.harness.cli import runs
-
 from tests.harness.test_rendering import egl_installed
 
 XML = """
@@ -68,14 +68,18 @@ def test_evaluation_runs_the_task_s_own_episode_length():
 
 
 def test_a_task_without_time_limit_needs_eval_steps():
-    with pytest.raises(ValueError, match="eval_steps=None evaluates the task's own episode length, but the task "
-                                         "has no time limit"):  # fmt: skip
+    with pytest.raises(
+        ValueError, match="eval_steps=None evaluates the task's own episode length, but the task has no time limit"
+    ):
         training.run(counter(), CountConfig(), TASK.replace(time_limit=None), SETTINGS)
 
 
 def test_what_a_module_lacks_is_named_at_once():
-    with pytest.raises(TypeError, match=r"counter is not an algorithm of the training.Algorithm contract; it lacks "
-                                        r"evaluate\(\), PER_ENV_FIELDS \(.*\), config.steps_per_update"):  # fmt: skip
+    with pytest.raises(
+        TypeError,
+        match=r"counter is not an algorithm of the training.Algorithm contract; it lacks "
+        r"evaluate\(\), PER_ENV_FIELDS \(.*\), config.steps_per_update",
+    ):
         training.run(counter(evaluate=None, PER_ENV_FIELDS=None), types.SimpleNamespace(num_updates=1), TASK, SETTINGS)
     with pytest.raises(TypeError, match=r"must be a dataclass with the fields \['per_env_typo'\]"):
         training.run(counter(PER_ENV_FIELDS=("per_env_typo",)), CountConfig(), TASK, SETTINGS)
@@ -133,7 +137,9 @@ class FakeClock:
                 self.now = max(self.now, eval_compile_s)
 
         compiling = types.SimpleNamespace(join=join, is_alive=lambda: self.now < eval_compile_s)
-        monkeypatch.setattr(training._Loop, "compile_evaluation_ahead", lambda loop, state: setattr(loop, "ahead", compiling))
+        monkeypatch.setattr(
+            training._Loop, "compile_evaluation_ahead", lambda loop, state: setattr(loop, "ahead", compiling)
+        )
 
 
 def lines(tmp_path, chunks: int, **settings) -> list[dict]:
@@ -347,13 +353,21 @@ print(json.dumps(sorted(str(p.relative_to(out)) for p in out.rglob("*.mp4"))))
 def test_video_every_writes_a_video_every_n_evaluations(tmp_path):
     result = subprocess.run(
         [sys.executable, "-c", VIDEO_SCRIPT, str(tmp_path), str(Path(__file__).parent)],
-        env={**os.environ, "MUJOCO_GL": "egl"}, capture_output=True, text=True, timeout=120, check=False,
+        env={**os.environ, "MUJOCO_GL": "egl"},
+        capture_output=True,
+        text=True,
+        timeout=120,
+        check=False,
         close_fds=False,  # lets Python use posix_spawn: no fork of this multithreaded (JAX) process
-    )  # fmt: skip
+    )
     assert result.returncode == 0, result.stderr
     assert json.loads(result.stdout.splitlines()[-1]) == [
-        "4/eval.mp4", "4/videos/eval_20.mp4", "4/videos/eval_40.mp4",
-        "5/eval.mp4", "5/videos/eval_20.mp4", "5/videos/eval_40.mp4",
-    ]  # fmt: skip
+        "4/eval.mp4",
+        "4/videos/eval_20.mp4",
+        "4/videos/eval_40.mp4",
+        "5/eval.mp4",
+        "5/videos/eval_20.mp4",
+        "5/videos/eval_40.mp4",
+    ]
     assert (tmp_path / "4/eval.mp4").read_bytes() == (tmp_path / "4/videos/eval_40.mp4").read_bytes()  # a copy
     assert (tmp_path / "5/eval.mp4").read_bytes() != (tmp_path / "5/videos/eval_40.mp4").read_bytes()

@@ -81,8 +81,9 @@ def _finished(run: tuple[Path, subprocess.Popen]) -> tuple[Path, str]:
 @pytest.fixture(scope="module")
 def sim():
     """Two pendulums under slider controls, paused (the tests step them)."""
-    shown = viewer.serve(viewer.env(mjzoo.envs.make(ENV), "sliders", num_envs=2), port=0, host="127.0.0.1",
-                         playing=False)  # fmt: skip
+    shown = viewer.serve(
+        viewer.env(mjzoo.envs.make(ENV), "sliders", num_envs=2), port=0, host="127.0.0.1", playing=False
+    )
     shown.step()  # compiles
     yield shown
     shown.stop()
@@ -143,7 +144,10 @@ def test_a_planner_draws_its_samples_and_plan():
         assert np.all(np.isfinite(samples)) and np.ptp(samples[..., 0]) > 0
         assert shown.stats()["plan_latency_ms"] > 0
         assert sorted(k for k in shown.controls if k.startswith("config/")) == [
-            "config/cvar_alpha", "config/noise_scale", "config/temperature"]  # fmt: skip
+            "config/cvar_alpha",
+            "config/noise_scale",
+            "config/temperature",
+        ]
         compiles = shown.source.compiles
         shown.controls["config/temperature"].value = 0.0  # mppi.Config refuses it: no compile
         assert "temperature" in shown.message and shown.source.compiles == compiles
@@ -163,12 +167,27 @@ def _dataset(task: mjzoo.Task, episodes: int = 2, steps: int = 12) -> datasets.D
         xpos[i], xquat[i] = data.xpos, data.xquat
     zeros = lambda *shape: np.zeros((episodes,) + shape, np.float32)  # noqa: E731
     return datasets.Dataset(
-        qpos=qpos, qvel=zeros(steps + 1, 1), time=zeros(steps + 1), xpos=xpos, xquat=xquat, obs=zeros(steps + 1, 3),
-        action=zeros(steps, 1), ctrl=zeros(steps, 1), reward=zeros(steps), reward_terms={"upright": zeros(steps)},
-        terminated=np.zeros((episodes, steps), bool), truncated=np.zeros((episodes, steps), bool),
-        length=np.full(episodes, steps), dt=0.02, joint_names=("hinge",), body_names=("world", "pole"),
-        actuator_names=("torque",), source={"task": ENV, "env_overrides": {}}, seed=0, deterministic=True,
-    )  # fmt: skip
+        qpos=qpos,
+        qvel=zeros(steps + 1, 1),
+        time=zeros(steps + 1),
+        xpos=xpos,
+        xquat=xquat,
+        obs=zeros(steps + 1, 3),
+        action=zeros(steps, 1),
+        ctrl=zeros(steps, 1),
+        reward=zeros(steps),
+        reward_terms={"upright": zeros(steps)},
+        terminated=np.zeros((episodes, steps), bool),
+        truncated=np.zeros((episodes, steps), bool),
+        length=np.full(episodes, steps),
+        dt=0.02,
+        joint_names=("hinge",),
+        body_names=("world", "pole"),
+        actuator_names=("torque",),
+        source={"task": ENV, "env_overrides": {}},
+        seed=0,
+        deterministic=True,
+    )
 
 
 def test_the_scrubber_shows_the_recorded_frame(tmp_path):
@@ -180,8 +199,9 @@ def test_the_scrubber_shows_the_recorded_frame(tmp_path):
     try:
         shown.controls["scrubber"].value = 7
         for e in (0, 1):
-            np.testing.assert_allclose(shown.scene.handles[(e, "pole")].position - shown.scene.offsets[e],
-                                       data.xpos[e, 7, 1], atol=1e-6)  # fmt: skip
+            np.testing.assert_allclose(
+                shown.scene.handles[(e, "pole")].position - shown.scene.offsets[e], data.xpos[e, 7, 1], atol=1e-6
+            )
             np.testing.assert_allclose(shown.scene.handles[(e, "pole")].wxyz, data.xquat[e, 7, 1], atol=1e-6)
         shown.controls["loop"].value = False
         shown.step(20)
@@ -221,7 +241,10 @@ def test_bad_input_is_one_line(tmp_path, target, flags, message):
     existing = tmp_path / "view.mp4"
     existing.write_bytes(b"")
     if flags.get("save_video"):
-        flags = {**flags, "save_video": existing if flags["save_video"] == "EXISTING" else tmp_path / flags["save_video"]}
+        flags = {
+            **flags,
+            "save_video": existing if flags["save_video"] == "EXISTING" else tmp_path / flags["save_video"],
+        }
     with pytest.raises(UsageError) as error:
         viewing.view(target, port=0, **flags)
     assert message in str(error.value) and "\n" not in str(error.value)
@@ -233,7 +256,11 @@ def test_save_frames_and_video(background):
     frames = sorted((out / "frames").glob("frame_*.png"))
     assert count >= 2 and len(frames) == count
     assert iio.imread(frames[0]).shape == (72, 96, 3)
-    assert len(iio.imread(out / "view.mp4", plugin="pyav")) == count if _has_pyav() else (out / "view.mp4").stat().st_size > 0
+    assert (
+        len(iio.imread(out / "view.mp4", plugin="pyav")) == count
+        if _has_pyav()
+        else (out / "view.mp4").stat().st_size > 0
+    )
     assert 2 <= len(iio.imread(out / "view.gif", index=None)) <= count  # Pillow merges repeated frames
 
 

@@ -110,9 +110,12 @@ def _wrapped(task: mjzoo.Task, rng: jax.Array):
     def body(state, _):
         state = wrapped.step(state, jnp.zeros((N_ENVS, env.action_size)))
         record = dict(
-            obs=state.obs, done=state.done, truncation=state.info["truncation"], reward=state.reward,
+            obs=state.obs,
+            done=state.done,
+            truncation=state.info["truncation"],
+            reward=state.reward,
             time_limit=state.info["mjzoo"]["state"].info["time_limit"],
-        )  # fmt: skip
+        )
         return state, record
 
     first = wrapped.reset(jax.random.split(rng, N_ENVS))
@@ -165,7 +168,7 @@ def test_wrap_for_training_keeps_the_task_truncation():
 
         @jax.jit
         def run(keys, env=env):
-            step = lambda state, _: (env.step(state, jnp.zeros((2, 1))), None)
+            step = lambda s, _: (env.step(s, jnp.zeros((2, 1))), None)
             return jax.lax.scan(step, env.reset(keys), None, length=L)[0]
 
         state = run(jax.random.split(jax.random.PRNGKey(0), 2))
@@ -234,14 +237,26 @@ def test_brax_ppo_trains_on_an_adapted_task(patched_jax):
     env = adapter.to_brax_env(mjzoo.envs.make("cartpole_balance"))
     progress = []
     _, params, metrics = ppo.train(
-        env, num_timesteps=2_000, episode_length=500, num_envs=8, batch_size=8, num_minibatches=2,
-        unroll_length=5, num_updates_per_batch=1, num_evals=2, run_evals=False,
-        log_training_metrics=True, training_metrics_steps=1_000,
-        normalize_observations=True, wrap_env_fn=adapter.wrap_for_training,
+        env,
+        num_timesteps=2_000,
+        episode_length=500,
+        num_envs=8,
+        batch_size=8,
+        num_minibatches=2,
+        unroll_length=5,
+        num_updates_per_batch=1,
+        num_evals=2,
+        run_evals=False,
+        log_training_metrics=True,
+        training_metrics_steps=1_000,
+        normalize_observations=True,
+        wrap_env_fn=adapter.wrap_for_training,
         network_factory=lambda *a, **k: ppo_networks.make_ppo_networks(
-            *a, **k, policy_hidden_layer_sizes=(16,), value_hidden_layer_sizes=(16,)),
-        progress_fn=lambda step, m: progress.append((step, m)), seed=1,
-    )  # fmt: skip
+            *a, **k, policy_hidden_layer_sizes=(16,), value_hidden_layer_sizes=(16,)
+        ),
+        progress_fn=lambda step, m: progress.append((step, m)),
+        seed=1,
+    )
     assert progress[-1][0] == 2_000
     for key in ("training/total_loss", "training/policy_loss", "training/v_loss"):
         assert np.isfinite(metrics[key]), key

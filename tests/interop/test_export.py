@@ -45,8 +45,15 @@ def task():
 
 
 def mlp_config(**changes) -> ppo.Config:
-    return ppo.Config(num_envs=4, unroll_length=8, num_minibatches=4, policy_hidden_sizes=(4,), activation="tanh",
-                      total_steps=32, **changes)  # fmt: skip
+    return ppo.Config(
+        num_envs=4,
+        unroll_length=8,
+        num_minibatches=4,
+        policy_hidden_sizes=(4,),
+        activation="tanh",
+        total_steps=32,
+        **changes,
+    )
 
 
 def balancing_params() -> dict:
@@ -67,9 +74,11 @@ def random_params(recurrent: bool, seed: int = 0) -> dict:
     leaves, treedef = jax.tree.flatten(params)
     keys = jax.random.split(key_scale, len(leaves))
     params = jax.tree.unflatten(treedef, [x + 0.5 * jax.random.normal(k, x.shape) for x, k in zip(leaves, keys)])
-    stats = normalization.RunningStats(mean=jax.random.normal(key_mean, (5,)),
-                                       var=jax.random.uniform(key_var, (5,), minval=0.25, maxval=4.0),
-                                       count=jnp.float32(100))  # fmt: skip
+    stats = normalization.RunningStats(
+        mean=jax.random.normal(key_mean, (5,)),
+        var=jax.random.uniform(key_var, (5,), minval=0.25, maxval=4.0),
+        count=jnp.float32(100),
+    )
     return {"policy": params, "obs_stats": stats}
 
 
@@ -137,13 +146,19 @@ def test_recurrent_carry_round_trips(task, tmp_path):
 def test_contract_of_cartpole(task):
     c = export.describe(task, export.Policy(lambda o, c: (o, c), 5, 1))
     terms = c["observation"]["terms"]
-    assert [(t["source"], t["index"]) for t in terms] == [("qpos", [0]), ("cos_qpos", [1]), ("sin_qpos", [1]),
-                                                          ("qvel", [0]), ("qvel", [1])]  # fmt: skip
+    assert [(t["source"], t["index"]) for t in terms] == [
+        ("qpos", [0]),
+        ("cos_qpos", [1]),
+        ("sin_qpos", [1]),
+        ("qvel", [0]),
+        ("qvel", [1]),
+    ]
     assert c["observation"]["size"] == 5 and c["observation"]["history"] == 1
     assert c["observation"]["checked"]["max_abs_error"] <= 1e-4
     assert c["model"]["joint_names"] == ["slider", "hinge"] and c["model"]["actuator_names"] == ["slide"]
-    assert c["action"]["to_task"] == dict(type="ctrlrange_affine", formula=c["action"]["to_task"]["formula"],
-                                          low=[-1.0], high=[1.0], limited=[True])  # fmt: skip
+    assert c["action"]["to_task"] == dict(
+        type="ctrlrange_affine", formula=c["action"]["to_task"]["formula"], low=[-1.0], high=[1.0], limited=[True]
+    )
     assert c["action"]["to_ctrl"]["type"] == "direct"
     assert c["physics"]["physics_dt"] == 0.01 and c["physics"]["substeps"] == 2
     assert c["physics"]["control_dt"] == pytest.approx(0.02, abs=1e-6)
@@ -156,8 +171,14 @@ def test_humanoid_terms_by_hand():
     m = physics.mj_model
     walk = locomotion.bare(physics, locomotion.free_base_observation(m))
     terms = contract.observation_terms(walk)
-    assert [t["source"] for t in terms] == ["body_position", "body_orientation", "qpos", "body_linear_velocity_local",
-                                           "body_angular_velocity_local", "qvel"]  # fmt: skip
+    assert [t["source"] for t in terms] == [
+        "body_position",
+        "body_orientation",
+        "qpos",
+        "body_linear_velocity_local",
+        "body_angular_velocity_local",
+        "qvel",
+    ]
     assert contract.frame_size(terms) == 45 and terms[0]["bodies"] == ["torso"] and terms[0]["components"] == [2]
     assert terms[2]["index"] == list(range(7, m.nq)) and terms[5]["index"] == list(range(6, m.nv))
     d = mujoco.MjData(m)
@@ -218,14 +239,17 @@ def test_cartpole_policy_drives_c_mujoco_to_the_jax_return(task, tmp_path):
     c_returns, errors = [], []
     for i in range(num):
         start = jax.tree.map(lambda x, i=i: x[i], starts)
-        rollout = sim2sim.run_in_mujoco(path, task.mj_model, steps, qpos=np.asarray(start.data.qpos),
-                                        qvel=np.asarray(start.data.qvel))  # fmt: skip
+        rollout = sim2sim.run_in_mujoco(
+            path, task.mj_model, steps, qpos=np.asarray(start.data.qpos), qvel=np.asarray(start.data.qvel)
+        )
         scored = sim2sim.replay(task, start, rollout)
         c_returns.append(scored.episode_return)
         errors.append(scored.obs_error)
     c_returns = np.asarray(c_returns)
-    print(f"JAX returns {np.round(jax_returns, 3)}, C MuJoCo {np.round(c_returns, 3)}, "
-          f"max relative difference {np.max(np.abs(c_returns / jax_returns - 1)):.2e}, obs error {max(errors):.1e}")
+    print(
+        f"JAX returns {np.round(jax_returns, 3)}, C MuJoCo {np.round(c_returns, 3)}, "
+        f"max relative difference {np.max(np.abs(c_returns / jax_returns - 1)):.2e}, obs error {max(errors):.1e}"
+    )
     assert np.all(jax_returns > 450)  # balanced the whole episode (500 steps, ~1 per step)
     np.testing.assert_allclose(c_returns, jax_returns, rtol=1e-4)
     assert max(errors) <= 1e-4  # the contract's observation is the task's own, on C's states too
@@ -236,8 +260,9 @@ def test_cli_export(task, tmp_path, capsys):
     run.mkdir()
     config = mlp_config()
     (run / "task.json").write_text(json.dumps({"env": "cartpole_balance", "overrides": {}}))
-    (run / "config.json").write_text(json.dumps({"algorithm": "ppo", "config": training.config_dict(config),
-                                                 "settings": {}}))  # fmt: skip
+    (run / "config.json").write_text(
+        json.dumps({"algorithm": "ppo", "config": training.config_dict(config), "settings": {}})
+    )
     state = ppo.init(config, task, jax.random.key(0))
     state = state.replace(params={**state.params, "policy": balancing_params()["policy"]})
     checkpoints.save(run / "checkpoints", 1, state)
@@ -249,9 +274,11 @@ def test_cli_export(task, tmp_path, capsys):
     cli.main(["export", str(run), "--format", "jax"])
     assert export.sidecar(run / "policy.jaxexport").is_file()
     capsys.readouterr()
-    for argv, words in (([str(run)], ("already exists", "--overwrite")),
-                        ([str(tmp_path / "nowhere")], ("no such run directory",)),
-                        ([str(run), "--out", str(tmp_path)], ("is a directory",))):  # fmt: skip
+    for argv, words in (
+        ([str(run)], ("already exists", "--overwrite")),
+        ([str(tmp_path / "nowhere")], ("no such run directory",)),
+        ([str(run), "--out", str(tmp_path)], ("is a directory",)),
+    ):
         with pytest.raises(SystemExit) as exit_info:
             cli.main(["export", *argv])
         err = capsys.readouterr().err

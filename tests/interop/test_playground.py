@@ -90,9 +90,17 @@ def test_done_is_terminated_and_a_dict_observation_trains_with_ppo():
     np.testing.assert_array_equal(states.terminated, [False, True, False, False])  # no auto-reset: steps on
     assert not np.asarray(states.truncated).any()
     assert set(states.obs) == {"state", "privileged_state"} and states.obs["privileged_state"].shape == (4, 6)
-    config = ppo.Config(num_envs=4, unroll_length=4, num_minibatches=2, num_epochs=1, total_steps=16,
-                        policy_hidden_sizes=(8,), value_hidden_sizes=(8,), policy_obs_key="state",
-                        value_obs_key="privileged_state")  # fmt: skip
+    config = ppo.Config(
+        num_envs=4,
+        unroll_length=4,
+        num_minibatches=2,
+        num_epochs=1,
+        total_steps=16,
+        policy_hidden_sizes=(8,),
+        value_hidden_sizes=(8,),
+        policy_obs_key="state",
+        value_obs_key="privileged_state",
+    )
     train_state = ppo.init(config, task, jax.random.key(2))
     train_state, metrics = jax.jit(ppo.update, static_argnums=0)(config, task, train_state)
     assert all(np.isfinite(np.asarray(v)).all() for v in jax.tree.leaves(metrics))
@@ -142,8 +150,11 @@ def test_a_missing_playground_is_one_line(monkeypatch):
     monkeypatch.setitem(sys.modules, "mujoco_playground", None)
     monkeypatch.delitem(sys.modules, "mjzoo.interop.playground")
     monkeypatch.delattr(mjzoo.interop, "playground", raising=False)
-    with pytest.raises(ValueError, match=r"playground:CartpoleBalance: MuJoCo Playground is not installed; "
-                                         r"pip install 'mjzoo\[playground\]'"):  # fmt: skip
+    with pytest.raises(
+        ValueError,
+        match=r"playground:CartpoleBalance: MuJoCo Playground is not installed; "
+        r"pip install 'mjzoo\[playground\]'",
+    ):
         mjzoo.envs.make("playground:CartpoleBalance")
 
 

@@ -74,8 +74,9 @@ def test_episodes_restart_and_next_obs_is_the_true_final_one(collected):
     final = np.array([0.06, 0.3])  # after 3 pushes: qpos 0.005 * 3 * 4, qvel 0.3
     np.testing.assert_allclose(data.next_obs[2, 0], final, atol=1e-6)
     np.testing.assert_allclose(data.obs[3, 0], [0.0, 0.0], atol=1e-6)  # the new episode's first
-    np.testing.assert_allclose(data.next_obs[:-1], np.where(data.truncated[:-1, :, None], data.next_obs[:-1],
-                                                            data.obs[1:]), atol=1e-6)  # fmt: skip
+    np.testing.assert_allclose(
+        data.next_obs[:-1], np.where(data.truncated[:-1, :, None], data.next_obs[:-1], data.obs[1:]), atol=1e-6
+    )
 
 
 def test_the_collector_continues_and_metrics_count_ended_episodes(collected):
@@ -127,7 +128,9 @@ def test_evaluation_scores_the_first_episode():
 
 
 def test_evaluation_reads_the_task_s_own_episode_length_on_the_host():
-    result = learning.evaluate(TASK.replace(time_limit=jnp.int32(2)), counting, jax.random.key(0), 1, carry=jnp.int32(0))
+    result = learning.evaluate(
+        TASK.replace(time_limit=jnp.int32(2)), counting, jax.random.key(0), 1, carry=jnp.int32(0)
+    )
     chex.assert_shape(result.trajectory.action, (2, 2))
     assert learning.episode_steps(TASK) == 3
     with pytest.raises(ValueError, match="the task has no time limit"):

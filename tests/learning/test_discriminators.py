@@ -147,10 +147,18 @@ def test_every_term_is_a_mean():
     doubled = jnp.tile(QUAD_X, (2, 1))
     np.testing.assert_allclose(disc.gradient_penalty(quadratic, QUAD_PARAMS, doubled), 18.5, rtol=1e-6)
     kwargs = {"gradient_penalty_weight": 5.0, "policy_gradient_penalty": True, "logit_l2_weight": 0.1}
-    once = disc.discriminator_loss("logistic", quadratic, QUAD_PARAMS, QUAD_X, -QUAD_X[:1], **kwargs,
-                                   logit_weights=lambda p: p["c"])  # fmt: skip
-    twice = disc.discriminator_loss("logistic", quadratic, QUAD_PARAMS, doubled, jnp.tile(-QUAD_X[:1], (3, 1)),
-                                    **kwargs, logit_weights=lambda p: p["c"])  # fmt: skip
+    once = disc.discriminator_loss(
+        "logistic", quadratic, QUAD_PARAMS, QUAD_X, -QUAD_X[:1], **kwargs, logit_weights=lambda p: p["c"]
+    )
+    twice = disc.discriminator_loss(
+        "logistic",
+        quadratic,
+        QUAD_PARAMS,
+        doubled,
+        jnp.tile(-QUAD_X[:1], (3, 1)),
+        **kwargs,
+        logit_weights=lambda p: p["c"],
+    )
     chex.assert_trees_all_close(once, twice, rtol=1e-6)
 
 
@@ -218,8 +226,11 @@ def test_jit_and_vmap_agree_with_eager():
     losses, m = jax.vmap(lambda p: loss_fn("least_squares", LINEAR.apply, p, REF, POL, 5.0, True, 0.01))(params)
     for i in range(3):
         one = [jax.tree.map(lambda x, i=i: x[i], params[0])]
-        np.testing.assert_allclose(losses[i], disc.discriminator_loss("least_squares", LINEAR.apply, one, REF, POL,
-                                                                      5.0, True, 0.01)[0], rtol=1e-5)  # fmt: skip
+        np.testing.assert_allclose(
+            losses[i],
+            disc.discriminator_loss("least_squares", LINEAR.apply, one, REF, POL, 5.0, True, 0.01)[0],
+            rtol=1e-5,
+        )
         np.testing.assert_allclose(m["disc/gradient_penalty"][i], jnp.sum(one[0]["kernel"] ** 2), rtol=1e-5)
 
 

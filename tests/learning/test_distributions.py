@@ -135,8 +135,10 @@ def test_entropy_gradient_is_the_true_entropys_gradient():
         return 0.5 * math.log(2 * math.pi * math.e) + math.log(s) + np.sum(w * log_sech2(m + s * z))
 
     m, s, h = 0.7, 1.3, 1e-4
-    expected = [(true_entropy(m + h, s) - true_entropy(m - h, s)) / (2 * h),
-                (true_entropy(m, s + h) - true_entropy(m, s - h)) / (2 * h)]  # fmt: skip
+    expected = [
+        (true_entropy(m + h, s) - true_entropy(m - h, s)) / (2 * h),
+        (true_entropy(m, s + h) - true_entropy(m, s - h)) / (2 * h),
+    ]
     # Averaged over fresh noise, the estimate's gradient is the true gradient; both
     # parts are far from zero here (squashing pulls loc towards 0 and caps the scale).
     n = 100_000
@@ -189,7 +191,7 @@ def test_jit_and_vmap():
     chex.assert_shape(vmapped[1:3], (6,))
     for i in range(6):
         row = everything(output[i], raw[i], keys[i])
-        chex.assert_trees_all_close(jax.tree.map(lambda x: x[i], vmapped), row, rtol=1e-5, atol=1e-6)
+        chex.assert_trees_all_close(jax.tree.map(lambda x, i=i: x[i], vmapped), row, rtol=1e-5, atol=1e-6)
     # The batched call (no vmap) agrees on the key-free outputs.
     loc, scale = split_params(output)
     np.testing.assert_allclose(vmapped[1], log_prob(loc, scale, raw), rtol=1e-6)

@@ -22,8 +22,11 @@ def count_samples(counts, minibatch):
 
 @pytest.mark.parametrize("sequences", [False, True])
 def test_every_sample_once_per_epoch(sequences):
-    run = jax.jit(lambda key: learning.learn(count_samples, jnp.zeros((T, N), jnp.int32), DATA, key, num_epochs=3,
-                                             num_minibatches=3, sequences=sequences))  # fmt: skip
+    run = jax.jit(
+        lambda key: learning.learn(
+            count_samples, jnp.zeros((T, N), jnp.int32), DATA, key, num_epochs=3, num_minibatches=3, sequences=sequences
+        )
+    )
     counts, metrics = run(jax.random.key(0))
     np.testing.assert_array_equal(counts, 3)
     assert float(metrics["size"]) == T * N / 3
@@ -34,8 +37,9 @@ def test_sequences_keep_time_in_order_and_samples_are_shuffled():
         in_order = jnp.all(minibatch["t"] == jnp.arange(T)[:, None]) & jnp.all(minibatch["env"] == minibatch["env"][0])
         return carry & in_order, {}
 
-    ok, _ = learning.learn(look, jnp.bool_(True), DATA, jax.random.key(0), num_epochs=2, num_minibatches=2,
-                           sequences=True)  # fmt: skip
+    ok, _ = learning.learn(
+        look, jnp.bool_(True), DATA, jax.random.key(0), num_epochs=2, num_minibatches=2, sequences=True
+    )
     assert bool(ok)
 
     def order(carry, minibatch):  # minibatches of one sample: records the sample ids in order
@@ -52,8 +56,21 @@ def test_sequences_keep_time_in_order_and_samples_are_shuffled():
 
 def test_minibatches_must_divide_the_data():
     with pytest.raises(ValueError, match=r"num_minibatches=4 must divide N \(the number of env sequences\) = 6"):
-        learning.learn(count_samples, jnp.zeros((T, N), jnp.int32), DATA, jax.random.key(0), num_epochs=1,
-                       num_minibatches=4, sequences=True)  # fmt: skip
+        learning.learn(
+            count_samples,
+            jnp.zeros((T, N), jnp.int32),
+            DATA,
+            jax.random.key(0),
+            num_epochs=1,
+            num_minibatches=4,
+            sequences=True,
+        )
     with pytest.raises(ValueError, match=r"\[T, N, ...\] with the same T and N"):
-        learning.learn(count_samples, (), {"a": jnp.zeros((T, N)), "b": jnp.zeros((T, 2))}, jax.random.key(0),
-                       num_epochs=1, num_minibatches=1)  # fmt: skip
+        learning.learn(
+            count_samples,
+            (),
+            {"a": jnp.zeros((T, N)), "b": jnp.zeros((T, 2))},
+            jax.random.key(0),
+            num_epochs=1,
+            num_minibatches=1,
+        )

@@ -107,8 +107,9 @@ def test_kl_penalty_hand_computed():
     np.testing.assert_array_equal(d_olp, 0.0)
     np.testing.assert_array_equal(d_adv, 0.0)
     # beta = 0 is the unclipped surrogate; at ratio 1 the penalty and its gradient vanish.
-    np.testing.assert_allclose(kl_penalty_loss(jnp.asarray(LOG_PROB), jnp.asarray(OLD_LOG_PROB), jnp.asarray(ADV), 0.0)[0],
-                               0.3, rtol=1e-5)  # fmt: skip
+    np.testing.assert_allclose(
+        kl_penalty_loss(jnp.asarray(LOG_PROB), jnp.asarray(OLD_LOG_PROB), jnp.asarray(ADV), 0.0)[0], 0.3, rtol=1e-5
+    )
     same = jnp.asarray(OLD_LOG_PROB)
     d_same = jax.grad(lambda lp: kl_penalty_loss(lp, same, jnp.asarray(ADV), 10.0)[0])(same)
     np.testing.assert_allclose(d_same, -ADV / 4, rtol=1e-6)
@@ -174,7 +175,7 @@ def test_jit_and_vmap():
     chex.assert_tree_shape_prefix(batched, (3,))
     for i in range(3):
         row = all_losses(lp[i], olp[i], adv[i], v[i], ret[i], ov[i])
-        chex.assert_trees_all_close(jax.tree.map(lambda x: x[i], batched), row, rtol=1e-5, atol=1e-6)
+        chex.assert_trees_all_close(jax.tree.map(lambda x, i=i: x[i], batched), row, rtol=1e-5, atol=1e-6)
     # Traced clip epsilon.
     loss_fn = jax.jit(lambda e: clipped_surrogate_loss(lp, olp, adv, e)[0])
     np.testing.assert_allclose(loss_fn(jnp.float32(0.2)), clipped_surrogate_loss(lp, olp, adv, 0.2)[0], rtol=1e-6)

@@ -120,10 +120,20 @@ def test_layout_names_every_slice():
     layout = feature_layout(FEATURES)
     assert feature_size(FEATURES) == 32
     assert list(layout) == [
-        "root_height", "root_tangent", "root_normal", "root_linear_velocity", "root_angular_velocity",
-        "qpos/shoulder", "qpos/elbow", "qpos/hip", "qvel/shoulder", "qvel/elbow", "qvel/hip",
-        "key_body/hand", "key_body/tip",
-    ]  # fmt: skip
+        "root_height",
+        "root_tangent",
+        "root_normal",
+        "root_linear_velocity",
+        "root_angular_velocity",
+        "qpos/shoulder",
+        "qpos/elbow",
+        "qpos/hip",
+        "qvel/shoulder",
+        "qvel/elbow",
+        "qvel/hip",
+        "key_body/hand",
+        "key_body/tip",
+    ]
     assert [s.stop - s.start for s in layout.values()] == [1, 3, 3, 3, 3, 1, 1, 6, 1, 1, 3, 3, 3]
     assert list(layout.values())[-1].stop == 32
 
@@ -143,8 +153,14 @@ def test_yawed_base_moving_along_world_x():
 
 def test_pitched_base_bent_arm_and_turned_tail():
     c, s = math.cos(0.2), math.sin(0.2)  # the base pitches by 0.2 about its y axis after a yaw of 0.3
-    qpos, qvel = toy_state([0, 0, 1], mul(quat("z", 0.3), quat("y", 0.2)), shoulder=math.pi / 2,
-                           hip=quat("z", 0.5), linear=[1, 0, 0], angular=[1, 0, 0])  # fmt: skip
+    qpos, qvel = toy_state(
+        [0, 0, 1],
+        mul(quat("z", 0.3), quat("y", 0.2)),
+        shoulder=math.pi / 2,
+        hip=quat("z", 0.5),
+        linear=[1, 0, 0],
+        angular=[1, 0, 0],
+    )
     f = features_of(qpos, qvel)
     np.testing.assert_allclose(f["root_tangent"][0], [c, 0, -s], atol=1e-6)
     np.testing.assert_allclose(f["root_normal"][0], [s, 0, c], atol=1e-6)
@@ -181,23 +197,33 @@ def test_fixed_base_arm():
     mj_model = mujoco.MjModel.from_xml_string(ARM)
     model = mjx.put_model(mj_model)
     features = motion_features(mj_model, key_bodies="hand")
-    assert list(feature_layout(features)) == ["qpos/shoulder", "qpos/wrist", "qvel/shoulder", "qvel/wrist",
-                                                 "key_body/hand"]  # fmt: skip
+    assert list(feature_layout(features)) == [
+        "qpos/shoulder",
+        "qpos/wrist",
+        "qvel/shoulder",
+        "qvel/wrist",
+        "key_body/hand",
+    ]
     qpos = np.concatenate([[0.4], quat("y", 0.3)])
     qvel = np.array([0.5, 0.1, 0.2, 0.3])
     f = features_of(qpos, qvel, features, model, mjx.make_data(model))
     hand = rot("z", 0.4) @ [0.4 + 0.3 * math.cos(0.3), 0, -0.3 * math.sin(0.3)] + [0, 0, 0.5]  # world frame
     np.testing.assert_allclose(f["key_body/hand"][0], hand, atol=1e-6)
-    np.testing.assert_allclose(f["qpos/wrist"][0], [math.cos(0.3), 0, -math.sin(0.3), math.sin(0.3), 0,
-                                                    math.cos(0.3)], atol=1e-6)  # fmt: skip
+    np.testing.assert_allclose(
+        f["qpos/wrist"][0], [math.cos(0.3), 0, -math.sin(0.3), math.sin(0.3), 0, math.cos(0.3)], atol=1e-6
+    )
     np.testing.assert_allclose(np.concatenate([f["qvel/shoulder"][0], f["qvel/wrist"][0]]), qvel, atol=1e-6)
 
 
 def constant_motion(fps: float, seconds: float = 1.0) -> tuple[np.ndarray, np.ndarray]:
     """A clip of a motion with constant velocities; qvel by frame differences / dt."""
     t = np.arange(round(seconds * fps) + 1) / fps
-    qpos = np.stack([toy_state([0.5 * s, 0.2 * s, 0.9], quat("z", 1.0 * s), shoulder=0.3 + 0.8 * s,
-                               hip=quat("z", 0.6 * s))[0] for s in t])  # fmt: skip
+    qpos = np.stack(
+        [
+            toy_state([0.5 * s, 0.2 * s, 0.9], quat("z", 1.0 * s), shoulder=0.3 + 0.8 * s, hip=quat("z", 0.6 * s))[0]
+            for s in t
+        ]
+    )
     qvel = np.zeros((len(t) - 1, TOY_MJ.nv))
     for k in range(len(t) - 1):
         mujoco.mj_differentiatePos(TOY_MJ, qvel[k], 1.0 / fps, qpos[k], qpos[k + 1])
@@ -288,8 +314,14 @@ NUM_FRAMES, NUM_STEPS = 3, 8
 
 def replay(recorded) -> Task:
     qpos, qvel = (jnp.asarray(x, jnp.float32) for x in recorded[:2])
-    return Task(model=TOY_MODEL, start=bind(replay_start, qpos, qvel, TOY_DATA), step=bind(replay_step, qpos, qvel),
-                reward=bind(no_reward), terminate=bind(never), mj_model=TOY_MJ)  # fmt: skip
+    return Task(
+        model=TOY_MODEL,
+        start=bind(replay_start, qpos, qvel, TOY_DATA),
+        step=bind(replay_step, qpos, qvel),
+        reward=bind(no_reward),
+        terminate=bind(never),
+        mj_model=TOY_MJ,
+    )
 
 
 def run(task: Task, num_envs: int):

@@ -59,8 +59,9 @@ def test_positions_are_turned_to_z_up_and_quaternions_conjugated(tmp_path):
     np.testing.assert_allclose(clip.qpos[0], [1, -3, 2, 1, 0, 0, 0, C, 0, 0, S, 0.3], atol=1e-12)
     np.testing.assert_allclose(clip.qpos[1, :7], [1.5, -3, 2, *_quat_about("z", 0.2)], atol=1e-12)
     np.testing.assert_allclose(clip.qpos[1, 7:11], _quat_about("z", np.pi / 2 + 0.1), atol=1e-12)
-    np.testing.assert_allclose(clip.qpos[2], [2, -2, 2, *_quat_about("z", 0.2), *_quat_about("z", np.pi / 2 + 0.1), 0.5],
-                               atol=1e-12)  # fmt: skip
+    np.testing.assert_allclose(
+        clip.qpos[2], [2, -2, 2, *_quat_about("z", 0.2), *_quat_about("z", np.pi / 2 + 0.1), 0.5], atol=1e-12
+    )
     assert clip.joint_names == ("root", "shoulder", "elbow")
 
 
@@ -131,7 +132,8 @@ def test_not_a_motion_file_and_bad_arguments(tmp_path):
         deepmimic.load(str(tmp_path / "absent.txt"), _model())
     with pytest.raises(ValueError, match="up='x'"):
         deepmimic.load(_write(tmp_path, FRAMES), _model(), up="x")
-    slide = mujoco.MjModel.from_xml_string('<mujoco><worldbody><body><joint type="slide"/><geom size="1"/></body>'
-                                           "</worldbody></mujoco>")  # fmt: skip
+    slide = mujoco.MjModel.from_xml_string(
+        '<mujoco><worldbody><body><joint type="slide"/><geom size="1"/></body></worldbody></mujoco>'
+    )
     with pytest.raises(ValueError, match="first joint must be its only free joint"):
         deepmimic.load(_write(tmp_path, FRAMES), slide)

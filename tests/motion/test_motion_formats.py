@@ -23,11 +23,17 @@ def write(path, clip=TRUTH, dof_names=("h2", "h1"), body_names=("shin", "torso")
     lin, ang = np.zeros((t, 2, 3)), np.zeros((t, 2, 3))
     body_pos[:, root[0]], body_rot[:, root[0]] = clip.qpos[:, :3], clip.qpos[:, 3:7]
     lin[:, root[0]], ang[:, root[0]] = clip.qvel[:, :3], world_angular_velocity(clip)
-    arrays = dict(fps=np.float64(clip.fps), dof_names=np.array(dof_names), body_names=np.array(body_names),
-                  dof_positions=np.stack([columns.get(n, columns["h1"]) for n in dof_names], axis=1),
-                  dof_velocities=np.stack([rates.get(n, rates["h1"]) for n in dof_names], axis=1),
-                  body_positions=body_pos, body_rotations=body_rot, body_linear_velocities=lin,
-                  body_angular_velocities=ang)  # fmt: skip
+    arrays = dict(
+        fps=np.float64(clip.fps),
+        dof_names=np.array(dof_names),
+        body_names=np.array(body_names),
+        dof_positions=np.stack([columns.get(n, columns["h1"]) for n in dof_names], axis=1),
+        dof_velocities=np.stack([rates.get(n, rates["h1"]) for n in dof_names], axis=1),
+        body_positions=body_pos,
+        body_rotations=body_rot,
+        body_linear_velocities=lin,
+        body_angular_velocities=ang,
+    )
     np.savez(path, **{k: v for k, v in arrays.items() if k not in drop})
     return path
 

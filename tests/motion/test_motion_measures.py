@@ -37,8 +37,10 @@ def test_window_one_and_exact_stretches():
 def test_matches_brute_force():
     rng = np.random.default_rng(1)
     ref, sim, index, w = rng.normal(size=(23, 6)), rng.normal(size=(17, 6)), [1, 3, 4], 5
-    best = [min(np.mean(np.abs(sim[s : s + w][:, index] - ref[r : r + w][:, index])) for r in range(23 - w + 1))
-            for s in range(17 - w + 1)]  # fmt: skip
+    best = [
+        min(np.mean(np.abs(sim[s : s + w][:, index] - ref[r : r + w][:, index])) for r in range(23 - w + 1))
+        for s in range(17 - w + 1)
+    ]
     assert motion.nearest_window_error(ref, sim, index, w) == pytest.approx(np.mean(best), rel=1e-12)
 
 

@@ -105,8 +105,14 @@ def _nothing(model, *args):
 
 
 def test_with_reference_checks_the_control_step_and_the_widths(ref):
-    task = Task(model=BASE_AND_ARM.model, start=bind(_start), step=bind(_tick, jnp.float32(0.02)),
-                reward=bind(_nothing), terminate=bind(_nothing), mj_model=ARM)  # fmt: skip
+    task = Task(
+        model=BASE_AND_ARM.model,
+        start=bind(_start),
+        step=bind(_tick, jnp.float32(0.02)),
+        reward=bind(_nothing),
+        terminate=bind(_nothing),
+        mj_model=ARM,
+    )
     arm_ref = motion.reference(arm_clip(), ARM, dt=0.02)
     assert motion.with_reference(task, arm_ref).motion is arm_ref
     with pytest.raises(ValueError, match=r"a frame every 0.01 s but the task's control step is 0.02 s"):

@@ -19,8 +19,16 @@ def steady(fps: float, num_frames: int) -> motion.Clip:
     qpos[:, 3:7] = axis_quat(2, 0.8 * t)
     qpos[:, 7], qpos[:, 8] = 1 - 2 * t, 0.3 * t
     qvel = np.broadcast_to([0.5, -0.2, 0, 0, 0, 0.8, -2, 0.3], (num_frames, 8)).copy()
-    return motion.Clip(name="steady", fps=fps, qpos=qpos, qvel=qvel, joint_names=JOINTS, body_names=("torso",),
-                       body_pos=qpos[:, None, :3].copy(), body_quat=qpos[:, None, 3:7].copy())  # fmt: skip
+    return motion.Clip(
+        name="steady",
+        fps=fps,
+        qpos=qpos,
+        qvel=qvel,
+        joint_names=JOINTS,
+        body_names=("torso",),
+        body_pos=qpos[:, None, :3].copy(),
+        body_quat=qpos[:, None, 3:7].copy(),
+    )
 
 
 def test_frame_times_by_hand():

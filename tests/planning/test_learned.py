@@ -136,9 +136,11 @@ def test_a_host_loop_of_jitted_plan_traces_once_and_heads_where_the_value_says()
     start = env_state.data.qpos
     left = _critic(start - jnp.array([0.3, 0.0]))
     critics = {
-        "none": _critic(start, weight=0.0), "right": _critic(start + jnp.array([0.3, 0.0])), "left": left,
+        "none": _critic(start, weight=0.0),
+        "right": _critic(start + jnp.array([0.3, 0.0])),
+        "left": left,
         "left, from a jit": jax.tree_util.Partial(_quadratic, *jax.jit(lambda args: args)(left.args)),
-    }  # fmt: skip
+    }
     pushes, costs = {}, {}
     for name, critic in critics.items():
         state = mppi.init(CONFIG, task)

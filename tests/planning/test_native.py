@@ -41,8 +41,12 @@ def _both(task: Task, nat: native.Native, state: State, controls: jax.Array):
 
     paths = jax.jit(jax.vmap(lambda a: path(mjzoo.transition, task, a)))(controls)
     mjx_side = (-np.sum(np.asarray(paths[1]), axis=1), jax.tree.map(lambda x: x[0], paths))
-    c_side = jax.jit(lambda: (native.rollout_costs(nat, state, controls, key)[0][0],
-                              path(native.transition_native, nat, controls[0])))()  # fmt: skip
+    c_side = jax.jit(
+        lambda: (
+            native.rollout_costs(nat, state, controls, key)[0][0],
+            path(native.transition_native, nat, controls[0]),
+        )
+    )()
     return jax.device_get(mjx_side), jax.device_get(c_side)
 
 
@@ -142,8 +146,14 @@ def _pd_arm() -> Task:
     """The arm under PD control evaluated at each of 4 physics steps per control step."""
     arm = physics.load(ARM, ctrl_dt=0.02)
     pd = actuators.pd(arm.mj_model, kp=20.0, kd=1.0)
-    return Task(model=arm.model, start=bind(_rest, arm.data0), step=bind(_pd_step, pd),
-                reward=bind(_tip_reward), terminate=bind(_never), mj_model=arm.mj_model)  # fmt: skip
+    return Task(
+        model=arm.model,
+        start=bind(_rest, arm.data0),
+        step=bind(_pd_step, pd),
+        reward=bind(_tip_reward),
+        terminate=bind(_never),
+        mj_model=arm.mj_model,
+    )
 
 
 def _tip_reward(model, state, action, next_state) -> dict:
@@ -224,4 +234,6 @@ def test_native_needs_jax_physics_and_one_model_to_simulate():
     task = mjzoo.envs.make("pendulum_swingup")
     ensemble = planning.ensemble(task, _heavier, 2, jax.random.key(0))
     with pytest.raises(TypeError, match="one model"):
-        native.transition_native(native.wrap(ensemble), jax.jit(mjzoo.reset)(task, jax.random.key(0)), jnp.zeros(1), jax.random.key(0))
+        native.transition_native(
+            native.wrap(ensemble), jax.jit(mjzoo.reset)(task, jax.random.key(0)), jnp.zeros(1), jax.random.key(0)
+        )

@@ -21,10 +21,9 @@ import pytest
 
 import mjzoo
 from mjzoo import envs, planning
-from mjzoo.catalog import randomizers
-from mjzoo.planning import splines
 from mjzoo.algorithms import cem, mppi, predictive_sampling
-from mjzoo.planning import PlannerState
+from mjzoo.catalog import randomizers
+from mjzoo.planning import PlannerState, splines
 
 # --- helpers --------------------------------------------------------------------------------
 
@@ -60,7 +59,8 @@ def _jitted_rollout_costs():
     return jax.jit(planning.rollout_costs)
 
 
-def _rollout_costs(task, state, controls, key=jax.random.key(0)):
+def _rollout_costs(task, state, controls, key=None):
+    key = jax.random.key(0) if key is None else key
     return _jitted_rollout_costs()(*_committed(task, state, jnp.asarray(controls, jnp.float32), key))
 
 
@@ -181,13 +181,16 @@ COSTS = np.array([[1.0, 10.0], [4.0, 20.0], [2.0, 40.0], [3.0, 30.0]], np.float3
 
 @pytest.mark.parametrize(
     "risk,alpha,expected",
-    [("mean", 0.25, [2.5, 25.0]), ("worst", 0.25, [4.0, 40.0]),
-     ("cvar", 0.5, [3.5, 35.0]),    # mean of the 2 largest: (4 + 3)/2, (40 + 30)/2
-     ("cvar", 0.25, [4.0, 40.0]),   # ceil(0.25 * 4) = 1: the worst
-     ("cvar", 0.3, [3.5, 35.0]),    # ceil(1.2) = 2
-     ("cvar", 0.01, [4.0, 40.0]),   # at least one model
-     ("cvar", 1.0, [2.5, 25.0])],   # every model: the mean
-)  # fmt: skip
+    [
+        ("mean", 0.25, [2.5, 25.0]),
+        ("worst", 0.25, [4.0, 40.0]),
+        ("cvar", 0.5, [3.5, 35.0]),  # mean of the 2 largest: (4 + 3)/2, (40 + 30)/2
+        ("cvar", 0.25, [4.0, 40.0]),  # ceil(0.25 * 4) = 1: the worst
+        ("cvar", 0.3, [3.5, 35.0]),  # ceil(1.2) = 2
+        ("cvar", 0.01, [4.0, 40.0]),  # at least one model
+        ("cvar", 1.0, [2.5, 25.0]),
+    ],  # every model: the mean
+)
 def test_aggregate_hand_computed(risk, alpha, expected):
     np.testing.assert_allclose(planning.aggregate(jnp.asarray(COSTS), risk, alpha), expected, rtol=1e-6)
     jitted = jax.jit(planning.aggregate, static_argnums=(1, 2))(jnp.asarray(COSTS), risk, alpha)
@@ -371,18 +374,26 @@ def test_initial_state_rejects_warm_start_knots_of_the_wrong_shape():
 
 @pytest.mark.parametrize(
     "module,kwargs,field",
-    [(mppi, dict(temperature=0.0), "temperature"), (mppi, dict(temperature=-1.0), "temperature"),
-     (cem, dict(num_samples=8, num_elites=9), "num_elites"), (cem, dict(num_elites=0), "num_elites"),
-     (cem, dict(sigma_min=0.5, sigma_max=0.1), "sigma_max"), (cem, dict(sigma_min=-0.1), "sigma_min"),
-     (cem, dict(explore_fraction=1.0), "explore_fraction"),
-     (predictive_sampling, dict(interpolation="quadratic"), "interpolation"),
-     (mppi, dict(risk="median"), "risk"), (cem, dict(cvar_alpha=0.0), "cvar_alpha"),
-     (predictive_sampling, dict(cvar_alpha=1.5), "cvar_alpha"),
-     (predictive_sampling, dict(num_samples=1), "num_samples"),
-     (predictive_sampling, dict(horizon_steps=0), "horizon_steps"),
-     (mppi, dict(horizon_steps=5, num_knots=6), "num_knots"), (cem, dict(num_knots=0), "num_knots"),
-     (mppi, dict(noise_scale=-0.1), "noise_scale"), (predictive_sampling, dict(unroll=0), "unroll")],
-)  # fmt: skip
+    [
+        (mppi, dict(temperature=0.0), "temperature"),
+        (mppi, dict(temperature=-1.0), "temperature"),
+        (cem, dict(num_samples=8, num_elites=9), "num_elites"),
+        (cem, dict(num_elites=0), "num_elites"),
+        (cem, dict(sigma_min=0.5, sigma_max=0.1), "sigma_max"),
+        (cem, dict(sigma_min=-0.1), "sigma_min"),
+        (cem, dict(explore_fraction=1.0), "explore_fraction"),
+        (predictive_sampling, dict(interpolation="quadratic"), "interpolation"),
+        (mppi, dict(risk="median"), "risk"),
+        (cem, dict(cvar_alpha=0.0), "cvar_alpha"),
+        (predictive_sampling, dict(cvar_alpha=1.5), "cvar_alpha"),
+        (predictive_sampling, dict(num_samples=1), "num_samples"),
+        (predictive_sampling, dict(horizon_steps=0), "horizon_steps"),
+        (mppi, dict(horizon_steps=5, num_knots=6), "num_knots"),
+        (cem, dict(num_knots=0), "num_knots"),
+        (mppi, dict(noise_scale=-0.1), "noise_scale"),
+        (predictive_sampling, dict(unroll=0), "unroll"),
+    ],
+)
 def test_config_rejects_out_of_range_values_naming_the_field(module, kwargs, field):
     name = module.__name__.rsplit(".", 1)[-1]
     with pytest.raises(ValueError, match=rf"^{name}\.Config: invalid {field}="):

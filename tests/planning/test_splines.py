@@ -121,9 +121,15 @@ def test_one_knot_is_a_constant(method):
 
 @pytest.mark.parametrize(
     "num_knots,horizon_steps,expected",
-    [(3, 5, [0.0, 2.0, 4.0]), (4, 25, [0.0, 8.0, 16.0, 24.0]), (1, 10, [0.0]), (1, 1, [0.0]), (3, 2, [0.0, 0.5, 1.0]),
-     (5, 5, [0.0, 1.0, 2.0, 3.0, 4.0])],
-)  # fmt: skip
+    [
+        (3, 5, [0.0, 2.0, 4.0]),
+        (4, 25, [0.0, 8.0, 16.0, 24.0]),
+        (1, 10, [0.0]),
+        (1, 1, [0.0]),
+        (3, 2, [0.0, 0.5, 1.0]),
+        (5, 5, [0.0, 1.0, 2.0, 3.0, 4.0]),
+    ],
+)
 def test_knot_positions(num_knots, horizon_steps, expected):
     positions = splines.knot_positions(num_knots, horizon_steps)
     assert positions.dtype == jnp.float32
@@ -156,9 +162,13 @@ def test_rejects_an_unknown_method_naming_the_choices():
 
 @pytest.mark.parametrize(
     "knots,positions",
-    [(np.zeros(3), np.zeros(3)), (np.zeros((3, 1, 1)), np.zeros(3)), (np.zeros((3, 2)), np.zeros(2)),
-     (np.zeros((3, 2)), np.zeros((3, 1)))],
-)  # fmt: skip
+    [
+        (np.zeros(3), np.zeros(3)),
+        (np.zeros((3, 1, 1)), np.zeros(3)),
+        (np.zeros((3, 2)), np.zeros(2)),
+        (np.zeros((3, 2)), np.zeros((3, 1))),
+    ],
+)
 def test_rejects_mismatched_shapes(knots, positions):
     with pytest.raises(ValueError, match=r"knots must be \[K, nu\] and positions \[K\]"):
         splines.evaluate(knots, positions, jnp.zeros(2), "linear")

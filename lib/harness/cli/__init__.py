@@ -42,8 +42,16 @@ from mjzoo.harness.cli.viewing import view
 
 __all__ = ["main", "demo", "envs", "train", "evaluate", "plan", "collect", "view", "export", "UsageError"]
 
-COMMANDS = {"demo": demo, "envs": envs, "train": train, "eval": evaluate, "plan": plan, "collect": collect,
-            "view": view, "export": export}  # fmt: skip
+COMMANDS = {
+    "demo": demo,
+    "envs": envs,
+    "train": train,
+    "eval": evaluate,
+    "plan": plan,
+    "collect": collect,
+    "view": view,
+    "export": export,
+}
 
 
 def main(argv: list[str] | None = None) -> None:

@@ -15,8 +15,18 @@ from typing import Any, Literal
 
 import mjzoo
 
-__all__ = ["UsageError", "checking", "at_least_one", "parse_assignments", "algorithm_module", "build_config", "episode_steps",
-           "slug", "ALGORITHMS", "PLANNERS"]  # fmt: skip
+__all__ = [
+    "UsageError",
+    "checking",
+    "at_least_one",
+    "parse_assignments",
+    "algorithm_module",
+    "build_config",
+    "episode_steps",
+    "slug",
+    "ALGORITHMS",
+    "PLANNERS",
+]
 
 ALGORITHMS = ("ppo", "amp")
 PLANNERS = ("predictive_sampling", "cem", "mppi")
@@ -125,7 +135,9 @@ def episode_steps(task: mjzoo.Task, spec: str, steps: int | None) -> int:
         at_least_one(steps=steps)
         return steps
     if task.time_limit is None:
-        raise UsageError(f"{spec}: the task has no time limit (mjzoo.with_time_limit) to end its episodes; give --steps")
+        raise UsageError(
+            f"{spec}: the task has no time limit (mjzoo.with_time_limit) to end its episodes; give --steps"
+        )
     return int(task.time_limit)
 
 

@@ -17,9 +17,18 @@ import tyro
 
 import mjzoo
 from mjzoo.harness.cli import runs
+from mjzoo.harness.cli.arguments import (
+    PLANNERS,
+    UsageError,
+    algorithm_module,
+    at_least_one,
+    build_config,
+    checking,
+    episode_steps,
+    parse_assignments,
+    slug,
+)
 from mjzoo.harness.rendering import RenderConfig
-from mjzoo.harness.cli.arguments import (PLANNERS, UsageError, algorithm_module, at_least_one, build_config,
-                                         checking, episode_steps, parse_assignments, slug)  # fmt: skip
 
 __all__ = ["envs", "demo", "train", "evaluate", "plan", "Schedule"]
 
@@ -165,22 +174,33 @@ def train(
         distributed.initialize(coordinator, num_processes, process_id)  # before anything touches JAX's devices
         module = algorithm_module(algorithm)
         if resume is not None:
-            out, env_values, config_values, run_settings = _resumed(resume, out, env, algorithm, env_overrides,
-                                                                    config, impl)  # fmt: skip
+            out, env_values, config_values, run_settings = _resumed(
+                resume, out, env, algorithm, env_overrides, config, impl
+            )
         else:
             env_values = {**parse_assignments(env_overrides, "--env-overrides"), **({"impl": impl} if impl else {})}
             config_values, run_settings = parse_assignments(config, "--config"), dict(RUN_DEFAULTS)
-        given = {"seed": seed, "eval_envs": eval_envs, "updates_per_chunk": updates_per_chunk,
-                 **_changed(schedule, Schedule())}  # fmt: skip
+        given = {
+            "seed": seed,
+            "eval_envs": eval_envs,
+            "updates_per_chunk": updates_per_chunk,
+            **_changed(schedule, Schedule()),
+        }
         run_settings.update({k: v for k, v in given.items() if v is not None})
         run_settings["render"] = _render(run_settings.pop("render", None), render)
         task = mjzoo.envs.make(env, **env_values)
         config_values.update(_lengths(task, total_steps, rollout_seconds))
         cfg = build_config(module, env, config_values)
         devices.check_split(cfg.num_envs)
-        if task.time_limit is None and run_settings.get("eval_steps") is None and run_settings.get("eval_seconds") is None:
-            raise UsageError(f"{env}: the task has no time limit (mjzoo.with_time_limit) to end its evaluation "
-                             "episodes; give --eval-steps or --eval-seconds")  # fmt: skip
+        if (
+            task.time_limit is None
+            and run_settings.get("eval_steps") is None
+            and run_settings.get("eval_seconds") is None
+        ):
+            raise UsageError(
+                f"{env}: the task has no time limit (mjzoo.with_time_limit) to end its evaluation "
+                "episodes; give --eval-steps or --eval-seconds"
+            )
         if resume is None:
             out = out or Path("runs") / f"{slug(env)}-{algorithm}"
             hint = f"continue it with --resume {out}, or choose a new --out"
@@ -223,8 +243,15 @@ def _changed(given: Any, default: Any) -> dict[str, Any]:
     return {k: v for k, v in dataclasses.asdict(given).items() if v != getattr(default, k)}
 
 
-def _resumed(resume: Path, out: Path | None, env: str, algorithm: str, env_overrides: tuple[str, ...],
-             config: tuple[str, ...], impl: str | None) -> tuple[Path, dict, dict, dict]:  # fmt: skip
+def _resumed(
+    resume: Path,
+    out: Path | None,
+    env: str,
+    algorithm: str,
+    env_overrides: tuple[str, ...],
+    config: tuple[str, ...],
+    impl: str | None,
+) -> tuple[Path, dict, dict, dict]:
     """(out, env overrides, config values, run settings) of the run `--resume` continues,
     checked against what the command line says of it. It keeps its physics
     implementation (config.json) where the env takes `impl`, unless --impl names one."""
@@ -245,7 +272,12 @@ def _resumed(resume: Path, out: Path | None, env: str, algorithm: str, env_overr
     run_settings = {**RUN_DEFAULTS, **{k: v for k, v in info.get("settings", {}).items() if k in kept}}
     # The physics it ran on, where the env lets it be chosen (a factory without `impl` chose its own).
     physics_impl = impl or (info.get("physics", {}).get("impl") if mjzoo.envs.takes(env, "impl") else None)
-    return resume, {**saved["overrides"], **({"impl": physics_impl} if physics_impl else {})}, config_values, run_settings
+    return (
+        resume,
+        {**saved["overrides"], **({"impl": physics_impl} if physics_impl else {})},
+        config_values,
+        run_settings,
+    )
 
 
 def evaluate(
@@ -331,8 +363,17 @@ def plan(
         problem.tasks  # noqa: B018 (native tasks are checked here: a refusal is one line)
     key = jax.random.key(seed)
     result, stats = realtime.offline(problem, key) if offline else realtime.realtime(problem, key, plan_hz)
-    summary = plan_report.write(out, problem, result, stats, video, env=env, algorithm=algorithm,
-                                mode="offline" if offline else "realtime", render=render)  # fmt: skip
+    summary = plan_report.write(
+        out,
+        problem,
+        result,
+        stats,
+        video,
+        env=env,
+        algorithm=algorithm,
+        mode="offline" if offline else "realtime",
+        render=render,
+    )
     print(json.dumps(summary, indent=2))
     print(f"plot:  {out / 'plan.png'}")
     print(f"video: {out / 'plan.mp4'}" if (out / "plan.mp4").exists() else "video: (not written)")

@@ -37,8 +37,10 @@ def policy(module: ModuleType, cfg: Any, task: mjzoo.Task, params: dict[str, Any
     if module.__name__.endswith(".amp"):
         cfg = dataclasses.replace(cfg, policy_obs_key=None, value_obs_key=None)
     elif cfg.policy_obs_key is not None:
-        raise UsageError(f"the run's policy sees the entry {cfg.policy_obs_key!r} of a dict observation; export "
-                         "describes one flat observation array")  # fmt: skip
+        raise UsageError(
+            f"the run's policy sees the entry {cfg.policy_obs_key!r} of a dict observation; export "
+            "describes one flat observation array"
+        )
     # With action_dim set, to_controls passes the action through: the output stays in [-1, 1].
     act = ppo.acting(cfg, task.replace(action_dim=task.action_size), params, deterministic=True)
     obs_size = int(jax.tree.leaves(params["obs_stats"].mean)[0].shape[-1])
@@ -81,7 +83,8 @@ def export(
     eval`. An existing file is replaced only with --overwrite. Needs `pip install
     'mjzoo[export]'` for ONNX.
     """
-    from mjzoo.interop import contract, export as exporting
+    from mjzoo.interop import contract
+    from mjzoo.interop import export as exporting
 
     out = out or run / f"policy{SUFFIXES[format]}"
     if out.is_dir():
@@ -94,16 +97,23 @@ def export(
         _need_onnx()
     trained, state = load_run(run, task, env_overrides)
     fn = policy(trained.module, trained.cfg, trained.task, trained.module.policy_params(state))
-    source = dict(run=str(run), env=trained.spec, overrides=trained.overrides, algorithm=trained.module.__name__,
-                  step=int(state.updates))  # fmt: skip
+    source = dict(
+        run=str(run),
+        env=trained.spec,
+        overrides=trained.overrides,
+        algorithm=trained.module.__name__,
+        step=int(state.updates),
+    )
     with checking(contract.ContractError):
         described = exporting.describe(trained.task, fn, source=source)
     write = exporting.write_onnx if format == "onnx" else exporting.write_jax
     path = write(fn, described, out, overwrite=overwrite)
     obs = described["observation"]
-    print(f"{path}: {trained.spec}, obs {obs['size']} ({len(obs['terms'])} terms x {obs['history']} frames), "
-          f"action {fn.action_size}{f', carry {fn.carry_size}' if fn.recurrent else ''}; observation layout checked "
-          f"(max error {obs['checked']['max_abs_error']:.2g})")  # fmt: skip
+    print(
+        f"{path}: {trained.spec}, obs {obs['size']} ({len(obs['terms'])} terms x {obs['history']} frames), "
+        f"action {fn.action_size}{f', carry {fn.carry_size}' if fn.recurrent else ''}; observation layout checked "
+        f"(max error {obs['checked']['max_abs_error']:.2g})"
+    )
     if format == "jax":
         print(f"contract: {exporting.sidecar(path)}")
 

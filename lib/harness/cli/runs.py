@@ -72,8 +72,10 @@ def load(run: Path, task: str | None, env_overrides: tuple[str, ...]) -> Trained
     `UsageError` (call inside `checking`)."""
     saved, info = read_run(run)
     if task is None and saved is None:
-        raise UsageError(f"{run}: has no task.json (trained from Python?): name its task with --task "
-                         "ENV_OR_MODULE:FACTORY, and its --env-overrides if it had any")  # fmt: skip
+        raise UsageError(
+            f"{run}: has no task.json (trained from Python?): name its task with --task "
+            "ENV_OR_MODULE:FACTORY, and its --env-overrides if it had any"
+        )
     spec = task or saved["env"]
     own = saved["overrides"] if saved is not None and saved["env"] == spec else {}
     overrides = {**own, **parse_assignments(env_overrides, "--env-overrides")}

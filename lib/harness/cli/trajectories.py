@@ -14,8 +14,16 @@ import tyro
 import mjzoo
 from mjzoo.harness import datasets
 from mjzoo.harness.cli import runs
-from mjzoo.harness.cli.arguments import (PLANNERS, UsageError, algorithm_module, at_least_one, build_config,
-                                         checking, episode_steps, parse_assignments)  # fmt: skip
+from mjzoo.harness.cli.arguments import (
+    PLANNERS,
+    UsageError,
+    algorithm_module,
+    at_least_one,
+    build_config,
+    checking,
+    episode_steps,
+    parse_assignments,
+)
 from mjzoo.planning.realtime import Problem
 
 __all__ = ["collect"]
@@ -66,36 +74,48 @@ def collect(
         else:
             trained = runs.load(Path(source), task, env_overrides)
             steps = episode_steps(trained.task, trained.spec, steps)
-            about = {"run": source, "algorithm": trained.module.__name__.split(".")[-1], "task": trained.spec,
-                     "env_overrides": trained.overrides}  # fmt: skip
+            about = {
+                "run": source,
+                "algorithm": trained.module.__name__.split(".")[-1],
+                "task": trained.spec,
+                "env_overrides": trained.overrides,
+            }
     if source in PLANNERS:
         dataset = datasets.record_planner(problem, seed, episodes, steps, source=about)
     else:  # past the checks: restoring compiles PPO's init, whose errors are bugs
         params = trained.module.policy_params(runs.restore(Path(source), trained))
         act = _policy(trained, not sampled)
-        dataset = datasets.record_policy(trained.task, act, params, seed, episodes, steps, deterministic=not sampled,
-                                         source=about)  # fmt: skip
+        dataset = datasets.record_policy(
+            trained.task, act, params, seed, episodes, steps, deterministic=not sampled, source=about
+        )
     for path in datasets.save(out, dataset, overwrite=overwrite):
         print(path)
-    print(f"{out}: {episodes} episodes of {dataset.num_steps} steps on {about['task']}, mean length "
-          f"{dataset.length.mean():.1f}, mean return {dataset.returns().mean():.2f}")  # fmt: skip
+    print(
+        f"{out}: {episodes} episodes of {dataset.num_steps} steps on {about['task']}, mean length "
+        f"{dataset.length.mean():.1f}, mean return {dataset.returns().mean():.2f}"
+    )
 
 
 def _check_out(out: Path, overwrite: bool) -> None:
     """Refuses an --out that is not a dataset directory, or holds one (unless --overwrite)."""
     if out.suffix == ".npz":
-        raise UsageError(f"--out {out}: names a directory (dataset.npz, meta.json and motions/ go in it), not an "
-                         f".npz file; e.g. --out {out.with_suffix('')}")  # fmt: skip
+        raise UsageError(
+            f"--out {out}: names a directory (dataset.npz, meta.json and motions/ go in it), not an "
+            f".npz file; e.g. --out {out.with_suffix('')}"
+        )
     if out.exists() and not out.is_dir():
         raise UsageError(f"--out {out}: is a file, not a directory")
     found = datasets.existing(out)
     if found and not overwrite:
-        raise UsageError(f"--out {out} already holds a dataset ({found[0]}, ...): give --overwrite to replace it, "
-                         "or choose a new --out")  # fmt: skip
+        raise UsageError(
+            f"--out {out} already holds a dataset ({found[0]}, ...): give --overwrite to replace it, "
+            "or choose a new --out"
+        )
 
 
-def _problem(name: str, spec: str | None, env_overrides: tuple[str, ...], config: tuple[str, ...],
-             steps: int | None) -> tuple[Problem, dict[str, Any]]:  # fmt: skip
+def _problem(
+    name: str, spec: str | None, env_overrides: tuple[str, ...], config: tuple[str, ...], steps: int | None
+) -> tuple[Problem, dict[str, Any]]:
     """The planner's closed-loop problem on `spec`, as `mjzoo plan` builds it, and its
     description for meta.json."""
     if spec is None:

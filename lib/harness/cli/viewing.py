@@ -15,8 +15,15 @@ import tyro
 import mjzoo
 from mjzoo.harness import datasets, rendering
 from mjzoo.harness.cli import runs
-from mjzoo.harness.cli.arguments import (PLANNERS, UsageError, algorithm_module, at_least_one, build_config,
-                                         checking, parse_assignments)  # fmt: skip
+from mjzoo.harness.cli.arguments import (
+    PLANNERS,
+    UsageError,
+    algorithm_module,
+    at_least_one,
+    build_config,
+    checking,
+    parse_assignments,
+)
 from mjzoo.harness.rendering import RenderConfig
 
 __all__ = ["view", "target_kind"]
@@ -75,9 +82,17 @@ def view(
         _check_outputs(save_frames, save_video, overwrite)
         source = _source(kind, target, task, env_overrides, controls, planner, config, sampled, num_envs, seed, trace)
         _check_body(source.mj_model, track_body)
-    shown = viewer.serve(source, port, host=host, speed=speed, track_body=track_body,
-                         record=save_frames is not None or save_video is not None)  # fmt: skip
-    print(f"mjzoo view: {target} at http://localhost:{shown.port} ({'Ctrl-C to stop' if seconds is None else f'{seconds:g} s'})")
+    shown = viewer.serve(
+        source,
+        port,
+        host=host,
+        speed=speed,
+        track_body=track_body,
+        record=save_frames is not None or save_video is not None,
+    )
+    print(
+        f"mjzoo view: {target} at http://localhost:{shown.port} ({'Ctrl-C to stop' if seconds is None else f'{seconds:g} s'})"
+    )
     try:
         shown.wait(seconds)
     finally:
@@ -101,8 +116,17 @@ def target_kind(target: str) -> Kind:
     return "task"
 
 
-def _check_flags(target: str, controls: str, planner: str | None, config: tuple[str, ...], sampled: bool,
-                 num_envs: int, seconds: float | None, speed: float, port: int) -> Kind:  # fmt: skip
+def _check_flags(
+    target: str,
+    controls: str,
+    planner: str | None,
+    config: tuple[str, ...],
+    sampled: bool,
+    num_envs: int,
+    seconds: float | None,
+    speed: float,
+    port: int,
+) -> Kind:
     """The flags that do not fit TARGET's kind, or are out of range."""
     kind = target_kind(target)
     at_least_one(num_envs=num_envs)
@@ -112,8 +136,12 @@ def _check_flags(target: str, controls: str, planner: str | None, config: tuple[
         raise UsageError(f"--speed must be one of {', '.join(f'{s:g}' for s in _SPEEDS)}, got {speed:g}")
     if not 0 <= port < 65536:
         raise UsageError(f"--port must be 0 (any free port) to 65535, got {port}")
-    wrong = {"--controls": controls != "zero" and kind != "task", "--planner": planner is not None and kind != "task",
-             "--sampled": sampled and kind != "run", "--config": bool(config) and planner is None}  # fmt: skip
+    wrong = {
+        "--controls": controls != "zero" and kind != "task",
+        "--planner": planner is not None and kind != "task",
+        "--sampled": sampled and kind != "run",
+        "--config": bool(config) and planner is None,
+    }
     for flag, bad in wrong.items():
         if bad:
             needs = {"--sampled": "a run", "--config": "--planner"}.get(flag, "a task")
@@ -143,9 +171,19 @@ def _check_body(mj_model: mujoco.MjModel, name: str | None) -> None:
         raise UsageError(f"--track-body {name!r}: no such body; bodies: {', '.join(map(str, bodies))}")
 
 
-def _source(kind: Kind, target: str, task: str | None, env_overrides: tuple[str, ...], controls: str,
-            planner: str | None, config: tuple[str, ...], sampled: bool, num_envs: int, seed: int,
-            trace: str | None) -> Any:  # fmt: skip
+def _source(
+    kind: Kind,
+    target: str,
+    task: str | None,
+    env_overrides: tuple[str, ...],
+    controls: str,
+    planner: str | None,
+    config: tuple[str, ...],
+    sampled: bool,
+    num_envs: int,
+    seed: int,
+    trace: str | None,
+) -> Any:
     """The viewer source TARGET names."""
     from mjzoo.harness import viewer
 

@@ -39,9 +39,19 @@ class Viewer:
       frame, when `record`.
     """
 
-    def __init__(self, source: Any, port: int = 8080, host: str = "0.0.0.0", *, display_hz: float = 30.0,
-                 speed: float | str = 1.0, playing: bool = True, track_body: str | None = None,
-                 record: bool = False, label: str = "mjzoo view"):  # fmt: skip
+    def __init__(
+        self,
+        source: Any,
+        port: int = 8080,
+        host: str = "0.0.0.0",
+        *,
+        display_hz: float = 30.0,
+        speed: float | str = 1.0,
+        playing: bool = True,
+        track_body: str | None = None,
+        record: bool = False,
+        label: str = "mjzoo view",
+    ):
         self.source, self.display_hz, self.record = source, display_hz, record
         self.server = viser.ViserServer(host=host, port=port or free_port(), label=label, verbose=False)
         self.lock = threading.RLock()
@@ -173,7 +183,8 @@ class Viewer:
             if handle is None:
                 width = 0.004 if name == "samples" else 0.012
                 self.trace_handles[name] = self.server.scene.add_line_segments(
-                    f"/traces/{name}", segments.astype(np.float32), colors, thickness=width)
+                    f"/traces/{name}", segments.astype(np.float32), colors, thickness=width
+                )
             else:
                 handle.points, handle.colors = segments.astype(np.float32), colors
 

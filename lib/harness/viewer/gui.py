@@ -55,8 +55,13 @@ def _playback(viewer: Viewer, controls: dict[str, Any], track_body: str | None) 
         controls["speed"] = g.add_dropdown("Speed", SPEEDS, initial_value=speed if speed in SPEEDS else "1")
         if source.num_envs > 1:
             controls["env"] = g.add_dropdown("Show env", ("all", *map(str, range(source.num_envs))))
-        names = ["none", *(mujoco.mj_id2name(source.mj_model, mujoco.mjtObj.mjOBJ_BODY, b) or f"body{b}"
-                           for b in range(1, source.mj_model.nbody))]  # fmt: skip
+        names = [
+            "none",
+            *(
+                mujoco.mj_id2name(source.mj_model, mujoco.mjtObj.mjOBJ_BODY, b) or f"body{b}"
+                for b in range(1, source.mj_model.nbody)
+            ),
+        ]
         controls["track"] = g.add_dropdown("Camera tracks", names, initial_value=track_body or "none")
         controls["status"] = g.add_markdown("")
 
@@ -178,8 +183,10 @@ def _reward_plot(viewer: Viewer, controls: dict[str, Any]) -> None:
     terms = list(viewer.source.frame().terms)
     if not terms:
         return
-    series = (uplot.Series(label="t (s)"),
-              *(uplot.Series(label=t, stroke=_COLORS[i % len(_COLORS)], width=1.5) for i, t in enumerate(terms)))  # fmt: skip
+    series = (
+        uplot.Series(label="t (s)"),
+        *(uplot.Series(label=t, stroke=_COLORS[i % len(_COLORS)], width=1.5) for i, t in enumerate(terms)),
+    )
     empty = tuple(np.zeros(0) for _ in range(len(terms) + 1))
     with viewer.server.gui.add_folder("Reward terms"):
         controls["plot"] = viewer.server.gui.add_uplot(empty, series, title="weighted reward terms", aspect=1.5)

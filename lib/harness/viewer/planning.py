@@ -23,12 +23,12 @@ import jax.numpy as jnp
 import mujoco
 import numpy as np
 
+from mjzoo.harness.viewer.sources import Frame, float_parameters, host_poses
 from mjzoo.planning import closed_loop, sampling
 from mjzoo.planning.realtime import Problem
 from mjzoo.planning.rollouts import base_task
 from mjzoo.running import complete, reset, transition
 from mjzoo.types import State, Task
-from mjzoo.harness.viewer.sources import Frame, float_parameters, host_poses
 
 __all__ = ["Planning", "trace_point", "config_floats"]
 
@@ -49,7 +49,11 @@ def trace_point(mj_model: mujoco.MjModel, name: str | None = None) -> tuple[str,
 
 def config_floats(config: Any) -> dict[str, float]:
     """The planner Config's float fields (the ones sliders set)."""
-    return {f.name: getattr(config, f.name) for f in dataclasses.fields(config) if isinstance(getattr(config, f.name), float)}
+    return {
+        f.name: getattr(config, f.name)
+        for f in dataclasses.fields(config)
+        if isinstance(getattr(config, f.name), float)
+    }
 
 
 class Planning:
@@ -78,8 +82,9 @@ class Planning:
         self.key = jax.random.key(seed)
         reset_key, self.key = jax.random.split(self.key)
         self.sim_state = complete(self.problem.sim_task, reset(self.problem.sim_task, reset_key))
-        self.planner_state = closed_loop.first_plan(self.problem.planner, self.config, self.problem.plan_task,
-                                                    self.sim_state, self.problem.hooks)  # fmt: skip
+        self.planner_state = closed_loop.first_plan(
+            self.problem.planner, self.config, self.problem.plan_task, self.sim_state, self.problem.hooks
+        )
         self.points, self.latencies, self.steps = None, [], 0
 
     def advance(self) -> int:
@@ -87,11 +92,13 @@ class Planning:
         p = self.problem
         self.key, plan_key, sim_key = jax.random.split(self.key, 3)
         tick = time.perf_counter()
-        new = jax.block_until_ready(self._replan(p.plan_task, self.planner_state, self.sim_state, plan_key,
-                                                 p.terminal_value))  # fmt: skip
+        new = jax.block_until_ready(
+            self._replan(p.plan_task, self.planner_state, self.sim_state, plan_key, p.terminal_value)
+        )
         self.latencies = (self.latencies + [time.perf_counter() - tick])[-50:]
-        self.points, self.sim_state = self._after(p.plan_task, p.sim_task, self.planner_state, new, self.sim_state,
-                                                  plan_key, sim_key)  # fmt: skip
+        self.points, self.sim_state = self._after(
+            p.plan_task, p.sim_task, self.planner_state, new, self.sim_state, plan_key, sim_key
+        )
         self.planner_state = new
         self.steps += p.replan_every
         return p.replan_every
@@ -123,10 +130,11 @@ class Planning:
 
     def frame(self) -> Frame:
         data = self.sim_state.data
-        qpos, mocap_pos, mocap_quat, t, metrics = jax.device_get((data.qpos[None], data.mocap_pos[None],
-                                                                   data.mocap_quat[None], data.time, self.sim_state.metrics))  # fmt: skip
+        qpos, mocap_pos, mocap_quat, t, metrics = jax.device_get(
+            (data.qpos[None], data.mocap_pos[None], data.mocap_quat[None], data.time, self.sim_state.metrics)
+        )
         xpos, xquat = host_poses(self.mj_model, qpos, mocap_pos, mocap_quat)
-        terms = {k[len("reward/"):]: np.asarray(v)[None] for k, v in metrics.items() if k.startswith("reward/")}
+        terms = {k[len("reward/") :]: np.asarray(v)[None] for k, v in metrics.items() if k.startswith("reward/")}
         points = None if self.points is None else np.asarray(self.points)
         return Frame(qpos, mocap_pos, mocap_quat, xpos, xquat, float(t), terms, points)
 
@@ -134,13 +142,17 @@ class Planning:
 
     def _replan_fn(self, plan_task, planner_state, sim_state, key, value):
         self.traces += 1
-        return closed_loop.replan(self.problem.planner, self.config, plan_task, planner_state, sim_state, key,
-                                  self.problem.hooks, value)  # fmt: skip
+        return closed_loop.replan(
+            self.problem.planner, self.config, plan_task, planner_state, sim_state, key, self.problem.hooks, value
+        )
 
-    def _after_fn(self, plan_task, sim_task: Task, old, new, sim_state: State, plan_key: jax.Array,
-                  sim_key: jax.Array) -> tuple[jax.Array, State]:  # fmt: skip
+    def _after_fn(
+        self, plan_task, sim_task: Task, old, new, sim_state: State, plan_key: jax.Array, sim_key: jax.Array
+    ) -> tuple[jax.Array, State]:
         """(the traces of this replan, the simulation `replan_every` steps on under `new`)."""
-        return self._traces_fn(plan_task, old, new, sim_state, plan_key), self._simulate_fn(sim_task, new, sim_state, sim_key)
+        return self._traces_fn(plan_task, old, new, sim_state, plan_key), self._simulate_fn(
+            sim_task, new, sim_state, sim_key
+        )
 
     def _simulate_fn(self, sim_task: Task, planner_state, sim_state: State, key: jax.Array) -> State:
         def body(state: State, key: jax.Array) -> tuple[State, None]:

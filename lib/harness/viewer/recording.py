@@ -29,10 +29,19 @@ class Recording:
       lengths: [E] frames of each episode that are its own (the rest: past its end).
     """
 
-    def __init__(self, mj_model: mujoco.MjModel, qpos: np.ndarray, dt: float, xpos: np.ndarray | None = None,
-                 xquat: np.ndarray | None = None, terms: dict[str, np.ndarray] | None = None):  # fmt: skip
+    def __init__(
+        self,
+        mj_model: mujoco.MjModel,
+        qpos: np.ndarray,
+        dt: float,
+        xpos: np.ndarray | None = None,
+        xquat: np.ndarray | None = None,
+        terms: dict[str, np.ndarray] | None = None,
+    ):
         if qpos.ndim != 3 or qpos.shape[-1] != mj_model.nq:
-            raise ValueError(f"recording: qpos has shape {qpos.shape}; the model needs [episodes, frames, {mj_model.nq}]")
+            raise ValueError(
+                f"recording: qpos has shape {qpos.shape}; the model needs [episodes, frames, {mj_model.nq}]"
+            )
         self.mj_model, self.qpos, self.dt = mj_model, qpos, dt
         self.xpos, self.xquat, self.terms = xpos, xquat, terms or {}
         self.num_envs, self.num_frames = qpos.shape[0], qpos.shape[1]
@@ -71,16 +80,26 @@ def from_dataset(mj_model: mujoco.MjModel, dataset, episodes: int = 1) -> Record
     """The first `episodes` episodes of a `mjzoo.harness.datasets.Dataset`."""
     names = tuple(mujoco.mj_id2name(mj_model, mujoco.mjtObj.mjOBJ_JOINT, j) for j in range(mj_model.njnt))
     if tuple(dataset.joint_names) != names:
-        raise ValueError(f"recording: the dataset's joints {list(dataset.joint_names)} are not the model's {list(names)}")
+        raise ValueError(
+            f"recording: the dataset's joints {list(dataset.joint_names)} are not the model's {list(names)}"
+        )
     e = max(1, min(episodes, dataset.num_episodes))
     terms = {k: np.asarray(v[:e]) for k, v in dataset.reward_terms.items()}
-    return Recording(mj_model, np.asarray(dataset.qpos[:e]), dataset.dt, np.asarray(dataset.xpos[:e]),
-                     np.asarray(dataset.xquat[:e]), terms)  # fmt: skip
+    return Recording(
+        mj_model,
+        np.asarray(dataset.qpos[:e]),
+        dataset.dt,
+        np.asarray(dataset.xpos[:e]),
+        np.asarray(dataset.xquat[:e]),
+        terms,
+    )
 
 
 def from_clip(mj_model: mujoco.MjModel, clip: motion.Clip) -> Recording:
     """One motion clip (`mjzoo.motion.load_file`), checked against the model's joints."""
     names = tuple(mujoco.mj_id2name(mj_model, mujoco.mjtObj.mjOBJ_JOINT, j) for j in range(mj_model.njnt))
     if tuple(clip.joint_names) != names or clip.qpos.shape[-1] != mj_model.nq:
-        raise ValueError(f"recording: clip {clip.name!r} has joints {list(clip.joint_names)}; the model has {list(names)}")
+        raise ValueError(
+            f"recording: clip {clip.name!r} has joints {list(clip.joint_names)}; the model has {list(names)}"
+        )
     return Recording(mj_model, np.asarray(clip.qpos)[None], 1.0 / clip.fps)

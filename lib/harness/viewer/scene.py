@@ -53,8 +53,14 @@ def body_groups(mj_model: mujoco.MjModel) -> list[BodyGroup]:
         if mesh is None:
             continue
         name = mujoco.mj_id2name(mj_model, mujoco.mjtObj.mjOBJ_GEOM, g) or f"geom{g}"
-        geom = Geom(name, np.asarray(mesh.vertices, np.float32), np.asarray(mesh.faces, np.uint32), rgba,
-                    mj_model.geom_pos[g].copy(), mj_model.geom_quat[g].copy())  # fmt: skip
+        geom = Geom(
+            name,
+            np.asarray(mesh.vertices, np.float32),
+            np.asarray(mesh.faces, np.uint32),
+            rgba,
+            mj_model.geom_pos[g].copy(),
+            mj_model.geom_quat[g].copy(),
+        )
         per_body.setdefault(int(mj_model.geom_bodyid[g]), []).append(geom)
     return [BodyGroup(b, _body_name(mj_model, b), tuple(geoms)) for b, geoms in sorted(per_body.items())]
 
@@ -136,8 +142,9 @@ class Scene:
             name = f"/floor/{geom.name}" if floor else f"/env{env}/{group.name}/{geom.name}"
             color = tuple(int(255 * c) for c in geom.rgba[:3])
             opacity = float(geom.rgba[3]) if geom.rgba[3] < 1 else None
-            self.server.scene.add_mesh_simple(name, geom.vertices, geom.faces,
-                                              color=color, opacity=opacity, position=geom.pos, wxyz=geom.quat)  # fmt: skip
+            self.server.scene.add_mesh_simple(
+                name, geom.vertices, geom.faces, color=color, opacity=opacity, position=geom.pos, wxyz=geom.quat
+            )
         return frame
 
     def update(self, xpos: np.ndarray, xquat: np.ndarray) -> None:
@@ -166,7 +173,9 @@ def _stage(server: viser.ViserServer, mj_model: mujoco.MjModel, width: float) ->
     server.scene.set_up_direction("+z")
     server.scene.configure_environment_map(None)
     server.scene.configure_default_lights(enabled=False)
-    server.scene.add_light_hemisphere("/lights/sky", sky_color=(255, 255, 255), ground_color=(90, 90, 100), intensity=1.2)
+    server.scene.add_light_hemisphere(
+        "/lights/sky", sky_color=(255, 255, 255), ground_color=(90, 90, 100), intensity=1.2
+    )
     server.scene.add_light_directional("/lights/sun", intensity=1.8, wxyz=(0.92, 0.2, -0.2, 0.25), position=(0, 0, 5))
     centre, extent = np.asarray(mj_model.stat.center, float), float(mj_model.stat.extent)
     distance = 1.0 * extent + 0.45 * width

@@ -59,8 +59,9 @@ class Frame:
     traces: np.ndarray | None = None
 
 
-def host_poses(mj_model: mujoco.MjModel, qpos: np.ndarray, mocap_pos: np.ndarray,
-               mocap_quat: np.ndarray) -> tuple[np.ndarray, np.ndarray]:  # fmt: skip
+def host_poses(
+    mj_model: mujoco.MjModel, qpos: np.ndarray, mocap_pos: np.ndarray, mocap_quat: np.ndarray
+) -> tuple[np.ndarray, np.ndarray]:
     """([E, nbody, 3], [E, nbody, 4]) body poses of qpos [E, nq] by native forward
     kinematics: cheap on the host, and the same for every physics backend."""
     data = mujoco.MjData(mj_model)
@@ -150,11 +151,18 @@ class Simulation:
         self.task = self.task.with_params(**values)
 
     def frame(self) -> Frame:
-        data = jax.device_get((self.states.data.qpos, self.states.data.mocap_pos, self.states.data.mocap_quat,
-                               self.states.data.time, self.states.metrics))  # fmt: skip
+        data = jax.device_get(
+            (
+                self.states.data.qpos,
+                self.states.data.mocap_pos,
+                self.states.data.mocap_quat,
+                self.states.data.time,
+                self.states.metrics,
+            )
+        )
         qpos, mocap_pos, mocap_quat, time, metrics = data
         xpos, xquat = host_poses(self.mj_model, qpos, mocap_pos, mocap_quat)
-        terms = {k[len("reward/"):]: np.asarray(v) for k, v in metrics.items() if k.startswith("reward/")}
+        terms = {k[len("reward/") :]: np.asarray(v) for k, v in metrics.items() if k.startswith("reward/")}
         return Frame(qpos, mocap_pos, mocap_quat, xpos, xquat, float(time[0]), terms)
 
     def _reset_all(self, task: Task, keys: jax.Array) -> State:
