@@ -169,6 +169,47 @@ def test_time_limit_counter_starts_at_zero_and_is_int32():
     )
 
 
+def test_nested_time_limits_each_count_their_own_steps():
+    # The known bug of one shared counter: an inner limit of 2 under an auto-reset under an
+    # outer limit of 5. The inner counts its own episodes (restarted every 2 steps), the
+    # outer its 6 steps; before, the outer's count overwrote the inner's, which then
+    # truncated at every step from the 2nd on.
+    task = mjzoo.with_time_limit(mjzoo.with_auto_reset(mjzoo.with_time_limit(make_task(), 2)), 5)
+    state, states = episode(task, *[1.0] * 6)
+    outer, inner = state.layers, state.layers.inner.inner
+    assert isinstance(outer, TimeLimitState) and isinstance(inner, TimeLimitState)
+    assert int(outer.steps) == 0 and int(inner.steps) == 0
+    np.testing.assert_array_equal(states.layers.steps, [1, 2, 3, 4, 5, 6])
+    np.testing.assert_array_equal(states.layers.inner.inner.steps, [1, 0, 1, 0, 1, 0])  # a new episode at 0
+    np.testing.assert_array_equal(states.truncated, [False, True, False, True, True, True])
+    np.testing.assert_allclose(states.data.qpos[:, 0], [0.01, 0, 0.01, 0, 0.01, 0], atol=1e-7)  # restarted
+    assert mjzoo.find(states, TimeLimitState) is states.layers  # the outermost: the one a reader here sees
+    assert int(task.time_limit) == 2
+
+
+def test_time_limits_around_action_repeat_each_count_their_own_steps():
+    # Inner limit 5 of the block's steps, under 2 repeats: its 5th step is in the 3rd
+    # repeated step, after which the repeat stops (the episode ended). The outer limit of
+    # 4 counts repeated steps. time_limit: min(ceil(5 / 2), 4) = 3.
+    task = mjzoo.with_time_limit(mjzoo.with_action_repeat(mjzoo.with_time_limit(make_task(), 5), 2), 4)
+    _, states = episode(task, *[1.0] * 6)
+    np.testing.assert_array_equal(states.layers.steps, [1, 2, 3, 4, 5, 6])
+    np.testing.assert_array_equal(states.layers.inner.steps, [2, 4, 5, 6, 7, 8])
+    np.testing.assert_array_equal(states.truncated, [False, False, True, True, True, True])
+    np.testing.assert_allclose(states.data.qpos[:3, 0], QPOS[[1, 3, 4]], rtol=1e-5)
+    assert int(task.time_limit) == 3
+
+
+def test_find_reads_a_record_by_type_and_names_what_is_missing():
+    state = reset(mjzoo.with_observation_noise(mjzoo.with_auto_reset(mjzoo.with_time_limit(make_task(), 3)), 0.0), KEY)
+    assert mjzoo.find(state, AutoResetState) is state.layers  # noise keeps no record
+    assert mjzoo.find(state, TimeLimitState) is state.layers.inner
+    assert state.outcome is None and reset(make_task(), KEY).layers == ()
+    with pytest.raises(LookupError, match=r"no ObservationState .*\['AutoResetState', 'TimeLimitState'\]"):
+        mjzoo.find(state, ObservationState)
+    assert mjzoo.find(state, ObservationState, None) is None
+
+
 def test_time_limit_terminated_wins_over_truncated():
     # threshold 0.08: qpos 0.01, 0.03, 0.06 < 0.08 < 0.10 = step 4, the last allowed step.
     _, states = episode(mjzoo.with_time_limit(make_task(threshold=0.08), 4), *[1.0] * 4)

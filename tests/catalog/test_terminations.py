@@ -219,7 +219,7 @@ def test_with_terminations_rejects_bad_items():
         term.with_terminations(task, {"fast": 1.0})
     with pytest.raises(ValueError, match="'wide' must return a scalar"):
         term.with_terminations(task, {"wide": _vector})
-    with pytest.raises(ValueError, match=r"'long' reads info\['time_limit'\].*info keys: \[\]"):
+    with pytest.raises(ValueError, match=r"'long': find: the state holds no TimeLimitState"):
         term.with_terminations(block_task(max_steps=None), {"long": term.episode_length(3)})
     once = term.with_terminations(task, {"fast": term.bad_velocity(1.0)})
     with pytest.raises(ValueError, match="already records metrics\\['termination/fast'\\]"):
