@@ -97,8 +97,12 @@ def test_bad_velocity_and_non_finite_physics():
     assert check(item, at(qvel=data.qvel.at[3].set(-5.1)))
     assert check(item, at(qvel=data.qvel.at[0].set(jnp.nan)))
     assert check(item, at(qpos=data.qpos.at[2].set(jnp.inf)))
-    assert not check(term.episode_length(5), State.create(data, jnp.zeros(()), {"time_limit": jnp.int32(4)}))
-    assert check(term.episode_length(5), State.create(data, jnp.zeros(()), {"time_limit": jnp.int32(5)}))
+    assert not check(
+        term.episode_length(5), State.create(data, jnp.zeros(())).replace(layers=mjzoo.TimeLimitState(jnp.int32(4)))
+    )
+    assert check(
+        term.episode_length(5), State.create(data, jnp.zeros(())).replace(layers=mjzoo.TimeLimitState(jnp.int32(5)))
+    )
 
 
 @pytest.mark.parametrize(
