@@ -129,7 +129,7 @@ class Task:
       model: the MJX model the functions are called with.
       start: ``(model, key) -> State``, how an episode starts, as the task's own code
         writes it: it need not hold the `info` and `metrics` entries only a transition
-        writes (the reward terms, an inner combinator's records).
+        writes (the reward terms); each combinator's start adds its record to `layers`.
       step: ``(model, state, action, key) -> State``, dynamics and observation. The
         action has shape ``(action_size,)``: by default a control per actuator, in its
         ctrlrange.
