@@ -67,13 +67,17 @@ def find(state: State, record_type: type[R], default: Any = _MISSING) -> R:
 
 
 def peel(state: State, record_type: type[R]) -> tuple[R, State]:
-    """This level's record (``state.layers``, of `record_type`) and the state the
-    wrapped task sees (``layers`` = the record's ``inner``)."""
-    record = state.layers
-    if not isinstance(record, record_type):  # a task built wrongly, found while tracing
-        raise TypeError(
-            f"expected this combinator's {record_type.__name__} in state.layers, got {type(record).__name__}"
-        )
+    """This level's record (the outermost of `record_type` in ``state.layers``) and the
+    state the wrapped task sees (``layers`` = the record's ``inner``).
+
+    A combinator's own step always gets its record on top. Its reward or terminate may
+    also be called on a state of an outer level, as when ``rewards.alive(task)`` is added
+    to a task wrapped around `task`: the outer records, which this level cannot know,
+    are skipped. Raises TypeError when the state holds no `record_type` at all."""
+    record = find(state, record_type, None)
+    if record is None:  # a task built wrongly, found while tracing
+        held = [type(r).__name__ for r in _records(state.layers)]
+        raise TypeError(f"expected this combinator's {record_type.__name__} in state.layers, which holds {held}")
     return record, state.replace(layers=record.inner)
 
 
