@@ -65,7 +65,7 @@ from task_overhead import add_impl_argument, impls, inputs, ratio, raw_steps_per
 import mjzoo  # noqa: E402
 import mjzoo.envs  # noqa: E402
 from mjzoo.algorithms import ppo  # noqa: E402
-from mjzoo.catalog import observations  # noqa: E402
+from mjzoo.catalog import commands, observations  # noqa: E402
 from mjzoo.envs import joystick  # noqa: E402
 from mjzoo.harness import rendering, training  # noqa: E402
 
@@ -108,7 +108,7 @@ def episode_measures(config: ppo.Config, task: mjzoo.Task, train_state, key, num
         def body(carry, key):
             state, alive = carry
             next_state = mjzoo.transition(task, state, act(params, state.obs, key), key)
-            command = state.info.get("command", jnp.zeros(3))
+            command = getattr(mjzoo.find(state, commands.VelocityCommandState, None), "command", jnp.zeros(3))
             error = jnp.linalg.norm(velocity(task.model, next_state)[:2] - command[:2])
             out = dict(
                 reward=next_state.reward * alive,

@@ -268,7 +268,7 @@ def humanoid_amp_joystick(
     **physics_options: Any,
 ) -> Task:
     """`humanoid_amp_walk` asked to follow a velocity command in the teacher's style:
-    ``info["command"]`` = [vx ~ U(`speed`) m/s, 0, yaw rate ~ U(`yaw_rate`) rad/s] in the
+    the command (`commands.VelocityCommandState`) = [vx ~ U(`speed`) m/s, 0, yaw rate ~ U(`yaw_rate`) rad/s] in the
     torso's heading frame, redrawn every U(`resample_interval`) s and appended to the
     observation (48); rewards exp(-|v_xy - c_xy|^2 / sigma) (`tracking_weight`) and
     exp(-(w_z - c_yaw)^2 / sigma) (`yaw_tracking_weight`), sigma = `tracking_sigma`,

@@ -27,9 +27,12 @@ import io
 with contextlib.redirect_stdout(io.StringIO()):  # mjx prints a notice when its optional warp backend is absent
     from mujoco import mjx  # noqa: F401
 
-from mjzoo import checks, lazy, names, physics, tree, worlds
+from mjzoo import checks, layers, lazy, names, physics, tree, worlds
 from mjzoo.checks import RetraceHazardWarning
 from mjzoo.combinators import (
+    AutoResetState,
+    ObservationState,
+    TimeLimitState,
     with_action_repeat,
     with_auto_reset,
     with_divergence_guard,
@@ -39,8 +42,14 @@ from mjzoo.combinators import (
     with_time_limit,
 )
 from mjzoo.kit import task
+from mjzoo.layers import find
 from mjzoo.parameters import params, with_params
-from mjzoo.perturbations import with_action_noise, with_domain_randomization, with_observation_noise
+from mjzoo.perturbations import (
+    DomainRandomizationState,
+    with_action_noise,
+    with_domain_randomization,
+    with_observation_noise,
+)
 from mjzoo.running import (
     Policy,
     complete,
@@ -51,7 +60,7 @@ from mjzoo.running import (
     transition,
     transition_with_terms,
 )
-from mjzoo.types import State, Task, Trajectory, bind
+from mjzoo.types import Outcome, State, Task, Trajectory, bind
 
 __version__ = "0.1.0"
 
@@ -61,7 +70,13 @@ __all__ = [
     "Task",
     "State",
     "Trajectory",
+    "Outcome",
     "Policy",
+    "find",
+    "ObservationState",
+    "TimeLimitState",
+    "AutoResetState",
+    "DomainRandomizationState",
     "bind",
     "reset",
     "complete",
@@ -87,6 +102,7 @@ __all__ = [
     "physics",
     "worlds",
     "tree",
+    "layers",
     "names",
     "checks",
     *SUBPACKAGES,

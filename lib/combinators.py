@@ -2,28 +2,30 @@
 extra reward terms, reward clipping and the divergence guard.
 
 Each combinator rebinds some of the task's four functions around the originals; its
-numbers are pytree leaves, and any state it needs lives in `state.info` under its own
-key, documented per combinator.
+numbers are pytree leaves. One that keeps per-episode state owns a record type
+(`ObservationState`, `TimeLimitState`, `AutoResetState`) kept in `state.layers` around
+the records of the task it wraps (`mjzoo.layers`): any of them can be applied twice.
 
 Three of them (auto-reset, action repeat, divergence guard) must see a whole transition
 of the task they wrap before deciding what to return. Their `step` runs
-`mjzoo.transition` on the inner task and records the outcome in
-``state.info["outcome"]``; their `reward` and `terminate` report that record, and the
-`transition` that called them drops it (states never keep it).
+`mjzoo.transition` on the inner task and hands its result on as ``state.outcome``
+(`mjzoo.Outcome`); their `reward` and `terminate` report it, and the `transition` that
+called them clears it (states never keep it).
 """
 
 from __future__ import annotations
 
 import dataclasses
-from typing import Callable, Mapping
+from typing import Any, Callable, Mapping, NamedTuple
 
 import jax
 import jax.numpy as jnp
 from mujoco import mjx
 
 from mjzoo import checks, tree, worlds
-from mjzoo.running import OUTCOME, complete, reset, reward_terms, transition_with_terms
-from mjzoo.types import State, Task, bind
+from mjzoo.layers import layered, peel, wrap
+from mjzoo.running import complete, reset, reward_terms, transition_with_terms
+from mjzoo.types import Outcome, State, Task, bind
 
 __all__ = [
     "with_observation",
@@ -35,13 +37,25 @@ __all__ = [
     "with_divergence_guard",
     "runs_transitions",
     "record",
+    "ObservationState",
+    "TimeLimitState",
+    "AutoResetState",
 ]
 
 Array = jax.Array
+PyTree = Any
 RESET_STREAM = 0x5E7  # fold_in tag: combinators pass keys through and derive their own
 
 
 # --- observation transform ----------------------------------------------------------
+
+
+class ObservationState(NamedTuple):
+    """`with_observation`'s record: ``obs``, the wrapped task's own observation, which
+    its step still receives."""
+
+    obs: PyTree
+    inner: Any = ()
 
 
 def with_observation(task: Task, fn: Callable) -> Task:
@@ -49,19 +63,19 @@ def with_observation(task: Task, fn: Callable) -> Task:
     e.g. drop velocities to make a task partially observable).
 
     `fn` maps one observation pytree to another; a plain function or a
-    `jax.tree_util.Partial` with its parameters. Keeps ``info["observation"]``: the
-    inner task's own observation, which its step still receives.
+    `jax.tree_util.Partial` with its parameters. Keeps an `ObservationState`: the inner
+    task's own observation, which its step still receives.
     """
     if not callable(fn):
         raise TypeError(f"with_observation: fn must be callable, got {type(fn).__name__}")
     checks.retrace_hazard("with_observation", "fn", fn)
     if not isinstance(fn, jax.tree_util.Partial):
         fn = jax.tree_util.Partial(fn)
-    return task.replace(start=bind(_observed_reset, task.start, fn), step=bind(_observed_step, task.step, fn))
+    return layered(task, ObservationState, bind(_observed_reset, task.start, fn), bind(_observed_step, task.step, fn))
 
 
 def _observed(state: State, fn) -> State:
-    return state.replace(obs=fn(state.obs), info={**state.info, "observation": state.obs})
+    return wrap(state.replace(obs=fn(state.obs)), ObservationState(obs=state.obs))
 
 
 def _observed_reset(reset_fn, fn, model, key) -> State:
@@ -69,70 +83,79 @@ def _observed_reset(reset_fn, fn, model, key) -> State:
 
 
 def _observed_step(step_fn, fn, model, state, action, key) -> State:
-    inner = state.replace(obs=state.info["observation"])
-    return _observed(step_fn(model, inner, action, key), fn)
+    own, inner = peel(state, ObservationState)
+    return _observed(step_fn(model, inner.replace(obs=own.obs), action, key), fn)
 
 
 # --- time limit ---------------------------------------------------------------------
 
 
+class TimeLimitState(NamedTuple):
+    """`with_time_limit`'s record: ``steps``, int32 [], the steps taken in this episode."""
+
+    steps: Array
+    inner: Any = ()
+
+
 def with_time_limit(task: Task, max_steps: int) -> Task:
     """Truncates episodes after `max_steps` steps of `task`; never terminates them.
 
-    Keeps ``info["time_limit"]``: int32 steps taken in this episode. An episode that
-    terminates on its last step is reported terminated, not truncated.
+    Keeps a `TimeLimitState`: the steps taken in this episode. An episode that
+    terminates on its last step is reported terminated, not truncated. Nested time
+    limits each count their own steps: an inner one still truncates at its own limit.
     """
     max_steps = checks.integer("with_time_limit", "max_steps", max_steps)
-    return task.replace(
-        time_limit=jnp.int32(max_steps) if task.time_limit is None else jnp.minimum(task.time_limit, max_steps),
+    return layered(
+        task,
+        TimeLimitState,
         start=bind(_time_limit_reset, task.start),
         step=bind(_time_limit_step, task.step),
         terminate=bind(_time_limit_terminate, task.terminate, jnp.int32(max_steps)),
-    )
+    ).replace(time_limit=jnp.int32(max_steps) if task.time_limit is None else jnp.minimum(task.time_limit, max_steps))
 
 
 def _time_limit_reset(reset_fn, model: mjx.Model, key: Array) -> State:
-    state = reset_fn(model, key)
-    return state.replace(info={**state.info, "time_limit": jnp.zeros((), jnp.int32)})
+    return wrap(reset_fn(model, key), TimeLimitState(steps=jnp.zeros((), jnp.int32)))
 
 
 def _time_limit_step(step_fn, model: mjx.Model, state: State, action: Array, key: Array) -> State:
-    next_state = step_fn(model, state, action, key)
-    return next_state.replace(info={**next_state.info, "time_limit": state.info["time_limit"] + 1})
+    own, inner = peel(state, TimeLimitState)
+    return wrap(step_fn(model, inner, action, key), TimeLimitState(steps=own.steps + 1))
 
 
 def _time_limit_terminate(terminate_fn, max_steps: Array, model: mjx.Model, state: State):
-    terminated, truncated = terminate_fn(model, state)
-    out_of_time = state.info["time_limit"] >= max_steps
+    own, inner = peel(state, TimeLimitState)
+    terminated, truncated = terminate_fn(model, inner)
+    out_of_time = own.steps >= max_steps
     return terminated, (truncated | out_of_time) & ~terminated
 
 
-# --- transitions recorded in info["outcome"] ----------------------------------------
+# --- steps that run whole transitions: state.outcome ------------------------------------
 
 
 def record(state: State, terms: dict[str, Array], terminated: Array, truncated: Array) -> State:
-    """`state` carrying a whole transition's outcome (reward terms, terminated,
+    """`state` carrying a whole transition's `Outcome` (reward terms, terminated,
     truncated) for the reward and terminate that `runs_transitions` installs."""
-    outcome = {"reward": terms, "terminated": terminated, "truncated": truncated}
-    return state.replace(info={**state.info, OUTCOME: outcome})
+    return state.replace(outcome=Outcome(terms=terms, terminated=terminated, truncated=truncated))
 
 
 def _select(cond: Array, on_true: State, on_false: State) -> State:
-    """`on_false` (the running state) with data, obs and info taken from `on_true` where
-    `cond` holds."""
+    """`on_false` (the running state) with data, obs, info and the combinators' records
+    taken from `on_true` where `cond` holds."""
     return on_false.replace(
         data=worlds.where(cond, on_true.data, on_false.data),
         obs=tree.where(cond, on_true.obs, on_false.obs),
         info=tree.where(cond, on_true.info, on_false.info),
+        layers=tree.where(cond, on_true.layers, on_false.layers),
     )
 
 
 def _recorded_reward(model, state, action, next_state) -> dict[str, Array]:
-    return dict(next_state.info[OUTCOME]["reward"])
+    return dict(next_state.outcome.terms)
 
 
 def _recorded_terminate(model, state) -> tuple[Array, Array]:
-    return state.info[OUTCOME]["terminated"], state.info[OUTCOME]["truncated"]
+    return state.outcome.terminated, state.outcome.truncated
 
 
 def runs_transitions(task: Task, step_fn: Callable, *params) -> Task:
@@ -151,14 +174,22 @@ def runs_transitions(task: Task, step_fn: Callable, *params) -> Task:
 # --- auto-reset ---------------------------------------------------------------------
 
 
+class AutoResetState(NamedTuple):
+    """`with_auto_reset`'s record: ``final_obs``, the observation the last transition
+    actually ended in (the finished episode's last, where it ended; zeros at reset)."""
+
+    final_obs: PyTree
+    inner: Any = ()
+
+
 def with_auto_reset(task: Task) -> Task:
     """Starts a new episode inside `step` whenever the inner transition ends one.
 
     The returned state carries the finished transition's reward, terminated, truncated
     and metrics, with the new episode's data and observation (the observation the next
-    action is chosen from). Keeps ``info["auto_reset"]["final_obs"]``: the observation
+    action is chosen from). Keeps an `AutoResetState`: ``final_obs``, the observation
     the episode actually ended in (equal to `obs` when it did not end), which PPO needs
-    to bootstrap truncated episodes.
+    to bootstrap truncated episodes (``mjzoo.find(state, AutoResetState).final_obs``).
 
     A task that already resets itself (an auto-reset inside, as under a curriculum) is
     returned unchanged: a second reset would restart the combinators between the two
@@ -169,7 +200,7 @@ def with_auto_reset(task: Task) -> Task:
     """
     if resets_itself(task):
         return task
-    return runs_transitions(task, _auto_reset_step)
+    return runs_transitions(task, _auto_reset_step).replace(start=bind(_auto_reset_start, task.start))
 
 
 def resets_itself(task: Task) -> bool:
@@ -185,17 +216,24 @@ def resets_itself(task: Task) -> bool:
     return found(task.replace(model=None))
 
 
+def _auto_reset_start(start_fn, model, key: Array) -> State:
+    state = start_fn(model, key)
+    zeros = jax.tree.map(lambda x: jnp.zeros(jnp.shape(x), jnp.result_type(x)), state.obs)  # strongly typed
+    return wrap(state, AutoResetState(final_obs=zeros))
+
+
 def _auto_reset_step(inner: Task, model, state: State, action: Array, key: Array) -> State:
     inner = inner.replace(model=model)
+    _, state = peel(state, AutoResetState)
     ended, terms = transition_with_terms(inner, state, action, key)
     chosen = _restarted(inner, ended.terminated | ended.truncated, key, ended)
-    chosen = chosen.replace(info={**chosen.info, "auto_reset": {"final_obs": ended.obs}})
+    chosen = wrap(chosen, AutoResetState(final_obs=ended.obs))
     return record(chosen, terms, ended.terminated, ended.truncated)
 
 
 def _restarted_select(inner: Task, done: Array, key: Array, ended: State) -> State:
-    """`ended` with a new episode's data, obs and info where `done` (its info holding
-    `ended`'s entries it lacks, as zeros)."""
+    """`ended` with a new episode's data, obs, info and records where `done` (its info
+    holding `ended`'s entries it lacks, as zeros)."""
     fresh = reset(inner, jax.random.fold_in(key, RESET_STREAM))
     return _select(done, fresh.replace(info=tree.fill_missing(fresh.info, ended.info)), ended)
 
@@ -250,8 +288,7 @@ def with_action_repeat(task: Task, repeats: int) -> Task:
     """Applies each action for `repeats` (static) steps of `task`, summing the rewards.
 
     Terminated / truncated if any inner step was; after an inner episode end the
-    remaining repeats leave the state unchanged and add no reward. Keeps nothing in
-    `info`. A time limit of L inner steps becomes ceil(L / repeats) steps.
+    remaining repeats leave the state unchanged and add no reward. Keeps no record. A time limit of L inner steps becomes ceil(L / repeats) steps.
     """
     repeats = checks.integer("with_action_repeat", "repeats", repeats)
     limit = None if task.time_limit is None else (task.time_limit + repeats - 1) // repeats
@@ -295,7 +332,7 @@ def with_reward(task: Task, name: str, fn: Callable, weight: float = 1.0) -> Tas
     `fn` returns a scalar; it may be a `jax.tree_util.Partial` carrying its own numeric
     parameters (leaves), or a plain module-level function. A lambda or nested function
     is a new object each time the task is built, so jit would retrace every rebuilt
-    task: it gets a `checks.RetraceHazardWarning`. Keeps nothing in `info`.
+    task: it gets a `checks.RetraceHazardWarning`. Keeps no record.
     """
     return with_rewards(task, {name: (fn, weight)})
 
@@ -337,7 +374,7 @@ def with_reward_clip(task: Task, low: float, high: float) -> Task:
     not clip their sum, so this adds the term ``"clip" = clip(sum, low, high) - sum``
     (0 when the sum is within bounds). The reward is the clipped sum, and the metrics
     keep every unclipped term under ``"reward/<name>"`` next to ``"reward/clip"``. Add
-    other terms inside it. Keeps nothing in `info`.
+    other terms inside it. Keeps no record.
     """
     if not (low <= high):  # also rejects NaN
         raise ValueError(f"with_reward_clip: the range low={low!r}, high={high!r} must have low <= high")
@@ -378,10 +415,9 @@ def with_divergence_guard(task: Task, max_qvel: float = 1e3) -> Task:
     A transition diverges when qpos, qvel, the observation or a reward term is not
     finite, or when any |qvel| exceeds `max_qvel`. Then the state returned has
     terminated=True, every reward term zero, ``metrics["diverged"]`` = 1, the previous
-    observation and info, and the previous physics state (`INTEGRATION_STATE`: what the
+    observation, info and combinators' records, and the previous physics state (`INTEGRATION_STATE`: what the
     next step integrates from); quantities derived from it in `data` (body poses,
-    contacts, forces), which the next step recomputes, are zeroed. Keeps nothing in
-    `info`.
+    contacts, forces), which the next step recomputes, are zeroed. Keeps no record.
 
     On MuJoCo Warp it also counts what Warp would print: ``metrics["physics/capacity_overflow"]``
     (1 when the step outgrew the contact or constraint capacity and dropped some) and
@@ -415,6 +451,7 @@ def _guard_step(max_qvel, inner: Task, model, state: State, action: Array, key: 
         data=_revert_physics(ok, next_state.data, state.data),
         obs=tree.where(ok, next_state.obs, state.obs),
         info=tree.where(ok, next_state.info, state.info),
+        layers=tree.where(ok, next_state.layers, state.layers),
     )
     metrics = jax.tree.map(lambda v: jnp.where(jnp.isfinite(v), v, 0.0), next_state.metrics)
     metrics = {**metrics, "diverged": (~ok).astype(jnp.float32), **worlds.overflow_metrics(data)}

@@ -7,15 +7,22 @@ Noise scales are pytree leaves, so a sweep over them runs under one trace.
 from __future__ import annotations
 
 import dataclasses
-from typing import Callable
+from typing import Any, Callable, NamedTuple
 
 import jax
 import jax.numpy as jnp
 from mujoco import mjx
 
+from mjzoo.layers import layered, peel, wrap
 from mjzoo.types import State, Task, bind
 
-__all__ = ["with_observation_noise", "with_action_noise", "with_domain_randomization", "add_noise"]
+__all__ = [
+    "with_observation_noise",
+    "with_action_noise",
+    "with_domain_randomization",
+    "add_noise",
+    "DomainRandomizationState",
+]
 
 Array = jax.Array
 NOISE_STREAM, DRAW_STREAM = 0x0B5, 0xD4A  # fold_in tags: the inner task keeps its own key,
@@ -49,8 +56,8 @@ def add_noise(tree, scale: Array, key: Array):
 def with_observation_noise(task: Task, scale: float) -> Task:
     """Adds independent Gaussian noise N(0, scale^2) to every observation leaf.
 
-    Applied after reset and after every step; the physics never sees it. Keeps nothing
-    in `info`.
+    Applied after reset and after every step; the physics never sees it. Keeps no
+    record; applied twice, the two noises add up.
     """
     scale = _check_scale("with_observation_noise", scale)
     return task.replace(start=bind(_noisy_reset, task.start, scale), step=bind(_noisy_obs_step, task.step, scale))
@@ -72,7 +79,7 @@ def _noisy_obs_step(step_fn, scale, model, state, action, key) -> State:
 def with_action_noise(task: Task, scale: float) -> Task:
     """Adds Gaussian noise N(0, scale^2) to the action before the inner step.
 
-    The reward still sees the commanded action. Keeps nothing in `info`.
+    The reward still sees the commanded action. Keeps no record.
     """
     return task.replace(step=bind(_noisy_action_step, task.step, _check_scale("with_action_noise", scale)))
 
@@ -85,13 +92,21 @@ def _noisy_action_step(step_fn, scale, model, state, action, key) -> State:
 # --- domain randomization -----------------------------------------------------------
 
 
+class DomainRandomizationState(NamedTuple):
+    """`with_domain_randomization`'s record: ``fields``, the episode's physics, the
+    `mjx.Model` fields it replaces ``{name: value}``."""
+
+    fields: dict[str, Array]
+    inner: Any = ()
+
+
 def with_domain_randomization(task: Task, randomize: Randomizer) -> Task:
     """Draws new physics for every episode: ``randomize(model, key) -> {field: value}``.
 
     `randomize` returns replacements for top-level `mjx.Model` fields (e.g.
     ``{"geom_friction": ..., "body_mass": ...}``), each with the field's shape. It may
     be a `jax.tree_util.Partial` holding its ranges as leaves. The draw happens in
-    `reset`; the episode's physics is kept in ``info["domain_randomization"]`` (the
+    `reset`; the episode's physics is kept in a `DomainRandomizationState` (the
     returned dict) and every call of reset, step, reward and terminate sees the model
     with those fields replaced.
     """
@@ -100,7 +115,9 @@ def with_domain_randomization(task: Task, randomize: Randomizer) -> Task:
     if not isinstance(randomize, jax.tree_util.Partial):
         randomize = jax.tree_util.Partial(randomize)
     _check_fields(task.model, randomize)
-    return task.replace(
+    return layered(
+        task,
+        DomainRandomizationState,
         start=bind(_randomized_reset, task.start, randomize),
         step=bind(_randomized_step, task.step),
         reward=bind(_randomized_reward, task.reward),
@@ -124,24 +141,27 @@ def _check_fields(model: mjx.Model, randomize) -> None:
             raise ValueError(f"with_domain_randomization: field {name!r} must keep shape {expected}, got {value.shape}")
 
 
-def _randomized(model: mjx.Model, state: State) -> mjx.Model:
-    return model.replace(**state.info["domain_randomization"])
+def _randomized(model: mjx.Model, state: State) -> tuple[mjx.Model, State]:
+    """The episode's model and the state the wrapped task sees."""
+    own, inner = peel(state, DomainRandomizationState)
+    return model.replace(**own.fields), inner
 
 
 def _randomized_reset(reset_fn, randomize, model, key) -> State:
     drawn = randomize(model, jax.random.fold_in(key, DRAW_STREAM))
     fields = {k: jnp.asarray(v, getattr(model, k).dtype) for k, v in drawn.items()}
-    state = reset_fn(model.replace(**fields), key)
-    return state.replace(info={**state.info, "domain_randomization": fields})
+    return wrap(reset_fn(model.replace(**fields), key), DomainRandomizationState(fields=fields))
 
 
 def _randomized_step(step_fn, model, state, action, key) -> State:
-    return step_fn(_randomized(model, state), state, action, key)
+    randomized, inner = _randomized(model, state)
+    return wrap(step_fn(randomized, inner, action, key), peel(state, DomainRandomizationState)[0])
 
 
 def _randomized_reward(reward_fn, model, state, action, next_state):
-    return reward_fn(_randomized(model, state), state, action, next_state)
+    randomized, inner = _randomized(model, state)
+    return reward_fn(randomized, inner, action, peel(next_state, DomainRandomizationState)[1])
 
 
 def _randomized_terminate(terminate_fn, model, state):
-    return terminate_fn(_randomized(model, state), state)
+    return terminate_fn(*_randomized(model, state))

@@ -4,12 +4,23 @@ from __future__ import annotations
 
 import dataclasses
 import math
-from typing import Any
+from typing import Any, Mapping
 
 import jax
 import jax.numpy as jnp
+import numpy as np
 
-__all__ = ["Packing", "Static", "where", "all_finite", "fill_missing", "strongly_typed", "zeros_like_shape"]
+__all__ = [
+    "Packing",
+    "Static",
+    "where",
+    "all_finite",
+    "fill_missing",
+    "strongly_typed",
+    "zeros_like_shape",
+    "named",
+    "with_named",
+]
 
 PyTree = Any
 
@@ -74,6 +85,59 @@ def fill_missing(actual: dict, template: dict) -> dict:
         elif isinstance(shape, dict) and isinstance(merged[key], dict):
             merged[key] = fill_missing(merged[key], shape)
     return merged
+
+
+def named(tree: PyTree, skip: tuple[type, ...] = (), unnamed: tuple[str, ...] = ()) -> dict[str, Any]:
+    """The leaves of `tree` that have a name, ``{name: leaf}``, in flattening order; where a
+    name has several leaves, the first one's. A leaf's name is the last step of its path
+    when that is a string dict key or an attribute not in `unnamed`; nodes of a `skip`
+    type are neither searched nor named."""
+    found: dict[str, Any] = {}
+    for path, leaf in jax.tree_util.tree_flatten_with_path(tree, is_leaf=lambda n: isinstance(n, skip))[0]:
+        name = _leaf_name(path, unnamed)
+        if name is not None and not isinstance(leaf, skip):
+            found.setdefault(name, leaf)
+    return found
+
+
+def with_named(
+    tree: PyTree, values: Mapping[str, Any], who: str, skip: tuple[type, ...] = (), unnamed: tuple[str, ...] = ()
+) -> PyTree:
+    """`tree` with every leaf named like a key of `values` (see `named`) replaced by that
+    value, cast to the leaf's shape and dtype: the structure, and so any jit cache entry,
+    is kept. Raises KeyError for a name `tree` lacks (listing those it has) and
+    ValueError for a value of another shape, both prefixed by `who`."""
+    known = named(tree, skip, unnamed)
+    unknown = sorted(set(values) - set(known))
+    if unknown:
+        raise KeyError(
+            f"{who}: the task has no parameter named {', '.join(map(repr, unknown))}; "
+            f"its named parameters: {', '.join(known) or 'none'}"
+        )
+
+    def replace(path, leaf):
+        name = _leaf_name(path, unnamed)
+        if name not in values or isinstance(leaf, skip):
+            return leaf
+        shape, dtype = np.shape(leaf), getattr(leaf, "dtype", None) or np.asarray(leaf).dtype
+        new = np.asarray(values[name])
+        if new.shape != shape:
+            raise ValueError(
+                f"{who}: {name}={values[name]!r} has shape {new.shape}, but the task's "
+                f"{name} has shape {shape} ({jax.tree_util.keystr(path)})"
+            )
+        return jnp.asarray(new, dtype)
+
+    return jax.tree_util.tree_map_with_path(replace, tree, is_leaf=lambda n: isinstance(n, skip))
+
+
+def _leaf_name(path: tuple, unnamed: tuple[str, ...]) -> str | None:
+    last = path[-1] if path else None
+    if isinstance(last, jax.tree_util.DictKey) and isinstance(last.key, str):
+        return last.key
+    if isinstance(last, jax.tree_util.GetAttrKey) and last.name not in unnamed:
+        return last.name
+    return None
 
 
 @dataclasses.dataclass(frozen=True)

@@ -30,6 +30,8 @@ from mujoco import mjx
 
 import mjzoo
 from mjzoo import physics as physics_lib
+from mjzoo.combinators import AutoResetState, ObservationState, TimeLimitState
+from mjzoo.perturbations import DomainRandomizationState
 from mjzoo.types import State, Task, bind
 
 DT = 0.1
@@ -154,7 +156,7 @@ def test_the_tiny_task_follows_the_hand_computed_dynamics():
 
 def test_time_limit_truncates_exactly_at_max_steps():
     _, states = episode(mjzoo.with_time_limit(make_task(), 4), *[1.0] * 6)
-    np.testing.assert_array_equal(states.info["time_limit"], [1, 2, 3, 4, 5, 6])
+    np.testing.assert_array_equal(mjzoo.find(states, TimeLimitState).steps, [1, 2, 3, 4, 5, 6])
     np.testing.assert_array_equal(states.truncated, [False, False, False, True, True, True])
     assert not states.terminated.any()  # the limit never terminates
     np.testing.assert_allclose(states.reward, QPOS[:6], rtol=1e-5)  # rewards untouched
@@ -162,7 +164,50 @@ def test_time_limit_truncates_exactly_at_max_steps():
 
 def test_time_limit_counter_starts_at_zero_and_is_int32():
     state = reset(mjzoo.with_time_limit(make_task(), 4), KEY)
-    assert state.info["time_limit"].dtype == jnp.int32 and int(state.info["time_limit"]) == 0
+    assert (
+        mjzoo.find(state, TimeLimitState).steps.dtype == jnp.int32 and int(mjzoo.find(state, TimeLimitState).steps) == 0
+    )
+
+
+def test_nested_time_limits_each_count_their_own_steps():
+    # The known bug of one shared counter: an inner limit of 2 under an auto-reset under an
+    # outer limit of 5. The inner counts its own episodes (restarted every 2 steps), the
+    # outer its 6 steps; before, the outer's count overwrote the inner's, which then
+    # truncated at every step from the 2nd on.
+    task = mjzoo.with_time_limit(mjzoo.with_auto_reset(mjzoo.with_time_limit(make_task(), 2)), 5)
+    state, states = episode(task, *[1.0] * 6)
+    outer, inner = state.layers, state.layers.inner.inner
+    assert isinstance(outer, TimeLimitState) and isinstance(inner, TimeLimitState)
+    assert int(outer.steps) == 0 and int(inner.steps) == 0
+    np.testing.assert_array_equal(states.layers.steps, [1, 2, 3, 4, 5, 6])
+    np.testing.assert_array_equal(states.layers.inner.inner.steps, [1, 0, 1, 0, 1, 0])  # a new episode at 0
+    np.testing.assert_array_equal(states.truncated, [False, True, False, True, True, True])
+    np.testing.assert_allclose(states.data.qpos[:, 0], [0.01, 0, 0.01, 0, 0.01, 0], atol=1e-7)  # restarted
+    assert mjzoo.find(states, TimeLimitState) is states.layers  # the outermost: the one a reader here sees
+    assert int(task.time_limit) == 2
+
+
+def test_time_limits_around_action_repeat_each_count_their_own_steps():
+    # Inner limit 5 of the block's steps, under 2 repeats: its 5th step is in the 3rd
+    # repeated step, after which the repeat stops (the episode ended). The outer limit of
+    # 4 counts repeated steps. time_limit: min(ceil(5 / 2), 4) = 3.
+    task = mjzoo.with_time_limit(mjzoo.with_action_repeat(mjzoo.with_time_limit(make_task(), 5), 2), 4)
+    _, states = episode(task, *[1.0] * 6)
+    np.testing.assert_array_equal(states.layers.steps, [1, 2, 3, 4, 5, 6])
+    np.testing.assert_array_equal(states.layers.inner.steps, [2, 4, 5, 6, 7, 8])
+    np.testing.assert_array_equal(states.truncated, [False, False, True, True, True, True])
+    np.testing.assert_allclose(states.data.qpos[:3, 0], QPOS[[1, 3, 4]], rtol=1e-5)
+    assert int(task.time_limit) == 3
+
+
+def test_find_reads_a_record_by_type_and_names_what_is_missing():
+    state = reset(mjzoo.with_observation_noise(mjzoo.with_auto_reset(mjzoo.with_time_limit(make_task(), 3)), 0.0), KEY)
+    assert mjzoo.find(state, AutoResetState) is state.layers  # noise keeps no record
+    assert mjzoo.find(state, TimeLimitState) is state.layers.inner
+    assert state.outcome is None and reset(make_task(), KEY).layers == ()
+    with pytest.raises(LookupError, match=r"no ObservationState .*\['AutoResetState', 'TimeLimitState'\]"):
+        mjzoo.find(state, ObservationState)
+    assert mjzoo.find(state, ObservationState, None) is None
 
 
 def test_time_limit_terminated_wins_over_truncated():
@@ -210,12 +255,12 @@ def test_auto_reset_after_truncation():
     np.testing.assert_array_equal(s.data.qpos[2], [0.0])
     np.testing.assert_array_equal(s.data.qvel[2], [0.0])
     # ... the final observation of the finished one is kept ...
-    np.testing.assert_allclose(s.info["auto_reset"]["final_obs"][2], [0.06, 0.3], rtol=1e-5)
+    np.testing.assert_allclose(mjzoo.find(s, AutoResetState).final_obs[2], [0.06, 0.3], rtol=1e-5)
     # ... and the time limit restarts: 1, 2, (3 ->) 0, 1, 2.
-    np.testing.assert_array_equal(s.info["time_limit"], [1, 2, 0, 1, 2])
+    np.testing.assert_array_equal(mjzoo.find(s, TimeLimitState).steps, [1, 2, 0, 1, 2])
     # Without an episode end, final_obs is the obs itself.
     for t in (0, 1, 3, 4):
-        np.testing.assert_array_equal(s.info["auto_reset"]["final_obs"][t], s.obs[t])
+        np.testing.assert_array_equal(mjzoo.find(s, AutoResetState).final_obs[t], s.obs[t])
     np.testing.assert_allclose(s.obs[3], [0.01, 0.1], rtol=1e-5)
 
 
@@ -227,9 +272,9 @@ def test_auto_reset_after_termination():
     np.testing.assert_array_equal(s.terminated, [False, False, True, False, False])
     assert not s.truncated.any()
     np.testing.assert_array_equal(s.obs[2], [0.0, 0.0])
-    np.testing.assert_allclose(s.info["auto_reset"]["final_obs"][2], [0.06, 0.3], rtol=1e-5)
+    np.testing.assert_allclose(mjzoo.find(s, AutoResetState).final_obs[2], [0.06, 0.3], rtol=1e-5)
     np.testing.assert_allclose(s.metrics["qpos"][2], 0.06, rtol=1e-5)  # metrics: the finished transition
-    np.testing.assert_array_equal(s.info["time_limit"], [1, 2, 0, 1, 2])
+    np.testing.assert_array_equal(mjzoo.find(s, TimeLimitState).steps, [1, 2, 0, 1, 2])
 
 
 def test_auto_reset_state_is_a_fresh_reset():
@@ -243,7 +288,7 @@ def test_auto_reset_state_is_a_fresh_reset():
     assert np.all((q >= 0.0) & (q < 0.5)) and len(set(q.tolist())) == 3  # new draws every time
     np.testing.assert_allclose(s.obs[:, 0], q)
     # final_obs is one step away from the previous fresh start: q + 0.01, 0.1.
-    np.testing.assert_allclose(s.info["auto_reset"]["final_obs"][1:, 0], q[:-1] + 0.01, rtol=1e-5)
+    np.testing.assert_allclose(mjzoo.find(s, AutoResetState).final_obs[1:, 0], q[:-1] + 0.01, rtol=1e-5)
 
 
 _RESETS: list[int] = []
@@ -533,13 +578,13 @@ def random_mass(model, key):
 def test_domain_randomization_draws_and_uses_new_masses():
     task = mjzoo.with_domain_randomization(make_task(), random_mass)
     start, next_ = reset_and_step(task, KEYS)
-    masses = np.asarray(start.info["domain_randomization"]["body_mass"])
+    masses = np.asarray(mjzoo.find(start, DomainRandomizationState).fields["body_mass"])
     assert masses.shape == (N_KEYS, 2)
     np.testing.assert_array_equal(masses[:, 0], 0.0)  # the world keeps its mass
     assert np.all((masses[:, 1] >= 1.0) & (masses[:, 1] < 4.0))
     assert len(np.unique(masses[:, 1])) > 0.99 * N_KEYS  # different keys, different masses
     # The episode keeps its draw, and the step uses it: qvel = dt * F / m = 0.1 / m.
-    np.testing.assert_array_equal(next_.info["domain_randomization"]["body_mass"], masses)
+    np.testing.assert_array_equal(mjzoo.find(next_, DomainRandomizationState).fields["body_mass"], masses)
     np.testing.assert_allclose(next_.data.qvel[:, 0], 0.1 / masses[:, 1], rtol=1e-5)
     np.testing.assert_allclose(next_.data.qpos[:, 0], 0.01 / masses[:, 1], rtol=1e-5)
     # Heavier accelerates less (ties only between masses closer than float32 resolves).
@@ -551,8 +596,8 @@ def test_domain_randomization_draws_and_uses_new_masses():
 def test_domain_randomization_redraws_on_auto_reset():
     task = mjzoo.with_auto_reset(mjzoo.with_time_limit(mjzoo.with_domain_randomization(make_task(), random_mass), 2))
     start, s = episode(task, *[1.0] * 4)
-    m = np.asarray(s.info["domain_randomization"]["body_mass"][:, 1])
-    m0 = float(start.info["domain_randomization"]["body_mass"][1])
+    m = np.asarray(mjzoo.find(s, DomainRandomizationState).fields["body_mass"][:, 1])
+    m0 = float(mjzoo.find(start, DomainRandomizationState).fields["body_mass"][1])
     # Episode 1 = steps 1, 2 (mass m0); the state after step 2 already holds episode 2's draw.
     assert m[0] == m0 and m[1] != m0 and m[2] == m[1] and m[3] != m[2]
     np.testing.assert_allclose(s.data.qvel[0, 0], 0.1 / m0, rtol=1e-5)
@@ -655,9 +700,9 @@ def test_an_action_of_the_wrong_shape_is_named(action):
 def test_reset_of_a_stack_starts_at_zero():
     s = reset(stack(make_task()), KEY)
     assert float(s.reward) == 0.0 and not bool(s.terminated) and not bool(s.truncated)
-    assert int(s.info["time_limit"]) == 0
+    assert int(mjzoo.find(s, TimeLimitState).steps) == 0
     assert float(s.metrics["diverged"]) == 0.0 and float(s.metrics["reward/x"]) == 0.0
-    np.testing.assert_array_equal(s.info["auto_reset"]["final_obs"], np.zeros(2))
+    np.testing.assert_array_equal(mjzoo.find(s, AutoResetState).final_obs, np.zeros(2))
 
 
 def constant(action, obs, key):
@@ -681,10 +726,12 @@ def test_rollout_of_a_stack_under_jit():
     np.testing.assert_allclose(traj.next_state.reward, [0.04, 0.16] * 3, rtol=1e-5)
     np.testing.assert_array_equal(traj.next_state.truncated, [False, True] * 3)
     assert not traj.next_state.terminated.any()
-    np.testing.assert_array_equal(traj.next_state.info["time_limit"], [2, 0] * 3)
+    np.testing.assert_array_equal(mjzoo.find(traj.next_state, TimeLimitState).steps, [2, 0] * 3)
     # obs each action was chosen from: reset, after 2 inner steps, reset, ...
     np.testing.assert_allclose(traj.obs, [[0.0, 0.0], [0.03, 0.2]] * 3, rtol=1e-5)
-    np.testing.assert_allclose(traj.next_state.info["auto_reset"]["final_obs"][1::2], [[0.10, 0.4]] * 3, rtol=1e-5)
+    np.testing.assert_allclose(
+        mjzoo.find(traj.next_state, AutoResetState).final_obs[1::2], [[0.10, 0.4]] * 3, rtol=1e-5
+    )
     chex.assert_trees_all_equal_structs(final, reset(task, KEY))
 
 
@@ -696,8 +743,10 @@ def test_rollout_of_a_stack_with_a_time_limit_inside_a_repeat():
     np.testing.assert_allclose(traj.next_state.reward, [0.01 + 0.03, 0.06] * 3, rtol=1e-5)
     np.testing.assert_array_equal(traj.next_state.truncated, [False, True] * 3)
     assert not traj.next_state.terminated.any()
-    np.testing.assert_allclose(traj.next_state.info["auto_reset"]["final_obs"][1::2], [[0.06, 0.3]] * 3, rtol=1e-5)
-    np.testing.assert_array_equal(traj.next_state.info["time_limit"], [2, 0] * 3)
+    np.testing.assert_allclose(
+        mjzoo.find(traj.next_state, AutoResetState).final_obs[1::2], [[0.06, 0.3]] * 3, rtol=1e-5
+    )
+    np.testing.assert_array_equal(mjzoo.find(traj.next_state, TimeLimitState).steps, [2, 0] * 3)
 
 
 def test_rollout_of_a_diverging_stack_stays_finite():
@@ -740,7 +789,7 @@ def test_with_observation_transforms_what_is_seen_but_not_the_physics():
     _, a = episode(plain, 1.0, 1.0)
     _, b = episode(seen, 1.0, 1.0)
     np.testing.assert_allclose(b.obs, -a.obs[:, 1:])
-    np.testing.assert_allclose(b.info["observation"], a.obs)  # the inner task's own
+    np.testing.assert_allclose(mjzoo.find(b, ObservationState).obs, a.obs)  # the inner task's own
     chex.assert_trees_all_close(b.data.qpos, a.data.qpos)
     with pytest.raises(TypeError, match="fn must be callable"):
         mjzoo.with_observation(plain, 3)

@@ -115,3 +115,69 @@ def test_every_package_is_installed():
     listed = set(tomllib.loads((ROOT / "pyproject.toml").read_text())["tool"]["setuptools"]["packages"])
     packages = {m for m, p in modules().items() if p.name == "__init__.py"}
     assert packages <= listed, f"pyproject.toml [tool.setuptools] packages lacks {sorted(packages - listed)}"
+
+
+def import_graph() -> dict[str, set[str]]:
+    """Module -> the modules of the distribution it imports (anywhere in its source,
+    function bodies included): ``from a.b import c`` imports the module a.b.c if there is
+    one, else a.b. Packages are left out: importing a module imports its packages first,
+    which is no cycle, and a package's ``__init__`` re-exports its modules."""
+    known = modules()
+    packages = {m for m, p in known.items() if p.name == "__init__.py"}
+    graph = {}
+    for module, path in known.items():
+        if module in packages:
+            continue
+        package = module.rpartition(".")[0]
+        found = set()
+        for node in ast.walk(ast.parse(path.read_text())):
+            if isinstance(node, ast.Import):
+                found |= {a.name for a in node.names}
+            elif isinstance(node, ast.ImportFrom):
+                base = node.module or ""
+                if node.level:
+                    parts = package.split(".")[: len(package.split(".")) - node.level + 1]
+                    base = ".".join(parts + ([base] if base else []))
+                found |= {f"{base}.{a.name}" if f"{base}.{a.name}" in known else base for a in node.names}
+        graph[module] = {m for m in found if m in known and m not in packages}
+    return graph
+
+
+def cycle(graph: dict[str, set[str]]) -> list[str] | None:
+    """One import cycle of `graph` as [a, b, ..., a], or None (depth-first search)."""
+    done, path = set(), []
+
+    def visit(node: str) -> list[str] | None:
+        if node in path:
+            return path[path.index(node) :] + [node]
+        if node in done:
+            return None
+        path.append(node)
+        for other in sorted(graph.get(node, ())):
+            if found := visit(other):
+                return found
+        path.pop()
+        done.add(node)
+        return None
+
+    return next((c for node in sorted(graph) if (c := visit(node))), None)
+
+
+def test_cycle_finds_a_circle_and_only_one():
+    assert cycle({"a": {"b"}, "b": {"c"}, "c": {"a"}}) == ["a", "b", "c", "a"]
+    assert cycle({"a": {"b", "c"}, "b": {"c"}, "c": set()}) is None
+
+
+def test_the_core_imports_without_circles():
+    graph = import_graph()
+    core = {m: {i for i in imports if layer(i) == "core"} for m, imports in graph.items() if layer(m) == "core"}
+    assert cycle(core) is None, f"an import cycle among core modules: {' -> '.join(cycle(core))}"
+    assert not graph["mjzoo.types"] & {"mjzoo.running", "mjzoo.parameters"}, graph["mjzoo.types"]
+
+
+def test_the_catalog_imports_without_circles():
+    graph = import_graph()
+    catalog = {
+        m: {i for i in imports if layer(i) == "catalog"} for m, imports in graph.items() if layer(m) == "catalog"
+    }
+    assert cycle(catalog) is None, f"an import cycle in the catalog: {' -> '.join(cycle(catalog))}"

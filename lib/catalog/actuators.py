@@ -11,7 +11,8 @@ torques and gains are in joint space (N m, or N for a slide joint).
 
 The combinators (`with_action_latency`, `with_action_drop`, `with_action_filter`) change
 the action the inner task receives; its reward still receives the action the policy
-chose. Each keeps its state in ``state.info[<own key>]``, zeroed at reset, so it must
+chose. Each keeps its state in its own record in ``state.layers`` (`ActionLatencyState`,
+`ActionDropState`, `ActionFilterState`; read one with `mjzoo.find`), zeroed at reset, so it must
 sit inside `with_auto_reset` (which resets it with every new episode). Clipping the
 summed reward is `mjzoo.with_reward_clip`.
 """
@@ -19,7 +20,7 @@ summed reward is `mjzoo.with_reward_clip`.
 from __future__ import annotations
 
 import dataclasses
-from typing import Callable, Sequence
+from typing import Any, Callable, NamedTuple, Sequence
 
 import jax
 import jax.numpy as jnp
@@ -28,9 +29,13 @@ import numpy as np
 from mujoco import mjx
 
 from mjzoo import checks, names, physics, tree, worlds
+from mjzoo.layers import layered, peel, wrap
 from mjzoo.types import State, Task, bind
 
 __all__ = [
+    "ActionLatencyState",
+    "ActionDropState",
+    "ActionFilterState",
     "Actuator",
     "Motors",
     "PDParams",
@@ -291,82 +296,98 @@ def step(model: mjx.Model, data: mjx.Data, actuator: Actuator, action: Array, n_
 # --- combinators on the action ------------------------------------------------------
 
 
-def _with_info(state: State, name: str, value, **metrics: Array) -> State:
-    return state.replace(info={**state.info, name: value}, metrics={**state.metrics, **metrics})
+class ActionLatencyState(NamedTuple):
+    """`with_action_latency`'s record: ``delay``, int32 [], this episode's delay in
+    control steps; ``buffer``, [max_latency + 1, nu] the latest actions, most recent first."""
+
+    delay: Array
+    buffer: Array
+    inner: Any = ()
+
+
+class ActionDropState(NamedTuple):
+    """`with_action_drop`'s record: ``previous``, [nu] the last action passed on."""
+
+    previous: Array
+    inner: Any = ()
+
+
+class ActionFilterState(NamedTuple):
+    """`with_action_filter`'s record: ``previous``, [nu] the last filtered action."""
+
+    previous: Array
+    inner: Any = ()
+
+
+def _kept(state: State, record, **metrics: Array) -> State:
+    return wrap(state, record).replace(metrics={**state.metrics, **metrics})
 
 
 def with_action_latency(task: Task, max_latency: int) -> Task:
     """Delays every action by d control steps, d ~ U{0, ..., max_latency} drawn per episode.
 
-    Until d actions have been given, the inner task receives zeros. Keeps
-    ``info["action_latency"]``: ``delay`` (int32 []) and ``buffer`` ([max_latency + 1,
-    nu], the latest actions, most recent first); logs ``metrics["action_latency/delay"]``.
-    `max_latency` (static int >= 0) sets the buffer's shape: changing it retraces.
+    Until d actions have been given, the inner task receives zeros. Keeps an
+    `ActionLatencyState` (the delay and the latest actions); logs
+    ``metrics["action_latency/delay"]``. `max_latency` (static int >= 0) sets the
+    buffer's shape: changing it retraces.
     """
     max_latency = checks.integer("with_action_latency", "max_latency", max_latency, 0)
-    return task.replace(
-        start=bind(_latency_reset, task.start, tree.Static(max_latency)), step=bind(_latency_step, task.step)
-    )
+    start = bind(_latency_reset, task.start, tree.Static(max_latency))
+    return layered(task, ActionLatencyState, start, bind(_latency_step, task.step))
 
 
 def _latency_reset(reset_fn, max_latency: tree.Static, model, key) -> State:
     state = reset_fn(model, key)
     delay = jax.random.randint(jax.random.fold_in(key, LATENCY_STREAM), (), 0, max_latency.value + 1)
     buffer = jnp.zeros((max_latency.value + 1, model.nu), jnp.float32)
-    return _with_info(state, "action_latency", {"delay": delay.astype(jnp.int32), "buffer": buffer})
+    return _kept(state, ActionLatencyState(delay=delay.astype(jnp.int32), buffer=buffer))
 
 
 def _latency_step(step_fn, model, state, action, key) -> State:
-    latency = state.info["action_latency"]
-    buffer = jnp.concatenate([jnp.asarray(action, jnp.float32)[None], latency["buffer"][:-1]])
-    next_state = step_fn(model, state, buffer[latency["delay"]], key)
-    delay = latency["delay"].astype(jnp.float32)
-    return _with_info(next_state, "action_latency", {**latency, "buffer": buffer}, **{"action_latency/delay": delay})
+    latency, inner = peel(state, ActionLatencyState)
+    buffer = jnp.concatenate([jnp.asarray(action, jnp.float32)[None], latency.buffer[:-1]])
+    next_state = step_fn(model, inner, buffer[latency.delay], key)
+    delay = latency.delay.astype(jnp.float32)
+    return _kept(next_state, latency._replace(buffer=buffer), **{"action_latency/delay": delay})
 
 
 def with_action_drop(task: Task, probability: float) -> Task:
     """With `probability` (in [0, 1]) per step, the inner task receives the action it
     received at the previous step instead of the new one (a lost command packet).
 
-    Keeps ``info["action_drop"]["previous"]`` ([nu], the last action passed on; zeros at
+    Keeps an `ActionDropState` (``previous``: [nu], the last action passed on; zeros at
     reset); logs ``metrics["action_drop/dropped"]`` (1.0 when this step's was dropped).
     """
     probability = checks.number("with_action_drop", "probability", probability, 0.0, 1.0)
-    return task.replace(
-        start=bind(_previous_reset, task.start, tree.Static("action_drop")),
-        step=bind(_drop_step, task.step, probability),
-    )
+    start = bind(_previous_reset, task.start, tree.Static(ActionDropState))
+    return layered(task, ActionDropState, start, bind(_drop_step, task.step, probability))
 
 
-def _previous_reset(reset_fn, name: tree.Static, model, key) -> State:
+def _previous_reset(reset_fn, record: tree.Static, model, key) -> State:
     state = reset_fn(model, key)
-    return _with_info(state, name.value, {"previous": jnp.zeros((model.nu,), jnp.float32)})
+    return _kept(state, record.value(previous=jnp.zeros((model.nu,), jnp.float32)))
 
 
 def _drop_step(step_fn, probability, model, state, action, key) -> State:
-    previous = state.info["action_drop"]["previous"]
+    own, inner = peel(state, ActionDropState)
     dropped = jax.random.uniform(jax.random.fold_in(key, DROP_STREAM)) < probability
-    applied = jnp.where(dropped, previous, jnp.asarray(action, jnp.float32))
-    next_state = step_fn(model, state, applied, key)
-    return _with_info(
-        next_state, "action_drop", {"previous": applied}, **{"action_drop/dropped": dropped.astype(jnp.float32)}
-    )
+    applied = jnp.where(dropped, own.previous, jnp.asarray(action, jnp.float32))
+    next_state = step_fn(model, inner, applied, key)
+    return _kept(next_state, ActionDropState(previous=applied), **{"action_drop/dropped": dropped.astype(jnp.float32)})
 
 
 def with_action_filter(task: Task, alpha: float) -> Task:
     """First-order low-pass filter on the action: the inner task receives
     ``a_t = alpha * action_t + (1 - alpha) * a_{t-1}``, with a_{-1} = 0 (alpha in (0, 1]).
 
-    Keeps ``info["action_filter"]["previous"]`` ([nu], a_{t-1}).
+    Keeps an `ActionFilterState` (``previous``: [nu], a_{t-1}).
     """
     alpha = checks.number("with_action_filter", "alpha", alpha, 0.0, 1.0, open_low=True)  # 1: no filtering
-    return task.replace(
-        start=bind(_previous_reset, task.start, tree.Static("action_filter")),
-        step=bind(_filter_step, task.step, alpha),
-    )
+    start = bind(_previous_reset, task.start, tree.Static(ActionFilterState))
+    return layered(task, ActionFilterState, start, bind(_filter_step, task.step, alpha))
 
 
 def _filter_step(step_fn, alpha, model, state, action, key) -> State:
-    previous = state.info["action_filter"]["previous"]
-    applied = alpha * jnp.asarray(action, jnp.float32) + (1.0 - alpha) * previous
-    return _with_info(step_fn(model, state, applied, key), "action_filter", {"previous": applied})
+    own, inner = peel(state, ActionFilterState)
+    applied = alpha * jnp.asarray(action, jnp.float32) + (1.0 - alpha) * own.previous
+    return _kept(step_fn(model, inner, applied, key), ActionFilterState(previous=applied))

@@ -1,20 +1,20 @@
 """Commands, `Task -> Task`: targets the policy is asked to follow, redrawn at random times.
 
     task = commands.with_velocity_command(task, vx=(-1, 1), vy=(-0.5, 0.5), yaw_rate=(-1, 1))
-    state.info["command"]  # float32 [3]: vx, vy (m/s, base frame), yaw rate (rad/s)
+    mjzoo.find(state, commands.VelocityCommandState).command  # float32 [3]: vx, vy (m/s, base frame), yaw rate (rad/s)
 
 Each combinator draws a target at reset and again every U(resample_interval) seconds of
-physics time (a countdown, as in `events`), and publishes the command under a shared
-`info` key that rewards and observations read:
-  ``info["command"]`` [3]   `with_velocity_command`, `with_heading_command`
-  ``info["joint_command"]`` [J]   `with_joint_position_command`
-Its own state (countdown, target) lives under its own key. Metrics:
+physics time (a countdown, as in `events`), and keeps it, with the command it publishes,
+in its record, which rewards and observations find by type (`mjzoo.find`):
+  `VelocityCommandState`  ``command`` [3]   `with_velocity_command`, `with_heading_command`
+  `JointCommandState`     ``command`` [J]   `with_joint_position_command`
+Each record also holds ``countdown`` (s to the next draw) and ``target``. Metrics:
 ``<name>/resampled`` (1 at a step that drew a new target).
 
 Timing: the command is redrawn at the END of a step, after the inner step. So the
-command an action was chosen for is ``state.info[...]`` of the state it was chosen from;
-at a resampling step ``next_state.info[...]`` already holds the next command. Tracking
-rewards should read the command from `state`.
+command an action was chosen for is the one in the state it was chosen from; at a
+resampling step `next_state` already holds the next command. Tracking rewards should
+read the command from `state`.
 
 Observation: ``observe=True`` (the default) is THE way a policy sees its command: the
 combinator appends the command to the observation (a 1-D array) after every reset and
@@ -22,7 +22,7 @@ step, so the observation always carries the command the next action is for. The
 catalog has no observation item for it because the inner task observes before the
 command is redrawn (and before it exists, at reset). The inner task's step still
 receives its own observation (the command stripped off). With ``observe=False`` the
-command is only in ``info`` (for rewards, or an observation pytree the user builds
+command is only in the record (for rewards, or an observation pytree the user builds
 outside this combinator).
 
 Where they sit: inside `with_auto_reset` (a new command each episode), outside
@@ -32,7 +32,7 @@ Where they sit: inside `with_auto_reset` (a new command each episode), outside
 from __future__ import annotations
 
 import dataclasses
-from typing import Sequence
+from typing import Any, NamedTuple, Sequence
 
 import jax
 import jax.numpy as jnp
@@ -40,18 +40,46 @@ import numpy as np
 
 from mjzoo import checks, names, tree
 from mjzoo.catalog.events import countdown_interval, due, elapsed
+from mjzoo.layers import layered, peel, wrap
 from mjzoo.types import State, Task, bind
 
-__all__ = ["with_velocity_command", "with_heading_command", "with_joint_position_command"]
+__all__ = [
+    "with_velocity_command",
+    "with_heading_command",
+    "with_joint_position_command",
+    "VelocityCommandState",
+    "JointCommandState",
+]
 
 Array = jax.Array
 COMMAND_STREAM = 0xC0D  # fold_in tag: the inner task keeps its own key
 
 
+class VelocityCommandState(NamedTuple):
+    """The record of `with_velocity_command` and `with_heading_command`: ``command``
+    float32 [3] = [vx, vy, yaw rate] (m/s, m/s, rad/s, base heading frame), the
+    ``target`` [3] it is made from, ``countdown`` s to the next draw."""
+
+    countdown: Array
+    target: Array
+    command: Array
+    inner: Any = ()
+
+
+class JointCommandState(NamedTuple):
+    """`with_joint_position_command`'s record: ``command`` = ``target`` [J] joint
+    positions (rad or m), ``countdown`` s to the next draw."""
+
+    countdown: Array
+    target: Array
+    command: Array
+    inner: Any = ()
+
+
 @jax.tree_util.register_dataclass
 @dataclasses.dataclass(frozen=True)
 class _Command:
-    """What one command combinator needs: its info keys, how to draw a target and how
+    """What one command combinator needs: its record type, how to draw a target and how
     to turn the target into the published command."""
 
     interval: Array  # [2] s between redraws
@@ -61,8 +89,8 @@ class _Command:
     stand_probability: Array  # all zeroable components are 0 with this probability
     zeroable: Array  # [k] bool
     publish: jax.tree_util.Partial  # (model, data, target [k]) -> command
-    name: str = dataclasses.field(metadata=dict(static=True))  # info key of the countdown and target
-    output: str = dataclasses.field(metadata=dict(static=True))  # info key of the command
+    name: str = dataclasses.field(metadata=dict(static=True))  # the metrics' prefix
+    record: type = dataclasses.field(metadata=dict(static=True))  # VelocityCommandState or JointCommandState
     observe: bool = dataclasses.field(metadata=dict(static=True))
 
 
@@ -73,9 +101,10 @@ def _with_command(task: Task, command: _Command) -> Task:
             raise ValueError(
                 f"commands: observe=True appends the command to a 1-D array observation, but the task "
                 f"observes {jax.tree.map(lambda x: x.shape, obs)}; pass observe=False and read "
-                f"info[{command.output!r}]"
+                f"mjzoo.find(state, {command.record.__name__}).command"
             )
-    return task.replace(start=bind(_command_reset, task.start, command), step=bind(_command_step, task.step, command))
+    start = bind(_command_reset, task.start, command)
+    return layered(task, command.record, start, bind(_command_step, task.step, command))
 
 
 def _draw(c: _Command, key: Array) -> dict[str, Array]:
@@ -91,8 +120,8 @@ def _draw(c: _Command, key: Array) -> dict[str, Array]:
 def _publish(c: _Command, model, state: State, own: dict, inner_obs, metrics: dict) -> State:
     command = c.publish(model, state.data, own["target"])
     obs = jnp.concatenate([inner_obs, command.astype(inner_obs.dtype)]) if c.observe else inner_obs
-    info = {**state.info, c.name: own, c.output: command}
-    return state.replace(obs=obs, info=info, metrics={**state.metrics, **metrics})
+    record = c.record(countdown=own["countdown"], target=own["target"], command=command)
+    return wrap(state, record).replace(obs=obs, metrics={**state.metrics, **metrics})
 
 
 def _command_reset(reset_fn, c: _Command, model, key) -> State:
@@ -102,11 +131,11 @@ def _command_reset(reset_fn, c: _Command, model, key) -> State:
 
 def _command_step(step_fn, c: _Command, model, state, action, key) -> State:
     inner_obs = state.obs[: -c.low.shape[0]] if c.observe else state.obs
-    next_state = step_fn(model, state.replace(obs=inner_obs), action, key)
-    own = state.info[c.name]
-    countdown = own["countdown"] - elapsed(state, next_state)
+    record, inner = peel(state, c.record)
+    next_state = step_fn(model, inner.replace(obs=inner_obs), action, key)
+    countdown = record.countdown - elapsed(state, next_state)
     resample = due(model, countdown)
-    own = tree.where(resample, _draw(c, key), {"countdown": countdown, "target": own["target"]})
+    own = tree.where(resample, _draw(c, key), {"countdown": countdown, "target": record.target})
     return _publish(c, model, next_state, own, next_state.obs, {f"{c.name}/resampled": resample.astype(jnp.float32)})
 
 
@@ -131,12 +160,12 @@ def with_velocity_command(
     stand_probability: float = 0.0,
     observe: bool = True,
 ) -> Task:
-    """A velocity command ``info["command"]`` = [vx, vy, yaw rate] (m/s, m/s, rad/s;
+    """A velocity command `VelocityCommandState` ``.command`` = [vx, vy, yaw rate] (m/s, m/s, rad/s;
     forward, left, counter-clockwise, in the base's heading frame).
 
     Each component ~ U(range), then independently set to 0 with `zero_probability`;
     all three are 0 (stand still) with `stand_probability`. Redrawn every
-    U(resample_interval) s. Keeps ``info["velocity_command"] = {"countdown", "target"}``.
+    U(resample_interval) s.
     """
     who = "commands.with_velocity_command"
     ranges = [checks.interval(who, n, r) for n, r in (("vx", vx), ("vy", vy), ("yaw_rate", yaw_rate))]
@@ -148,7 +177,7 @@ def with_velocity_command(
         zeroable=jnp.ones(3, bool),
         publish=bind(_identity),
         name="velocity_command",
-        output="command",
+        record=VelocityCommandState,
         observe=bool(observe),
     )
     return _with_command(task, command)
@@ -171,13 +200,13 @@ def with_heading_command(
     observe: bool = True,
 ) -> Task:
     """A velocity command whose yaw rate steers the base to a target heading:
-    ``info["command"]`` = [vx, vy, clip(gain * wrap(target - yaw), +-max_yaw_rate)],
+    `VelocityCommandState` ``.command`` = [vx, vy, clip(gain * wrap(target - yaw), +-max_yaw_rate)],
     yaw = the heading of the base `body`'s x axis (rad, from its free joint; None: the
     model's first free joint), recomputed after every step; gain in 1/s.
 
     vx, vy and the target heading (rad, world frame) are redrawn every
     U(resample_interval) s; `zero_probability` and `stand_probability` apply to vx, vy
-    only. Keeps ``info["heading_command"] = {"countdown", "target": [vx, vy, heading]}``.
+    only. Its record's ``target`` is [vx, vy, heading].
     """
     who = "commands.with_heading_command"
     ranges = [checks.interval(who, n, r) for n, r in (("vx", vx), ("vy", vy), ("heading", heading))]
@@ -191,7 +220,7 @@ def with_heading_command(
         zeroable=jnp.array([True, True, False]),
         publish=bind(_steer, jnp.asarray(qpos_idx[3:]), gain, max_yaw_rate),
         name="heading_command",
-        output="command",
+        record=VelocityCommandState,
         observe=bool(observe),
     )
     return _with_command(task, command)
@@ -215,11 +244,11 @@ def with_joint_position_command(
     resample_interval: Sequence[float] = (5.0, 10.0),
     observe: bool = True,
 ) -> Task:
-    """Target positions ``info["joint_command"]`` [J] (rad or m) for hinge / slide
+    """Target positions `JointCommandState` ``.command`` [J] (rad or m) for hinge / slide
     `joints`, each ~ U(range), redrawn every U(resample_interval) s.
 
     `ranges`: one (low, high) per joint; None: each joint's own range (the joints must
-    have one). Keeps ``info["joint_position_command"] = {"countdown", "target"}``.
+    have one).
     """
     who = "commands.with_joint_position_command"
     ids = names.joints(task.mj_model, joints, who, limited=ranges is None)
@@ -238,7 +267,7 @@ def with_joint_position_command(
         zeroable=jnp.zeros(len(ids), bool),
         publish=bind(_identity),
         name="joint_position_command",
-        output="joint_command",
+        record=JointCommandState,
         observe=bool(observe),
     )
     return _with_command(task, command)

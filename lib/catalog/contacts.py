@@ -25,7 +25,7 @@ from mujoco import mjx
 
 from mjzoo import names, worlds
 
-__all__ = ["can_touch", "geom_sets", "pairs", "touching", "normal_forces", "forces"]
+__all__ = ["can_touch", "geom_sets", "pairs", "touching", "normal_forces", "forces", "point_velocity"]
 
 Array = jax.Array
 
@@ -85,3 +85,13 @@ def forces(model: mjx.Model, data: mjx.Data, geoms: Array, others: Array) -> Arr
     """[G] float32 total normal force on geom ``geoms[g]`` from `others`, N (0 apart)."""
     contact = worlds.contacts(data, model)
     return jnp.sum(_pairs(contact, geoms, others) * contact.normal_force[None, :], axis=1)
+
+
+def point_velocity(model: mjx.Model, data: mjx.Data, bodies: Array, points: Array) -> tuple[Array, Array]:
+    """A helper, not an item: the world-frame linear velocity [n, 3] (m/s) of world
+    points `points` [n, 3] fixed to `bodies` [n] (int32), and the bodies' world-frame
+    angular velocity [n, 3] (rad/s). `cvel` is (angular, linear) about the subtree
+    centre of mass of each body's root: v(p) = v(com) + w x (p - com)."""
+    angular, linear = data.cvel[bodies, :3], data.cvel[bodies, 3:]
+    com = data.subtree_com[jnp.asarray(model.body_rootid)[bodies]]
+    return linear + jnp.cross(angular, points - com), angular

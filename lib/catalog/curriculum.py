@@ -17,7 +17,7 @@ Only the leaves that move are batched per environment under `jax.vmap`; physics 
 fields may move too.
 
 Where it sits: OUTSIDE `with_auto_reset` (inside `make`), so the level survives episode
-ends. Keeps ``info["curriculum"] = {"level": float32 [], "memory": the rule's state}``;
+ends. Keeps a `CurriculumState` (``level``: float32 [], ``memory``: the rule's state);
 the level of a new environment (`reset`) is the rule's `initial`. Metric:
 ``curriculum/level``, the level the transition ran at.
 
@@ -28,7 +28,7 @@ Rules say how the level moves after each transition (`by_steps`, `by_episode_len
 from __future__ import annotations
 
 import dataclasses
-from typing import Any, Callable
+from typing import Any, Callable, NamedTuple
 
 import jax
 import jax.numpy as jnp
@@ -38,10 +38,11 @@ from mujoco import mjx
 
 from mjzoo import checks, names
 from mjzoo.combinators import record, runs_transitions
+from mjzoo.layers import peel, wrap
 from mjzoo.running import transition_with_terms
 from mjzoo.types import State, Task, bind
 
-__all__ = ["with_curriculum", "Rule", "by_steps", "by_episode_length", "by_distance"]
+__all__ = ["with_curriculum", "CurriculumState", "Rule", "by_steps", "by_episode_length", "by_distance"]
 
 Array = jax.Array
 PyTree = Any
@@ -151,22 +152,30 @@ def _at(inner: Task, functions: _Ramp, model_ramp: _Ramp, model: mjx.Model, leve
     return functions.at(inner, level).replace(model=model_ramp.at(model, level))
 
 
+class CurriculumState(NamedTuple):
+    """`with_curriculum`'s record: ``level``, float32 [] in [0, 1], and ``memory``, the
+    rule's state."""
+
+    level: Array
+    memory: PyTree
+    inner: Any = ()
+
+
 def _curriculum_reset(inner, functions, model_ramp, rule, model, key) -> State:
     level = rule.initial
     task = _at(inner, functions, model_ramp, model, level)
     state = task.start(task.model, key)
     memory = rule.start(task.model, state)
-    return state.replace(info={**state.info, "curriculum": {"level": level, "memory": memory}})
+    return wrap(state, CurriculumState(level=level, memory=memory))
 
 
 def _curriculum_step(functions, model_ramp, rule, inner, model, state, action, key) -> State:
-    own = state.info["curriculum"]
-    task = _at(inner, functions, model_ramp, model, own["level"])
+    own, state = peel(state, CurriculumState)
+    task = _at(inner, functions, model_ramp, model, own.level)
     next_state, terms = transition_with_terms(task, state, action, key)
-    level, memory = rule.update(own["memory"], own["level"], task.model, state, next_state)
-    next_state = next_state.replace(
-        info={**next_state.info, "curriculum": {"level": jnp.clip(level, 0.0, 1.0), "memory": memory}},
-        metrics={**next_state.metrics, "curriculum/level": own["level"]},
+    level, memory = rule.update(own.memory, own.level, task.model, state, next_state)
+    next_state = wrap(next_state, CurriculumState(level=jnp.clip(level, 0.0, 1.0), memory=memory)).replace(
+        metrics={**next_state.metrics, "curriculum/level": own.level}
     )
     return record(next_state, terms, next_state.terminated, next_state.truncated)
 

@@ -3,7 +3,7 @@
     task = events.with_velocity_pushes(task, interval=(5.0, 10.0), linear=(0.5, 0.5, 0.0))
     task = events.with_force_pushes(task, "torso", interval=(3.0, 6.0), force=(80, 80, 0), duration=0.2)
 
-Timing: each combinator keeps a countdown in seconds of physics time in its `info` entry,
+Timing: each combinator keeps a countdown in seconds of physics time in its record,
 drawn U(interval) at reset and after every push, and decreased by the physics time each
 step advances (`data.time`), so it needs no control period and stays right under action
 repeat. A push is due at the first step that starts within half a physics step of the
@@ -17,19 +17,45 @@ step sees their effect.
 
 from __future__ import annotations
 
-from typing import Sequence
+from typing import Any, NamedTuple, Sequence
 
 import jax
 import jax.numpy as jnp
 from mujoco import mjx
 
 from mjzoo import checks, names
+from mjzoo.layers import layered, peel, wrap
 from mjzoo.types import State, Task, bind
 
-__all__ = ["with_velocity_pushes", "with_force_pushes", "elapsed", "due", "countdown_interval"]
+__all__ = [
+    "with_velocity_pushes",
+    "with_force_pushes",
+    "elapsed",
+    "due",
+    "countdown_interval",
+    "VelocityPushState",
+    "ForcePushState",
+]
 
 Array = jax.Array
 PUSH_STREAM = 0x9B5  # fold_in tag: the inner task keeps its own key
+
+
+class VelocityPushState(NamedTuple):
+    """`with_velocity_pushes`' record: ``countdown``, s to the next push."""
+
+    countdown: Array
+    inner: Any = ()
+
+
+class ForcePushState(NamedTuple):
+    """`with_force_pushes`' record: ``countdown`` s to the next push, ``remaining`` s of
+    the current push left, ``force`` [3] N."""
+
+    countdown: Array
+    remaining: Array
+    force: Array
+    inner: Any = ()
 
 
 def elapsed(state: State, next_state: State) -> Array:
@@ -68,8 +94,7 @@ def with_velocity_pushes(
     angular_i) rad/s (body frame).
 
     `body`: the base, whose free joint is kicked (None: the model's first free joint).
-    `interval`: (low, high) s with 0 < low. Keeps ``info["velocity_pushes"] =
-    {"countdown": s to the next push}``. Metrics: ``velocity_push/applied`` (1 at a
+    `interval`: (low, high) s with 0 < low. Keeps a `VelocityPushState`. Metrics: ``velocity_push/applied`` (1 at a
     push), ``velocity_push/linear`` (|dv| m/s), ``velocity_push/angular`` (|dw| rad/s),
     0 between pushes.
     """
@@ -77,24 +102,23 @@ def with_velocity_pushes(
     _, qvel_idx = names.free_joint_addresses(task.mj_model, body, who)
     interval = countdown_interval(who, "interval", interval)
     limits = jnp.concatenate([checks.numbers(who, "linear", linear, 3), checks.numbers(who, "angular", angular, 3)])
-    return task.replace(
-        start=bind(_velocity_reset, task.start, interval),
-        step=bind(_velocity_step, task.step, jnp.asarray(qvel_idx), interval, limits),
-    )
+    start = bind(_velocity_reset, task.start, interval)
+    step = bind(_velocity_step, task.step, jnp.asarray(qvel_idx), interval, limits)
+    return layered(task, VelocityPushState, start, step)
 
 
 def _velocity_reset(reset_fn, interval, model, key) -> State:
     state = reset_fn(model, key)
-    countdown = _draw(jax.random.fold_in(key, PUSH_STREAM), interval)
-    return state.replace(info={**state.info, "velocity_pushes": {"countdown": countdown}})
+    return wrap(state, VelocityPushState(countdown=_draw(jax.random.fold_in(key, PUSH_STREAM), interval)))
 
 
 def _velocity_step(step_fn, qvel_idx, interval, limits, model, state, action, key) -> State:
     draw_key, kick_key = jax.random.split(jax.random.fold_in(key, PUSH_STREAM))
-    countdown = state.info["velocity_pushes"]["countdown"]
+    own, inner = peel(state, VelocityPushState)
+    countdown = own.countdown
     push = due(model, countdown)
     kick = jnp.where(push, jax.random.uniform(kick_key, (6,), minval=-limits, maxval=limits), 0.0)
-    kicked = state.replace(data=state.data.replace(qvel=state.data.qvel.at[qvel_idx].add(kick)))
+    kicked = inner.replace(data=state.data.replace(qvel=state.data.qvel.at[qvel_idx].add(kick)))
     next_state = step_fn(model, kicked, action, key)
     countdown = jnp.where(push, _draw(draw_key, interval), countdown) - elapsed(state, next_state)
     metrics = {
@@ -102,10 +126,7 @@ def _velocity_step(step_fn, qvel_idx, interval, limits, model, state, action, ke
         "velocity_push/linear": jnp.linalg.norm(kick[:3]),
         "velocity_push/angular": jnp.linalg.norm(kick[3:]),
     }
-    return next_state.replace(
-        info={**next_state.info, "velocity_pushes": {"countdown": countdown}},
-        metrics={**next_state.metrics, **metrics},
-    )
+    return wrap(next_state, VelocityPushState(countdown=countdown)).replace(metrics={**next_state.metrics, **metrics})
 
 
 # --- force pushes -------------------------------------------------------------------
@@ -125,9 +146,8 @@ def with_force_pushes(
     push lasts (so `duration` is rounded to whole control steps), and taken off again
     after the step: other uses of `xfrc_applied` are kept. A push due while another
     lasts replaces it. It must sit inside `with_auto_reset`: outside it, a step that
-    starts a new episode would have the force taken off the new episode's data. Keeps
-    ``info["force_pushes"] = {"countdown": s to the next push, "remaining": s of the
-    current push left, "force": [3] N}``. Metrics:
+    starts a new episode would have the force taken off the new episode's data. Keeps a
+    `ForcePushState`. Metrics:
     ``force_push/started`` (1 at a push's first step), ``force_push/force`` (|F| N applied
     during the step, else 0).
     """
@@ -136,36 +156,35 @@ def with_force_pushes(
     interval = countdown_interval(who, "interval", interval)
     duration = checks.number(who, "duration", duration, 0.0, open_low=True)
     params = (body_id, interval, checks.numbers(who, "force", force, 3), duration)
-    return task.replace(start=bind(_force_reset, task.start, interval), step=bind(_force_step, task.step, *params))
+    start = bind(_force_reset, task.start, interval)
+    return layered(task, ForcePushState, start, bind(_force_step, task.step, *params))
 
 
 def _force_reset(reset_fn, interval, model, key) -> State:
     state = reset_fn(model, key)
-    pushes = {
-        "countdown": _draw(jax.random.fold_in(key, PUSH_STREAM), interval),
-        "remaining": jnp.zeros((), jnp.float32),
-        "force": jnp.zeros((3,), jnp.float32),
-    }
-    return state.replace(info={**state.info, "force_pushes": pushes})
+    pushes = ForcePushState(
+        countdown=_draw(jax.random.fold_in(key, PUSH_STREAM), interval),
+        remaining=jnp.zeros((), jnp.float32),
+        force=jnp.zeros((3,), jnp.float32),
+    )
+    return wrap(state, pushes)
 
 
 def _force_step(step_fn, body, interval, limits, duration, model, state, action, key) -> State:
     draw_key, force_key = jax.random.split(jax.random.fold_in(key, PUSH_STREAM))
-    pushes = state.info["force_pushes"]
-    start = due(model, pushes["countdown"])
-    force = jnp.where(start, jax.random.uniform(force_key, (3,), minval=-limits, maxval=limits), pushes["force"])
-    remaining = jnp.where(start, duration, pushes["remaining"])
+    pushes, inner = peel(state, ForcePushState)
+    start = due(model, pushes.countdown)
+    force = jnp.where(start, jax.random.uniform(force_key, (3,), minval=-limits, maxval=limits), pushes.force)
+    remaining = jnp.where(start, duration, pushes.remaining)
     applied = jnp.where(remaining > 0.5 * model.opt.timestep, force, 0.0)
     pushed = state.data.replace(xfrc_applied=state.data.xfrc_applied.at[body, :3].add(applied))
-    next_state = step_fn(model, state.replace(data=pushed), action, key)
+    next_state = step_fn(model, inner.replace(data=pushed), action, key)
     data = next_state.data.replace(xfrc_applied=next_state.data.xfrc_applied.at[body, :3].add(-applied))
     dt = elapsed(state, next_state)
-    pushes = {
-        "countdown": jnp.where(start, _draw(draw_key, interval), pushes["countdown"]) - dt,
-        "remaining": jnp.maximum(remaining - dt, 0.0),
-        "force": force,
-    }
-    metrics = {"force_push/started": start.astype(jnp.float32), "force_push/force": jnp.linalg.norm(applied)}
-    return next_state.replace(
-        data=data, info={**next_state.info, "force_pushes": pushes}, metrics={**next_state.metrics, **metrics}
+    pushes = ForcePushState(
+        countdown=jnp.where(start, _draw(draw_key, interval), pushes.countdown) - dt,
+        remaining=jnp.maximum(remaining - dt, 0.0),
+        force=force,
     )
+    metrics = {"force_push/started": start.astype(jnp.float32), "force_push/force": jnp.linalg.norm(applied)}
+    return wrap(next_state, pushes).replace(data=data, metrics={**next_state.metrics, **metrics})

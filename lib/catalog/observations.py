@@ -27,7 +27,7 @@ Combinators: history, per-episode bias, multiplicative noise (additive noise is
 
 from __future__ import annotations
 
-from typing import Callable
+from typing import Any, Callable, NamedTuple
 
 import jax
 import jax.numpy as jnp
@@ -37,6 +37,9 @@ from mujoco import mjx
 
 from mjzoo import checks, names, tree
 from mjzoo.catalog import contacts
+from mjzoo.catalog.contacts import point_velocity
+from mjzoo.catalog.trackers import ActionHistoryState, FeetState
+from mjzoo.layers import find, layered, peel, wrap
 from mjzoo.perturbations import add_noise
 from mjzoo.types import State, Task, bind
 
@@ -65,6 +68,8 @@ __all__ = [
     "concat",
     "with_observation_history",
     "with_observation_bias",
+    "ObservationHistoryState",
+    "ObservationBiasState",
     "with_multiplicative_observation_noise",
 ]
 
@@ -125,16 +130,6 @@ def _entries(mj_model: mujoco.MjModel, joints: Names, velocity: bool, who: str) 
 
 
 # --- the base body (default: the first body with a free joint) ------------------------
-
-
-def point_velocity(model: mjx.Model, data: mjx.Data, bodies: Array, points: Array) -> tuple[Array, Array]:
-    """A helper, not an item: the world-frame linear velocity [n, 3] (m/s) of world
-    points `points` [n, 3] fixed to `bodies` [n] (int32), and the bodies' world-frame
-    angular velocity [n, 3] (rad/s). `cvel` is (angular, linear) about the subtree
-    centre of mass of each body's root: v(p) = v(com) + w x (p - com)."""
-    angular, linear = data.cvel[bodies, :3], data.cvel[bodies, 3:]
-    com = data.subtree_com[jnp.asarray(model.body_rootid)[bodies]]
-    return linear + jnp.cross(angular, points - com), angular
 
 
 def base_position(mj_model: mujoco.MjModel, body: str | None = None) -> Partial:
@@ -254,8 +249,9 @@ def foot_forces(mj_model: mujoco.MjModel, feet: Names, floor: Names | None = Non
 
 
 def foot_contacts(model: mjx.Model, state: State) -> Array:
-    """``info["feet"]["contact"]`` as 1.0 / 0.0: [F] float32 (kept by `trackers.with_feet`)."""
-    return state.info["feet"]["contact"].astype(jnp.float32)
+    """The feet's contacts (`trackers.FeetState`, kept by `trackers.with_feet`) as
+    1.0 / 0.0: [F] float32."""
+    return find(state, FeetState).contact.astype(jnp.float32)
 
 
 def _geom_contacts(geoms, others, model, state) -> Array:
@@ -266,13 +262,13 @@ def _foot_forces(feet, others, model, state) -> Array:
     return contacts.forces(model, state.data, feet, others)
 
 
-# --- what the task keeps in info, and joining items ------------------------------------
+# --- what the trackers keep, and joining items -----------------------------------------
 
 
 def last_action(model: mjx.Model, state: State) -> Array:
-    """The previous action, ``info["action_history"][0]``: [nu] float32 (kept by
-    `trackers.with_action_history`)."""
-    return state.info["action_history"][0].astype(jnp.float32)
+    """The previous action, row 0 of `trackers.ActionHistoryState` (kept by
+    `trackers.with_action_history`): [nu] float32."""
+    return find(state, ActionHistoryState).actions[0].astype(jnp.float32)
 
 
 def concat(*fns: Observation) -> Partial:
@@ -297,20 +293,34 @@ def with_observation_history(task: Task, length: int) -> Task:
     axis: a leaf of shape [k] becomes [length * k], obs[:k] the newest (a scalar leaf
     becomes [length]). At reset the history is filled with the first observation.
 
-    Keeps ``info["observation_history"]``, each leaf stacked to [length, ...]; the inner
+    Keeps an `ObservationHistoryState`, each leaf stacked to [length, ...]; the inner
     step still receives its own newest observation. Sits inside `with_auto_reset` (each
     episode starts a new history); noise combinators inside it perturb each frame once.
+    Applied twice, the outer one keeps a history of the inner one's stacked observations.
     """
     length = checks.integer("with_observation_history", "length", length)
-    if "observation_history" in jax.eval_shape(task.start, task.model, jax.random.key(0)).info:
-        raise ValueError("with_observation_history: the task already keeps an observation history; raise its length")
     start = bind(_history_reset, task.start, tree.Static(length))
-    return task.replace(start=start, step=bind(_history_step, task.step))
+    return layered(task, ObservationHistoryState, start, bind(_history_step, task.step))
+
+
+class ObservationHistoryState(NamedTuple):
+    """`with_observation_history`'s record: ``frames``, the observation pytree with
+    each leaf stacked to [length, ...], newest first."""
+
+    frames: Any
+    inner: Any = ()
+
+
+class ObservationBiasState(NamedTuple):
+    """`with_observation_bias`'s record: ``bias``, shaped like the observation."""
+
+    bias: Any
+    inner: Any = ()
 
 
 def _with_history(state: State, history) -> State:
     flat = jax.tree.map(lambda h: h.reshape((-1,) + h.shape[2:]), history)
-    return state.replace(obs=flat, info={**state.info, "observation_history": history})
+    return wrap(state.replace(obs=flat), ObservationHistoryState(frames=history))
 
 
 def _history_reset(reset_fn, length: tree.Static, model, key) -> State:
@@ -319,8 +329,9 @@ def _history_reset(reset_fn, length: tree.Static, model, key) -> State:
 
 
 def _history_step(step_fn, model, state, action, key) -> State:
-    history = state.info["observation_history"]
-    next_state = step_fn(model, state.replace(obs=jax.tree.map(lambda h: h[0], history)), action, key)
+    own, inner = peel(state, ObservationHistoryState)
+    history = own.frames
+    next_state = step_fn(model, inner.replace(obs=jax.tree.map(lambda h: h[0], history)), action, key)
     shifted = jax.tree.map(lambda h, o: jnp.concatenate([o[None], h[:-1]]), history, next_state.obs)
     return _with_history(next_state, shifted)
 
@@ -334,15 +345,15 @@ def with_observation_bias(task: Task, scale: float) -> Task:
     """Adds a bias that is constant over an episode, drawn at reset from N(0, scale^2)
     for every entry of every floating observation leaf (a miscalibrated sensor).
 
-    Keeps ``info["observation_bias"]``, shaped like the observation. Inside
+    Keeps an `ObservationBiasState`, shaped like the observation. Inside
     `with_auto_reset`, every episode draws a new bias.
     """
     scale = checks.number("with_observation_bias", "scale", scale, 0.0)
-    return task.replace(start=bind(_bias_reset, task.start, scale), step=bind(_bias_step, task.step))
+    return layered(task, ObservationBiasState, bind(_bias_reset, task.start, scale), bind(_bias_step, task.step))
 
 
 def _biased(state: State, bias) -> State:
-    return state.replace(obs=jax.tree.map(jnp.add, state.obs, bias), info={**state.info, "observation_bias": bias})
+    return wrap(state.replace(obs=jax.tree.map(jnp.add, state.obs, bias)), ObservationBiasState(bias=bias))
 
 
 def _bias_reset(reset_fn, scale, model, key) -> State:
@@ -351,13 +362,14 @@ def _bias_reset(reset_fn, scale, model, key) -> State:
 
 
 def _bias_step(step_fn, model, state, action, key) -> State:
-    return _biased(step_fn(model, state, action, key), state.info["observation_bias"])
+    own, inner = peel(state, ObservationBiasState)
+    return _biased(step_fn(model, inner, action, key), own.bias)
 
 
 def with_multiplicative_observation_noise(task: Task, scale: float) -> Task:
     """Observes ``obs * (1 + e)``, e ~ N(0, scale^2) drawn for every entry of every
     floating leaf after reset and after every step: noise proportional to the signal.
-    Keeps nothing in `info`."""
+    Keeps no record."""
     scale = checks.number("with_multiplicative_observation_noise", "scale", scale, 0.0)
     return task.replace(start=bind(_scaled_reset, task.start, scale), step=bind(_scaled_step, task.step, scale))
 

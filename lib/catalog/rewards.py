@@ -5,9 +5,9 @@ next_state) -> float32 scalar``, UNWEIGHTED: the weight comes from
 ``mjzoo.with_reward(task, name, fn, weight)`` or `terms`. A term documented as a "Reward" grows with good behaviour (give it a
 positive weight); a "Cost" is >= 0 and grows with bad behaviour (give it a negative
 weight). Unless said otherwise a term reads the physics of `next_state` (after the
-action), so add terms inside `with_auto_reset`; the command is ``state.info["command"]``
-([3]: forward m/s, lateral m/s, yaw rad/s, in the base frame), the one in force when the
-action was chosen.
+action), so add terms inside `with_auto_reset`; the command is
+``mjzoo.find(state, commands.VelocityCommandState).command`` ([3]: forward m/s, lateral
+m/s, yaw rad/s, in the base frame), the one in force when the action was chosen.
 
 Constructors resolve names once, from the host `mujoco.MjModel` (``task.mj_model``), and
 return ``mjzoo.bind(fn, ...)``: indices and numbers are pytree leaves. Base terms read
@@ -26,8 +26,11 @@ import mujoco
 import numpy as np
 
 from mjzoo import checks, names
+from mjzoo.catalog.commands import VelocityCommandState
 from mjzoo.catalog.shapes import SIGMOIDS, tolerance
+from mjzoo.catalog.trackers import ActionHistoryState, FeetState
 from mjzoo.combinators import with_rewards
+from mjzoo.layers import find
 from mjzoo.types import State, Task, bind
 
 __all__ = [
@@ -119,7 +122,7 @@ def _base_state(next_state: State, base: Array) -> tuple[Array, Array, Array, Ar
 
 def linear_velocity_tracking(mj_model: mujoco.MjModel, sigma: float = 0.25, body: str | None = None) -> Partial:
     """Reward in (0, 1]: exp(-|v_xy - command[:2]|^2 / sigma), v the base linear
-    velocity in the base frame (m/s); sigma in (m/s)^2. Reads ``state.info["command"]``."""
+    velocity in the base frame (m/s); sigma in (m/s)^2. Reads the velocity command of `state`."""
     who = "linear_velocity_tracking"
     return bind(_linear_tracking, _base(mj_model, body, who), _sigma(who, sigma))
 
@@ -130,7 +133,7 @@ def _sigma(who: str, sigma: float) -> Array:
 
 def _linear_tracking(base, sigma, model, state, action, next_state) -> Array:
     velocity = _base_state(next_state, base)[1]
-    return jnp.exp(-jnp.sum(jnp.square(velocity[:2] - state.info["command"][:2])) / sigma)
+    return jnp.exp(-jnp.sum(jnp.square(velocity[:2] - _command(state)[:2])) / sigma)
 
 
 def command_progress(mj_model: mujoco.MjModel, body: str | None = None) -> Partial:
@@ -138,26 +141,26 @@ def command_progress(mj_model: mujoco.MjModel, body: str | None = None) -> Parti
     the commanded speed: min(v_xy . c_xy / |c_xy|, |c_xy|), base frame; 0 for a zero
     command. Unlike the exp kernel of `linear_velocity_tracking`, aimless motion earns
     nothing on average and every step toward the command pays, so policies that start
-    by standing still still find the gait. Reads ``state.info["command"]``."""
+    by standing still still find the gait. Reads the velocity command of `state`."""
     return bind(_command_progress, _base(mj_model, body, "command_progress"))
 
 
 def _command_progress(base, model, state, action, next_state) -> Array:
-    velocity, command = _base_state(next_state, base)[1][:2], state.info["command"][:2]
+    velocity, command = _base_state(next_state, base)[1][:2], _command(state)[:2]
     speed = jnp.sqrt(jnp.sum(jnp.square(command)))
     return jnp.minimum(jnp.dot(velocity, command) / jnp.maximum(speed, 1e-6), speed)
 
 
 def angular_velocity_tracking(mj_model: mujoco.MjModel, sigma: float = 0.25, body: str | None = None) -> Partial:
     """Reward in (0, 1]: exp(-(w_z - command[2])^2 / sigma), w_z the base yaw rate in the
-    base frame (rad/s); sigma in (rad/s)^2. Reads ``state.info["command"]``."""
+    base frame (rad/s); sigma in (rad/s)^2. Reads the velocity command of `state`."""
     who = "angular_velocity_tracking"
     return bind(_angular_tracking, _base(mj_model, body, who), _sigma(who, sigma))
 
 
 def _angular_tracking(base, sigma, model, state, action, next_state) -> Array:
     yaw_rate = _base_state(next_state, base)[2][2]
-    return jnp.exp(-jnp.square(yaw_rate - state.info["command"][2]) / sigma)
+    return jnp.exp(-jnp.square(yaw_rate - _command(state)[2]) / sigma)
 
 
 def vertical_velocity(mj_model: mujoco.MjModel, body: str | None = None) -> Partial:
@@ -310,12 +313,15 @@ def effort(model, state: State, action: Array, next_state: State) -> Array:
 
 
 def _difference(next_state: State, order: int, who: str) -> Array:
-    """The `order`-th backward difference of ``next_state.info["action_history"]``."""
-    history = next_state.info.get("action_history")
+    """The `order`-th backward difference of the actions `trackers.with_action_history` keeps."""
+    try:
+        history = find(next_state, ActionHistoryState).actions
+    except LookupError:
+        history = None
     if history is None or history.shape[0] < order + 1:
         have = "none" if history is None else f"length {history.shape[0]}"
         raise ValueError(
-            f"{who} needs info['action_history'] of length >= {order + 1} (has {have}): "
+            f"{who} needs an action history of length >= {order + 1} (has {have}): "
             f"wrap the task with trackers.with_action_history(task, length={order + 1})"
         )
     coefficients = [(-1) ** k * math.comb(order, k) for k in range(order + 1)]
@@ -351,20 +357,32 @@ def energy(model, state: State, action: Array, next_state: State) -> Array:
     return jnp.sum(jnp.abs(next_state.data.qfrc_actuator * next_state.data.qvel))
 
 
-# --- feet (info["feet"], kept by trackers.with_feet) --------------------------------
+# --- feet (a FeetState, kept by trackers.with_feet) ---------------------------------
 
 
-def _feet(next_state: State, who: str) -> dict[str, Array]:
-    if "feet" not in next_state.info:
-        raise ValueError(f"{who} needs info['feet']: wrap the task with trackers.with_feet(task, ...)")
-    return next_state.info["feet"]
+def _feet(next_state: State, who: str) -> FeetState:
+    try:
+        return find(next_state, FeetState)
+    except LookupError:
+        raise ValueError(f"{who} needs the feet's state: wrap the task with trackers.with_feet(task, ...)") from None
+
+
+def _command(state: State) -> Array:
+    """The velocity command [3] in force in `state`."""
+    try:
+        return find(state, VelocityCommandState).command
+    except LookupError:
+        raise ValueError(
+            "this reward term reads the velocity command: wrap the task with commands.with_velocity_command "
+            "(or with_heading_command) inside the term"
+        ) from None
 
 
 def feet_air_time(threshold: float = 0.5, min_command: float | None = None) -> Partial:
     """Reward (legged gym): sum over feet touching down in this transition of
     (last air time - threshold), s: positive for steps longer than `threshold`. With
     `min_command` (m/s) it is 0 unless |command[:2]| > min_command (from
-    ``state.info["command"]``), so standing still is not punished."""
+    the velocity command of `state`), so standing still is not punished."""
     if not math.isfinite(threshold):
         raise ValueError(f"feet_air_time: threshold={threshold!r} must be finite")
     if min_command is None:
@@ -376,18 +394,18 @@ def feet_air_time(threshold: float = 0.5, min_command: float | None = None) -> P
 
 def _feet_air_time(threshold, model, state, action, next_state) -> Array:
     feet = _feet(next_state, "feet_air_time")
-    return jnp.sum((feet["last_air_time"] - threshold) * feet["first_contact"])
+    return jnp.sum((feet.last_air_time - threshold) * feet.first_contact)
 
 
 def _gated_feet_air_time(threshold, min_command, model, state, action, next_state) -> Array:
-    moving = jnp.linalg.norm(state.info["command"][:2]) > min_command
+    moving = jnp.linalg.norm(_command(state)[:2]) > min_command
     return jnp.where(moving, _feet_air_time(threshold, model, state, action, next_state), 0.0)
 
 
 def foot_slip(model, state: State, action: Array, next_state: State) -> Array:
     """Cost: sum over feet in contact of the foot's squared horizontal speed, (m/s)^2."""
     feet = _feet(next_state, "foot_slip")
-    return jnp.sum(feet["contact"] * jnp.sum(jnp.square(feet["velocity"][:, :2]), axis=-1))
+    return jnp.sum(feet.contact * jnp.sum(jnp.square(feet.velocity[:, :2]), axis=-1))
 
 
 def foot_clearance(target: float) -> Partial:
@@ -401,5 +419,5 @@ def foot_clearance(target: float) -> Partial:
 
 def _foot_clearance(target, model, state, action, next_state) -> Array:
     feet = _feet(next_state, "foot_clearance")
-    speed = jnp.linalg.norm(feet["velocity"][:, :2], axis=-1)
-    return jnp.sum(~feet["contact"] * jnp.square(feet["position"][:, 2] - target) * speed)
+    speed = jnp.linalg.norm(feet.velocity[:, :2], axis=-1)
+    return jnp.sum(~feet.contact * jnp.square(feet.position[:, 2] - target) * speed)

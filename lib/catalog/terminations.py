@@ -28,6 +28,8 @@ from mujoco import mjx
 
 from mjzoo import checks, names, tree
 from mjzoo.catalog import contacts
+from mjzoo.combinators import TimeLimitState
+from mjzoo.layers import find
 from mjzoo.running import reset
 from mjzoo.types import State, Task, bind
 
@@ -130,9 +132,9 @@ def _far_from_origin(body, radius, model, state) -> Array:
 
 
 def episode_length(max_steps: int) -> Partial:
-    """True once the episode has taken `max_steps` steps, counted by
-    `mjzoo.with_time_limit` in ``info["time_limit"]`` (every env from `envs.base.build`
-    has one; wrap `with_terminations` outside it).
+    """True once the episode has taken `max_steps` steps, counted by the nearest
+    `mjzoo.with_time_limit` inside it (its `TimeLimitState`; every env from
+    `envs.base.build` has one; wrap `with_terminations` outside it).
 
     `with_time_limit` truncates: the episode is cut short and the value is bootstrapped,
     right when time is not part of the task (the usual case in locomotion). This item
@@ -143,7 +145,7 @@ def episode_length(max_steps: int) -> Partial:
 
 
 def _episode_length(max_steps, model, state) -> Array:
-    return state.info["time_limit"] >= max_steps
+    return find(state, TimeLimitState).steps >= max_steps
 
 
 # --- the combinator -------------------------------------------------------------------
@@ -155,11 +157,10 @@ def with_terminations(task: Task, items: Mapping[str, Termination]) -> Task:
     ``terminated = inner terminated | any(item(model, next_state))``; truncated only if
     not terminated. Each item's flag on the state a step returns is recorded in
     ``metrics["termination/<name>"]`` as float32 1.0 / 0.0 (0 at reset); averaged over a
-    batch, it is the fraction of episodes ending for that reason. Keeps nothing in
-    `info`.
+    batch, it is the fraction of episodes ending for that reason. Keeps no record.
 
     Items see the state this combinator's step returns: wrap it outside the combinators
-    whose `info` they read (`with_time_limit` for `episode_length`) and inside
+    whose records they read (`with_time_limit` for `episode_length`) and inside
     `with_auto_reset` and `with_action_repeat` (so that every inner step is checked).
     """
     if not isinstance(items, Mapping) or not items:
@@ -193,6 +194,8 @@ def _check_items(task: Task, names: tuple[str, ...], fns: tuple) -> None:
                 f"with_terminations: item {name!r} reads info[{e.args[0]!r}], which the task does not keep; "
                 f"info keys: {sorted(state.info)}"
             ) from None
+        except LookupError as e:  # a combinator's record the task does not keep, from mjzoo.find
+            raise ValueError(f"with_terminations: item {name!r}: {e}") from None
         if not hasattr(out, "shape") or out.shape != ():
             raise ValueError(f"with_terminations: item {name!r} must return a scalar, got {out}")
 

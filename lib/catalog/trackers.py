@@ -1,5 +1,5 @@
-"""Shared per-episode trackers, `Task -> Task`: state in `state.info` that several
-catalog items read (observations of the last actions or foot contacts, the action-rate
+"""Shared per-episode trackers, `Task -> Task`: records in `state.layers` that several
+catalog items read (found with `mjzoo.find`) (observations of the last actions or foot contacts, the action-rate
 and feet rewards), kept once per task instead of recomputed by each reader.
 
 Both trackers keep per-episode state, so they sit INSIDE `mjzoo.with_auto_reset` (wrap
@@ -9,6 +9,8 @@ that read them must be added at the same level of any `with_action_repeat`.
 
 from __future__ import annotations
 
+from typing import Any, NamedTuple
+
 import jax
 import jax.numpy as jnp
 import numpy as np
@@ -16,20 +18,41 @@ from mujoco import mjx
 
 from mjzoo import checks, names, tree
 from mjzoo.catalog import contacts
-from mjzoo.catalog.observations import point_velocity
+from mjzoo.catalog.contacts import point_velocity
+from mjzoo.layers import layered, peel, wrap
 from mjzoo.types import State, Task, bind
 
-__all__ = ["with_action_history", "with_feet", "ACTION_HISTORY", "FEET"]
+__all__ = ["with_action_history", "with_feet", "ActionHistoryState", "FeetState"]
 
 Array = jax.Array
-ACTION_HISTORY, FEET = "action_history", "feet"  # their keys in state.info
+
+
+class ActionHistoryState(NamedTuple):
+    """`with_action_history`'s record: ``actions``, [length, nu] float32, row 0 the
+    action of the transition that produced the state, row k the one k transitions
+    earlier; zeros at reset."""
+
+    actions: Array
+    inner: Any = ()
+
+
+class FeetState(NamedTuple):
+    """`with_feet`'s record, over the F watched foot geoms (see `with_feet`)."""
+
+    contact: Array  # [F] bool
+    position: Array  # [F, 3] m
+    velocity: Array  # [F, 3] m/s
+    air_time: Array  # [F] float32 s
+    first_contact: Array  # [F] bool
+    last_air_time: Array  # [F] float32 s
+    inner: Any = ()
 
 
 # --- action history -----------------------------------------------------------------
 
 
 def with_action_history(task: Task, length: int = 3) -> Task:
-    """Keeps the last `length` actions in ``info["action_history"]``: [length, nu]
+    """Keeps the last `length` actions in an `ActionHistoryState`: [length, nu]
     float32, row 0 the action of the transition that produced the state, row k the one
     k transitions earlier; zeros at reset.
 
@@ -37,26 +60,26 @@ def with_action_history(task: Task, length: int = 3) -> Task:
     record the policy's action, inside them to record what the actuators got.
     """
     shape = tree.Static((checks.integer("with_action_history", "length", length), task.action_size))
-    return task.replace(start=bind(_history_reset, task.start, shape), step=bind(_history_step, task.step))
+    start = bind(_history_reset, task.start, shape)
+    return layered(task, ActionHistoryState, start, bind(_history_step, task.step))
 
 
 def _history_reset(reset_fn, shape: tree.Static, model: mjx.Model, key: Array) -> State:
-    state = reset_fn(model, key)
-    return state.replace(info={**state.info, ACTION_HISTORY: jnp.zeros(shape.value, jnp.float32)})
+    return wrap(reset_fn(model, key), ActionHistoryState(actions=jnp.zeros(shape.value, jnp.float32)))
 
 
 def _history_step(step_fn, model: mjx.Model, state: State, action: Array, key: Array) -> State:
-    next_state = step_fn(model, state, action, key)
-    history = state.info[ACTION_HISTORY]
-    history = jnp.concatenate([jnp.asarray(action, jnp.float32)[None], history[:-1]])
-    return next_state.replace(info={**next_state.info, ACTION_HISTORY: history})
+    own, inner = peel(state, ActionHistoryState)
+    next_state = step_fn(model, inner, action, key)
+    history = jnp.concatenate([jnp.asarray(action, jnp.float32)[None], own.actions[:-1]])
+    return wrap(next_state, ActionHistoryState(actions=history))
 
 
 # --- feet ---------------------------------------------------------------------------
 
 
 def with_feet(task: Task, feet: names.Names, floor: names.Names) -> Task:
-    """Keeps ``info["feet"]``, a dict over the F geoms named in `feet` (in that order):
+    """Keeps a `FeetState`, over the F geoms named in `feet` (in that order):
 
       contact       [F] bool     the foot touches a `floor` geom (one name or several):
                                  an active contact (`mjzoo.catalog.contacts.touching`)
@@ -77,7 +100,7 @@ def with_feet(task: Task, feet: names.Names, floor: names.Names) -> Task:
     geoms, floor = contacts.geom_sets(task.mj_model, feet, floor, "with_feet")
     bodies = jnp.asarray(task.mj_model.geom_bodyid[np.asarray(geoms)], jnp.int32)
     indices = {"geom": geoms, "body": bodies, "floor": floor}
-    return task.replace(start=bind(_feet_reset, task.start, indices), step=bind(_feet_step, task.step, indices))
+    return layered(task, FeetState, bind(_feet_reset, task.start, indices), bind(_feet_step, task.step, indices))
 
 
 def _feet_now(indices: dict, model: mjx.Model, data: mjx.Data) -> dict[str, Array]:
@@ -92,19 +115,20 @@ def _feet_reset(reset_fn, indices: dict, model: mjx.Model, key: Array) -> State:
     state = reset_fn(model, key)
     now = _feet_now(indices, model, state.data)
     zeros = jnp.zeros(now["contact"].shape, jnp.float32)
-    feet = {**now, "air_time": zeros, "first_contact": jnp.zeros_like(now["contact"]), "last_air_time": zeros}
-    return state.replace(info={**state.info, FEET: feet})
+    feet = FeetState(**now, air_time=zeros, first_contact=jnp.zeros_like(now["contact"]), last_air_time=zeros)
+    return wrap(state, feet)
 
 
 def _feet_step(step_fn, indices: dict, model: mjx.Model, state: State, action: Array, key: Array) -> State:
-    next_state = step_fn(model, state, action, key)
-    before, now = state.info[FEET], _feet_now(indices, model, next_state.data)
-    air_time = before["air_time"] + (next_state.data.time - state.data.time).astype(jnp.float32)
-    first_contact = now["contact"] & ~before["contact"]
-    feet = {
+    before, inner = peel(state, FeetState)
+    next_state = step_fn(model, inner, action, key)
+    now = _feet_now(indices, model, next_state.data)
+    air_time = before.air_time + (next_state.data.time - state.data.time).astype(jnp.float32)
+    first_contact = now["contact"] & ~before.contact
+    feet = FeetState(
         **now,
-        "air_time": jnp.where(now["contact"], 0.0, air_time),
-        "first_contact": first_contact,
-        "last_air_time": jnp.where(first_contact, air_time, before["last_air_time"]),
-    }
-    return next_state.replace(info={**next_state.info, FEET: feet})
+        air_time=jnp.where(now["contact"], 0.0, air_time),
+        first_contact=first_contact,
+        last_air_time=jnp.where(first_contact, air_time, before.last_air_time),
+    )
+    return wrap(next_state, feet)

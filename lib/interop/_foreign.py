@@ -37,7 +37,6 @@ from mujoco import mjx
 
 from mjzoo import physics, tree
 from mjzoo.combinators import record, with_divergence_guard, with_time_limit
-from mjzoo.running import OUTCOME
 from mjzoo.types import State, Task, bind
 
 __all__ = ["Kind", "task", "env_model", "key_data"]
@@ -157,8 +156,8 @@ def _prefixed(kind: Kind, metrics: dict[str, Array]) -> dict[str, Array]:
 
 
 def _recorded_reward(model, state: State, action: Array, next_state: State) -> dict[str, Array]:
-    return dict(next_state.info[OUTCOME]["reward"])
+    return dict(next_state.outcome.terms)
 
 
 def _recorded_terminate(model, state: State) -> tuple[Array, Array]:
-    return state.info[OUTCOME]["terminated"], state.info[OUTCOME]["truncated"]
+    return state.outcome.terminated, state.outcome.truncated

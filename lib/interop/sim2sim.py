@@ -28,7 +28,9 @@ import numpy as np
 from mujoco import mjx
 
 from mjzoo import physics
+from mjzoo.catalog.observations import ObservationHistoryState
 from mjzoo.interop import contract as contracts
+from mjzoo.layers import find
 from mjzoo.learning import to_controls
 from mjzoo.running import reset, transition
 from mjzoo.types import State, Task
@@ -177,7 +179,7 @@ def check_observation(task: Task, terms: list[dict[str, Any]], key: Array, steps
             "describes one flat array (a dict observation is not supported)"
         )
     size = contracts.frame_size(terms)
-    history = first.info.get("observation_history")
+    history = getattr(find(first, ObservationHistoryState, None), "frames", None)
     length = 1 if history is None else int(history.shape[0])
     if first.obs.shape[0] != length * size:
         raise contracts.ContractError(

@@ -29,7 +29,8 @@ import jax
 import jax.numpy as jnp
 
 from mjzoo import checks, worlds
-from mjzoo.combinators import with_auto_reset
+from mjzoo.combinators import AutoResetState, with_auto_reset
+from mjzoo.layers import find
 from mjzoo.running import reset, transition
 from mjzoo.types import State, Task
 
@@ -153,7 +154,7 @@ def collect(
             terminated=next_state.terminated,
             truncated=next_state.truncated,
             start=c.start,
-            next_obs=next_state.info["auto_reset"]["final_obs"],
+            next_obs=find(next_state, AutoResetState).final_obs,
         )
         c = Collector(
             env_state=next_state,

@@ -42,7 +42,6 @@ from mujoco import mjx
 
 from mjzoo import names, tree
 from mjzoo.combinators import resets_itself
-from mjzoo.running import OUTCOME
 from mjzoo.types import State, Task, bind
 
 __all__ = ["Layout", "feature_layout", "feature_size", "frames_features", "motion_features", "with_feature_window"]
@@ -314,7 +313,7 @@ def _window_step(step_fn, features, restarts: tree.Static, model, state: State, 
     frame = features(model, next_state.data)
     shifted = jnp.concatenate([window[1:], frame[None]])
     if restarts.value:  # the inner auto-reset records whether the step ended an episode
-        outcome = next_state.info[OUTCOME]
-        ended = outcome["terminated"] | outcome["truncated"]
+        outcome = next_state.outcome
+        ended = outcome.terminated | outcome.truncated
         shifted = jnp.where(ended, jnp.broadcast_to(frame, window.shape), shifted)
     return _windowed(next_state, shifted)

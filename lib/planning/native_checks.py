@@ -49,6 +49,7 @@ def start_state(task: Task) -> State:
         data=data,
         obs=jax.tree.map(zeros, shape.obs),
         info=jax.tree.map(zeros, shape.info),
+        layers=jax.tree.map(zeros, shape.layers),
         metrics=jax.tree.map(zeros, shape.metrics),
         reward=np.float32(0),
         terminated=np.bool_(False),

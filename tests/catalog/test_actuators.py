@@ -24,6 +24,7 @@ from mujoco import mjx
 
 import mjzoo
 from mjzoo.catalog import actuators
+from mjzoo.layers import find
 from mjzoo.types import State, Task, bind
 
 JOINTS_XML = """
@@ -224,21 +225,21 @@ KEYS = jax.random.split(KEY, 48)
 
 def test_latency_delays_the_action_by_exactly_the_drawn_steps():
     s = episodes(actuators.with_action_latency(block_task(), 2), ACTIONS, KEYS)
-    delays = np.asarray(s.info["action_latency"]["delay"])
+    delays = np.asarray(find(s, actuators.ActionLatencyState).delay)
     assert np.all(delays == delays[:, :1]) and set(delays[:, 0]) == {0, 1, 2}  # one draw per episode
     for d, got in zip(delays[:, 0], applied(s)):  # delay 0: the plain task's actions
         np.testing.assert_allclose(got, np.concatenate([np.zeros(d), ACTIONS[: 6 - d]]), atol=1e-6)
     np.testing.assert_allclose(s.metrics["action_latency/delay"], delays)
-    np.testing.assert_allclose(s.info["action_latency"]["buffer"][0, -1, :, 0], [0.6, 0.5, 0.4], rtol=1e-6)
+    np.testing.assert_allclose(find(s, actuators.ActionLatencyState).buffer[0, -1, :, 0], [0.6, 0.5, 0.4], rtol=1e-6)
     np.testing.assert_allclose(s.reward[:, -1], np.asarray(s.data.qvel[:, -1, 0]))  # reward untouched
 
 
 def test_latency_restarts_with_each_episode_inside_auto_reset():
     task = mjzoo.with_auto_reset(mjzoo.with_time_limit(actuators.with_action_latency(block_task(), 3), 3))
     s = episodes(task, ACTIONS, KEYS[:16])
-    buffer = np.asarray(s.info["action_latency"]["buffer"][:, 2])  # the state after step 3: a new episode
+    buffer = np.asarray(find(s, actuators.ActionLatencyState).buffer[:, 2])  # the state after step 3: a new episode
     np.testing.assert_array_equal(buffer, 0.0)
-    delays = np.asarray(s.info["action_latency"]["delay"])
+    delays = np.asarray(find(s, actuators.ActionLatencyState).delay)
     assert np.any(delays[:, 0] != delays[:, 3])  # redrawn
 
 
@@ -251,7 +252,9 @@ def test_drop_holds_the_previously_applied_action():
         held = np.where(dropped[:, t], held, actions[t])
         expected.append(held)
     np.testing.assert_allclose(applied(s), np.stack(expected, axis=1), atol=1e-6)
-    np.testing.assert_allclose(s.info["action_drop"]["previous"][..., 0], np.stack(expected, axis=1), atol=1e-6)
+    np.testing.assert_allclose(
+        find(s, actuators.ActionDropState).previous[..., 0], np.stack(expected, axis=1), atol=1e-6
+    )
     assert 0.35 < dropped.mean() < 0.65
     # Probability is a leaf (no new compile): 0 passes everything, 1 holds the reset's zeros.
     never = episodes(actuators.with_action_drop(block_task(), 0.0), actions, KEYS)
@@ -263,7 +266,7 @@ def test_filter_follows_the_first_order_recurrence():
     s = episodes(actuators.with_action_filter(block_task(), 0.5), jnp.ones(6), KEYS[:1])
     # a_t = 0.5 * 1 + 0.5 * a_{t-1}, a_{-1} = 0: 1 - 2^-(t+1).
     np.testing.assert_allclose(applied(s)[0], [0.5, 0.75, 0.875, 0.9375, 0.96875, 0.984375], rtol=1e-5)
-    np.testing.assert_allclose(s.info["action_filter"]["previous"][0, :, 0], applied(s)[0], rtol=1e-5)
+    np.testing.assert_allclose(find(s, actuators.ActionFilterState).previous[0, :, 0], applied(s)[0], rtol=1e-5)
     s = episodes(actuators.with_action_filter(block_task(), 1.0), ACTIONS, KEYS[:1])  # alpha 1: no filter
     np.testing.assert_allclose(applied(s)[0], ACTIONS, atol=1e-6)
 

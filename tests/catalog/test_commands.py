@@ -16,6 +16,7 @@ from catalog_tasks import DT, QPOS0, B, T, make_task, resets_of, run
 import mjzoo
 import mjzoo.envs
 from mjzoo.catalog import commands
+from mjzoo.layers import find
 from mjzoo.types import Task
 
 
@@ -41,31 +42,35 @@ def test_velocity_command_redrawn_on_schedule_and_every_episode_and_observed():
     # new command from each reset, after steps 8, 16, 24.
     task = mjzoo.with_auto_reset(mjzoo.with_time_limit(velocity(), 8))
     start, s = run(task, KEY)
-    c = np.asarray(s.info["command"])  # [B, T, 3]
+    c = np.asarray(find(s, commands.VelocityCommandState).command)  # [B, T, 3]
     assert c.dtype == np.float32 and c.shape == (B, T, 3)
     for row in np.asarray(s.metrics["velocity_command/resampled"]):
         np.testing.assert_array_equal(np.flatnonzero(row), [4, 12, 20])
     # Constant in between: the command changes exactly there.
-    full = np.concatenate([np.asarray(start.info["command"])[:, None], c], axis=1)  # [B, T + 1, 3]
+    full = np.concatenate(
+        [np.asarray(find(start, commands.VelocityCommandState).command)[:, None], c], axis=1
+    )  # [B, T + 1, 3]
     changed = np.any(full[:, 1:] != full[:, :-1], axis=-1)
     np.testing.assert_array_equal(changed, np.broadcast_to(np.isin(np.arange(T), [4, 7, 12, 15, 20, 23]), (B, T)))
     assert np.all(np.abs(full) <= [1.0, 0.5, 2.0]) and np.abs(full[..., 2]).max() > 1.0
     # The observation is [inner observation (19), command (3)]; the inner step got its own 19.
     np.testing.assert_array_equal(s.obs[..., 19:], c)
     np.testing.assert_array_equal(s.obs[..., :19], np.concatenate([s.data.qpos, s.data.qvel], axis=-1))
-    np.testing.assert_array_equal(start.obs[:, 19:], start.info["command"])
+    np.testing.assert_array_equal(start.obs[:, 19:], find(start, commands.VelocityCommandState).command)
     np.testing.assert_array_equal(s.metrics["inner_obs_size"], 19.0)
 
 
 def test_zero_and_stand_probabilities():
     keys = jax.random.split(KEY, 4000)
-    c = np.asarray(resets_of(velocity(zero_probability=0.5), keys).info["command"])
+    c = np.asarray(find(resets_of(velocity(zero_probability=0.5), keys), commands.VelocityCommandState).command)
     np.testing.assert_allclose(np.mean(c == 0, axis=0), 0.5, atol=0.03)  # each component alone
     np.testing.assert_allclose(np.mean(np.all(c == 0, axis=1)), 0.125, atol=0.02)  # all three: 0.5^3
-    c = np.asarray(resets_of(velocity(stand_probability=0.25), keys).info["command"])
+    c = np.asarray(find(resets_of(velocity(stand_probability=0.25), keys), commands.VelocityCommandState).command)
     np.testing.assert_allclose(np.mean(np.all(c == 0, axis=1)), 0.25, atol=0.03)  # together
     np.testing.assert_allclose(np.mean(c == 0), 0.25, atol=0.03)  # never alone
-    c = np.asarray(resets_of(velocity(vx=(0.3, 0.3), zero_probability=0.0), keys).info["command"])
+    c = np.asarray(
+        find(resets_of(velocity(vx=(0.3, 0.3), zero_probability=0.0), keys), commands.VelocityCommandState).command
+    )
     np.testing.assert_array_equal(c[:, 0], np.float32(0.3))
     assert not np.any(c == 0)
 
@@ -89,11 +94,17 @@ def test_heading_command_steers_by_the_heading_error():
     start, s = run(task, KEY)
     n = np.arange(1, T + 1)
     expected = np.clip(0.5 * (1.0 - DT * n), -0.3, 0.3)
-    np.testing.assert_allclose(s.info["command"][..., 2], np.broadcast_to(expected, (B, T)), atol=1e-5)
-    np.testing.assert_allclose(s.info["command"][..., :2], np.broadcast_to([0.5, -0.2], (B, T, 2)), atol=1e-7)
-    np.testing.assert_allclose(start.info["command"], np.broadcast_to([0.5, -0.2, 0.3], (B, 3)), atol=1e-7)
-    np.testing.assert_allclose(s.info["heading_command"]["target"][..., 2], 1.0)
-    np.testing.assert_array_equal(s.obs[..., 19:], s.info["command"])
+    np.testing.assert_allclose(
+        find(s, commands.VelocityCommandState).command[..., 2], np.broadcast_to(expected, (B, T)), atol=1e-5
+    )
+    np.testing.assert_allclose(
+        find(s, commands.VelocityCommandState).command[..., :2], np.broadcast_to([0.5, -0.2], (B, T, 2)), atol=1e-7
+    )
+    np.testing.assert_allclose(
+        find(start, commands.VelocityCommandState).command, np.broadcast_to([0.5, -0.2, 0.3], (B, 3)), atol=1e-7
+    )
+    np.testing.assert_allclose(find(s, commands.VelocityCommandState).target[..., 2], 1.0)
+    np.testing.assert_array_equal(s.obs[..., 19:], find(s, commands.VelocityCommandState).command)
 
 
 def test_heading_command_turns_the_short_way():
@@ -108,7 +119,9 @@ def test_heading_command_turns_the_short_way():
         resample_interval=(0.1, 0.1),
     )
     start, _ = run(task, KEY)
-    np.testing.assert_allclose(start.info["command"][:, 2], 0.5 * (6.0 - 2 * np.pi), atol=1e-5)
+    np.testing.assert_allclose(
+        find(start, commands.VelocityCommandState).command[:, 2], 0.5 * (6.0 - 2 * np.pi), atol=1e-5
+    )
 
 
 # --- joint position command -------------------------------------------------------------
@@ -117,15 +130,15 @@ def test_heading_command_turns_the_short_way():
 def test_joint_position_command_within_the_joint_ranges():
     task = commands.with_joint_position_command(make_task(), ["hip", "wrist"], resample_interval=(0.1, 0.1))
     keys = jax.random.split(KEY, 2000)
-    c = np.asarray(resets_of(task, keys).info["joint_command"])
+    c = np.asarray(find(resets_of(task, keys), commands.JointCommandState).command)
     assert c.shape == (2000, 2) and c.dtype == np.float32
     assert c[:, 0].min() >= -1 and c[:, 0].max() <= 0.5 and c[:, 0].min() < -0.99 and c[:, 0].max() > 0.49
     assert c[:, 1].min() >= -0.1 and c[:, 1].max() <= 0.2 and c[:, 1].min() < -0.09 and c[:, 1].max() > 0.19
     start = resets_of(task, keys)
-    np.testing.assert_array_equal(start.obs[:, 19:], start.info["joint_command"])  # observed too
+    np.testing.assert_array_equal(start.obs[:, 19:], find(start, commands.JointCommandState).command)  # observed too
     # An unlimited joint needs explicit ranges (same structure: no new compile).
     task = commands.with_joint_position_command(make_task(), ["spin", "hip"], ranges=[(2.0, 3.0), (-0.5, 0.0)])
-    c = np.asarray(resets_of(task, keys).info["joint_command"])
+    c = np.asarray(find(resets_of(task, keys), commands.JointCommandState).command)
     assert c[:, 0].min() >= 2.0 and c[:, 0].max() <= 3.0 and c[:, 1].min() >= -0.5 and c[:, 1].max() <= 0.0
 
 
@@ -152,4 +165,4 @@ def test_bad_arguments_are_named():
     dict_obs = mjzoo.with_observation(make_task(), lambda obs: {"x": obs})
     with pytest.raises(ValueError, match="1-D array observation"):
         commands.with_velocity_command(dict_obs)
-    commands.with_velocity_command(dict_obs, observe=False)  # reading info["command"] only is fine
+    commands.with_velocity_command(dict_obs, observe=False)  # reading the command from its record only is fine

@@ -29,6 +29,7 @@ import mjzoo
 import mjzoo.envs
 from mjzoo import physics as physics_lib
 from mjzoo.catalog import curriculum, events
+from mjzoo.layers import find
 from mjzoo.types import State, Task, bind
 
 XML = """
@@ -120,8 +121,8 @@ def test_push_size_and_gravity_grow_with_the_level():
     levels = np.minimum(np.arange(T) / 4, 1.0)
     np.testing.assert_allclose(s.metrics["curriculum/level"], np.broadcast_to(levels, (B, T)), atol=1e-7)
     after = np.minimum(np.arange(1, T + 1) / 4, 1.0)  # the level each transition leaves for the next
-    np.testing.assert_allclose(s.info["curriculum"]["level"], np.broadcast_to(after, (B, T)))
-    assert float(start.info["curriculum"]["level"][0]) == 0.0
+    np.testing.assert_allclose(find(s, curriculum.CurriculumState).level, np.broadcast_to(after, (B, T)))
+    assert float(find(start, curriculum.CurriculumState).level[0]) == 0.0
     # Pushes from the 2nd step on, each of size level * |c| with |c| <= 2 fixed per environment.
     size = np.asarray(s.metrics["velocity_push/linear"])  # [B, T]
     np.testing.assert_array_equal(size[:, 0], 0.0)
@@ -143,7 +144,7 @@ def test_by_episode_length_moves_the_level_at_episode_ends():
     task = curriculum.with_curriculum(functools.partial(make, speed=1.0, limit=5), rule)
     _, s = run(task, KEYS)
     np.testing.assert_allclose(s.metrics["curriculum/level"][0], [0.5] * 5 + [0.75] * 5 + [1.0] * 2)
-    np.testing.assert_array_equal(s.info["curriculum"]["memory"][0], [1, 2, 3, 4, 0] * 2 + [1, 2])
+    np.testing.assert_array_equal(find(s, curriculum.CurriculumState).memory[0], [1, 2, 3, 4, 0] * 2 + [1, 2])
     # At 1 m/s, x = 0.02 n passes 0.05 at step 3: episodes of 3 steps (< 4): -0.1 each.
     task = curriculum.with_curriculum(functools.partial(make, speed=1.0, limit=5, threshold=0.05), rule)
     _, s = run(task, KEYS)
@@ -160,7 +161,7 @@ def test_by_distance_measures_from_the_episode_start():
     )
     _, s = run(task, KEYS)
     np.testing.assert_allclose(s.metrics["curriculum/level"][0], [0.5] * 5 + [0.75] * 5 + [1.0] * 2)
-    np.testing.assert_allclose(s.info["curriculum"]["memory"][0], np.broadcast_to([1.0, 0.0], (T, 2)))
+    np.testing.assert_allclose(find(s, curriculum.CurriculumState).memory[0], np.broadcast_to([1.0, 0.0], (T, 2)))
     task = curriculum.with_curriculum(
         functools.partial(make, speed=1.0, spawn=1.0, limit=5),
         curriculum.by_distance(MJ, target=0.09, up=0.25, down=0.1, initial=0.5),

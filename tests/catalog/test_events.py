@@ -17,6 +17,7 @@ from catalog_tasks import DT, MASS, B, T, make_task, run
 import mjzoo
 import mjzoo.envs
 from mjzoo.catalog import events
+from mjzoo.layers import find
 
 PUSH_STEPS = np.array([6, 11, 16, 21]) - 1  # 0-based steps at which a (0.1, 0.1) s interval pushes
 KEY = jax.random.key(0)
@@ -32,11 +33,11 @@ def steps_where(flags: np.ndarray) -> list[np.ndarray]:
 def test_velocity_pushes_on_schedule_and_integrated_by_hand():
     task = events.with_velocity_pushes(make_task(), interval=(0.1, 0.1), linear=(1.0, 0.5, 0.0))
     start, s = run(task, KEY)
-    np.testing.assert_allclose(start.info["velocity_pushes"]["countdown"], 0.1)
+    np.testing.assert_allclose(find(start, events.VelocityPushState).countdown, 0.1)
     for pushed in steps_where(s.metrics["velocity_push/applied"]):
         np.testing.assert_array_equal(pushed, PUSH_STEPS)
     # countdown after steps 1..6: 0.08, 0.06, 0.04, 0.02, 0, (pushed: 0.1 - 0.02 =) 0.08.
-    countdown = s.info["velocity_pushes"]["countdown"][:, :6]
+    countdown = find(s, events.VelocityPushState).countdown[:, :6]
     np.testing.assert_allclose(countdown, [[0.08, 0.06, 0.04, 0.02, 0.0, 0.08]] * B, atol=1e-6)
     v = np.asarray(s.data.qvel[:, :, :3])  # [B, T, 3] world linear velocity of the base
     kicks = np.diff(np.concatenate([np.zeros((B, 1, 3)), v], axis=1), axis=1)  # velocity change per step
@@ -78,7 +79,7 @@ def test_force_pushes_held_for_the_duration():
     active = np.zeros(T, bool)
     active[PUSH_STEPS] = active[PUSH_STEPS + 1] = True
     np.testing.assert_array_equal(s.metrics["force_push/force"][:, ~active], 0.0)
-    forces = np.asarray(s.info["force_pushes"]["force"][:, PUSH_STEPS])  # [B, 4, 3]
+    forces = np.asarray(find(s, events.ForcePushState).force[:, PUSH_STEPS])  # [B, 4, 3]
     assert np.all(np.abs(forces) <= 10.0) and len(np.unique(forces)) == forces.size
     size = s.metrics["force_push/force"][:, PUSH_STEPS + 1]
     np.testing.assert_allclose(size, np.linalg.norm(forces, axis=-1), rtol=1e-5)
@@ -89,7 +90,7 @@ def test_force_pushes_held_for_the_duration():
     np.testing.assert_allclose(v[:, 9], v[:, 6], rtol=1e-6)  # no force between pushes
     np.testing.assert_allclose(v[:, 11] - v[:, 9], 2 * DT * forces[:, 1] / MASS, rtol=1e-4, atol=1e-6)
     np.testing.assert_array_equal(s.data.xfrc_applied, 0.0)  # the push is taken off after each step
-    np.testing.assert_allclose(s.info["force_pushes"]["remaining"][:, PUSH_STEPS], 0.02, atol=1e-6)
+    np.testing.assert_allclose(find(s, events.ForcePushState).remaining[:, PUSH_STEPS], 0.02, atol=1e-6)
 
 
 def test_pushes_restart_with_every_episode():

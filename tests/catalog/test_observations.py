@@ -25,6 +25,8 @@ from mujoco import mjx
 import mjzoo
 from mjzoo import physics as physics_lib
 from mjzoo.catalog import observations as obs
+from mjzoo.catalog import trackers
+from mjzoo.layers import find
 from mjzoo.types import State, Task, bind
 
 XML = """
@@ -60,12 +62,14 @@ C = float(np.sqrt(0.5))
 forward = jax.jit(mjx.forward)
 
 
-def state_at(qpos, qvel=(0.0,) * 7, ctrl=0.0, model=MODEL, **info) -> State:
+def state_at(qpos, qvel=(0.0,) * 7, ctrl=0.0, model=MODEL, layers=()) -> State:
     """A state at the given qpos (base xyz, base quat wxyz, yaw) completed by mjx.forward."""
     data = mjx.make_data(model).replace(
         qpos=jnp.asarray(qpos, jnp.float32), qvel=jnp.asarray(qvel, jnp.float32), ctrl=jnp.asarray([ctrl], jnp.float32)
     )
-    return State.create(forward(model, data), jnp.zeros(()), info)  # the solver starts cold: fine at rest
+    return State.create(forward(model, data), jnp.zeros(())).replace(
+        layers=layers
+    )  # the solver starts cold: fine at rest
 
 
 def stack(*states):
@@ -77,8 +81,17 @@ def stack(*states):
 POSE_A = dict(qpos=[1, 2, 0.5, C, 0, 0, C, 0.3], qvel=[1, 2, 3, 0, 0, 1, 0.5], ctrl=0.25)
 # Pose B: base at (0, 0, 1) rolled +90 deg about x (base y axis = world z, z axis = -y), at rest.
 POSE_B = dict(qpos=[0, 0, 1, C, C, 0, 0, 0], ctrl=-1.0)
-INFO_A = dict(action_history=jnp.array([[0.7], [0.6]]), feet={"contact": jnp.array([True, False])})
-INFO_B = dict(action_history=jnp.array([[-0.1], [0.2]]), feet={"contact": jnp.array([False, True])})
+
+
+def kept(action_history, contact):
+    """The records of `trackers.with_action_history` around `trackers.with_feet` (only
+    the contacts, the rest unused)."""
+    unused = {f: None for f in trackers.FeetState._fields if f not in ("contact", "inner")}
+    return trackers.ActionHistoryState(action_history, trackers.FeetState(contact=contact, **unused))
+
+
+INFO_A = dict(layers=kept(jnp.array([[0.7], [0.6]]), jnp.array([True, False])))
+INFO_B = dict(layers=kept(jnp.array([[-0.1], [0.2]]), jnp.array([False, True])))
 
 # name: (item, expected in pose A, expected in pose B)
 ITEMS = {
@@ -243,11 +256,13 @@ def test_observation_history_newest_first_filled_at_reset():
     o0, o1, o2, o3 = CLEAN
     expected = [np.r_[o0, o0, o0], np.r_[o1, o0, o0], np.r_[o2, o1, o0], np.r_[o3, o2, o1]]
     np.testing.assert_allclose(states.obs[0], expected, rtol=1e-5)
-    np.testing.assert_allclose(states.info["observation_history"][0, 3], [o3, o2, o1], rtol=1e-5)
+    np.testing.assert_allclose(find(states, obs.ObservationHistoryState).frames[0, 3], [o3, o2, o1], rtol=1e-5)
     # The block's step is given its own last observation [qpos, qvel], not the history.
     np.testing.assert_allclose(states.metrics["given"][0, 1:], QVEL[:3], atol=1e-6)
-    with pytest.raises(ValueError, match="already keeps an observation history"):
-        obs.with_observation_history(obs.with_observation_history(block_task(), 2), 2)
+    # Applied twice, each keeps its own record: the outer stacks the inner's stacks.
+    twice = episodes(obs.with_observation_history(obs.with_observation_history(block_task(), 2), 2), KEYS[:1])
+    nested = [np.r_[o0, o0, o0, o0], np.r_[o1, o0, o0, o0], np.r_[o2, o1, o1, o0], np.r_[o3, o2, o2, o1]]
+    np.testing.assert_allclose(twice.obs[0], nested, rtol=1e-5)
     for length in [0, 2.0, True]:
         with pytest.raises(ValueError, match="length"):
             obs.with_observation_history(block_task(), length)
@@ -256,7 +271,9 @@ def test_observation_history_newest_first_filled_at_reset():
 def test_observation_bias_is_constant_per_episode_and_drawn_at_reset():
     states = episodes(obs.with_observation_bias(block_task(), 0.3), KEYS)
     bias = np.asarray(states.obs) - CLEAN  # [512, 4, 2]
-    np.testing.assert_allclose(bias, np.broadcast_to(states.info["observation_bias"][:, :1], bias.shape), atol=1e-6)
+    np.testing.assert_allclose(
+        bias, np.broadcast_to(find(states, obs.ObservationBiasState).bias[:, :1], bias.shape), atol=1e-6
+    )
     np.testing.assert_allclose(bias[:, 0].std(axis=0), [0.3, 0.3], rtol=0.1)  # one draw per episode
     np.testing.assert_allclose(bias[:, 0].mean(axis=0), [0.0, 0.0], atol=0.05)
     states = episodes(obs.with_observation_bias(block_task(), 0.0), KEYS[:2])  # scale is a leaf: no retrace

@@ -252,8 +252,8 @@ def test_with_domain_randomization_draws_each_episode_and_steps_with_it():
         return mjzoo.transition(task, state, jnp.zeros(1), key)
 
     s = jax.vmap(episode)(jax.random.split(KEY, 64))
-    b = np.asarray(s.info["domain_randomization"]["dof_damping"][:, SLIDE_V])
-    m = np.asarray(s.info["domain_randomization"]["body_mass"][:, 1])
+    b = np.asarray(mjzoo.find(s, mjzoo.DomainRandomizationState).fields["dof_damping"][:, SLIDE_V])
+    m = np.asarray(mjzoo.find(s, mjzoo.DomainRandomizationState).fields["body_mass"][:, 1])
     assert np.all((b >= 0) & (b <= 20)) and np.all((m >= 1.5) & (m <= 4.5)) and len(np.unique(b)) == 64
     np.testing.assert_allclose(s.reward, block_v1(m=m, b=b), rtol=1e-5)
 

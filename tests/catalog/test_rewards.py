@@ -25,7 +25,7 @@ import pytest
 from mujoco import mjx
 
 import mjzoo
-from mjzoo.catalog import rewards, trackers
+from mjzoo.catalog import commands, rewards, trackers
 from mjzoo.catalog.rewards import SIGMOIDS, tolerance
 from mjzoo.types import State, Task, bind
 
@@ -221,14 +221,25 @@ def biped_state(
     joints=(0.95, 0.3, -1.2, -0.2),
     joint_vel=(2, 5, 3, 7),
     ctrl=(0.5, -1),
-    **info,
+    command=None,
+    action_history=None,
+    feet=None,
 ) -> State:
+    """A biped state; `command`, `action_history` and `feet` become the records of the
+    combinators that keep them (velocity command outermost)."""
     d = mujoco.MjData(BIPED)
     d.qpos[:11] = [0, 0, height, *quat, *joints]
     d.qvel[:10] = [*linear, *angular, *joint_vel]
     d.ctrl[:] = ctrl
     mujoco.mj_forward(BIPED, d)
-    return State.create(mjx.put_data(BIPED, d), jnp.zeros(1), info)
+    layers = ()
+    if feet is not None:
+        layers = trackers.FeetState(**feet, inner=layers)
+    if action_history is not None:
+        layers = trackers.ActionHistoryState(actions=action_history, inner=layers)
+    if command is not None:
+        layers = commands.VelocityCommandState(countdown=jnp.zeros(()), target=command, command=command, inner=layers)
+    return State.create(mjx.put_data(BIPED, d), jnp.zeros(1)).replace(layers=layers)
 
 
 COMMAND = dict(command=jnp.array([1.0, 0.5, 0.5], jnp.float32))

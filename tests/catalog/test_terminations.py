@@ -97,8 +97,12 @@ def test_bad_velocity_and_non_finite_physics():
     assert check(item, at(qvel=data.qvel.at[3].set(-5.1)))
     assert check(item, at(qvel=data.qvel.at[0].set(jnp.nan)))
     assert check(item, at(qpos=data.qpos.at[2].set(jnp.inf)))
-    assert not check(term.episode_length(5), State.create(data, jnp.zeros(()), {"time_limit": jnp.int32(4)}))
-    assert check(term.episode_length(5), State.create(data, jnp.zeros(()), {"time_limit": jnp.int32(5)}))
+    assert not check(
+        term.episode_length(5), State.create(data, jnp.zeros(())).replace(layers=mjzoo.TimeLimitState(jnp.int32(4)))
+    )
+    assert check(
+        term.episode_length(5), State.create(data, jnp.zeros(())).replace(layers=mjzoo.TimeLimitState(jnp.int32(5)))
+    )
 
 
 @pytest.mark.parametrize(
@@ -219,7 +223,7 @@ def test_with_terminations_rejects_bad_items():
         term.with_terminations(task, {"fast": 1.0})
     with pytest.raises(ValueError, match="'wide' must return a scalar"):
         term.with_terminations(task, {"wide": _vector})
-    with pytest.raises(ValueError, match=r"'long' reads info\['time_limit'\].*info keys: \[\]"):
+    with pytest.raises(ValueError, match=r"'long': find: the state holds no TimeLimitState"):
         term.with_terminations(block_task(max_steps=None), {"long": term.episode_length(3)})
     once = term.with_terminations(task, {"fast": term.bad_velocity(1.0)})
     with pytest.raises(ValueError, match="already records metrics\\['termination/fast'\\]"):

@@ -27,6 +27,7 @@ from mujoco import mjx
 import mjzoo
 from mjzoo import physics as physics_lib
 from mjzoo.catalog import contacts, rewards, trackers
+from mjzoo.layers import find
 from mjzoo.types import State, Task, bind
 
 DT = 0.02
@@ -153,46 +154,46 @@ def runs():
 
 def test_feet_at_reset(runs):
     first, _ = runs
-    feet = first.info["feet"]
-    np.testing.assert_array_equal(feet["contact"], [[True, False]] * 2)
-    np.testing.assert_array_equal(feet["first_contact"], [[False, False]] * 2)
-    np.testing.assert_array_equal(feet["air_time"], np.zeros((2, 2)))
-    np.testing.assert_array_equal(feet["last_air_time"], np.zeros((2, 2)))
-    np.testing.assert_allclose(feet["position"][0], [[-0.5, 0, 0], [0.6, 0, 0.2]], atol=1e-6)
-    np.testing.assert_array_equal(first.info["action_history"], np.zeros((2, 4, 4)))
+    feet = find(first, trackers.FeetState)
+    np.testing.assert_array_equal(feet.contact, [[True, False]] * 2)
+    np.testing.assert_array_equal(feet.first_contact, [[False, False]] * 2)
+    np.testing.assert_array_equal(feet.air_time, np.zeros((2, 2)))
+    np.testing.assert_array_equal(feet.last_air_time, np.zeros((2, 2)))
+    np.testing.assert_allclose(feet.position[0], [[-0.5, 0, 0], [0.6, 0, 0.2]], atol=1e-6)
+    np.testing.assert_array_equal(find(first, trackers.ActionHistoryState).actions, np.zeros((2, 4, 4)))
 
 
 def test_feet_contacts_and_air_times_by_hand(runs):
-    feet = runs[1].info["feet"]
+    feet = find(runs[1], trackers.FeetState)
     # Steps 1-4 of A, then step 5 returns the new episode's reset, step 6 is its first.
-    np.testing.assert_array_equal(feet["contact"][0], [[0, 0], [0, 1], [1, 1], [1, 0], [1, 0], [0, 0]])
-    np.testing.assert_array_equal(feet["first_contact"][0], [[0, 0], [0, 1], [1, 0], [0, 0], [0, 0], [0, 0]])
+    np.testing.assert_array_equal(feet.contact[0], [[0, 0], [0, 1], [1, 1], [1, 0], [1, 0], [0, 0]])
+    np.testing.assert_array_equal(feet.first_contact[0], [[0, 0], [0, 1], [1, 0], [0, 0], [0, 0], [0, 0]])
     # foot_a: off at step 1, 0.02 s then 0.04 s up, lands at step 3 after 0.06 s.
     # foot_b: up since reset, lands at step 2 after 0.04 s, leaves again at step 4.
     air = [[0.02, 0.02], [0.04, 0], [0, 0], [0, 0.02], [0, 0], [0.02, 0.02]]
     last = [[0, 0], [0, 0.04], [0.06, 0.04], [0.06, 0.04], [0, 0], [0, 0]]
-    np.testing.assert_allclose(feet["air_time"][0], air, atol=1e-6)
-    np.testing.assert_allclose(feet["last_air_time"][0], last, atol=1e-6)
+    np.testing.assert_allclose(feet.air_time[0], air, atol=1e-6)
+    np.testing.assert_allclose(feet.last_air_time[0], last, atol=1e-6)
     # B: foot_a stands, foot_b hangs: its air time grows 0.02 s a step, restarting at 5.
-    np.testing.assert_array_equal(feet["contact"][1], [[1, 0]] * 6)
-    assert not feet["first_contact"][1].any()
-    np.testing.assert_allclose(feet["air_time"][1][:, 1], [0.02, 0.04, 0.06, 0.08, 0, 0.02], atol=1e-6)
-    np.testing.assert_array_equal(feet["last_air_time"][1], np.zeros((6, 2)))
+    np.testing.assert_array_equal(feet.contact[1], [[1, 0]] * 6)
+    assert not feet.first_contact[1].any()
+    np.testing.assert_allclose(feet.air_time[1][:, 1], [0.02, 0.04, 0.06, 0.08, 0, 0.02], atol=1e-6)
+    np.testing.assert_array_equal(feet.last_air_time[1], np.zeros((6, 2)))
 
 
 def test_feet_positions_and_velocities_by_hand(runs):
-    feet = runs[1].info["feet"]
+    feet = find(runs[1], trackers.FeetState)
     # Step 3: foot_a moved 1 cm in x and 10 cm down in 0.02 s: (0.5, 0, -5) m/s.
-    np.testing.assert_allclose(feet["velocity"][0, 2, 0], [0.5, 0, -5], atol=1e-4)
-    np.testing.assert_allclose(feet["position"][0, 2, 0], [-0.49, 0, 0], atol=1e-6)
+    np.testing.assert_allclose(feet.velocity[0, 2, 0], [0.5, 0, -5], atol=1e-4)
+    np.testing.assert_allclose(feet.position[0, 2, 0], [-0.49, 0, 0], atol=1e-6)
     # Step 4: foot_b yaws by 0.02 rad at 1 rad/s, 0.1 m off the axis, and rises 0.445 m.
     c, s = math.cos(0.02), math.sin(0.02)
-    np.testing.assert_allclose(feet["velocity"][0, 3, 1], [-0.1 * s, 0.1 * c, 0.445 / DT], rtol=1e-4, atol=1e-5)
-    np.testing.assert_allclose(feet["position"][0, 3, 1], [0.5 + 0.1 * c, 0.1 * s, 0.5], atol=1e-6)
+    np.testing.assert_allclose(feet.velocity[0, 3, 1], [-0.1 * s, 0.1 * c, 0.445 / DT], rtol=1e-4, atol=1e-5)
+    np.testing.assert_allclose(feet.position[0, 3, 1], [0.5 + 0.1 * c, 0.1 * s, 0.5], atol=1e-6)
 
 
 def test_action_history_most_recent_first_and_cleared_by_reset(runs):
-    history = np.asarray(runs[1].info["action_history"][0])
+    history = np.asarray(find(runs[1], trackers.ActionHistoryState).actions[0])
     np.testing.assert_array_equal(history[0], [A[0], 0 * A[0], 0 * A[0], 0 * A[0]])
     np.testing.assert_array_equal(history[3], [A[3], A[2], A[1], A[0]])
     np.testing.assert_array_equal(history[4], np.zeros((4, 4)))  # the reset state

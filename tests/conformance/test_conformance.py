@@ -9,10 +9,12 @@ The stack ("all") nests them as the catalog says they must (docs/catalog.md): ac
 filters, trackers, commands, history, terminations and randomization inside the episode's
 time limit and auto-reset, which the curriculum's tasks add (with force pushes), and the
 curriculum outside them. Left out of it: "resets" (its `observe` is the pendulum's own),
-"time_limit" and "auto_reset" (the curriculum's tasks have them), and entries that would
-keep a second copy of one `info` entry: "domain_randomization" next to "randomizers",
-"action_history" next to the "reward_terms" entry's, "force_pushes" next to the
-curriculum's."""
+"time_limit" and "auto_reset" (the curriculum's tasks have them). Combinators keep
+their state in records of their own (`State.layers`), so the stack applies some twice:
+"domain_randomization" next to "randomizers", "action_history" next to the
+"reward_terms" entry's, "force_pushes" next to the curriculum's. The "twice" case nests
+time limits and observation noises around an action repeat: the inner limit still
+truncates at its own step count, which check_task's time-limit check sees."""
 
 from __future__ import annotations
 
@@ -113,6 +115,13 @@ def _scored(t: mjzoo.Task) -> mjzoo.Task:
     )
 
 
+def _twice(t: mjzoo.Task) -> mjzoo.Task:
+    """Two time limits and two observation noises with an action repeat between them: the
+    inner limit of 5 steps is 3 repeated steps, before the outer limit of 4."""
+    inner = mjzoo.with_observation_noise(mjzoo.with_time_limit(t, 5), 0.1)
+    return mjzoo.with_time_limit(mjzoo.with_observation_noise(mjzoo.with_action_repeat(inner, 2), 0.05), 4)
+
+
 def _reset_noise(t: mjzoo.Task) -> mjzoo.Task:
     m = t.mj_model
     noise = resets.joint_position_noise(m, 0.1), resets.joint_velocities(m, 0.5)
@@ -149,12 +158,15 @@ COMBINATORS = {
         t, [_first_joint(t)], ranges=[(-0.5, 0.5)], resample_interval=(0.04, 0.1)
     ),
     "curriculum": lambda t: curriculum.with_curriculum(functools.partial(_pushed, t), curriculum.by_steps(10)),
+    "twice": _twice,
 }
 ALL = (  # innermost first
     "action_latency",
     "action_drop",
     "action_filter",
+    "action_history",
     "reward_terms",
+    "force_pushes",
     "velocity_command",
     "joint_position_command",
     "observation_history",
@@ -166,6 +178,7 @@ ALL = (  # innermost first
     "observation_noise",
     "action_noise",
     "randomizers",
+    "domain_randomization",
     "divergence_guard",
     "reward_clip",
     "curriculum",
@@ -187,9 +200,7 @@ CASES += [("pendulum_swingup", comb) for comb in COMBINATORS if comb not in ("ba
 
 def task_for(env: str, comb: str, mass_scale: float = 1.0, **numbers) -> mjzoo.Task:
     """The case's task, its bodies `mass_scale` times as heavy. The stack keeps its env's
-    long default limit: the curriculum's limit of 5 steps inside it comes first. (Nested
-    limits share `info["time_limit"]`: one inside `with_action_repeat` inside another
-    does not count its own steps.)"""
+    long default limit: the curriculum's limit of 5 steps inside it comes first."""
     base = mjzoo.envs.make(env, **({} if comb == "all" else dict(episode_steps=LIMIT)), **numbers)
     return COMBINATORS[comb](base.replace(model=base.model.replace(body_mass=base.model.body_mass * mass_scale)))
 

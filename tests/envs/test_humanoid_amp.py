@@ -98,7 +98,7 @@ def test_steps_observe_and_reward_without_forward_velocity(walk, joystick):
         assert state.obs.shape == after.obs.shape == (obs,) and task.action_size == 17
         assert {k.removeprefix("reward/") for k in after.metrics if k.startswith("reward/")} == terms
         assert int(task.time_limit) == 1000
-    assert state.info["command"].shape == (3,)
+    assert mjzoo.find(state, mjzoo.catalog.commands.VelocityCommandState).command.shape == (3,)
 
 
 def test_bad_overrides_are_refused_at_construction():

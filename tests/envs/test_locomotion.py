@@ -77,7 +77,7 @@ def test_a_curriculum_keeps_its_level_under_a_second_auto_reset():
     assert mjzoo.combinators.resets_itself(task) and not mjzoo.combinators.resets_itself(base)
     assert mjzoo.with_auto_reset(task) is task
     _, states = _rollout(mjzoo.with_auto_reset(task), jax.random.key(0))
-    np.testing.assert_allclose(states.info["curriculum"]["level"], [0.25, 0.5, 0.75, 1.0, 1.0, 1.0])
+    np.testing.assert_allclose(mjzoo.find(states, curriculum.CurriculumState).level, [0.25, 0.5, 0.75, 1.0, 1.0, 1.0])
     assert states.truncated[1] and states.truncated[3]  # episodes of 2 steps ended meanwhile
 
 
@@ -174,7 +174,7 @@ def test_joystick_curriculum_resets_itself_and_observes_the_command():
     assert mjzoo.with_auto_reset(task) is task
     _, states = _rollout(task, jax.random.key(0))
     assert "curriculum/level" in states.metrics and states.truncated[2]
-    command = states.info["velocity_command"]["target"]
+    command = mjzoo.find(states, mjzoo.catalog.commands.VelocityCommandState).target
     np.testing.assert_allclose(states.obs[:3, -3:], command[:3])  # level 0 until the first episode ends: no noise
     np.testing.assert_allclose(states.obs[3:, -3:], command[3:], atol=0.3)  # then N(0, (0.05 level)^2) noise
     assert (np.abs(command) <= 1.0).all() and np.abs(command).max() > 0.0

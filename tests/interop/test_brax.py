@@ -76,7 +76,7 @@ def test_reset_and_steps_match_mjzoo_and_truncate_at_the_time_limit():
     assert not m.terminated.any()
     np.testing.assert_array_equal(b.done, (m.terminated | m.truncated).astype(np.float32))
     np.testing.assert_array_equal(b.info["truncation"], m.truncated.astype(np.float32))
-    np.testing.assert_array_equal(b.info["mjzoo"]["state"].info["time_limit"], np.arange(1, L + 1))
+    np.testing.assert_array_equal(mjzoo.find(b.info["mjzoo"]["state"], mjzoo.TimeLimitState).steps, np.arange(1, L + 1))
     # The carried key is split on every step.
     assert len({tuple(np.asarray(k)) for k in b.info["rng"]}) == L
 
@@ -91,8 +91,8 @@ def test_terminated_is_done_without_truncation():
     # Stepped again without a reset, the bare env treats each step as an episode's first:
     # mjzoo's step counter restarts (Brax's AutoResetWrapper would also put the first
     # physics state back); mjzoo, never reset, keeps counting.
-    np.testing.assert_array_equal(b.info["mjzoo"]["state"].info["time_limit"], [1] * L)
-    np.testing.assert_array_equal(m.info["time_limit"], np.arange(1, L + 1))
+    np.testing.assert_array_equal(mjzoo.find(b.info["mjzoo"]["state"], mjzoo.TimeLimitState).steps, [1] * L)
+    np.testing.assert_array_equal(mjzoo.find(m, mjzoo.TimeLimitState).steps, np.arange(1, L + 1))
 
 
 # --- Brax's training wrappers, jit and vmap ---------------------------------------------
@@ -114,7 +114,7 @@ def _wrapped(task: mjzoo.Task, rng: jax.Array):
             done=state.done,
             truncation=state.info["truncation"],
             reward=state.reward,
-            time_limit=state.info["mjzoo"]["state"].info["time_limit"],
+            time_limit=mjzoo.find(state.info["mjzoo"]["state"], mjzoo.TimeLimitState).steps,
         )
         return state, record
 
