@@ -426,6 +426,13 @@ def test_hyperparams_reject_out_of_range_values_naming_the_field(module, kwargs,
     jax.jit(lambda values: jax.tree.leaves(module.Hyperparams(**values)))(batch)
 
 
+def test_hyperparams_refuse_a_string_or_a_bool_naming_the_field():
+    with pytest.raises(ValueError, match=r"^mppi\.Hyperparams: temperature='hot' must be a number"):
+        mppi.Hyperparams(temperature="hot")
+    with pytest.raises(ValueError, match=r"^cem\.Hyperparams: sigma_min=True must be a number"):
+        cem.Hyperparams(sigma_min=True)
+
+
 def test_configs_are_hashable_static_arguments():
     for module, config in CONFIGS.items():
         assert hash(config) == hash(module.Config(**{f: getattr(config, f) for f in config.__dataclass_fields__}))
