@@ -102,11 +102,12 @@ def build_planner(module: ModuleType, spec: str, overrides: dict[str, Any], what
     checked by `mjzoo.planning.configure` (the planners' one reader of a flat dict)."""
     from mjzoo.planning import configure
 
-    values = {**mjzoo.envs.hyperparameters(spec, module.__name__.split(".")[-1]), **overrides}
+    name = module.__name__.split(".")[-1]
+    values = {**mjzoo.envs.hyperparameters(spec, name), **overrides}
     try:
         return configure(module, values)
-    except ValueError as e:  # "mppi: unknown field(s) ...": the flag names where it came from
-        raise UsageError(f"{what}: {str(e).partition(': ')[2]}") from None
+    except ValueError as e:  # "mppi: unknown field(s) ...": the flag says where it came from
+        raise UsageError(f"{what}: {str(e).removeprefix(f'{name}: ')}") from None
 
 
 def _as_type(value: Any, hint: Any) -> Any:
