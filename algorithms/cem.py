@@ -1,7 +1,8 @@
 """The cross-entropy method: refit a Gaussian over plans to its lowest-cost samples.
 
-    config = cem.Config(num_samples=128, num_elites=16)
-    state = cem.init(config, task)
+    config = cem.Config(num_samples=128, num_elites=16)   # structure: static under jit
+    hyperparams = cem.Hyperparams(sigma_min=0.1)          # numbers: pytree leaves
+    state = cem.init(config, task, hyperparams)
     state, controls = jax.jit(cem.plan, static_argnums=0)(config, task, state, env_state, key)
 
 At every replan, with mean mu and std s shifted to the current time:
@@ -12,8 +13,10 @@ At every replan, with mean mu and std s shifted to the current time:
     mu' = mean_{i in E} theta_i,   s' = clip(std_{i in E} theta_i, sigma_min, sigma_max)
 sigma_min keeps the search from collapsing; the explore fraction keeps wide samples in
 play after it has narrowed. sigma_min / sigma_max are fractions of each actuator's half
-control range (like noise_scale, the initial std). Defaults: 128 samples, 16 elites,
-25 planning steps, 4 cubic knots, s0 = 0.3, sigma_min = 0.05, sigma_max = 1.0, f = 0.
+control range (like noise_scale, the initial std). The numbers (s0, sigma_min,
+sigma_max, f) are hyperparameters kept in the planner state, so vmapping over states
+sweeps them; the elite count is structure. Defaults: 128 samples, 16 elites, 25
+planning steps, 4 cubic knots, s0 = 0.3, sigma_min = 0.05, sigma_max = 1.0, f = 0.
 """
 
 from __future__ import annotations
@@ -22,37 +25,56 @@ import dataclasses
 
 import jax
 import jax.numpy as jnp
+import numpy as np
 
 from mjzoo import planning
 from mjzoo.planning import Ensemble, PlannerState, TerminalValue
 from mjzoo.types import State, Task
 
-__all__ = ["Config", "init", "plan"]
+__all__ = ["Config", "Hyperparams", "init", "plan"]
 
 
 @dataclasses.dataclass(frozen=True, kw_only=True)
 class Config(planning.SamplingConfig):
-    """`planning.SamplingConfig` plus the elite count, std bounds and explore fraction."""
+    """`planning.SamplingConfig` plus the elite count."""
 
     num_elites: int = 16
-    sigma_min: float = 0.05
-    sigma_max: float = 1.0
-    explore_fraction: float = 0.0
 
     def __post_init__(self) -> None:
         super().__post_init__()
-        checks = {
-            "num_elites": 1 <= self.num_elites <= self.num_samples,
-            "sigma_min": 0 <= self.sigma_min,
-            "sigma_max": self.sigma_min <= self.sigma_max,
-            "explore_fraction": 0 <= self.explore_fraction < 1,
+        if not 1 <= self.num_elites <= self.num_samples:
+            raise ValueError(f"cem.Config: invalid num_elites={self.num_elites!r}")
+
+
+@jax.tree_util.register_dataclass
+@dataclasses.dataclass(frozen=True, kw_only=True)
+class Hyperparams(planning.SamplingHyperparams):
+    """`planning.SamplingHyperparams` (noise_scale: the initial std) plus the std bounds
+    and the explore fraction: floor(f N) samples, the last, draw with std sigma_max."""
+
+    sigma_min: float | jax.Array = 0.05
+    sigma_max: float | jax.Array = 1.0
+    explore_fraction: float | jax.Array = 0.0
+
+    def _checks(self) -> dict[str, np.ndarray]:
+        return {
+            **super()._checks(),
+            "sigma_min": np.greater_equal(self.sigma_min, 0),
+            "sigma_max": np.less_equal(self.sigma_min, self.sigma_max),
+            "explore_fraction": np.logical_and(
+                np.greater_equal(self.explore_fraction, 0), np.less(self.explore_fraction, 1)
+            ),
         }
-        for field, ok in checks.items():
-            if not ok:
-                raise ValueError(f"cem.Config: invalid {field}={getattr(self, field)!r}")
 
 
-init = planning.initial_state  # (config, task, knots=None): mean = a zero plan or warm-start knots
+def init(
+    config: Config, task: Task | Ensemble, hyperparams: Hyperparams | None = None, *, knots: jax.Array | None = None
+) -> PlannerState:
+    """Mean = a zero plan or the warm-start `knots` [K, nu], std = noise_scale x half
+    range, holding `hyperparams` (default `Hyperparams()`)."""
+    hyperparams = Hyperparams() if hyperparams is None else hyperparams
+    planning.sampling.check_hyperparams(hyperparams, Hyperparams)
+    return planning.initial_state(config, task, hyperparams, knots)
 
 
 def plan(
@@ -66,17 +88,15 @@ def plan(
     """One replan from `env_state`: returns the new planner state and the plan's [H, nu]
     controls. `terminal_value` (model, state) -> [] values each rollout's final state
     (`planning.as_terminal_value`: a Partial whose weights are leaves, not recompiled)."""
-    half_range = planning.half_range(task)
-    num_explore = int(config.explore_fraction * config.num_samples)
-    stds = jnp.concatenate(
-        [
-            jnp.broadcast_to(state.std, (config.num_samples - num_explore,) + state.std.shape),
-            jnp.broadcast_to(config.sigma_max * half_range, (num_explore,) + state.std.shape),
-        ]
-    )  # [N, K, nu]
+    hyperparams, half_range = state.hyperparams, planning.half_range(task)
+    # The explore count is traced (a swept fraction), so the last floor(f N) samples are
+    # picked by a mask; the slack absorbs float32 rounding of f N (0.7 x 10 -> 6.9999995).
+    num_explore = jnp.floor(hyperparams.explore_fraction * config.num_samples + 1e-4)
+    explores = jnp.arange(config.num_samples) >= config.num_samples - num_explore  # [N]
+    stds = jnp.where(explores[:, None, None], hyperparams.sigma_max * half_range, state.std[None])  # [N, K, nu]
     state, samples, costs = planning.sample_around(config, task, state, env_state, key, stds, terminal_value)
     mean, std = planning.cem_update(
-        samples, costs, config.num_elites, config.sigma_min * half_range, config.sigma_max * half_range
+        samples, costs, config.num_elites, hyperparams.sigma_min * half_range, hyperparams.sigma_max * half_range
     )
     state = state.replace(knots=mean, std=std, cost=jnp.sort(costs)[: config.num_elites].mean())
     return state, planning.controls(config, mean, *planning.control_limits(task))

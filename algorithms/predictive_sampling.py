@@ -1,7 +1,7 @@
 """Predictive sampling: keep the best of N perturbed plans.
 
     config = predictive_sampling.Config(num_samples=64, horizon_steps=25)
-    state = predictive_sampling.init(config, task)
+    state = predictive_sampling.init(config, task, predictive_sampling.Hyperparams(noise_scale=0.2))
     plan = jax.jit(predictive_sampling.plan, static_argnums=0)
     state, controls = plan(config, task, state, env_state, key)   # controls: [H, nu]
 
@@ -9,7 +9,8 @@ At every replan, with the nominal knots mu shifted to the current time:
     theta_0 = mu,   theta_i = clip(mu + sigma * eps_i),  eps_i ~ N(0, I),  i = 1..N-1
     mu' = theta_{i*},  i* = argmin_i J(theta_i)
 where J is the rollout cost (`mjzoo.planning`). Keeping mu as a sample makes the plan's
-cost non-increasing along a deterministic receding horizon.
+cost non-increasing along a deterministic receding horizon. sigma (the noise scale) is a
+hyperparameter kept in the planner state: vmapping over states sweeps it.
 Defaults: 128 samples, 25 planning steps, 4 cubic knots, sigma = 0.3 x half ctrl range.
 """
 
@@ -24,15 +25,28 @@ from mjzoo import planning
 from mjzoo.planning import Ensemble, PlannerState, TerminalValue
 from mjzoo.types import State, Task
 
-__all__ = ["Config", "init", "plan"]
+__all__ = ["Config", "Hyperparams", "init", "plan"]
 
 
 @dataclasses.dataclass(frozen=True, kw_only=True)
 class Config(planning.SamplingConfig):
-    """Predictive sampling has only the shared sampling settings (`planning.SamplingConfig`)."""
+    """Predictive sampling has only the shared sampling structure (`planning.SamplingConfig`)."""
 
 
-init = planning.initial_state  # (config, task, knots=None): a zero plan, or warm-start knots [K, nu]
+@jax.tree_util.register_dataclass
+@dataclasses.dataclass(frozen=True, kw_only=True)
+class Hyperparams(planning.SamplingHyperparams):
+    """Predictive sampling has only the shared numbers (`planning.SamplingHyperparams`)."""
+
+
+def init(
+    config: Config, task: Task | Ensemble, hyperparams: Hyperparams | None = None, *, knots: jax.Array | None = None
+) -> PlannerState:
+    """A zero plan, or the warm-start `knots` [K, nu], holding `hyperparams` (default
+    `Hyperparams()`)."""
+    hyperparams = Hyperparams() if hyperparams is None else hyperparams
+    planning.sampling.check_hyperparams(hyperparams, Hyperparams)
+    return planning.initial_state(config, task, hyperparams, knots)
 
 
 def plan(
@@ -46,6 +60,7 @@ def plan(
     """One replan from `env_state`: returns the new planner state and the plan's [H, nu]
     controls. `terminal_value` (model, state) -> [] values each rollout's final state
     (`planning.as_terminal_value`: a Partial whose weights are leaves, not recompiled)."""
+    state = state.replace(std=planning.noise_std(state.hyperparams.noise_scale, task, state.knots.shape))
     state, samples, costs = planning.sample_around(config, task, state, env_state, key, terminal_value=terminal_value)
     best = jnp.argmin(costs)
     state = state.replace(knots=samples[best], cost=costs[best])

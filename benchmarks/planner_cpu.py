@@ -64,9 +64,10 @@ def problem(task: str, planner: str, samples: int, backend: str, seconds: float)
     plan_task = mjzoo.envs.make(spec["env"], **overrides)
     plan_task = setup.plan_view(plan_task) if setup.plan_view else plan_task
     sim_task = mjzoo.envs.make(spec["env"], episode_steps=10**9)
+    config, hyperparams = mjzoo.planning.configure(module, fields)
     return realtime.Problem(
         module,
-        module.Config(**fields),
+        config,
         sim_task,
         plan_task,
         seconds=seconds,
@@ -74,6 +75,7 @@ def problem(task: str, planner: str, samples: int, backend: str, seconds: float)
         hooks=setup.hooks,
         success=setup.success,
         backend=backend,
+        hyperparams=hyperparams,
     )
 
 

@@ -164,6 +164,7 @@ def closed_loop_problem(
     config: SamplingConfig,
     seconds: float | None = None,
     backend: str = "auto",
+    hyperparams: Any | None = None,
     **overrides: Any,
 ) -> Problem:
     """The task's closed-loop problem (its `planning` setup): the task as the world, its
@@ -171,7 +172,8 @@ def closed_loop_problem(
     (default: the setup's, else one episode) of simulated time, on `backend` ("mjx",
     "native": C MuJoCo; "auto": native on a CPU). Registered envs run with no episode
     limit; `overrides` go to both tasks. A Playground env steps MJX itself, so it plans
-    on MJX ("auto": "mjx", with a warning on a CPU; "native" is refused)."""
+    on MJX ("auto": "mjx", with a warning on a CPU; "native" is refused). `hyperparams`:
+    the planner's numbers (None: its defaults; `mjzoo.planning.configure`)."""
     setup = planning(spec)
     build = functools.partial(make, spec, **overrides)
     if _is_playground(spec):
@@ -204,6 +206,7 @@ def closed_loop_problem(
         hooks=setup.hooks,
         success=setup.success,
         backend=backend,
+        hyperparams=hyperparams,
     )
 
 

@@ -1,4 +1,5 @@
-"""The documentation's Python examples run as written: README.md and docs/own-task.md.
+"""The documentation's Python examples run as written: README.md, docs/own-task.md and
+docs/planner-sweeps.md.
 
 Each ```python block is one test. A document's blocks share one namespace and run in
 the order the document reads (the README's PPO block trains the task its first block
@@ -19,7 +20,7 @@ from pathlib import Path
 import pytest
 
 ROOT = Path(__file__).resolve().parents[1]
-DOCS = ("README.md", "docs/own-task.md")
+DOCS = ("README.md", "docs/own-task.md", "docs/planner-sweeps.md")
 _FENCE = re.compile(r"^```python\n(.*?)^```", re.S | re.M)
 
 
@@ -51,6 +52,7 @@ NOT_RUN = {
         ),
     },
     "docs/own-task.md": {"ppo.train(": _PPO_TRAIN},
+    "docs/planner-sweeps.md": {},
 }
 
 

@@ -216,6 +216,7 @@ def record_planner(
         problem.plan_task,
         problem.hooks,
         problem.terminal_value,
+        problem.hyperparams,
         jax.random.split(key, episodes),
         limited,
     )
@@ -271,6 +272,7 @@ def _planner_episodes(
     plan_task: Any,
     hooks: closed_loop.Hooks,
     value: Any,
+    hyperparams: Any,
     keys: jax.Array,
     limited: jax.Array,
 ):
@@ -279,7 +281,9 @@ def _planner_episodes(
     def one(key):
         reset_key, run_key = jax.random.split(key)
         first = reset(sim_task, reset_key)
-        result = closed_loop.run(planner, config, sim_task, plan_task, first, run_key, num_replans, every, hooks, value)
+        result = closed_loop.run(
+            planner, config, sim_task, plan_task, first, run_key, num_replans, every, hooks, value, hyperparams
+        )
         cut = jax.tree.map(lambda x: x[:steps], (result.states, result.controls))
         return _record(sim_task, first, *cut, limited)
 

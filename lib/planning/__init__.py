@@ -1,8 +1,10 @@
 """The pieces sampling-based planners are composed from, and the closed loop they run in.
 
     splines       plans as K control knots, evaluated at any time (zero, linear, cubic)
-    sampling      SamplingConfig, PlannerState, sampling around a nominal plan, warm
-                  start, the MPPI weights and the CEM update
+    sampling      SamplingConfig (structure), SamplingHyperparams (numbers, swept by
+                  vmap), configure (both from one dict of fields), PlannerState,
+                  sampling around a nominal plan, warm start, the MPPI weights and
+                  the CEM update
     rollouts      batched rollouts of a task's own `transition` and their costs, model
                   ensembles and risk measures
     native        the same rollouts in C MuJoCo (`mujoco.rollout`), costed by the task's
@@ -24,13 +26,16 @@ from mjzoo.planning.rollouts import RISKS, Ensemble, aggregate, base_task, ensem
 from mjzoo.planning.sampling import (
     PlannerState,
     SamplingConfig,
+    SamplingHyperparams,
     cem_update,
+    configure,
     control_at,
     control_limits,
     controls,
     half_range,
     initial_state,
     mppi_weights,
+    noise_std,
     sample_around,
     sample_costs,
     sample_knots,
@@ -47,6 +52,8 @@ __all__ = [
     "Native",
     "realtime",
     "SamplingConfig",
+    "SamplingHyperparams",
+    "configure",
     "PlannerState",
     "Ensemble",
     "TerminalValue",
@@ -56,6 +63,7 @@ __all__ = [
     "base_task",
     "control_limits",
     "half_range",
+    "noise_std",
     "initial_state",
     "shift",
     "sample_knots",

@@ -7,7 +7,9 @@ simulated state; in between, the simulation applies the plan's control at its ow
 (`sampling.control_at`), so a planning task with a different timestep still lines up.
 
 The whole run is one `jax.jit` of one `lax.scan` over replans (each an inner scan over
-simulation steps): an evaluation episode costs one compile. A learned terminal value
+simulation steps): an evaluation episode costs one compile. The planner's `Hyperparams`
+are an argument of the run, not a constant: `jax.vmap` over a batch of them is a sweep
+of whole closed-loop runs in one program. A learned terminal value
 (`mjzoo.planning.learned`) is an argument of the run like the tasks: new critic weights
 run without compiling again.
 
@@ -31,7 +33,7 @@ from __future__ import annotations
 import dataclasses
 import functools
 from types import ModuleType
-from typing import Callable
+from typing import Any, Callable
 
 import jax
 
@@ -118,13 +120,20 @@ def after_rollout(hooks: Hooks, sim_state: State, planner_state: PlannerState) -
 
 
 def first_plan(
-    planner: ModuleType, config: SamplingConfig, plan_task: Task | Ensemble, sim_state: State, hooks: Hooks = Hooks()
+    planner: ModuleType,
+    config: SamplingConfig,
+    plan_task: Task | Ensemble,
+    sim_state: State,
+    hooks: Hooks = Hooks(),
+    hyperparams: Any | None = None,
 ) -> PlannerState:
-    """The planner's initial state, with the task's warm-start knots if it supplies them."""
+    """The planner's initial state holding `hyperparams` (None: the planner's defaults),
+    with the task's warm-start knots if it supplies them."""
     if hooks.warm_start is None:
-        return planner.init(config, plan_task)
+        return planner.init(config, plan_task, hyperparams)
     start = hooks.to_planner(sim_state) if hooks.to_planner else sim_state
-    return planner.init(config, plan_task, hooks.warm_start(base_task(plan_task), start, config.num_knots))
+    knots = hooks.warm_start(base_task(plan_task), start, config.num_knots)
+    return planner.init(config, plan_task, hyperparams, knots=knots)
 
 
 def sim_step(
@@ -160,15 +169,18 @@ def run(
     replan_every: int = 1,
     hooks: Hooks = Hooks(),
     terminal_value: TerminalValue | None = None,
+    hyperparams: Any | None = None,
 ) -> Result:
     """Simulates `sim_task` from `sim_state` for `num_replans x replan_every` control
     steps, replanning with `planner` (a module: `predictive_sampling`, `cem`, `mppi`)
     on `plan_task` every `replan_every` steps (either may be `Native`: its physics in C
     MuJoCo, `mjzoo.planning.native`). One jit; `planner`, `config` and the
     counts are static. `terminal_value`: None or a `jax.tree_util.Partial`
-    (`mjzoo.planning.as_terminal_value`), whose weights are arguments, not constants."""
+    (`mjzoo.planning.as_terminal_value`), whose weights are arguments, not constants.
+    `hyperparams`: the planner's `Hyperparams` (None: its defaults), also an argument:
+    vmap the run over a batch of them to sweep them in one program."""
     sim_state = complete(base_task(sim_task), sim_state)
-    planner_state = first_plan(planner, config, plan_task, sim_state, hooks)
+    planner_state = first_plan(planner, config, plan_task, sim_state, hooks, hyperparams)
 
     def period(carry, key):
         sim_state, planner_state = carry

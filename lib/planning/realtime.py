@@ -9,7 +9,7 @@ the same problem as one jitted `lax.scan` (`closed_loop.run`), timed without its
 A problem's `terminal_value` (a critic, `mjzoo.planning.learned`) reaches every replan
 as an argument of the jitted functions, its weights never baked in as constants.
 
-    problem = Problem(mppi, config, sim_task, plan_task, seconds=6.0)
+    problem = Problem(mppi, config, sim_task, plan_task, seconds=6.0, hyperparams=mppi.Hyperparams())
     result, stats = realtime(problem, key)        # stats: plan_hz, plan_latency_ms, ...
     result, stats = offline(problem, key)
 
@@ -57,7 +57,7 @@ class Problem:
 
     Attributes:
       planner: the planner module (`mjzoo.algorithms.mppi`, `cem`, `predictive_sampling`).
-      config: its `Config`.
+      config: its `Config` (structure).
       sim_task: the simulated world.
       plan_task: the planner's model of it (a `Task` or an `Ensemble`).
       seconds: simulated time to run.
@@ -69,6 +69,8 @@ class Problem:
       backend: where the physics runs, for planning and simulation alike: "mjx", or
         "native" (C MuJoCo, `mjzoo.planning.native`); "auto": native where JAX's
         default device is a CPU, MJX on a GPU.
+      hyperparams: the planner's `Hyperparams` (numbers); None: its defaults.
+        `mjzoo.planning.configure` gives (config, hyperparams) from one dict of fields.
     """
 
     planner: ModuleType
@@ -81,6 +83,7 @@ class Problem:
     success: Callable[[Any], tuple[bool, float]] | None = None
     terminal_value: TerminalValue | None = None
     backend: str = "auto"
+    hyperparams: Any | None = None
 
     def __post_init__(self) -> None:
         object.__setattr__(self, "terminal_value", as_terminal_value(self.terminal_value))
@@ -123,7 +126,7 @@ def offline(
     static = (problem.planner, problem.config)
     dynamic = (*problem.tasks, sim_state, run_key)
     counts = (problem.num_replans, problem.replan_every)
-    functions = (problem.hooks, problem.terminal_value)
+    functions = (problem.hooks, problem.terminal_value, problem.hyperparams)
     start = time.perf_counter()
     compiled = closed_loop.run.lower(*static, *dynamic, *counts, *functions).compile(compiler_options)
     compile_s = time.perf_counter() - start
@@ -164,7 +167,9 @@ def _compiled(problem: Problem, key: jax.Array, total_steps: int) -> _Compiled:
     plan_keys = list(committed(jax.random.split(plan_key, total_steps + 1)))
     sim_state = committed(reset(problem.sim_task, reset_key))
     planner_state = committed(
-        jax.jit(lambda s: closed_loop.first_plan(planner, config, plan_task, s, hooks))(sim_state)
+        jax.jit(lambda s, h: closed_loop.first_plan(planner, config, plan_task, s, hooks, h))(
+            sim_state, problem.hyperparams
+        )
     )
     # The loop carries both states packed, a few arrays each (`mjzoo.tree.Packing`): a
     # simulation state's ~100 leaves cost more to pass through a jit than a small step.

@@ -10,6 +10,7 @@ from __future__ import annotations
 
 import dataclasses
 import math
+import numbers
 from typing import Any, Callable
 
 import jax
@@ -96,20 +97,30 @@ def rollout_costs(
     return costs, dt.astype(jnp.float32)
 
 
-def aggregate(costs: Array, risk: str = "mean", alpha: float = 0.25) -> Array:
+def aggregate(costs: Array, risk: str = "mean", alpha: float | Array = 0.25) -> Array:
     """[N] one cost per sample from [M, N] costs over models.
 
     mean:  (1/M) sum_m c_m
     worst: max_m c_m
     cvar:  mean of the ceil(alpha M) largest c_m (the expected cost in the worst alpha tail)
+
+    `alpha` may be traced ([]: a swept hyperparameter); the tail is then a mask over the
+    models sorted worst first, so its size need not be known when tracing.
     """
     if risk == "mean":
         return jnp.mean(costs, axis=0)
     if risk == "worst":
         return jnp.max(costs, axis=0)
     if risk == "cvar":
-        tail = max(1, math.ceil(alpha * costs.shape[0] - 1e-9))  # 0.28 * 25 is 7.000000000000001
-        return jnp.mean(jax.lax.top_k(costs.T, tail)[0], axis=-1)
+        num_models = costs.shape[0]
+        if isinstance(alpha, numbers.Real):
+            tail = max(1, math.ceil(alpha * num_models - 1e-9))  # 0.28 * 25 is 7.000000000000001
+            return jnp.mean(jax.lax.top_k(costs.T, tail)[0], axis=-1)
+        # float32: 0.28 * 25 may land just above 7, hence the larger slack.
+        tail = jnp.maximum(1.0, jnp.ceil(jnp.asarray(alpha, jnp.float32) * num_models - 1e-4))
+        worst_first = -jnp.sort(-costs, axis=0)
+        in_tail = jnp.arange(num_models)[:, None] < tail
+        return jnp.sum(jnp.where(in_tail, worst_first, 0.0), axis=0) / tail
     raise ValueError(f"planning.aggregate: unknown risk {risk!r}; choose one of {RISKS}")
 
 

@@ -8,6 +8,13 @@ is the planning task's control step, measured from its rollouts, so a simulation
 different timestep can ask for the control at any time (`control_at`). Samples are
 costed by `mjzoo.planning.rollouts`.
 
+A planner's settings come in two parts. Its `Config` is structure (sizes, the spline
+kind, the risk measure): a static argument of `plan`, so a new value compiles again. Its
+`Hyperparams` are numbers (noise scale, MPPI's temperature, CEM's std bounds): leaves of
+`PlannerState.hyperparams`, so `jax.vmap` over planner states sweeps them in one program
+and a new value runs without compiling. `configure` splits one flat dict of fields, the
+form env registries and the command line give, into the two.
+
 `predictive_sampling`, `cem` and `mppi` in `mjzoo.algorithms` combine these pieces;
 each is a few lines on top of `sample_around`.
 """
@@ -15,6 +22,10 @@ each is a few lines on top of `sample_around`.
 from __future__ import annotations
 
 import dataclasses
+import numbers
+import typing
+from types import ModuleType
+from typing import Any, Mapping
 
 import jax
 import jax.numpy as jnp
@@ -27,7 +38,10 @@ from mjzoo.types import State, Task
 
 __all__ = [
     "SamplingConfig",
+    "SamplingHyperparams",
     "PlannerState",
+    "configure",
+    "noise_std",
     "control_limits",
     "half_range",
     "initial_state",
@@ -46,16 +60,15 @@ Array = jax.Array
 
 @dataclasses.dataclass(frozen=True, kw_only=True)
 class SamplingConfig:
-    """What every sampling planner shares (each algorithm's `Config` extends it).
+    """The structure every sampling planner shares (each algorithm's `Config` extends it):
+    sizes and kinds, a static argument of `plan`. The numbers are `SamplingHyperparams`.
 
     Attributes:
       num_samples: rollouts per replan (N), the nominal included where the method keeps it.
       horizon_steps: control steps of the planning task per rollout (H).
       num_knots: spline knots over the horizon (K).
       interpolation: "zero", "linear" or "cubic" (`mjzoo.planning.splines`).
-      noise_scale: sampling std as a fraction of each actuator's half control range.
       risk: how costs over an `Ensemble` of models become one: "mean", "worst" or "cvar".
-      cvar_alpha: the worst fraction of models CVaR averages over.
       unroll: `lax.scan` unroll of the rollout loop (a GPU latency knob).
     """
 
@@ -63,26 +76,78 @@ class SamplingConfig:
     horizon_steps: int = 25
     num_knots: int = 4
     interpolation: str = "cubic"
-    noise_scale: float = 0.3
     risk: str = "mean"
-    cvar_alpha: float = 0.25
     unroll: int = 1
 
     def __post_init__(self) -> None:
-        name = type(self).__module__.rsplit(".", 1)[-1] + ".Config"
         checks = {
             "num_samples": self.num_samples >= 2,
             "horizon_steps": self.horizon_steps >= 1,
             "num_knots": 1 <= self.num_knots <= self.horizon_steps,
-            "noise_scale": self.noise_scale >= 0,
             "interpolation": self.interpolation in splines.METHODS,
             "risk": self.risk in RISKS,
-            "cvar_alpha": 0 < self.cvar_alpha <= 1,
             "unroll": self.unroll >= 1,
         }
-        for field, ok in checks.items():
-            if not ok:
-                raise ValueError(f"{name}: invalid {field}={getattr(self, field)!r}")
+        _refuse(self, checks)
+
+
+@jax.tree_util.register_dataclass
+@dataclasses.dataclass(frozen=True, kw_only=True)
+class SamplingHyperparams:
+    """The numbers every sampling planner shares (each algorithm's `Hyperparams` extends
+    it): pytree leaves, kept in `PlannerState.hyperparams`, so they are swept by vmapping
+    over planner states and changed without compiling again.
+
+    Each field is a number or an array of them ([] for one planner; [B] for a batch that
+    `jax.vmap` maps over). Values that are concrete are checked at construction; traced
+    ones (inside a jit or vmap) are not.
+
+    Attributes:
+      noise_scale: sampling std as a fraction of each actuator's half control range.
+      cvar_alpha: the worst fraction of models CVaR averages over (with risk="cvar").
+    """
+
+    noise_scale: float | Array = 0.3
+    cvar_alpha: float | Array = 0.25
+
+    def __post_init__(self) -> None:
+        for field in dataclasses.fields(self):
+            value = getattr(self, field.name)
+            if isinstance(value, (str, bool)):
+                raise ValueError(f"{_name(self)}: {field.name}={value!r} must be a number")
+        if _concrete(self):
+            _refuse(self, self._checks())
+
+    def _checks(self) -> dict[str, Any]:
+        """Field -> whether its value is in range (elementwise for arrays)."""
+        return {"noise_scale": np.greater_equal(self.noise_scale, 0), "cvar_alpha": _within(self.cvar_alpha, 0, 1)}
+
+
+def _within(value: Any, low: float, high: float) -> np.ndarray:
+    """low < value <= high, elementwise."""
+    return np.logical_and(np.greater(value, low), np.less_equal(value, high))
+
+
+def _concrete(hyperparams: SamplingHyperparams) -> bool:
+    """Whether every field holds a concrete number or array (not a tracer, nor the
+    placeholders JAX builds pytree nodes with)."""
+    values = [getattr(hyperparams, f.name) for f in dataclasses.fields(hyperparams)]
+    return all(
+        isinstance(v, (numbers.Real, np.ndarray)) or (isinstance(v, jax.Array) and not isinstance(v, jax.core.Tracer))
+        for v in values
+    )
+
+
+def _name(settings: Any) -> str:
+    """ "mppi.Config", "cem.Hyperparams", ...: the name users write."""
+    return f"{type(settings).__module__.rsplit('.', 1)[-1]}.{type(settings).__name__}"
+
+
+def _refuse(settings: Any, checks: dict[str, Any]) -> None:
+    """ValueError naming the first field whose check fails (`mppi.Config: invalid ...`)."""
+    for field, ok in checks.items():
+        if not np.all(ok):
+            raise ValueError(f"{_name(settings)}: invalid {field}={getattr(settings, field)!r}")
 
 
 @jax.tree_util.register_dataclass
@@ -97,6 +162,9 @@ class PlannerState:
       time: [] environment time (s) at the plan's first knot.
       dt: [] control step of the planning task (s); 0 until the first replan.
       cost: [] cost of the plan chosen at the last replan (inf before).
+      hyperparams: the planner's `Hyperparams` (float32 [] leaves), which `plan` reads:
+        a batch of states vmapped over is a sweep (None: a bare plan, for the pieces
+        here that only evaluate it).
     """
 
     knots: Array
@@ -104,6 +172,7 @@ class PlannerState:
     time: Array
     dt: Array
     cost: Array
+    hyperparams: Any = None
 
     def replace(self, **changes) -> "PlannerState":
         return dataclasses.replace(self, **changes)
@@ -123,23 +192,92 @@ def half_range(task: Task | Ensemble | native.Native) -> np.ndarray:
     return np.where(np.isfinite(high - low), (high - low) / 2, 1.0).astype(np.float32)
 
 
+def noise_std(noise_scale: float | Array, task: Task | Ensemble | native.Native, shape: tuple[int, int]) -> Array:
+    """[K, nu] sampling std in control units: `noise_scale` ([]) x half of each actuator's
+    control range (x 1 where unlimited), broadcast to the plan's `shape` (K, nu)."""
+    return jnp.broadcast_to(jnp.asarray(noise_scale, jnp.float32) * half_range(task), shape)
+
+
 def initial_state(
-    config: SamplingConfig, task: Task | Ensemble | native.Native, knots: Array | None = None
+    config: SamplingConfig,
+    task: Task | Ensemble | native.Native,
+    hyperparams: SamplingHyperparams | None = None,
+    knots: Array | None = None,
 ) -> PlannerState:
     """A plan of `knots` ([K, nu]; default: zero controls, clipped into the limits) with
-    std = noise_scale x half the control range (x 1 for unlimited actuators).
+    std = noise_scale x half the control range (x 1 for unlimited actuators), holding
+    `hyperparams` (default `SamplingHyperparams()`) as float32 leaves.
 
     Committed to the device (unless traced), like the states `plan` returns: a host loop
     of ``jax.jit(planner.plan, static_argnums=0)`` then compiles once."""
+    hyperparams = SamplingHyperparams() if hyperparams is None else hyperparams
+    if not isinstance(hyperparams, SamplingHyperparams):
+        raise TypeError(
+            f"hyperparams must be a planner's Hyperparams (e.g. mppi.Hyperparams), got {type(hyperparams).__name__}; "
+            "warm-start knots go by knots="
+        )
     low, high = control_limits(task)
     shape = (config.num_knots, low.shape[0])
     if knots is None:
         knots = jnp.clip(jnp.zeros(shape, jnp.float32), low, high)
     elif jnp.shape(knots) != shape:
         raise ValueError(f"warm-start knots must have shape {shape} (num_knots, nu), got {jnp.shape(knots)}")
-    std = jnp.broadcast_to(jnp.float32(config.noise_scale) * half_range(task), shape)
+    hyperparams = jax.tree.map(lambda x: jnp.asarray(x, jnp.float32), hyperparams)
+    std = noise_std(hyperparams.noise_scale, task, shape)
     zero, inf = jnp.zeros((), jnp.float32), jnp.full((), jnp.inf, jnp.float32)
-    return committed(PlannerState(jnp.asarray(knots, jnp.float32), std, zero, zero, inf))
+    return committed(PlannerState(jnp.asarray(knots, jnp.float32), std, zero, zero, inf, hyperparams))
+
+
+def check_hyperparams(hyperparams: Any, expected: type) -> None:
+    """TypeError unless `hyperparams` is an `expected` (the planner's own `Hyperparams`):
+    another planner's would fail only when traced, on a missing field."""
+    if not isinstance(hyperparams, expected):
+        raise TypeError(
+            f"{expected.__module__.rsplit('.', 1)[-1]}.init: hyperparams must be a {expected.__qualname__} "
+            f"of that module, got {type(hyperparams).__module__}.{type(hyperparams).__qualname__}; "
+            "warm-start knots go by knots="
+        )
+
+
+def configure(planner: ModuleType, fields: Mapping[str, Any]) -> tuple[SamplingConfig, SamplingHyperparams]:
+    """`planner`'s (Config, Hyperparams) from one flat dict of their fields, the form env
+    registries and ``--config NAME=VALUE`` give: ``{"num_samples": 128, "temperature": 0.1}``.
+
+    Each value is checked against its field's type first (an int field takes 1e3, not
+    1.5; a number field takes ints, floats and, for a sweep, arrays), then by the
+    classes' own range checks. Raises ValueError naming an unknown field or a bad value.
+    """
+    name = planner.__name__.rsplit(".", 1)[-1]
+    classes = (planner.Config, planner.Hyperparams)
+    owner = {f.name: cls for cls in classes for f in dataclasses.fields(cls)}
+    unknown = sorted(set(fields) - set(owner))
+    if unknown:
+        raise ValueError(f"{name}: unknown field(s) {unknown}; fields: {sorted(owner)}")
+    split: dict[type, dict[str, Any]] = {cls: {} for cls in classes}
+    for field, value in fields.items():
+        hint = typing.get_type_hints(owner[field])[field]
+        split[owner[field]][field] = _as_field(name, field, value, hint)
+    return planner.Config(**split[planner.Config]), planner.Hyperparams(**split[planner.Hyperparams])
+
+
+def _as_field(planner: str, field: str, value: Any, hint: Any) -> Any:
+    """`value` as the field annotated `hint` holds it (1e3 as an int), or ValueError."""
+    if hint is int:
+        if isinstance(value, numbers.Integral) and not isinstance(value, bool):
+            return int(value)
+        if isinstance(value, float) and value.is_integer():
+            return int(value)
+        raise ValueError(f"{planner}: {field}={value!r} must be an int")
+    if hint is str:
+        if isinstance(value, str):
+            return value
+        raise ValueError(f"{planner}: {field}={value!r} must be a string")
+    # A hyperparameter: a number, or an array of them for a sweep.
+    if isinstance(value, numbers.Real) and not isinstance(value, bool):
+        return float(value)
+    if isinstance(value, (np.ndarray, jax.Array)) and jnp.issubdtype(value.dtype, jnp.number):
+        return value
+    raise ValueError(f"{planner}: {field}={value!r} must be a number")
 
 
 def shift(config: SamplingConfig, state: PlannerState, now: Array) -> PlannerState:
@@ -190,13 +328,15 @@ def sample_costs(
     samples: Array,
     key: Array,
     terminal_value: TerminalValue | None = None,
+    cvar_alpha: float | Array = 0.25,
 ) -> tuple[Array, Array]:
     """([N] risk-aggregated costs of knot samples [N, K, nu] from `state`, [] dt), each
-    less the `terminal_value` of its final state if one is given."""
+    less the `terminal_value` of its final state if one is given; `cvar_alpha` ([]) is
+    the tail CVaR averages over when ``config.risk == "cvar"``."""
     sequences = controls(config, samples, *control_limits(task))
     costs_of = native.rollout_costs if isinstance(task, native.Native) else rollout_costs
     costs, dt = costs_of(task, state, sequences, key, terminal_value, config.unroll)
-    costs = aggregate(costs, config.risk, config.cvar_alpha)
+    costs = aggregate(costs, config.risk, cvar_alpha)
     # A sample whose physics blew up must never win.
     return jnp.where(jnp.isfinite(costs), costs, jnp.inf), dt
 
@@ -213,7 +353,8 @@ def sample_around(
     """The step every sampling planner starts with: shift the plan to `env_state`'s time,
     sample knots around it (sample 0 = the nominal) with `std` ([K, nu] or [N, K, nu];
     default `state.std`), and cost them, with the final states valued by
-    `terminal_value` (a `(model, state) -> []` `jax.tree_util.Partial`, or None).
+    `terminal_value` (a `(model, state) -> []` `jax.tree_util.Partial`, or None) and
+    models aggregated with `state.hyperparams.cvar_alpha`.
 
     Returns (the shifted state with the measured dt, [N, K, nu] samples, [N] costs).
     """
@@ -222,7 +363,8 @@ def sample_around(
     low, high = control_limits(task)
     std = state.std if std is None else std
     samples = sample_knots(sample_key, state.knots, std, config.num_samples, low, high)
-    costs, dt = sample_costs(config, task, env_state, samples, rollout_key, terminal_value)
+    alpha = state.hyperparams.cvar_alpha
+    costs, dt = sample_costs(config, task, env_state, samples, rollout_key, terminal_value, alpha)
     return state.replace(dt=dt), samples, costs
 
 

@@ -30,8 +30,8 @@ PLANNERS = {"predictive_sampling": predictive_sampling, "cem": cem, "mppi": mppi
 def setup_for(env: str, planner: str, backend: str = "auto") -> realtime.Problem:
     """The env's documented closed-loop problem for `planner`."""
     module = PLANNERS[planner]
-    config = module.Config(**mjzoo.envs.hyperparameters(env, planner))
-    return mjzoo.envs.closed_loop_problem(env, module, config, backend=backend)
+    config, hyperparams = planning.configure(module, mjzoo.envs.hyperparameters(env, planner))
+    return mjzoo.envs.closed_loop_problem(env, module, config, backend=backend, hyperparams=hyperparams)
 
 
 ENVS = ["pendulum_swingup", "cartpole_swingup", "cylinder_push", "point_mass"]
@@ -109,8 +109,11 @@ def test_robust_planning_over_an_ensemble_swings_up_a_heavier_pendulum(risk):
         model=setup.sim_task.model.replace(body_mass=setup.sim_task.model.body_mass * 1.3)
     )
     models = planning.ensemble(setup.plan_task, jax.tree_util.Partial(_heavier, 0.9, 1.5), 4, jax.random.key(7))
-    config = dataclasses.replace(setup.config, risk=risk, cvar_alpha=0.5)
-    robust = dataclasses.replace(setup, sim_task=sim_task, plan_task=models, config=config, seconds=8.0)
+    config = dataclasses.replace(setup.config, risk=risk)
+    hyperparams = dataclasses.replace(setup.hyperparams, cvar_alpha=0.5)
+    robust = dataclasses.replace(
+        setup, sim_task=sim_task, plan_task=models, config=config, hyperparams=hyperparams, seconds=8.0
+    )
     result, _ = realtime.offline(robust, jax.random.key(0), OPTIMIZED)
     solved, score = robust.success(jax.device_get(result.states))
     assert solved, f"{risk}: |angle| over the last second up to {score:.3f} rad"

@@ -22,7 +22,8 @@ from mjzoo.algorithms import cem, mppi, predictive_sampling
 from mjzoo.planning import closed_loop, learned, realtime
 
 H, K = 6, 3  # 6 planning steps of 0.05 s: a full push moves the 0.3 kg mass ~0.15 m
-CONFIG = mppi.Config(num_samples=16, horizon_steps=H, num_knots=K, temperature=0.05)
+CONFIG = mppi.Config(num_samples=16, horizon_steps=H, num_knots=K)
+HYPERPARAMS = mppi.Hyperparams(temperature=0.05)
 WEIGHT = 1000.0  # the value dominates the task's own reward (in [-0.01, 1] per step)
 
 
@@ -93,8 +94,9 @@ def test_a_terminal_value_that_is_not_callable_is_rejected_by_name(value):
 
 @pytest.mark.parametrize("planner", [predictive_sampling, cem, mppi], ids=lambda m: m.__name__.rsplit(".", 1)[-1])
 def test_init_returns_a_committed_state(planner):
-    config = planner.Config(horizon_steps=H, num_knots=K, noise_scale=0.3)
-    for state in [planner.init(config, _task()), planner.init(config, _task(), jnp.full((K, 2), 0.5))]:
+    config, hyperparams = planner.Config(horizon_steps=H, num_knots=K), planner.Hyperparams(noise_scale=0.3)
+    warm = planner.init(config, _task(), hyperparams, knots=jnp.full((K, 2), 0.5))
+    for state in [planner.init(config, _task(), hyperparams), warm]:
         assert all(_committed_leaves(state))
         np.testing.assert_allclose(state.std, 0.3, rtol=1e-6)
     np.testing.assert_array_equal(state.knots, 0.5)
@@ -143,7 +145,7 @@ def test_a_host_loop_of_jitted_plan_traces_once_and_heads_where_the_value_says()
     }
     pushes, costs = {}, {}
     for name, critic in critics.items():
-        state = mppi.init(CONFIG, task)
+        state = mppi.init(CONFIG, task, HYPERPARAMS)
         for seed in range(3):
             state, controls = plan(CONFIG, task, state, env_state, jax.random.key(seed), terminal_value=critic)
         pushes[name], costs[name] = float(jnp.mean(controls[:, 0])), float(state.cost)
@@ -165,7 +167,7 @@ def test_closed_loop_runs_with_a_terminal_value_as_an_argument():
     run = functools.partial(closed_loop.run, traced, CONFIG, task, task, sim_state, jax.random.key(3), 4, 2)
     start = sim_state.data.qpos
     for sign in (1.0, -1.0):
-        result = run(terminal_value=_critic(start + sign * jnp.array([0.0, 0.3])))
+        result = run(terminal_value=_critic(start + sign * jnp.array([0.0, 0.3])), hyperparams=HYPERPARAMS)
         _assert_moved_along_y(result.states.data.qpos[-1] - start, sign)
 
 
@@ -174,7 +176,9 @@ def test_a_problems_terminal_value_reaches_the_offline_run():
     key = jax.random.key(4)
     start = mjzoo.reset(_task(), jax.random.split(key)[0]).data.qpos
     value = functools.partial(_quadratic, WEIGHT, start - jnp.array([0.0, 0.3]))  # a plain function: wrapped
-    problem = realtime.Problem(mppi, CONFIG, _task(), _task(), seconds=0.4, replan_every=2, terminal_value=value)
+    problem = realtime.Problem(
+        mppi, CONFIG, _task(), _task(), seconds=0.4, replan_every=2, terminal_value=value, hyperparams=HYPERPARAMS
+    )
     assert isinstance(problem.terminal_value, jax.tree_util.Partial) and problem.num_replans == 4
     result, _ = realtime.offline(problem, key)
     _assert_moved_along_y(result.states.data.qpos[-1] - start, -1.0)

@@ -32,7 +32,7 @@ ROLLOUTS = 2  # control sequences per `rollout_costs` call: one batch shape, one
 CONFIGS = {
     predictive_sampling: predictive_sampling.Config(num_samples=8, horizon_steps=H, num_knots=K),
     cem: cem.Config(num_samples=8, horizon_steps=H, num_knots=K, num_elites=2),
-    mppi: mppi.Config(num_samples=8, horizon_steps=H, num_knots=K, temperature=0.1),
+    mppi: mppi.Config(num_samples=8, horizon_steps=H, num_knots=K),
 }
 
 
@@ -334,15 +334,18 @@ def test_shift_without_a_measured_dt_or_backwards_in_time_keeps_the_knots():
 
 
 def test_initial_state_on_point_mass():
-    config = predictive_sampling.Config(horizon_steps=H, num_knots=K, noise_scale=0.3)
-    state = planning.initial_state(config, _task())
+    config = predictive_sampling.Config(horizon_steps=H, num_knots=K)
+    state = planning.initial_state(config, _task(), predictive_sampling.Hyperparams(noise_scale=0.3))
     chex.assert_shape([state.knots, state.std], (K, NU))
     np.testing.assert_array_equal(state.knots, np.zeros((K, NU)))
     np.testing.assert_allclose(state.std, 0.3, rtol=1e-6)  # ctrlrange [-1, 1]: half range 1
     assert float(state.time) == 0.0 and float(state.dt) == 0.0 and float(state.cost) == np.inf
     chex.assert_type([state.knots, state.std, state.time, state.dt, state.cost], jnp.float32)
+    # The hyperparameters are kept as float32 [] leaves: a sweep vmaps over them.
+    chex.assert_trees_all_equal(state.hyperparams, predictive_sampling.Hyperparams(noise_scale=jnp.float32(0.3)))
+    chex.assert_type(jax.tree.leaves(state.hyperparams), jnp.float32)
     warm = jnp.full((K, NU), 0.5)
-    np.testing.assert_array_equal(planning.initial_state(config, _task(), warm).knots, warm)
+    np.testing.assert_array_equal(planning.initial_state(config, _task(), knots=warm).knots, warm)
 
 
 def test_initial_state_std_is_noise_scale_times_half_range():
@@ -356,7 +359,7 @@ def test_initial_state_std_is_noise_scale_times_half_range():
     np.testing.assert_array_equal(low, [-np.inf, 0.5])
     np.testing.assert_array_equal(high, [np.inf, 1.5])
     np.testing.assert_array_equal(planning.half_range(task), [1.0, 0.5])
-    state = planning.initial_state(cem.Config(horizon_steps=H, num_knots=K, noise_scale=0.4), task)
+    state = cem.init(cem.Config(horizon_steps=H, num_knots=K), task, cem.Hyperparams(noise_scale=0.4))
     np.testing.assert_allclose(state.std, np.broadcast_to([0.4, 0.2], (K, NU)), rtol=1e-6)
     np.testing.assert_array_equal(state.knots, np.broadcast_to([0.0, 0.5], (K, NU)))
 
@@ -364,9 +367,16 @@ def test_initial_state_std_is_noise_scale_times_half_range():
 def test_initial_state_rejects_warm_start_knots_of_the_wrong_shape():
     config = predictive_sampling.Config(horizon_steps=H, num_knots=K)
     with pytest.raises(ValueError, match=r"warm-start knots must have shape \(3, 2\).*got \(2, 3\)"):
-        planning.initial_state(config, _task(), jnp.zeros((2, 3)))
+        planning.initial_state(config, _task(), knots=jnp.zeros((2, 3)))
     with pytest.raises(ValueError, match="warm-start knots"):
-        mppi.init(CONFIGS[mppi], _task(), jnp.zeros((K,)))
+        mppi.init(CONFIGS[mppi], _task(), knots=jnp.zeros((K,)))
+
+
+def test_init_refuses_another_planners_hyperparams_or_knots_in_their_place():
+    with pytest.raises(TypeError, match=r"mppi.init: hyperparams must be a Hyperparams.*cem.Hyperparams"):
+        mppi.init(CONFIGS[mppi], _task(), cem.Hyperparams())
+    with pytest.raises(TypeError, match="warm-start knots go by knots="):
+        cem.init(CONFIGS[cem], _task(), jnp.zeros((K, NU)))
 
 
 # --- Config validation --------------------------------------------------------------------
@@ -375,22 +385,14 @@ def test_initial_state_rejects_warm_start_knots_of_the_wrong_shape():
 @pytest.mark.parametrize(
     "module,kwargs,field",
     [
-        (mppi, dict(temperature=0.0), "temperature"),
-        (mppi, dict(temperature=-1.0), "temperature"),
         (cem, dict(num_samples=8, num_elites=9), "num_elites"),
         (cem, dict(num_elites=0), "num_elites"),
-        (cem, dict(sigma_min=0.5, sigma_max=0.1), "sigma_max"),
-        (cem, dict(sigma_min=-0.1), "sigma_min"),
-        (cem, dict(explore_fraction=1.0), "explore_fraction"),
         (predictive_sampling, dict(interpolation="quadratic"), "interpolation"),
         (mppi, dict(risk="median"), "risk"),
-        (cem, dict(cvar_alpha=0.0), "cvar_alpha"),
-        (predictive_sampling, dict(cvar_alpha=1.5), "cvar_alpha"),
         (predictive_sampling, dict(num_samples=1), "num_samples"),
         (predictive_sampling, dict(horizon_steps=0), "horizon_steps"),
         (mppi, dict(horizon_steps=5, num_knots=6), "num_knots"),
         (cem, dict(num_knots=0), "num_knots"),
-        (mppi, dict(noise_scale=-0.1), "noise_scale"),
         (predictive_sampling, dict(unroll=0), "unroll"),
     ],
 )
@@ -400,9 +402,85 @@ def test_config_rejects_out_of_range_values_naming_the_field(module, kwargs, fie
         module.Config(**kwargs)
 
 
+HYPERPARAMS_OUT_OF_RANGE = [
+    (mppi, dict(temperature=0.0), "temperature"),
+    (mppi, dict(temperature=-1.0), "temperature"),
+    (cem, dict(sigma_min=0.5, sigma_max=0.1), "sigma_max"),
+    (cem, dict(sigma_min=-0.1), "sigma_min"),
+    (cem, dict(explore_fraction=1.0), "explore_fraction"),
+    (cem, dict(cvar_alpha=0.0), "cvar_alpha"),
+    (predictive_sampling, dict(cvar_alpha=1.5), "cvar_alpha"),
+    (mppi, dict(noise_scale=-0.1), "noise_scale"),
+]
+
+
+@pytest.mark.parametrize("module,kwargs,field", HYPERPARAMS_OUT_OF_RANGE)
+def test_hyperparams_reject_out_of_range_values_naming_the_field(module, kwargs, field):
+    name = module.__name__.rsplit(".", 1)[-1]
+    with pytest.raises(ValueError, match=rf"^{name}\.Hyperparams: invalid {field}="):
+        module.Hyperparams(**kwargs)
+    # A batch for a sweep is checked elementwise; traced values are not checked.
+    batch = {k: np.array([v, v]) for k, v in kwargs.items()}
+    with pytest.raises(ValueError, match=rf"invalid {field}="):
+        module.Hyperparams(**batch)
+    jax.jit(lambda values: jax.tree.leaves(module.Hyperparams(**values)))(batch)
+
+
+def test_hyperparams_refuse_a_string_or_a_bool_naming_the_field():
+    with pytest.raises(ValueError, match=r"^mppi\.Hyperparams: temperature='hot' must be a number"):
+        mppi.Hyperparams(temperature="hot")
+    with pytest.raises(ValueError, match=r"^cem\.Hyperparams: sigma_min=True must be a number"):
+        cem.Hyperparams(sigma_min=True)
+
+
 def test_configs_are_hashable_static_arguments():
     for module, config in CONFIGS.items():
         assert hash(config) == hash(module.Config(**{f: getattr(config, f) for f in config.__dataclass_fields__}))
+
+
+# --- configure: one flat dict of fields -> (Config, Hyperparams) -------------------------
+
+
+def test_configure_splits_a_flat_dict_into_structure_and_numbers():
+    fields = {"num_samples": 64, "horizon_steps": 1e1, "temperature": 1, "noise_scale": 0.2, "risk": "worst"}
+    config, hyperparams = planning.configure(mppi, fields)
+    assert config == mppi.Config(num_samples=64, horizon_steps=10, risk="worst")
+    assert hyperparams == mppi.Hyperparams(temperature=1.0, noise_scale=0.2)
+    assert type(config.horizon_steps) is int and type(hyperparams.temperature) is float
+    config, hyperparams = planning.configure(cem, {"num_elites": 4, "sigma_min": 0.2})
+    assert (config.num_elites, hyperparams.sigma_min) == (4, 0.2)
+    assert planning.configure(predictive_sampling, {}) == (
+        predictive_sampling.Config(),
+        predictive_sampling.Hyperparams(),
+    )
+    # Arrays pass through as they are: a batch of hyperparameters for a sweep.
+    temps = np.array([0.1, 0.2])
+    assert planning.configure(mppi, {"temperature": temps})[1].temperature is temps
+
+
+@pytest.mark.parametrize(
+    "module,fields,message",
+    [
+        (mppi, {"temprature": 0.1}, r"^mppi: unknown field\(s\) \['temprature'\]; fields: .*'temperature'"),
+        (cem, {"temperature": 0.1}, r"^cem: unknown field\(s\) \['temperature'\]"),
+        (mppi, {"num_samples": "many"}, r"^mppi: num_samples='many' must be an int"),
+        (mppi, {"num_samples": 1.5}, r"num_samples=1.5 must be an int"),
+        (mppi, {"num_samples": True}, r"num_samples=True must be an int"),
+        (mppi, {"temperature": "hot"}, r"^mppi: temperature='hot' must be a number"),
+        (mppi, {"interpolation": 3}, r"interpolation=3 must be a string"),
+        (mppi, {"temperature": 0.0}, r"^mppi\.Hyperparams: invalid temperature=0.0"),
+        (cem, {"num_elites": 0}, r"^cem\.Config: invalid num_elites=0"),
+    ],
+)
+def test_configure_names_an_unknown_field_or_a_bad_value(module, fields, message):
+    with pytest.raises(ValueError, match=message):
+        planning.configure(module, fields)
+
+
+def test_every_env_planning_setup_configures():
+    for name in ("pendulum_swingup", "cartpole_swingup", "point_mass", "cylinder_push"):
+        for module in CONFIGS:
+            planning.configure(module, envs.hyperparameters(name, module.__name__.rsplit(".", 1)[-1]))
 
 
 # --- rollout_costs on point_mass ----------------------------------------------------------

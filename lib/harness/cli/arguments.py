@@ -22,6 +22,7 @@ __all__ = [
     "parse_assignments",
     "algorithm_module",
     "build_config",
+    "build_planner",
     "episode_steps",
     "slug",
     "ALGORITHMS",
@@ -94,6 +95,19 @@ def build_config(module: ModuleType, spec: str, overrides: dict[str, Any], what:
         if values[name] is _MISMATCH:
             raise UsageError(f"{what}: {name}={value!r} must be {_describe(hints[name])}")
     return module.Config(**values)
+
+
+def build_planner(module: ModuleType, spec: str, overrides: dict[str, Any], what: str = "--config") -> tuple[Any, Any]:
+    """A planner's (Config, Hyperparams): the task's fields, then `overrides`, split and
+    checked by `mjzoo.planning.configure` (the planners' one reader of a flat dict)."""
+    from mjzoo.planning import configure
+
+    name = module.__name__.split(".")[-1]
+    values = {**mjzoo.envs.hyperparameters(spec, name), **overrides}
+    try:
+        return configure(module, values)
+    except ValueError as e:  # "mppi: unknown field(s) ...": the flag says where it came from
+        raise UsageError(f"{what}: {str(e).removeprefix(f'{name}: ')}") from None
 
 
 def _as_type(value: Any, hint: Any) -> Any:

@@ -23,6 +23,7 @@ from mjzoo.harness.cli.arguments import (
     algorithm_module,
     at_least_one,
     build_config,
+    build_planner,
     checking,
     episode_steps,
     parse_assignments,
@@ -355,11 +356,13 @@ def plan(
                 raise UsageError(f"{flag} must be > 0, got {value}")
         mjzoo.envs.planning(env)
         module = algorithm_module(algorithm, PLANNERS)
-        cfg = build_config(module, env, parse_assignments(config, "--config"))
+        cfg, hyperparams = build_planner(module, env, parse_assignments(config, "--config"))
         out = out or Path("runs") / f"{slug(env)}-{algorithm}-plan"
         runs.refuse_existing(out, PLAN_FILES, "choose a new --out")
         overrides = {**parse_assignments(env_overrides, "--env-overrides"), **({"impl": impl} if impl else {})}
-        problem = mjzoo.envs.closed_loop_problem(env, module, cfg, seconds, backend=backend, **overrides)
+        problem = mjzoo.envs.closed_loop_problem(
+            env, module, cfg, seconds, backend=backend, hyperparams=hyperparams, **overrides
+        )
         problem.tasks  # noqa: B018 (native tasks are checked here: a refusal is one line)
     key = jax.random.key(seed)
     result, stats = realtime.offline(problem, key) if offline else realtime.realtime(problem, key, plan_hz)

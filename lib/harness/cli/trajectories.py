@@ -19,7 +19,7 @@ from mjzoo.harness.cli.arguments import (
     UsageError,
     algorithm_module,
     at_least_one,
-    build_config,
+    build_planner,
     checking,
     episode_steps,
     parse_assignments,
@@ -123,10 +123,11 @@ def _problem(
     if steps is not None:
         at_least_one(steps=steps)
     module = algorithm_module(name, PLANNERS)
-    cfg = build_config(module, spec, parse_assignments(config, "--config"))
+    cfg, hyperparams = build_planner(module, spec, parse_assignments(config, "--config"))
     overrides = parse_assignments(env_overrides, "--env-overrides")
-    problem = mjzoo.envs.closed_loop_problem(spec, module, cfg, **overrides)
-    about = {"planner": name, "task": spec, "env_overrides": overrides, "config": _json(_fields(cfg))}
+    problem = mjzoo.envs.closed_loop_problem(spec, module, cfg, hyperparams=hyperparams, **overrides)
+    fields = {**_fields(cfg), **_fields(hyperparams)}
+    about = {"planner": name, "task": spec, "env_overrides": overrides, "config": _json(fields)}
     return problem, about
 
 

@@ -20,7 +20,7 @@ from mjzoo.harness.cli.arguments import (
     UsageError,
     algorithm_module,
     at_least_one,
-    build_config,
+    build_planner,
     checking,
     parse_assignments,
 )
@@ -197,8 +197,9 @@ def _source(
     if planner is None:
         return viewer.env(mjzoo.envs.make(target, **overrides), controls, num_envs, seed)
     module = algorithm_module(planner, PLANNERS)
-    cfg = build_config(module, target, parse_assignments(config, "--config"))
-    return viewer.planner(mjzoo.envs.closed_loop_problem(target, module, cfg, **overrides), seed, trace=trace)
+    cfg, hyperparams = build_planner(module, target, parse_assignments(config, "--config"))
+    problem = mjzoo.envs.closed_loop_problem(target, module, cfg, hyperparams=hyperparams, **overrides)
+    return viewer.planner(problem, seed, trace=trace)
 
 
 def _run(run: Path, task: str | None, env_overrides: tuple[str, ...], sampled: bool, num_envs: int, seed: int) -> Any:

@@ -158,12 +158,12 @@ def _set_parameter(viewer: Viewer, name: str, index: int, value: float) -> None:
 
 
 def _config_sliders(viewer: Viewer, controls: dict[str, Any]) -> None:
-    """The planner Config's floats: a change compiles the planner again (static argument)."""
+    """The planner's hyperparameters: a change runs at once (they are in its state)."""
     from mjzoo.harness.viewer.planning import config_floats
 
     g = viewer.server.gui
-    with g.add_folder("Planner config (recompiles)"):
-        for name, value in config_floats(viewer.source.config).items():
+    with g.add_folder("Planner hyperparameters"):
+        for name, value in config_floats(viewer.source.hyperparams).items():
             low, high, step = slider_range(value)
             handle = g.add_slider(name, low, high, step, value)
             controls[f"config/{name}"] = handle
@@ -175,7 +175,7 @@ def _set_config(viewer: Viewer, controls: dict[str, Any], name: str, value: floa
         try:
             viewer.source.set_config(**{name: float(value)})
             viewer.message = ""
-        except ValueError as e:  # the Config's own check, e.g. temperature must be > 0
+        except ValueError as e:  # the Hyperparams' own check, e.g. temperature must be > 0
             viewer.message = str(e)
 
 

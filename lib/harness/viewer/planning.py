@@ -9,7 +9,9 @@ out in the planning task, as positions of one site or body (its centre of mass) 
 the horizon.
 
 The planner's `Config` is a static argument of these jitted functions: a new value
-(`set_config`) compiles them again, keeping the simulated and the planner's state.
+(`set_config`) compiles them again, keeping the simulated and the planner's state. Its
+`Hyperparams` (the sliders: temperature, noise scale, ...) live in the planner state: a
+new value runs at once, without compiling.
 """
 
 from __future__ import annotations
@@ -47,13 +49,10 @@ def trace_point(mj_model: mujoco.MjModel, name: str | None = None) -> tuple[str,
     raise KeyError(f"trace point {name!r}: the model has no body or site of that name; bodies: {bodies}")
 
 
-def config_floats(config: Any) -> dict[str, float]:
-    """The planner Config's float fields (the ones sliders set)."""
-    return {
-        f.name: getattr(config, f.name)
-        for f in dataclasses.fields(config)
-        if isinstance(getattr(config, f.name), float)
-    }
+def config_floats(settings: Any) -> dict[str, float]:
+    """The float fields of a planner's settings (its `Hyperparams`: the ones sliders set)."""
+    values = {f.name: getattr(settings, f.name) for f in dataclasses.fields(settings)}
+    return {name: float(v) for name, v in values.items() if not isinstance(v, (bool, int, str)) and np.ndim(v) == 0}
 
 
 class Planning:
@@ -63,6 +62,8 @@ class Planning:
 
     def __init__(self, problem: Problem, seed: int = 0, num_traces: int = 16, point: str | None = None):
         self.problem, self.config = problem, problem.config
+        defaults = problem.planner.Hyperparams()
+        self.hyperparams = defaults if problem.hyperparams is None else problem.hyperparams
         self.mj_model, self.dt = problem.sim_task.mj_model, problem.sim_dt
         self.point = trace_point(base_task(problem.plan_task).mj_model, point)
         self.num_traces = min(num_traces, problem.config.num_samples - 1)
@@ -83,7 +84,12 @@ class Planning:
         reset_key, self.key = jax.random.split(self.key)
         self.sim_state = complete(self.problem.sim_task, reset(self.problem.sim_task, reset_key))
         self.planner_state = closed_loop.first_plan(
-            self.problem.planner, self.config, self.problem.plan_task, self.sim_state, self.problem.hooks
+            self.problem.planner,
+            self.config,
+            self.problem.plan_task,
+            self.sim_state,
+            self.problem.hooks,
+            self.hyperparams,
         )
         self.points, self.latencies, self.steps = None, [], 0
 
@@ -119,14 +125,22 @@ class Planning:
         self.problem = dataclasses.replace(p, sim_task=p.sim_task.with_params(**values), plan_task=plan_task)
 
     def set_config(self, **values: Any) -> None:
-        """A new planner Config (checked by its own validation): compiles again, keeps the
-        states; a new noise_scale resets the sampling std it sets."""
-        self.config = dataclasses.replace(self.config, **values)
-        self.problem = dataclasses.replace(self.problem, config=self.config)
-        if "noise_scale" in values:
-            fresh = sampling.initial_state(self.config, self.problem.plan_task)
-            self.planner_state = self.planner_state.replace(std=fresh.std)
-        self._compile()
+        """New planner settings (checked by their own validation), keeping the states:
+        `Hyperparams` fields go into the planner state, with no compile (a new
+        noise_scale resets the sampling std it sets); `Config` fields compile again."""
+        names = {f.name for f in dataclasses.fields(self.hyperparams)}
+        numbers = {k: v for k, v in values.items() if k in names}
+        structure = {k: v for k, v in values.items() if k not in names}
+        config = dataclasses.replace(self.config, **structure)  # both checked before either is kept
+        hyperparams = dataclasses.replace(self.hyperparams, **numbers)
+        self.config, self.hyperparams = config, hyperparams
+        self.problem = dataclasses.replace(self.problem, config=config, hyperparams=hyperparams)
+        # The state's hyperparams as `init` makes them (float32, committed): no retrace.
+        fresh = self.problem.planner.init(config, self.problem.plan_task, hyperparams)
+        changes = {"hyperparams": fresh.hyperparams, **({"std": fresh.std} if "noise_scale" in numbers else {})}
+        self.planner_state = self.planner_state.replace(**changes)
+        if structure:
+            self._compile()
 
     def frame(self) -> Frame:
         data = self.sim_state.data
