@@ -163,6 +163,8 @@ def configure(**fields: Any) -> tuple[Config, Hyperparams]:
         "amp.configure", Config, ppo.Hyperparams, {k: v for k, v in fields.items() if k not in own}
     )
     mine = {k: (INF if v is None and k == "disc_max_grad_norm" else v) for k, v in fields.items() if k in own}
+    for name in [k for k, v in mine.items() if v is None]:  # Hyperparams lets None pass: JAX rebuilds with it
+        raise ValueError(f"amp.configure: {name}=None is invalid; expected a number")
     return Config(**config), Hyperparams(ppo=ppo.Hyperparams(**ppo_hyper), **mine)
 
 

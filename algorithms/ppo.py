@@ -223,6 +223,8 @@ def split_fields(
         raise ValueError(f"{where}: unknown field(s) {unknown}; fields: {sorted(structure | numbers)}")
     config = {k: v for k, v in fields.items() if k in structure}
     hyper = {k: (INF if v is None and k in _OFF_AT_INF else v) for k, v in fields.items() if k in numbers}
+    for name in [k for k, v in hyper.items() if v is None]:  # Hyperparams lets None pass: JAX rebuilds with it
+        raise ValueError(f"{where}: {name}=None is invalid; expected a number")
     return config, hyper
 
 
