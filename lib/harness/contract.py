@@ -21,7 +21,7 @@ def check_algorithm(algorithm: Any) -> None:
     contract (functions, counts, per-env field names)."""
     missing = [
         f"{name}()"
-        for name in ("init", "update", "evaluate", "policy", "policy_params")
+        for name in ("init", "update", "evaluate")
         if not callable(getattr(algorithm, name, None))
     ]
     fields = getattr(algorithm, "per_env_fields", None)

@@ -45,13 +45,13 @@ class Algorithm(NamedTuple):
         metrics a dict of scalars (NaN: nothing to report this update).
       evaluate: ``(task, state, key, num_envs, num_steps) -> (mean return, returns
         [num_envs], env 0's `mjzoo.Trajectory` or None)``; num_envs, num_steps static.
-      policy: ``(task, deterministic=True) -> act`` with ``act(params, obs, key) -> ctrl``
-        for one env: the deployable policy.
-      policy_params: ``state -> params`` that `policy`'s act needs.
       steps_per_update: env steps one update collects (the step axis of metrics).
       num_updates: updates in a whole run.
       per_env_fields: the state's fields whose leaves have a leading [num_envs] axis (a
         dotted name reaches into a nested state); a driver may shard them over devices.
+      policy: optional ``(task, deterministic=True) -> act`` with ``act(params, obs,
+        key) -> ctrl`` for one env: the deployable policy (PPO's and AMP's have one).
+      policy_params: optional ``state -> params`` that `policy`'s act needs.
       diagnose: optional ``(history of chunk metrics) -> str | None``, a warning when
         training has gone wrong in a way the numbers show.
     """
@@ -62,9 +62,9 @@ class Algorithm(NamedTuple):
     init: Callable[[Any, PyTree, Array], PyTree]
     update: Callable[[Any, PyTree], tuple[PyTree, dict[str, Array]]]
     evaluate: Callable[..., tuple]
-    policy: Callable[..., Callable[[Any, Any, Array], Array]]
-    policy_params: Callable[[PyTree], Any]
     steps_per_update: int
     num_updates: int
     per_env_fields: Sequence[str] = ()
+    policy: Callable[..., Callable[[Any, Any, Array], Array]] | None = None
+    policy_params: Callable[[PyTree], Any] | None = None
     diagnose: Callable[[Sequence[dict[str, float]]], str | None] | None = None

@@ -191,8 +191,8 @@ def test_user_network_and_optimizer(pendulum):
     assert "params" in new.params["policy"]  # flax's own layout, untouched by us
     moved = jax.tree.map(lambda a, b: float(jnp.max(jnp.abs(a - b))), state.params["policy"], new.params["policy"])
     assert max(jax.tree.leaves(moved)) > 0 and np.isfinite(metrics["loss/total"])
-    # A function of the learning rate gets the state's (traced) rate: 10x the rate, 10x SGD's step.
-    algo = ppo.make(config, optimizer=optax.sgd)
+    # A function of the learning rate gets the state's (traced) rate: 10x the rate, 10x SGD's one step.
+    algo = ppo.make(dataclasses.replace(config, num_minibatches=1), optimizer=optax.sgd)
     steps = []
     for rate in (1e-3, 1e-2):
         state = algo.init(pendulum, HP.replace(learning_rate=rate, max_grad_norm=float("inf")), jax.random.key(4))
