@@ -19,11 +19,7 @@ def _is_count(value: Any) -> bool:
 def check_algorithm(algorithm: Any) -> None:
     """Raises one TypeError naming everything `algorithm` lacks of the `Algorithm`
     contract (functions, counts, per-env field names)."""
-    missing = [
-        f"{name}()"
-        for name in ("init", "update", "evaluate")
-        if not callable(getattr(algorithm, name, None))
-    ]
+    missing = [f"{name}()" for name in ("init", "update", "evaluate") if not callable(getattr(algorithm, name, None))]
     fields = getattr(algorithm, "per_env_fields", None)
     if not (isinstance(fields, (tuple, list)) and all(isinstance(f, str) for f in fields)):
         missing.append("per_env_fields (a tuple of the state's per-env field names; () if none)")

@@ -97,7 +97,9 @@ def build_config(module: ModuleType, spec: str, overrides: dict[str, Any], what:
     return module.Config(**values)
 
 
-def build_algorithm(module: ModuleType, spec: str, overrides: dict[str, Any], what: str = "--config") -> tuple[Any, Any]:
+def build_algorithm(
+    module: ModuleType, spec: str, overrides: dict[str, Any], what: str = "--config"
+) -> tuple[Any, Any]:
     """An RL algorithm's (Config, Hyperparams): its defaults, then the task's, then
     `overrides` (the command line, or a saved config.json's "config" and "hyperparams"
     merged), each checked against its field's type first, then split by the module's
