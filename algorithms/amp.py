@@ -44,7 +44,9 @@ import optax
 from mjzoo import learning, motion
 from mjzoo.algorithms import ppo
 from mjzoo.learning import discriminators, motion_features, networks, normalization, replay
+from mjzoo.learning import hyperparams as hyperparams_lib
 from mjzoo.learning.algorithm import Algorithm
+from mjzoo.learning.hyperparams import INF
 from mjzoo.types import Task
 
 __all__ = [
@@ -85,7 +87,11 @@ class Config(ppo.Config):
 
     def __post_init__(self):
         super().__post_init__()
-        need = functools.partial(ppo._need, self, "amp.Config")
+
+        def need(ok: bool, field: str, allowed: str):
+            if not ok:
+                raise ValueError(f"amp.Config: {field}={getattr(self, field)!r} is invalid; expected {allowed}")
+
         for field in ("num_frames", "disc_epochs", "disc_minibatches", "replay_size"):
             value = getattr(self, field)
             need(isinstance(value, int) and not isinstance(value, bool) and value >= 1, field, "an integer >= 1")
@@ -100,9 +106,6 @@ class Config(ppo.Config):
         # AMP feeds PPO a dict observation {"policy", "motion"}; the keys are its own.
         for field in ("policy_obs_key", "value_obs_key"):  # "policy": the task's own entry of AMP's observation
             need(getattr(self, field) in (None, "policy"), field, "None: AMP's networks see the task's observation")
-
-
-INF = ppo.INF
 
 
 @jax.tree_util.register_dataclass
@@ -123,8 +126,8 @@ class Hyperparams:
     replay_keep_probability: float | Array = 0.05
 
     def __post_init__(self):
-        ppo.check_ranges(self, "amp.Hyperparams", HYPERPARAM_RANGES)
-        task, style = ppo._concrete(self.task_weight), ppo._concrete(self.style_weight)
+        hyperparams_lib.check_ranges(self, "amp.Hyperparams", HYPERPARAM_RANGES)
+        task, style = hyperparams_lib.host_value(self.task_weight), hyperparams_lib.host_value(self.style_weight)
         if task is not None and style is not None and not np.all(task + style > 0):
             raise ValueError(
                 f"amp.Hyperparams: style_weight={self.style_weight!r} is invalid; expected > 0 where task_weight is 0"
@@ -153,18 +156,14 @@ def configure(**fields: Any) -> tuple[Config, Hyperparams]:
 
         config, hyperparams = amp.configure(num_envs=64, style_weight=1.0, learning_rate=1e-4)
     """
-    own = {f.name for f in dataclasses.fields(Hyperparams)} - {"ppo"}
-    ppo_numbers = {f.name for f in dataclasses.fields(ppo.Hyperparams)}
-    structure = {f.name for f in dataclasses.fields(Config)}
-    unknown = sorted(set(fields) - structure - own - ppo_numbers)
-    if unknown:
-        raise ValueError(f"amp.configure: unknown field(s) {unknown}; fields: {sorted(structure | own | ppo_numbers)}")
-    config, ppo_hyper = ppo.split_fields(
-        "amp.configure", Config, ppo.Hyperparams, {k: v for k, v in fields.items() if k not in own}
+    names = hyperparams_lib.field_names
+    own, ppo_numbers = names(Hyperparams) - {"ppo"}, names(ppo.Hyperparams)
+    off_at_inf = (*ppo.OFF_AT_INF, "disc_max_grad_norm")
+    config, numbers = hyperparams_lib.split_fields(
+        "amp.configure", names(Config), own | ppo_numbers, fields, off_at_inf
     )
-    mine = {k: (INF if v is None and k == "disc_max_grad_norm" else v) for k, v in fields.items() if k in own}
-    for name in [k for k, v in mine.items() if v is None]:  # Hyperparams lets None pass: JAX rebuilds with it
-        raise ValueError(f"amp.configure: {name}=None is invalid; expected a number")
+    ppo_hyper = {k: v for k, v in numbers.items() if k in ppo_numbers}
+    mine = {k: v for k, v in numbers.items() if k in own}
     return Config(**config), Hyperparams(ppo=ppo.Hyperparams(**ppo_hyper), **mine)
 
 
@@ -271,7 +270,7 @@ def init(
     and `hyperparams`, which `update` reads from it."""
     ppo_key, disc_key = jax.random.split(key)
     _reference(task)
-    hyperparams = ppo.as_leaves(hyperparams)
+    hyperparams = hyperparams_lib.as_leaves(hyperparams)
     ppo_state = ppo.init(_ppo(config), style_task(config, task), hyperparams.ppo, ppo_key, components=components)
     window = jax.tree.map(lambda x: x[0], ppo_state.collector.env_state.obs["motion"])  # [num_frames, F]
     disc_params = _discriminator(config).init(disc_key, window.reshape(-1))

@@ -33,12 +33,13 @@ from typing import Any, Literal, NamedTuple
 
 import jax
 import jax.numpy as jnp
-import numpy as np
 import optax
 
 from mjzoo import learning
 from mjzoo.learning import distributions, losses, networks, normalization
+from mjzoo.learning import hyperparams as hyperparams_lib
 from mjzoo.learning.algorithm import Algorithm, TrainingWarning
+from mjzoo.learning.hyperparams import INF
 from mjzoo.types import Task
 
 __all__ = [
@@ -136,40 +137,6 @@ def _need(obj: Any, where: str, ok: bool, field: str, allowed: str) -> None:
         raise ValueError(f"{where}: {field}={getattr(obj, field)!r} is invalid; expected {allowed}")
 
 
-def _concrete(value: Any) -> np.ndarray | None:
-    """A hyperparameter's value on the host, or None where it is not a number yet (traced,
-    or a placeholder JAX puts in a pytree while it rebuilds one: None, object(), a shape)."""
-    if isinstance(value, (str, bytes)):
-        raise TypeError(f"a hyperparameter must be a number, not {value!r}")
-    if isinstance(value, (bool, np.bool_)) or not isinstance(value, (int, float, np.ndarray, np.number, jax.Array)):
-        return None
-    if isinstance(value, jax.core.Tracer):
-        return None
-    return np.asarray(value, dtype=np.float64)
-
-
-def check_ranges(obj: Any, where: str, ranges: dict[str, tuple[float, float, str]]) -> None:
-    """Raises a ValueError naming the first field of `obj` with a concrete value (every
-    element, for a batch of them) outside its range: {field: (low, high, "[]" or "(]"
-    ...)}, the brackets saying which ends are allowed."""
-    for field, (low, high, ends) in ranges.items():
-        try:
-            value = _concrete(getattr(obj, field))
-        except TypeError:
-            raise ValueError(f"{where}: {field}={getattr(obj, field)!r} is invalid; expected a number") from None
-        if value is None:
-            continue
-        above = value >= low if ends[0] == "[" else value > low
-        below = value <= high if ends[1] == "]" else value < high
-        if not np.all(above & below):
-            shown = getattr(obj, field)
-            shown = shown if np.ndim(shown) == 0 else np.asarray(shown).tolist()
-            raise ValueError(f"{where}: {field}={shown!r} is invalid; expected in {ends[0]}{low}, {high}{ends[1]}")
-
-
-INF = float("inf")
-
-
 @jax.tree_util.register_dataclass
 @dataclasses.dataclass(frozen=True, kw_only=True)
 class Hyperparams:
@@ -191,7 +158,7 @@ class Hyperparams:
     max_grad_norm: float | Array = 1.0  # inf: gradients unclipped
 
     def __post_init__(self):
-        check_ranges(self, "ppo.Hyperparams", HYPERPARAM_RANGES)
+        hyperparams_lib.check_ranges(self, "ppo.Hyperparams", HYPERPARAM_RANGES)
 
     def replace(self, **changes) -> Hyperparams:
         return dataclasses.replace(self, **changes)
@@ -208,24 +175,7 @@ HYPERPARAM_RANGES = {
     "reward_scaling": (0.0, INF, "()"),
     "max_grad_norm": (0.0, INF, "(]"),
 }
-_OFF_AT_INF = ("value_clip_epsilon", "max_grad_norm")  # None in a flat dict means inf (off)
-
-
-def split_fields(
-    where: str, config_cls: type, hyperparams_cls: type, fields: dict[str, Any]
-) -> tuple[dict[str, Any], dict[str, Any]]:
-    """(Config's fields, Hyperparams' fields) of one flat dict; a ValueError lists the valid
-    names when one is unknown. None for a switch-off-at-inf number means inf."""
-    structure = {f.name for f in dataclasses.fields(config_cls)}
-    numbers = {f.name for f in dataclasses.fields(hyperparams_cls)}
-    unknown = sorted(set(fields) - structure - numbers)
-    if unknown:
-        raise ValueError(f"{where}: unknown field(s) {unknown}; fields: {sorted(structure | numbers)}")
-    config = {k: v for k, v in fields.items() if k in structure}
-    hyper = {k: (INF if v is None and k in _OFF_AT_INF else v) for k, v in fields.items() if k in numbers}
-    for name in [k for k, v in hyper.items() if v is None]:  # Hyperparams lets None pass: JAX rebuilds with it
-        raise ValueError(f"{where}: {name}=None is invalid; expected a number")
-    return config, hyper
+OFF_AT_INF = ("value_clip_epsilon", "max_grad_norm")  # None in a flat dict means inf (off)
 
 
 def configure(**fields: Any) -> tuple[Config, Hyperparams]:
@@ -235,7 +185,8 @@ def configure(**fields: Any) -> tuple[Config, Hyperparams]:
 
         config, hyperparams = ppo.configure(num_envs=64, learning_rate=1e-3)
     """
-    config, hyper = split_fields("ppo.configure", Config, Hyperparams, fields)
+    names = hyperparams_lib.field_names
+    config, hyper = hyperparams_lib.split_fields("ppo.configure", names(Config), names(Hyperparams), fields, OFF_AT_INF)
     return Config(**config), Hyperparams(**hyper)
 
 
@@ -379,12 +330,6 @@ def _initial_carry(policy_net) -> Any:
     return policy_net.initial_carry() if _is_recurrent(policy_net) else ()
 
 
-def as_leaves(hyperparams: Any) -> Any:
-    """Hyperparameters as float32 arrays, as a train state holds them (one dtype for a
-    checkpoint and for the chunk's compile, whatever Python numbers they were given as)."""
-    return jax.tree.map(lambda x: jnp.asarray(x, jnp.float32), hyperparams)
-
-
 # --- init ---------------------------------------------------------------------------
 
 
@@ -401,7 +346,7 @@ def init(
     stats = normalization.init_stats(example)
     policy_example, value_example = _inputs(config, stats, example)
     params = {"policy": policy_net.init(policy_key, policy_example), "value": value_net.init(value_key, value_example)}
-    hyperparams = as_leaves(hyperparams)
+    hyperparams = hyperparams_lib.as_leaves(hyperparams)
     return TrainState(
         params=params,
         opt_state=_optimizer(config, hyperparams, components).init(params),
@@ -623,8 +568,10 @@ def train(
     purejaxrl's make_train). Jit it with `config` static; vmap it over hyperparameters
     and keys to sweep them in one program:
 
+        rates = jnp.array([1e-4, 3e-4])  # every leaf batched [2]: the defaults repeated, the rates swept
+        hps = jax.tree.map(lambda x: jnp.full(2, x), ppo.Hyperparams()).replace(learning_rate=rates)
         run = jax.jit(jax.vmap(lambda hp, key: ppo.train(config, task, hp, key)))
-        states, metrics = run(ppo.Hyperparams(learning_rate=jnp.array([1e-4, 3e-4])), keys)
+        states, metrics = run(hps, jax.random.split(key, 2))  # docs/sweeps.md
 
     Returns (final TrainState, per-update metrics, each [num_updates]). With files on
     disk, progress, evaluation and checkpoints: `mjzoo.harness.training.run(ppo.make(config), ...)`.

@@ -7,6 +7,7 @@ writes an A2C from them).
 
     algorithm       an RL algorithm as a value the harness drives (`Algorithm`)
     collection      auto-resetting batched experience, time-major (`collect`, `Collector`)
+    hyperparams     checking and splitting an algorithm's numbers (`check_ranges`, `split_fields`)
     evaluation      deterministic first-episode returns from a policy (`evaluate`)
     actions         [-1, 1] actions onto a task's controls (`to_controls`)
     advantages      generalized advantage estimation (`gae`)
@@ -28,6 +29,7 @@ from mjzoo.learning import (
     discriminators,
     distributions,
     evaluation,
+    hyperparams,
     learner,
     losses,
     motion_features,
@@ -103,6 +105,7 @@ __all__ = [
     "gae",
     "gradient_penalty",
     "gru_mlp",
+    "hyperparams",
     "init_stats",
     "kl_penalty_loss",
     "learn",

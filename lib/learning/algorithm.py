@@ -2,7 +2,7 @@
 `GradientTransformation` is, that anything may drive (a `lax.scan`, a user's loop, the
 training harness `mjzoo.harness.training.run`).
 
-    algo = ppo.make(ppo.Config(num_envs=256))         # structure fixed, numbers not yet
+    algo = ppo.make(ppo.Config(num_envs=256))         # structure bound, numbers not yet
     state = algo.init(task, ppo.Hyperparams(), key)   # the numbers live in the state
     state, metrics = jax.jit(algo.update)(task, state)
 
