@@ -14,6 +14,14 @@ from mjzoo.algorithms import ppo
 
 CONFIG = ppo.Config(num_envs=8, unroll_length=8, num_minibatches=2, num_epochs=1, total_steps=8 * 8 * 3)
 RATES = (1e-4, 1e-3, 1e-2, 3e-2)
+# Batched and lone runs sum in other orders, and Adam's normalized steps carry a rounding
+# difference on to ~1e-5 in a few of 4096 weights after 3 updates; the rates' own
+# differences are 100x that (checked), so the comparison still tells runs apart.
+TOLERANCE = dict(rtol=1e-3, atol=1e-4)
+
+
+def max_difference(a, b) -> float:
+    return max(float(jnp.max(jnp.abs(x - y))) for x, y in zip(jax.tree.leaves(a), jax.tree.leaves(b)))
 
 
 @pytest.fixture(scope="module")
@@ -45,12 +53,11 @@ def test_a_sweep_over_learning_rates_is_one_program_of_the_separate_runs(cartpol
     states, metrics = sweep(batched(ppo.Hyperparams(), len(RATES), learning_rate=RATES), key)
     chex.assert_shape(metrics["loss/total"], (len(RATES), CONFIG.num_updates))
     np.testing.assert_allclose(states.hyperparams.learning_rate, np.float32(RATES))
-    for i, rate in enumerate(RATES):
-        chex.assert_trees_all_close(
-            jax.tree.map(lambda x, i=i: x[i], states.params), separate(rate, key), rtol=1e-4, atol=1e-6
-        )
-    kernels = states.params["policy"][0]["kernel"]  # the rates made different runs
-    assert not np.allclose(kernels[0], kernels[-1], atol=1e-4)
+    runs = [jax.tree.map(lambda x, i=i: x[i], states.params) for i in range(len(RATES))]
+    for run, rate in zip(runs, RATES):
+        chex.assert_trees_all_close(run, separate(rate, key), **TOLERANCE)
+    for one, other in zip(runs, runs[1:]):  # each rate made a run of its own
+        assert max_difference(one, other) > 10 * TOLERANCE["atol"]
     sweep(batched(ppo.Hyperparams(), len(RATES), learning_rate=RATES[::-1]), jax.random.key(1))  # no retrace
 
 
@@ -67,4 +74,5 @@ def test_seeds_by_learning_rates_in_one_call(cartpole, separate):
     for i, rate in enumerate(rates):
         for j, key in enumerate(keys):
             one = jax.tree.map(lambda x, i=i, j=j: x[i, j], states.params)
-            chex.assert_trees_all_close(one, separate(rate, key), rtol=1e-4, atol=1e-6)
+            chex.assert_trees_all_close(one, separate(rate, key), **TOLERANCE)
+    assert max_difference(states.params["policy"], jax.tree.map(lambda x: x[:, ::-1], states.params["policy"])) > 1e-3
