@@ -2,9 +2,10 @@
 judgment of a discriminator trained to tell the policy's motion from a reference's.
 
     task = mjzoo.motion.with_reference(task, mjzoo.motion.reference(clips, task.mj_model, dt))
-    config = amp.Config(num_envs=256, total_steps=5_000_000, task_weight=0.0)  # style only
-    state = amp.init(config, task, jax.random.key(0))
+    config, hyperparams = amp.configure(num_envs=256, total_steps=5_000_000, task_weight=0.0)  # style only
+    state = amp.init(config, task, hyperparams, jax.random.key(0))
     state, metrics = jax.jit(amp.update, static_argnums=0)(config, task, state)
+    mjzoo.harness.training.run(amp.make(config), task, settings, hyperparams)  # with files, as PPO
     act = amp.policy(config, task)            # deployable: act(amp.policy_params(state), obs, key)
 
 The task carries its reference (`Task.motion`, a `mjzoo.motion.Reference` at the task's
@@ -32,27 +33,32 @@ from __future__ import annotations
 
 import dataclasses
 import functools
-import sys
 from collections.abc import Callable, Sequence
 from typing import Any, Literal
 
 import jax
 import jax.numpy as jnp
+import numpy as np
 import optax
 
 from mjzoo import learning, motion
 from mjzoo.algorithms import ppo
-from mjzoo.harness import training
 from mjzoo.learning import discriminators, motion_features, networks, normalization, replay
+from mjzoo.learning import hyperparams as hyperparams_lib
+from mjzoo.learning.algorithm import Algorithm
+from mjzoo.learning.hyperparams import INF
 from mjzoo.types import Task
 
 __all__ = [
     "PER_ENV_FIELDS",
     "Config",
+    "Hyperparams",
     "TrainState",
+    "configure",
     "diagnose",
     "evaluate",
     "init",
+    "make",
     "policy",
     "policy_params",
     "reference_windows",
@@ -66,25 +72,18 @@ Array = jax.Array
 
 @dataclasses.dataclass(frozen=True, kw_only=True)
 class Config(ppo.Config):
-    """PPO's hyperparameters (all of `ppo.Config`) and AMP's (static under jit; hashable)."""
+    """PPO's structure (all of `ppo.Config`) and AMP's (static under jit; hashable). The
+    numbers are `Hyperparams`."""
 
-    task_weight: float = 0.5  # on the task's own reward; 0: imitation by style alone
-    style_weight: float = 0.5
     num_frames: int = 2  # frames per discriminator window (2: a transition)
     key_bodies: tuple[str, ...] = ()  # bodies whose positions (root-relative) the discriminator sees
     root_body: str | None = None  # None: the body of the model's first free joint, if any
     disc_loss: Literal["least_squares", "logistic"] = "least_squares"
     disc_hidden_sizes: tuple[int, ...] = (1024, 512)
-    disc_learning_rate: float = 1e-4
-    disc_weight_decay: float = 1e-4
-    disc_max_grad_norm: float | None = 1.0
     disc_epochs: int = 2
     disc_minibatches: int = 8
-    gradient_penalty_weight: float = 5.0  # the AMP paper's w_gp / 2
     policy_gradient_penalty: bool = False
-    logit_l2_weight: float = 0.01
     replay_size: int = 100_000  # windows of past policies
-    replay_keep_probability: float = 0.05
 
     def __post_init__(self):
         super().__post_init__()
@@ -93,9 +92,6 @@ class Config(ppo.Config):
             if not ok:
                 raise ValueError(f"amp.Config: {field}={getattr(self, field)!r} is invalid; expected {allowed}")
 
-        for field in ("task_weight", "style_weight", "gradient_penalty_weight", "logit_l2_weight", "disc_weight_decay"):
-            need(getattr(self, field) >= 0, field, ">= 0")
-        need(self.task_weight + self.style_weight > 0, "style_weight", "> 0 where task_weight is 0")
         for field in ("num_frames", "disc_epochs", "disc_minibatches", "replay_size"):
             value = getattr(self, field)
             need(isinstance(value, int) and not isinstance(value, bool) and value >= 1, field, "an integer >= 1")
@@ -106,13 +102,69 @@ class Config(ppo.Config):
             f"a divisor of num_envs * unroll_length = {self.steps_per_update}",
         )
         need(self.disc_loss in ("least_squares", "logistic"), "disc_loss", "least_squares or logistic")
-        need(self.disc_learning_rate > 0, "disc_learning_rate", "> 0")
-        need(self.disc_max_grad_norm is None or self.disc_max_grad_norm > 0, "disc_max_grad_norm", "None or > 0")
-        need(0.0 <= self.replay_keep_probability <= 1.0, "replay_keep_probability", "in [0, 1]")
         need(isinstance(self.key_bodies, tuple), "key_bodies", "a tuple of body names")
         # AMP feeds PPO a dict observation {"policy", "motion"}; the keys are its own.
         for field in ("policy_obs_key", "value_obs_key"):  # "policy": the task's own entry of AMP's observation
             need(getattr(self, field) in (None, "policy"), field, "None: AMP's networks see the task's observation")
+
+
+@jax.tree_util.register_dataclass
+@dataclasses.dataclass(frozen=True, kw_only=True)
+class Hyperparams:
+    """AMP's numbers: PPO's (`ppo`) and the style reward's and discriminator's, a pytree
+    of scalars (or batches of them, to sweep under `jax.vmap`). `disc_max_grad_norm` is
+    off at inf."""
+
+    ppo: ppo.Hyperparams = ppo.Hyperparams()
+    task_weight: float | Array = 0.5  # on the task's own reward; 0: imitation by style alone
+    style_weight: float | Array = 0.5
+    disc_learning_rate: float | Array = 1e-4
+    disc_weight_decay: float | Array = 1e-4
+    disc_max_grad_norm: float | Array = 1.0  # inf: unclipped
+    gradient_penalty_weight: float | Array = 5.0  # the AMP paper's w_gp / 2
+    logit_l2_weight: float | Array = 0.01
+    replay_keep_probability: float | Array = 0.05
+
+    def __post_init__(self):
+        hyperparams_lib.check_ranges(self, "amp.Hyperparams", HYPERPARAM_RANGES)
+        task, style = hyperparams_lib.host_value(self.task_weight), hyperparams_lib.host_value(self.style_weight)
+        if task is not None and style is not None and not np.all(task + style > 0):
+            raise ValueError(
+                f"amp.Hyperparams: style_weight={self.style_weight!r} is invalid; expected > 0 where task_weight is 0"
+            )
+
+    def replace(self, **changes) -> Hyperparams:
+        return dataclasses.replace(self, **changes)
+
+
+HYPERPARAM_RANGES = {
+    "task_weight": (0.0, INF, "[)"),
+    "style_weight": (0.0, INF, "[)"),
+    "disc_learning_rate": (0.0, INF, "()"),
+    "disc_weight_decay": (0.0, INF, "[)"),
+    "disc_max_grad_norm": (0.0, INF, "(]"),
+    "gradient_penalty_weight": (0.0, INF, "[)"),
+    "logit_l2_weight": (0.0, INF, "[)"),
+    "replay_keep_probability": (0.0, 1.0, "[]"),
+}
+
+
+def configure(**fields: Any) -> tuple[Config, Hyperparams]:
+    """(Config, Hyperparams) from one flat dict of field values, PPO's and AMP's alike
+    (a registry's, `--config k=v`, a config.json's); unknown names and bad values are a
+    ValueError naming them.
+
+        config, hyperparams = amp.configure(num_envs=64, style_weight=1.0, learning_rate=1e-4)
+    """
+    names = hyperparams_lib.field_names
+    own, ppo_numbers = names(Hyperparams) - {"ppo"}, names(ppo.Hyperparams)
+    off_at_inf = (*ppo.OFF_AT_INF, "disc_max_grad_norm")
+    config, numbers = hyperparams_lib.split_fields(
+        "amp.configure", names(Config), own | ppo_numbers, fields, off_at_inf
+    )
+    ppo_hyper = {k: v for k, v in numbers.items() if k in ppo_numbers}
+    mine = {k: v for k, v in numbers.items() if k in own}
+    return Config(**config), Hyperparams(ppo=ppo.Hyperparams(**ppo_hyper), **mine)
 
 
 @jax.tree_util.register_dataclass
@@ -121,11 +173,13 @@ class TrainState:
     """PPO's state (on the windowed task) and the discriminator's; a checkpoint saves it.
 
     Attributes:
-      ppo: `ppo.TrainState`; its collector's observations hold the motion windows.
+      ppo: `ppo.TrainState`; its collector's observations hold the motion windows, its
+        hyperparameters are `hyperparams.ppo` (each update hands them down).
       disc_params: the discriminator MLP's parameters.
       disc_opt_state: its optimizer's state.
       disc_stats: running statistics of discriminator inputs ([num_frames, F]).
       replay: `learning.replay.Replay` of past policy windows [replay_size, num_frames, F].
+      hyperparams: AMP's `Hyperparams` (float32 leaves), PPO's among them.
     """
 
     ppo: ppo.TrainState
@@ -133,6 +187,7 @@ class TrainState:
     disc_opt_state: Any
     disc_stats: normalization.RunningStats
     replay: replay.Replay
+    hyperparams: Hyperparams
 
     @property
     def updates(self) -> Array:
@@ -142,7 +197,7 @@ class TrainState:
         return dataclasses.replace(self, **changes)
 
 
-PER_ENV_FIELDS = ("ppo.collector",)  # the harness shards these over devices (training.Algorithm)
+PER_ENV_FIELDS = ("ppo.collector",)  # a driver may shard these over devices (`Algorithm.per_env_fields`)
 
 
 # --- the pieces AMP wires -----------------------------------------------------------
@@ -176,10 +231,10 @@ def _discriminator(config: Config) -> networks.Network:
     return networks.mlp(1, config.disc_hidden_sizes, jax.nn.relu)
 
 
-def _disc_optimizer(config: Config) -> optax.GradientTransformation:
-    return discriminators.discriminator_optimizer(
-        config.disc_learning_rate, config.disc_weight_decay, config.disc_max_grad_norm
-    )
+def _disc_optimizer(hp: Hyperparams) -> optax.GradientTransformation:
+    """The discriminator's optimizer of these (traced or not) numbers; its state's
+    structure does not depend on them (as `ppo._optimizer`)."""
+    return discriminators.discriminator_optimizer(hp.disc_learning_rate, hp.disc_weight_decay, hp.disc_max_grad_norm)
 
 
 def _logit(config: Config) -> Callable[[Any, Array], Array]:
@@ -203,41 +258,54 @@ def reference_windows(config: Config, task: Task, template: Any, key: Array, num
 # --- init ---------------------------------------------------------------------------
 
 
-@functools.partial(jax.jit, static_argnums=0)
-def init(config: Config, task: Task, key: Array) -> TrainState:
-    """A fresh train state: PPO's (on `style_task`), the discriminator, an empty replay."""
+@functools.partial(jax.jit, static_argnums=0, static_argnames="components")
+def init(
+    config: Config,
+    task: Task,
+    hyperparams: Hyperparams,
+    key: Array,
+    components: ppo.Components = ppo.NO_COMPONENTS,
+) -> TrainState:
+    """A fresh train state: PPO's (on `style_task`), the discriminator, an empty replay,
+    and `hyperparams`, which `update` reads from it."""
     ppo_key, disc_key = jax.random.split(key)
     _reference(task)
-    ppo_state = ppo.init(_ppo(config), style_task(config, task), ppo_key)
+    hyperparams = hyperparams_lib.as_leaves(hyperparams)
+    ppo_state = ppo.init(_ppo(config), style_task(config, task), hyperparams.ppo, ppo_key, components=components)
     window = jax.tree.map(lambda x: x[0], ppo_state.collector.env_state.obs["motion"])  # [num_frames, F]
     disc_params = _discriminator(config).init(disc_key, window.reshape(-1))
     return TrainState(
         ppo=ppo_state,
         disc_params=disc_params,
-        disc_opt_state=_disc_optimizer(config).init(disc_params),
+        disc_opt_state=_disc_optimizer(hyperparams).init(disc_params),
         disc_stats=normalization.init_stats(window),
         replay=replay.create(config.replay_size, window),
+        hyperparams=hyperparams,
     )
 
 
 # --- update -------------------------------------------------------------------------
 
 
-def update(config: Config, task: Task, train_state: TrainState) -> tuple[TrainState, dict[str, Array]]:
-    """One AMP update (see the module docstring): collect, style reward, PPO, discriminator.
-    Jit it with `config` static; `task` and `train_state` are ordinary arguments."""
-    ts, pcfg, windowed = train_state, _ppo(config), style_task(config, task)
+def update(
+    config: Config, task: Task, train_state: TrainState, components: ppo.Components = ppo.NO_COMPONENTS
+) -> tuple[TrainState, dict[str, Array]]:
+    """One AMP update (see the module docstring): collect, style reward, PPO, discriminator,
+    with the state's hyperparameters. Jit it with `config` static; `task` and
+    `train_state` are ordinary arguments."""
+    ts, pcfg, windowed, hp = train_state, _ppo(config), style_task(config, task), train_state.hyperparams
+    ts = ts.replace(ppo=ts.ppo.replace(hyperparams=hp.ppo))  # AMP's hold PPO's: one source of the numbers
     key, collect_key, learn_key, disc_key = jax.random.split(ts.ppo.key, 4)
-    collector, data, collect_metrics = ppo.rollout(pcfg, windowed, ts.ppo, collect_key)
+    collector, data, collect_metrics = ppo.rollout(pcfg, windowed, ts.ppo, collect_key, components)
 
     windows = data.next_obs["motion"]  # [T, N, num_frames, F]: each transition's, ending at its next state
     normalized = normalization.normalize(ts.disc_stats, windows)
     logits = jax.vmap(jax.vmap(_logit(config), (None, 0)), (None, 0))(ts.disc_params, normalized)
     style = discriminators.style_reward(config.disc_loss, logits[..., 0])
-    reward = config.task_weight * data.reward + config.style_weight * style
+    reward = hp.task_weight * data.reward + hp.style_weight * style
     ppo_state = ts.ppo.replace(collector=collector, key=key, updates=ts.ppo.updates + 1)
     ppo_state, learn_metrics = ppo.improve(
-        pcfg, windowed, ppo_state, dataclasses.replace(data, reward=reward), learn_key
+        pcfg, windowed, ppo_state, dataclasses.replace(data, reward=reward), learn_key, components
     )
 
     template = jax.tree.map(lambda x: x[0], collector.env_state.data)
@@ -257,16 +325,17 @@ def _learn_discriminator(
     """`disc_epochs` x `disc_minibatches` steps on this update's windows [T, N, k, F],
     as many replayed ones and as many reference ones."""
     t, n = windows.shape[:2]
+    hp = ts.hyperparams
     insert_key, replay_key, reference_key, learn_key = jax.random.split(key, 4)
     buffer = replay.insert(
-        ts.replay, windows.reshape((t * n,) + windows.shape[2:]), insert_key, config.replay_keep_probability
+        ts.replay, windows.reshape((t * n,) + windows.shape[2:]), insert_key, hp.replay_keep_probability
     )
     replayed = replay.sample(buffer, replay_key, t * n).reshape(windows.shape)
     reference = reference_windows(config, task, template, reference_key, t * n).reshape(windows.shape)
     stats = normalization.update_stats(ts.disc_stats, windows, num_batch_dims=2)
     stats = normalization.update_stats(stats, reference, num_batch_dims=2)
     logit = _logit(config)
-    optimizer = _disc_optimizer(config)
+    optimizer = _disc_optimizer(hp)
 
     def loss(params, batch):
         policy = jnp.concatenate([batch["fresh"], batch["replayed"]])
@@ -276,9 +345,9 @@ def _learn_discriminator(
             params,
             batch["reference"],
             policy,
-            config.gradient_penalty_weight,
+            hp.gradient_penalty_weight,
             config.policy_gradient_penalty,
-            config.logit_l2_weight,
+            hp.logit_l2_weight,
         )
 
     def step(carry, batch):
@@ -313,18 +382,27 @@ def policy_params(train_state: TrainState) -> dict[str, Any]:
     return {"policy": train_state.ppo.params["policy"], "obs_stats": own}
 
 
-def policy(config: Config, task: Task, deterministic: bool = True) -> Callable[[Any, Any, Array], Array]:
+def policy(
+    config: Config, task: Task, deterministic: bool = True, components: ppo.Components = ppo.NO_COMPONENTS
+) -> Callable[[Any, Any, Array], Array]:
     """A deployable policy ``(policy_params, obs, key) -> ctrl`` on the task's own
     observation: PPO's, with no motion window (the discriminator is for training only)."""
-    return ppo.policy(dataclasses.replace(config, policy_obs_key=None, value_obs_key=None), task, deterministic)
+    own = dataclasses.replace(config, policy_obs_key=None, value_obs_key=None)
+    return ppo.policy(own, task, deterministic, components)
 
 
 def evaluate(
-    config: Config, task: Task, train_state: TrainState, key: Array, num_envs: int, num_steps: int | None = None
+    config: Config,
+    task: Task,
+    train_state: TrainState,
+    key: Array,
+    num_envs: int,
+    num_steps: int | None = None,
+    components: ppo.Components = ppo.NO_COMPONENTS,
 ):
     """Deterministic episodes scored by the task's own reward, as `ppo.evaluate`:
     (mean return, per-env returns [num_envs], Trajectory of env 0 [num_steps])."""
-    return ppo.evaluate(_ppo(config), style_task(config, task), train_state.ppo, key, num_envs, num_steps)
+    return ppo.evaluate(_ppo(config), style_task(config, task), train_state.ppo, key, num_envs, num_steps, components)
 
 
 def diagnose(history: Sequence[dict[str, float]], chunks: int = 3) -> str | None:
@@ -343,8 +421,43 @@ def diagnose(history: Sequence[dict[str, float]], chunks: int = 3) -> str | None
     return None
 
 
-def train(config: Config, task: Task, settings: training.Settings | None = None, **settings_kwargs):
-    """Trains with the shared harness (`mjzoo.harness.training.run`), as `ppo.train`.
-    Returns (final TrainState, last metrics)."""
-    settings = settings or training.Settings(**settings_kwargs)
-    return training.run(sys.modules[__name__], config, task, settings)
+def train(
+    config: Config,
+    task: Task,
+    hyperparams: Hyperparams,
+    key: Array,
+    components: ppo.Components = ppo.NO_COMPONENTS,
+) -> tuple[TrainState, dict[str, Array]]:
+    """A whole run, `init` then `config.num_updates` `update`s in one `lax.scan`, as
+    `ppo.train`: jit it with `config` static, vmap it over hyperparameters and keys.
+    Returns (final TrainState, per-update metrics, each [num_updates])."""
+    state = init(config, task, hyperparams, key, components=components)
+    return jax.lax.scan(lambda s, _: update(config, task, s, components), state, None, length=config.num_updates)
+
+
+def make(
+    config: Config,
+    *,
+    policy_network: networks.Network | networks.RecurrentNetwork | None = None,
+    value_network: networks.Network | None = None,
+    optimizer: optax.GradientTransformation | Callable[[Any], optax.GradientTransformation] | None = None,
+) -> Algorithm:
+    """AMP as a value (`mjzoo.learning.Algorithm`), as `ppo.make`; its `diagnose` warns
+    when the discriminator has won."""
+    components = ppo.Components(policy_network, value_network, optimizer)
+    return Algorithm(
+        name="amp",
+        config=config,
+        hyperparams=Hyperparams(),
+        init=lambda task, hyperparams, key: init(config, task, hyperparams, key, components=components),
+        update=lambda task, state: update(config, task, state, components),
+        evaluate=lambda task, state, key, num_envs, num_steps=None: evaluate(
+            config, task, state, key, num_envs, num_steps, components
+        ),
+        policy=lambda task, deterministic=True: policy(config, task, deterministic, components),
+        policy_params=policy_params,
+        steps_per_update=config.steps_per_update,
+        num_updates=config.num_updates,
+        per_env_fields=PER_ENV_FIELDS,
+        diagnose=diagnose,
+    )

@@ -1,10 +1,16 @@
 """Proximal Policy Optimization on any `mjzoo.Task`.
 
-    config = ppo.Config(num_envs=256, total_steps=2_000_000)
-    state = ppo.init(config, task, jax.random.key(0))
-    state, metrics = jax.jit(ppo.update, static_argnums=0)(config, task, state)
+    config, hyperparams = ppo.configure(num_envs=256, total_steps=2_000_000, learning_rate=1e-3)
+    state, metrics = jax.jit(ppo.train, static_argnums=0)(config, task, hyperparams, key)  # a whole run
     act = ppo.policy(config, task)                 # deployable: act(params, obs, key)
     act(ppo.policy_params(state), obs, key)
+
+    algo = ppo.make(config)                        # the same as a value the harness drives
+    mjzoo.harness.training.run(algo, task, Settings(out_dir="runs/x"), hyperparams)
+
+`Config` is the structure (static, hashable); `Hyperparams` every number a user may sweep
+(a pytree: `jax.vmap` of `train` over a batch of them is one program). `init` stores the
+hyperparameters in the `TrainState`, and `update` reads them there.
 
 `update` is one jit: `rollout` (`learning.collect`) runs `unroll_length` steps of
 `num_envs` auto-resetting envs, then `improve` (`learning.learn`) makes `num_epochs` x
@@ -21,28 +27,35 @@ from __future__ import annotations
 
 import dataclasses
 import functools
-import sys
 import warnings
 from collections.abc import Callable
-from typing import Any, Literal
+from typing import Any, Literal, NamedTuple
 
 import jax
 import jax.numpy as jnp
 import optax
 
 from mjzoo import learning
-from mjzoo.harness import training
 from mjzoo.learning import distributions, losses, networks, normalization
+from mjzoo.learning import hyperparams as hyperparams_lib
+from mjzoo.learning.algorithm import Algorithm, TrainingWarning
+from mjzoo.learning.hyperparams import INF
 from mjzoo.types import Task
 
 __all__ = [
     "PER_ENV_FIELDS",
+    "Batch",
+    "Components",
     "Config",
+    "Extras",
+    "Hyperparams",
     "TrainState",
     "acting",
+    "configure",
     "evaluate",
     "improve",
     "init",
+    "make",
     "policy",
     "policy_params",
     "rollout",
@@ -56,22 +69,15 @@ ACTIVATIONS = {"swish": jax.nn.swish, "tanh": jnp.tanh, "relu": jax.nn.relu, "el
 
 @dataclasses.dataclass(frozen=True, kw_only=True)
 class Config:
-    """PPO hyperparameters (static under jit; hashable)."""
+    """PPO's structure: sizes, network shapes, what is normalized, the learning rate
+    schedule's kind (static under jit; hashable). The numbers are `Hyperparams`."""
 
     num_envs: int = 256
     unroll_length: int = 32
     num_minibatches: int = 8
     num_epochs: int = 4
-    learning_rate: float = 3e-4
+    # The schedule's shape; it multiplies Hyperparams.learning_rate over the run's steps.
     lr_schedule: Literal["constant", "linear", "cosine"] = "constant"
-    discount: float = 0.99
-    gae_lambda: float = 0.95
-    clip_epsilon: float = 0.2
-    value_clip_epsilon: float | None = None
-    value_coef: float = 0.5
-    entropy_coef: float = 1e-2
-    max_grad_norm: float | None = 1.0  # None: no clipping
-    reward_scaling: float = 1.0
     normalize_observations: bool = True
     normalize_advantages: bool = True
     policy_hidden_sizes: tuple[int, ...] = (64, 64)
@@ -90,16 +96,9 @@ class Config:
     policy_obs_key: str | None = None
     value_obs_key: str | None = None
     total_steps: int = 1_000_000
-    # Users' own pieces (any JAX library): (init, apply) pairs and an optax optimizer.
-    policy_network: networks.Network | networks.RecurrentNetwork | None = None
-    value_network: networks.Network | None = None
-    optimizer: optax.GradientTransformation | None = None
 
     def __post_init__(self):
-        def need(ok: bool, field: str, allowed: str):
-            if not ok:
-                raise ValueError(f"ppo.Config: {field}={getattr(self, field)!r} is invalid; expected {allowed}")
-
+        need = functools.partial(_need, self, "ppo.Config")
         for field in ("num_envs", "unroll_length", "num_minibatches", "num_epochs", "total_steps", "gru_hidden_size"):
             value = getattr(self, field)
             need(isinstance(value, int) and not isinstance(value, bool) and value >= 1, field, "an integer >= 1")
@@ -113,23 +112,14 @@ class Config:
             "num_minibatches",
             "a divisor of num_envs (recurrent minibatches split whole sequences)",
         )
-        need(self.learning_rate > 0, "learning_rate", "> 0")
         need(self.lr_schedule in ("constant", "linear", "cosine"), "lr_schedule", "constant, linear or cosine")
-        for field in ("discount", "gae_lambda"):
-            need(0.0 <= getattr(self, field) <= 1.0, field, "in [0, 1]")
-        need(self.clip_epsilon > 0, "clip_epsilon", "> 0")
-        need(self.value_clip_epsilon is None or self.value_clip_epsilon > 0, "value_clip_epsilon", "None or > 0")
-        for field in ("value_coef", "entropy_coef"):
-            need(getattr(self, field) >= 0, field, ">= 0")
-        need(self.max_grad_norm is None or self.max_grad_norm > 0, "max_grad_norm", "None or > 0")
-        need(self.reward_scaling > 0, "reward_scaling", "> 0")
         need(self.activation in ACTIVATIONS, "activation", f"one of {sorted(ACTIVATIONS)}")
         need(self.compute_dtype in ("float32", "bfloat16"), "compute_dtype", "float32 or bfloat16")
         if self.total_steps < self.steps_per_update:  # a run is whole updates: this one is one, larger
             warnings.warn(
                 f"ppo.Config: total_steps={self.total_steps} is less than one update (num_envs x "
                 f"unroll_length = {self.steps_per_update} env steps); the run trains that one update",
-                training.TrainingWarning,
+                TrainingWarning,
                 stacklevel=3,
             )
 
@@ -142,13 +132,72 @@ class Config:
         return max(1, self.total_steps // self.steps_per_update)
 
 
+def _need(obj: Any, where: str, ok: bool, field: str, allowed: str) -> None:
+    if not ok:
+        raise ValueError(f"{where}: {field}={getattr(obj, field)!r} is invalid; expected {allowed}")
+
+
+@jax.tree_util.register_dataclass
+@dataclasses.dataclass(frozen=True, kw_only=True)
+class Hyperparams:
+    """PPO's numbers: a pytree of scalars (or of [n] batches of them, to sweep under
+    `jax.vmap`). `init` stores them in the train state; changing one never recompiles.
+
+    `value_clip_epsilon` and `max_grad_norm` switch off at inf (the defaults: no value
+    clipping; clipping gradients at norm 1): a number, so the switch can be swept too.
+    """
+
+    learning_rate: float | Array = 3e-4  # the schedule's base rate (Config.lr_schedule)
+    entropy_coef: float | Array = 1e-2
+    value_coef: float | Array = 0.5
+    clip_epsilon: float | Array = 0.2
+    value_clip_epsilon: float | Array = INF  # inf: the value loss unclipped
+    discount: float | Array = 0.99
+    gae_lambda: float | Array = 0.95
+    reward_scaling: float | Array = 1.0
+    max_grad_norm: float | Array = 1.0  # inf: gradients unclipped
+
+    def __post_init__(self):
+        hyperparams_lib.check_ranges(self, "ppo.Hyperparams", HYPERPARAM_RANGES)
+
+    def replace(self, **changes) -> Hyperparams:
+        return dataclasses.replace(self, **changes)
+
+
+HYPERPARAM_RANGES = {
+    "learning_rate": (0.0, INF, "()"),
+    "entropy_coef": (0.0, INF, "[)"),
+    "value_coef": (0.0, INF, "[)"),
+    "clip_epsilon": (0.0, INF, "()"),
+    "value_clip_epsilon": (0.0, INF, "(]"),
+    "discount": (0.0, 1.0, "[]"),
+    "gae_lambda": (0.0, 1.0, "[]"),
+    "reward_scaling": (0.0, INF, "()"),
+    "max_grad_norm": (0.0, INF, "(]"),
+}
+OFF_AT_INF = ("value_clip_epsilon", "max_grad_norm")  # None in a flat dict means inf (off)
+
+
+def configure(**fields: Any) -> tuple[Config, Hyperparams]:
+    """(Config, Hyperparams) from one flat dict of field values (a registry's, `--config
+    k=v`, a config.json's): each name goes where it belongs. Unknown names and bad values
+    are a ValueError naming them.
+
+        config, hyperparams = ppo.configure(num_envs=64, learning_rate=1e-3)
+    """
+    names = hyperparams_lib.field_names
+    config, hyper = hyperparams_lib.split_fields("ppo.configure", names(Config), names(Hyperparams), fields, OFF_AT_INF)
+    return Config(**config), Hyperparams(**hyper)
+
+
 @jax.tree_util.register_dataclass
 @dataclasses.dataclass(frozen=True)
 class TrainState:
     """Everything training needs to continue exactly: a checkpoint saves this.
 
     `collector` holds the per-env leaves ([num_envs, ...]): env states, recurrent policy
-    carries and running episode returns (`learning.Collector`).
+    carries and running episode returns (`learning.Collector`). `hyperparams` are the
+    numbers `update` learns with (float32 leaves).
     """
 
     params: dict[str, Any]  # {"policy": ..., "value": ...}
@@ -157,21 +206,62 @@ class TrainState:
     collector: learning.Collector
     key: jax.Array
     updates: jax.Array  # int32 count of updates done
+    hyperparams: Hyperparams
 
     def replace(self, **changes) -> TrainState:
         return dataclasses.replace(self, **changes)
 
 
-PER_ENV_FIELDS = ("collector",)  # the harness shards these over devices (training.Algorithm)
+PER_ENV_FIELDS = ("collector",)  # a driver may shard these over devices (`Algorithm.per_env_fields`)
+
+
+class Components(NamedTuple):
+    """A user's own pieces (any JAX library); None: PPO's default of the Config.
+
+    Attributes:
+      policy_network: an (init, apply) pair (`learning.Network` or `RecurrentNetwork`)
+        whose output is [2 * action_size] (mean, scale parameters).
+      value_network: a `learning.Network` with output [1].
+      optimizer: an optax `GradientTransformation`, used as it is (the hyperparameters
+        learning_rate and max_grad_norm are then unused), or a function of the learning
+        rate (e.g. `optax.sgd`), which gets the scheduled, traced rate and follows the
+        gradient clipping at max_grad_norm. Default: `optax.adam`.
+    """
+
+    policy_network: networks.Network | networks.RecurrentNetwork | None = None
+    value_network: networks.Network | None = None
+    optimizer: optax.GradientTransformation | Callable[[Any], optax.GradientTransformation] | None = None
+
+
+NO_COMPONENTS = Components()  # PPO's own networks and optimizer
+
+
+class Extras(NamedTuple):
+    """What the sampling policy records beside each action ([T, N, ...] once collected)."""
+
+    raw: Array  # [action_size] the pre-tanh sample
+    log_prob: Array  # [] its log-probability
+    carry: Any  # the recurrent carry the step started from (() feed-forward)
+
+
+class Batch(NamedTuple):
+    """What the learner's minibatches are cut from: [T, N, ...] leaves."""
+
+    obs: Any
+    start: Array  # [T, N] bool, obs begins an episode
+    extras: Extras
+    advantages: Array  # [T, N]
+    returns: Array  # [T, N] GAE's value targets
+    values: Array  # [T, N] the value function's estimate when collected
 
 
 # --- networks and optimizer ---------------------------------------------------------
 
 
-def _networks(config: Config, task: Task):
+def _networks(config: Config, task: Task, components: Components = NO_COMPONENTS):
     activation = ACTIVATIONS[config.activation]
     dtype = jnp.dtype(config.compute_dtype)
-    policy_net = config.policy_network
+    policy_net = components.policy_network
     if policy_net is None and config.recurrent:
         policy_net = networks.gru_mlp(
             2 * task.action_size,
@@ -184,22 +274,31 @@ def _networks(config: Config, task: Task):
         policy_net = networks.mlp(
             2 * task.action_size, config.policy_hidden_sizes, activation, output_scale=0.01, compute_dtype=dtype
         )
-    value_net = config.value_network or networks.mlp(1, config.value_hidden_sizes, activation, compute_dtype=dtype)
+    value_net = components.value_network or networks.mlp(1, config.value_hidden_sizes, activation, compute_dtype=dtype)
     return policy_net, value_net
 
 
-def _optimizer(config: Config) -> optax.GradientTransformation:
-    if config.optimizer is not None:
-        return config.optimizer
+def _optimizer(
+    config: Config, hyperparams: Hyperparams, components: Components = NO_COMPONENTS
+) -> optax.GradientTransformation:
+    """The optimizer of these hyperparameters (traced or not). Built afresh where it is
+    used, as `optax.inject_hyperparams` rebuilds its inner one: its state's structure
+    does not depend on the numbers, so init's state serves every value."""
+    if isinstance(components.optimizer, optax.GradientTransformation):
+        return components.optimizer
     steps = config.num_updates * config.num_epochs * config.num_minibatches
-    schedule = {
-        "constant": optax.constant_schedule(config.learning_rate),
-        "linear": optax.linear_schedule(config.learning_rate, 0.0, steps),
-        "cosine": optax.cosine_decay_schedule(config.learning_rate, steps),
+    shape = {
+        "constant": optax.constant_schedule(1.0),
+        "linear": optax.linear_schedule(1.0, 0.0, steps),
+        "cosine": optax.cosine_decay_schedule(1.0, steps),
     }[config.lr_schedule]
-    if config.max_grad_norm is None:
-        return optax.adam(schedule)
-    return optax.chain(optax.clip_by_global_norm(config.max_grad_norm), optax.adam(schedule))
+    base = hyperparams.learning_rate
+
+    def schedule(count: Array) -> Array:
+        return base * shape(count)
+
+    make = components.optimizer or optax.adam
+    return optax.chain(optax.clip_by_global_norm(hyperparams.max_grad_norm), make(schedule))
 
 
 def _view(obs: Any, key: str | None, field: str) -> Any:
@@ -234,36 +333,48 @@ def _initial_carry(policy_net) -> Any:
 # --- init ---------------------------------------------------------------------------
 
 
-@functools.partial(jax.jit, static_argnums=0)  # one compile: resetting op by op took minutes on a GPU
-def init(config: Config, task: Task, key: jax.Array) -> TrainState:
-    """A fresh train state: networks, optimizer, normalizer and `num_envs` reset envs."""
-    policy_net, value_net = _networks(config, task)
+@functools.partial(jax.jit, static_argnums=0, static_argnames="components")  # one compile: op by op took minutes
+def init(
+    config: Config, task: Task, hyperparams: Hyperparams, key: jax.Array, components: Components = NO_COMPONENTS
+) -> TrainState:
+    """A fresh train state: networks, optimizer, normalizer, `num_envs` reset envs, and
+    `hyperparams`, which `update` reads from it."""
+    policy_net, value_net = _networks(config, task, components)
     env_key, policy_key, value_key, key = jax.random.split(key, 4)
     collector = learning.Collector.create(task, env_key, config.num_envs, _initial_carry(policy_net))
     example = jax.tree.map(lambda x: x[0], collector.env_state.obs)
     stats = normalization.init_stats(example)
     policy_example, value_example = _inputs(config, stats, example)
     params = {"policy": policy_net.init(policy_key, policy_example), "value": value_net.init(value_key, value_example)}
+    hyperparams = hyperparams_lib.as_leaves(hyperparams)
     return TrainState(
         params=params,
-        opt_state=_optimizer(config).init(params),
+        opt_state=_optimizer(config, hyperparams, components).init(params),
         obs_stats=stats,
         collector=collector,
         key=key,
         updates=jnp.zeros((), jnp.int32),
+        hyperparams=hyperparams,
     )
 
 
 # --- acting -------------------------------------------------------------------------
 
 
-def acting(config: Config, task: Task, params: dict[str, Any], deterministic: bool) -> learning.Policy:
+def acting(
+    config: Config,
+    task: Task,
+    params: dict[str, Any],
+    deterministic: bool,
+    components: Components = NO_COMPONENTS,
+) -> learning.Policy:
     """The policy of `policy_params` for one env, as `learning.collect` and
     `learning.evaluate` take it: ``act(carry, obs, start, key) -> (carry, ctrl, extras)``,
     the carry () for a feed-forward network, `start` restarting a recurrent one. A sample
-    records its pre-tanh value, its log-probability and the carry it started from (the
-    learner's sequences begin there); the deterministic action is tanh of the mean."""
-    policy_net, _ = _networks(config, task)
+    records `Extras`: its pre-tanh value, its log-probability and the carry it started
+    from (the learner's sequences begin there); the deterministic action is tanh of the
+    mean, with no extras."""
+    policy_net, _ = _networks(config, task, components)
 
     def act(carry, obs, start, key):
         obs, _ = _inputs(config, params["obs_stats"], obs)
@@ -273,9 +384,9 @@ def acting(config: Config, task: Task, params: dict[str, Any], deterministic: bo
             new_carry, out = carry, policy_net.apply(params["policy"], obs)
         loc, scale = distributions.split_params(out)
         if deterministic:
-            return new_carry, learning.to_controls(task, distributions.mode(loc)), {}
+            return new_carry, learning.to_controls(task, distributions.mode(loc)), ()
         action, raw = distributions.sample(loc, scale, key)
-        extras = {"raw": raw, "log_prob": distributions.log_prob(loc, scale, raw), "carry": carry}
+        extras = Extras(raw=raw, log_prob=distributions.log_prob(loc, scale, raw), carry=carry)
         return new_carry, learning.to_controls(task, action), extras
 
     return act
@@ -286,17 +397,19 @@ def policy_params(train_state: TrainState) -> dict[str, Any]:
     return {"policy": train_state.params["policy"], "obs_stats": train_state.obs_stats}
 
 
-def policy(config: Config, task: Task, deterministic: bool = True) -> Callable[[Any, Any, jax.Array], jax.Array]:
+def policy(
+    config: Config, task: Task, deterministic: bool = True, components: Components = NO_COMPONENTS
+) -> Callable[[Any, Any, jax.Array], jax.Array]:
     """A deployable feed-forward policy ``(policy_params, obs, key) -> ctrl`` for one env.
 
     Deterministic: the mean action (tanh of the Gaussian's mean); else a sample.
     (Recurrent policies: use `evaluate`, which carries the hidden state.)
     """
-    if _is_recurrent(_networks(config, task)[0]):
+    if _is_recurrent(_networks(config, task, components)[0]):
         raise ValueError("ppo.policy: a recurrent policy needs its carry; use ppo.evaluate or the network directly")
 
     def act(params, obs, key):
-        return acting(config, task, params, deterministic)((), obs, jnp.ones((), bool), key)[1]
+        return acting(config, task, params, deterministic, components)((), obs, jnp.ones((), bool), key)[1]
 
     return act
 
@@ -304,29 +417,32 @@ def policy(config: Config, task: Task, deterministic: bool = True) -> Callable[[
 # --- update -------------------------------------------------------------------------
 
 
-def _loss(config: Config, task: Task, params, stats, batch, key) -> tuple[jax.Array, dict[str, jax.Array]]:
+def _loss(
+    config: Config, task: Task, components: Components, hp: Hyperparams, params, stats, batch: Batch, key
+) -> tuple[jax.Array, dict[str, jax.Array]]:
     """PPO loss on one minibatch: [T, n, ...] sequences (recurrent) or [n, ...] samples;
     `key` draws the entropy estimate's fresh sample."""
-    policy_net, value_net = _networks(config, task)
-    obs, value_obs = _inputs(config, stats, batch["obs"])
+    policy_net, value_net = _networks(config, task, components)
+    obs, value_obs = _inputs(config, stats, batch.obs)
     if _is_recurrent(policy_net):
 
         def step(carry, inputs):  # over time, vmapped over the minibatch's envs
             return jax.vmap(lambda c, o, s: policy_net.apply(params["policy"], c, o, s))(carry, *inputs)
 
-        initial = jax.tree.map(lambda c: c[0], batch["carry"])  # each sequence's carry at its start
-        _, out = jax.lax.scan(step, initial, (obs, batch["start"]))
+        initial = jax.tree.map(lambda c: c[0], batch.extras.carry)  # each sequence's carry at its start
+        _, out = jax.lax.scan(step, initial, (obs, batch.start))
     else:
         out = policy_net.apply(params["policy"], obs)
     loc, scale = distributions.split_params(out)
-    log_prob = distributions.log_prob(loc, scale, batch["raw"])
+    log_prob = distributions.log_prob(loc, scale, batch.extras.raw)
     entropy = jnp.mean(distributions.entropy(loc, scale, jax.random.normal(key, loc.shape)))
-    adv = losses.normalize_advantages(batch["advantages"]) if config.normalize_advantages else batch["advantages"]
-    policy_loss, aux = losses.clipped_surrogate_loss(log_prob, batch["log_prob"], adv, config.clip_epsilon)
+    adv = losses.normalize_advantages(batch.advantages) if config.normalize_advantages else batch.advantages
+    policy_loss, aux = losses.clipped_surrogate_loss(log_prob, batch.extras.log_prob, adv, hp.clip_epsilon)
     values = value_net.apply(params["value"], value_obs)[..., 0]
-    old_values = batch["values"] if config.value_clip_epsilon else None
-    v_loss = losses.value_loss(values, batch["returns"], old_values, config.value_clip_epsilon)
-    total = policy_loss + config.value_coef * v_loss - config.entropy_coef * entropy
+    # inf switches clipping off: the unclipped loss exactly (the clipped one, old + (v - old), rounds).
+    clipped = losses.value_loss(values, batch.returns, batch.values, hp.value_clip_epsilon)
+    v_loss = jnp.where(jnp.isinf(hp.value_clip_epsilon), losses.value_loss(values, batch.returns), clipped)
+    total = policy_loss + hp.value_coef * v_loss - hp.entropy_coef * entropy
     return total, {
         "loss/policy": policy_loss,
         "loss/value": v_loss,
@@ -337,26 +453,34 @@ def _loss(config: Config, task: Task, params, stats, batch, key) -> tuple[jax.Ar
     }
 
 
-def rollout(config: Config, task: Task, train_state: TrainState, key: jax.Array):
+def rollout(
+    config: Config, task: Task, train_state: TrainState, key: jax.Array, components: Components = NO_COMPONENTS
+):
     """Collects `unroll_length` steps of every env with the current sampling policy.
 
     Returns (collector to continue from, `learning.Transitions` [unroll_length,
-    num_envs, ...], collection metrics). AMP rewrites the transitions' reward between
-    this and `improve`.
+    num_envs, ...] with `Extras`, collection metrics). AMP rewrites the transitions'
+    reward between this and `improve`.
     """
-    act = acting(config, task, policy_params(train_state), deterministic=False)
+    act = acting(config, task, policy_params(train_state), False, components)
     return learning.collect(task, act, train_state.collector, key, config.unroll_length)
 
 
 def improve(
-    config: Config, task: Task, train_state: TrainState, data: learning.Transitions, key: jax.Array
+    config: Config,
+    task: Task,
+    train_state: TrainState,
+    data: learning.Transitions,
+    key: jax.Array,
+    components: Components = NO_COMPONENTS,
 ) -> tuple[TrainState, dict[str, jax.Array]]:
-    """Learns from `data` (from `rollout`, rewards as given): the observation statistics,
-    GAE from the value function, then `num_epochs` x `num_minibatches` clipped-surrogate
-    steps. Returns the state with new params, optimizer state and statistics (its
-    collector and key as given) and the learning metrics."""
-    ts = train_state
-    policy_net, value_net = _networks(config, task)
+    """Learns from `data` (from `rollout`, rewards as given) with the state's
+    hyperparameters: the observation statistics, GAE from the value function, then
+    `num_epochs` x `num_minibatches` clipped-surrogate steps. Returns the state with new
+    params, optimizer state and statistics (its collector and key as given) and the
+    learning metrics."""
+    ts, hp = train_state, train_state.hyperparams
+    policy_net, value_net = _networks(config, task, components)
     stats = ts.obs_stats
     if config.normalize_observations:
         stats = normalization.update_stats(stats, data.obs, num_batch_dims=2)
@@ -366,25 +490,18 @@ def improve(
 
     values = value_of(data.obs)
     adv, returns = learning.gae(
-        data.reward * config.reward_scaling,
+        data.reward * hp.reward_scaling,
         values,
         value_of(data.next_obs),
         data.terminated,
         data.truncated,
-        config.discount,
-        config.gae_lambda,
+        hp.discount,
+        hp.gae_lambda,
     )
-    batch = {
-        "obs": data.obs,
-        "start": data.start,
-        **data.extras,
-        "advantages": adv,
-        "returns": returns,
-        "values": values,
-    }
+    batch = Batch(obs=data.obs, start=data.start, extras=data.extras, advantages=adv, returns=returns, values=values)
 
-    optimizer = _optimizer(config)
-    grad_fn = jax.grad(lambda p, b, k: _loss(config, task, p, stats, b, k), has_aux=True)
+    optimizer = _optimizer(config, hp, components)
+    grad_fn = jax.grad(lambda p, b, k: _loss(config, task, components, hp, p, stats, b, k), has_aux=True)
 
     def sgd_step(carry, minibatch):
         params, opt_state, key = carry
@@ -407,21 +524,30 @@ def improve(
     return ts.replace(params=params, opt_state=opt_state, obs_stats=stats), metrics
 
 
-def update(config: Config, task: Task, train_state: TrainState) -> tuple[TrainState, dict[str, jax.Array]]:
-    """One PPO update, `rollout` then `improve`. Jit it with `config` static; `task` and
-    `train_state` are ordinary arguments."""
+def update(
+    config: Config, task: Task, train_state: TrainState, components: Components = NO_COMPONENTS
+) -> tuple[TrainState, dict[str, jax.Array]]:
+    """One PPO update, `rollout` then `improve`, with the state's hyperparameters. Jit it
+    with `config` (and `components`) static; `task` and `train_state` are ordinary
+    arguments."""
     key, collect_key, learn_key = jax.random.split(train_state.key, 3)
-    collector, data, collect_metrics = rollout(config, task, train_state, collect_key)
+    collector, data, collect_metrics = rollout(config, task, train_state, collect_key, components)
     ts = train_state.replace(collector=collector, key=key, updates=train_state.updates + 1)
-    ts, learn_metrics = improve(config, task, ts, data, learn_key)
+    ts, learn_metrics = improve(config, task, ts, data, learn_key, components)
     return ts, {**collect_metrics, **learn_metrics}
 
 
-# --- evaluate and train -------------------------------------------------------------
+# --- evaluate, train, make ----------------------------------------------------------
 
 
 def evaluate(
-    config: Config, task: Task, train_state: TrainState, key: jax.Array, num_envs: int, num_steps: int | None = None
+    config: Config,
+    task: Task,
+    train_state: TrainState,
+    key: jax.Array,
+    num_envs: int,
+    num_steps: int | None = None,
+    components: Components = NO_COMPONENTS,
 ):
     """Deterministic episodes (`learning.evaluate` of the mean action): the mean return
     of the first episode of `num_envs` envs over at most `num_steps` steps (static;
@@ -429,15 +555,57 @@ def evaluate(
 
     Returns (mean return, per-env returns [num_envs], Trajectory of env 0 [num_steps]).
     """
-    act = acting(config, task, policy_params(train_state), deterministic=True)
-    carry = _initial_carry(_networks(config, task)[0])
+    act = acting(config, task, policy_params(train_state), True, components)
+    carry = _initial_carry(_networks(config, task, components)[0])
     returns, _, trajectory = learning.evaluate(task, act, key, num_envs, num_steps, carry)
     return jnp.mean(returns), returns, trajectory
 
 
-def train(config: Config, task: Task, settings: training.Settings | None = None, **settings_kwargs):
-    """Trains with the shared harness (`mjzoo.harness.training.run`): jitted chunks of updates,
-    evaluation, metrics.jsonl / TensorBoard, checkpoints, curves and a video when
-    `settings.out_dir` is set. Returns (final TrainState, last metrics)."""
-    settings = settings or training.Settings(**settings_kwargs)
-    return training.run(sys.modules[__name__], config, task, settings)
+def train(
+    config: Config, task: Task, hyperparams: Hyperparams, key: jax.Array, components: Components = NO_COMPONENTS
+) -> tuple[TrainState, dict[str, jax.Array]]:
+    """A whole run: `init`, then `config.num_updates` `update`s in one `lax.scan` (as
+    purejaxrl's make_train). Jit it with `config` static; vmap it over hyperparameters
+    and keys to sweep them in one program:
+
+        rates = jnp.array([1e-4, 3e-4])  # every leaf batched [2]: the defaults repeated, the rates swept
+        hps = jax.tree.map(lambda x: jnp.full(2, x), ppo.Hyperparams()).replace(learning_rate=rates)
+        run = jax.jit(jax.vmap(lambda hp, key: ppo.train(config, task, hp, key)))
+        states, metrics = run(hps, jax.random.split(key, 2))  # docs/sweeps.md
+
+    Returns (final TrainState, per-update metrics, each [num_updates]). With files on
+    disk, progress, evaluation and checkpoints: `mjzoo.harness.training.run(ppo.make(config), ...)`.
+    """
+    state = init(config, task, hyperparams, key, components=components)
+
+    def body(state, _):
+        return update(config, task, state, components)
+
+    return jax.lax.scan(body, state, None, length=config.num_updates)
+
+
+def make(
+    config: Config,
+    *,
+    policy_network: networks.Network | networks.RecurrentNetwork | None = None,
+    value_network: networks.Network | None = None,
+    optimizer: optax.GradientTransformation | Callable[[Any], optax.GradientTransformation] | None = None,
+) -> Algorithm:
+    """PPO as a value (`mjzoo.learning.Algorithm`): this module's functions with `config`
+    and the user's pieces (`Components`) bound, default `Hyperparams()`."""
+    components = Components(policy_network, value_network, optimizer)
+    return Algorithm(
+        name="ppo",
+        config=config,
+        hyperparams=Hyperparams(),
+        init=lambda task, hyperparams, key: init(config, task, hyperparams, key, components=components),
+        update=lambda task, state: update(config, task, state, components),
+        evaluate=lambda task, state, key, num_envs, num_steps=None: evaluate(
+            config, task, state, key, num_envs, num_steps, components
+        ),
+        policy=lambda task, deterministic=True: policy(config, task, deterministic, components),
+        policy_params=policy_params,
+        steps_per_update=config.steps_per_update,
+        num_updates=config.num_updates,
+        per_env_fields=PER_ENV_FIELDS,
+    )

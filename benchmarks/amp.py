@@ -8,8 +8,8 @@ In one process, at AMP's batch (`humanoid_amp.AMP`: 2048 envs, unrolls of 160):
   (c) AMP on `humanoid_amp_walk` (alive and effort, no forward speed; the style reward
       of the teacher's walk does the rest).
 
-Each trains through the shared harness (`training.run`, what `ppo.train` / `amp.train`
-call), which evaluates the deterministic policy after every chunk of updates; env 0's
+Each trains through the shared harness (`training.run` of `ppo.make` / `amp.make`,
+a call each), which evaluates the deterministic policy after every chunk of updates; env 0's
 episode of each evaluation is kept (a host callback) and measured after training, off
 the clock: the style error of its steps 200-1000 (`humanoid_amp.style_error`: mean
 hinge-angle error to the nearest 10-frame reference window, rad; the reference was cut
@@ -43,7 +43,6 @@ import json
 import os
 import sys
 import time
-import types
 from pathlib import Path
 
 if "--quick" in sys.argv:  # XLA's backend optimizations triple MJX compiles on a CPU
@@ -59,6 +58,7 @@ from task_overhead import inputs, raw_steps_per_s  # noqa: E402
 
 import mjzoo  # noqa: E402
 import mjzoo.envs  # noqa: E402
+from mjzoo import learning  # noqa: E402
 from mjzoo.algorithms import amp, ppo  # noqa: E402
 from mjzoo.envs import humanoid_amp  # noqa: E402
 from mjzoo.harness import rendering, training  # noqa: E402
@@ -78,26 +78,21 @@ QUICK = dict(num_envs=8, unroll_length=8, num_minibatches=4, num_epochs=1, disc_
 # --- keeping each evaluation's episode ----------------------------------------------------
 
 
-def recording(algorithm: types.ModuleType, episodes: list) -> types.ModuleType:
+def recording(algorithm: learning.Algorithm, episodes: list) -> learning.Algorithm:
     """`algorithm` whose `evaluate` also hands env 0's episode to the host: appends
     ``(qpos [T, nq], terminated [T], truncated [T])`` to `episodes` once per evaluation
     (`jax.debug.callback`: a copy of 100 kB, nothing computed on the host meanwhile)."""
-    wrapped = types.ModuleType(algorithm.__name__)
-    for name in ("PER_ENV_FIELDS", "init", "update", "diagnose"):
-        if hasattr(algorithm, name):
-            setattr(wrapped, name, getattr(algorithm, name))
 
     def keep(qpos, terminated, truncated):
         episodes.append((np.asarray(qpos), np.asarray(terminated), np.asarray(truncated)))
 
-    def evaluate(config, task, state, key, num_envs, num_steps):
-        mean, returns, trajectory = algorithm.evaluate(config, task, state, key, num_envs, num_steps)
+    def evaluate(task, state, key, num_envs, num_steps):
+        mean, returns, trajectory = algorithm.evaluate(task, state, key, num_envs, num_steps)
         after = trajectory.next_state
         jax.debug.callback(keep, after.data.qpos, after.terminated, after.truncated)
         return mean, returns, trajectory
 
-    wrapped.evaluate = evaluate
-    return wrapped
+    return algorithm._replace(evaluate=evaluate)
 
 
 def measure_episode(style_task: mjzoo.Task, qpos: np.ndarray, terminated: np.ndarray, truncated: np.ndarray) -> dict:
@@ -124,8 +119,8 @@ def measure_episode(style_task: mjzoo.Task, qpos: np.ndarray, terminated: np.nda
 
 def train(
     label: str,
-    algorithm: types.ModuleType,
-    config,
+    algorithm: learning.Algorithm,
+    hyperparams,
     task: mjzoo.Task,
     style_task: mjzoo.Task,
     out: Path,
@@ -147,7 +142,7 @@ def train(
         progress=False,
     )
     start = time.perf_counter()
-    training.run(recording(algorithm, episodes), config, task, settings)
+    training.run(recording(algorithm, episodes), task, settings, hyperparams)
     total = time.perf_counter() - start
     curve, steps_per_s = training_curve(out / label / "metrics.jsonl", total)
     measured = [measure_episode(style_task, *episode) for episode in episodes]  # one per chunk, in order
@@ -167,10 +162,11 @@ def train(
         flush=True,
     )
     return {
-        "config": training.config_dict(config),
+        "config": training.config_dict(algorithm.config),
+        "hyperparams": training.hyperparams_dict(hyperparams),
         "steps_per_s": steps_per_s,
         "train_s": total,
-        "compile_s": curve[0][1] - settings.updates_per_chunk * config.steps_per_update / steps_per_s,
+        "compile_s": curve[0][1] - settings.updates_per_chunk * algorithm.steps_per_update / steps_per_s,
         "time_to_style_s": first and first["elapsed_s"],
         "steps_to_style": first and first["step"],
         "final": points[-1],
@@ -206,16 +202,17 @@ def teacher(style_task: mjzoo.Task, path: Path | None) -> dict:
 # --- the run --------------------------------------------------------------------------------
 
 
-def configs(steps: int, ppo_steps: int, quick: bool) -> tuple[ppo.Config, amp.Config]:
+def configs(steps: int, ppo_steps: int, quick: bool) -> tuple[tuple, tuple]:
     """PPO's registered humanoid_walk hyperparameters and AMP's `humanoid_amp.AMP`, at AMP's
-    number of envs (the same batch for both), each for its number of env steps."""
+    number of envs (the same batch for both), each for its number of env steps: each a
+    (Config, Hyperparams) pair."""
     ppo_fields = dict(mjzoo.envs.hyperparameters("humanoid_walk", "ppo"), total_steps=ppo_steps)
     amp_fields = dict(humanoid_amp.AMP, total_steps=steps)
     ppo_fields["num_envs"] = amp_fields["num_envs"]
     if quick:  # two updates of 8 envs
         ppo_fields.update({k: v for k, v in QUICK.items() if k in ppo_fields}, total_steps=128)
         amp_fields.update(QUICK, total_steps=128)
-    return ppo.Config(**ppo_fields), amp.Config(**amp_fields)
+    return ppo.configure(**ppo_fields), amp.configure(**amp_fields)
 
 
 def print_table(result: dict) -> None:
@@ -261,7 +258,7 @@ def main() -> None:
         return
     device = jax.devices()[0].device_kind
     print(f"device: {device}, jax {jax.__version__}", flush=True)
-    ppo_config, amp_config = configs(args.steps, args.ppo_steps, args.quick)
+    (ppo_config, ppo_hyperparams), (amp_config, amp_hyperparams) = configs(args.steps, args.ppo_steps, args.quick)
     walk = mjzoo.envs.make("humanoid_walk")
     batch = inputs(walk, amp_config.num_envs, 20 if args.quick else 100)
     raw = raw_steps_per_s(walk, "humanoid_walk", *batch, repeats=3)
@@ -279,12 +276,12 @@ def main() -> None:
     }
     args.out.mkdir(parents=True, exist_ok=True)
     path = args.out / f"amp_{jax.default_backend()}_{'_'.join(args.trainers)}{'_quick' if args.quick else ''}.json"
-    for key, label, algorithm, config, task in (
-        ("ppo", "ppo_walk", ppo, ppo_config, walk),
-        ("amp", "amp_walk", amp, amp_config, style_task),
+    for key, label, algorithm, hyperparams, task in (
+        ("ppo", "ppo_walk", ppo.make(ppo_config), ppo_hyperparams, walk),
+        ("amp", "amp_walk", amp.make(amp_config), amp_hyperparams, style_task),
     ):
         if key in args.trainers:
-            result[key] = train(label, algorithm, config, task, style_task, args.out, args.quick, video)
+            result[key] = train(label, algorithm, hyperparams, task, style_task, args.out, args.quick, video)
             path.write_text(json.dumps(result, indent=2))  # what is done survives a run cut short
     if len(args.trainers) == 2:
         result["amp_overhead"] = result["ppo"]["steps_per_s"] / result["amp"]["steps_per_s"] - 1.0

@@ -53,19 +53,20 @@ def main() -> None:
     if args.smoke:
         fields.update(num_envs=16, num_minibatches=2, num_epochs=1, unroll_length=4)
         args.updates, args.eval_envs, args.eval_steps = 2, 4, 20
-    config = ppo.Config(**fields)
-    state = training._init_fn(ppo)(config, task, jax.random.key(0))
+    algorithm, hyperparams = ppo.configure(**fields)
+    algorithm = ppo.make(algorithm)
+    state = training._init_fn(algorithm.init)(task, hyperparams, jax.random.key(0))
 
     @jax.jit  # the harness's chunk (`training._chunk_fn`) donates its state; this one runs from `state` again
     def chunk(task, state):  # `args.updates` updates in one program
-        return jax.lax.scan(lambda s, _: ppo.update(config, task, s), state, None, length=args.updates)[0]
+        return jax.lax.scan(lambda s, _: algorithm.update(task, s), state, None, length=args.updates)[0]
 
     jax.block_until_ready(chunk(task, state))  # compiled and run once: the timed runs only execute it
-    evaluate = training._evaluate_fn(ppo)  # the very function the harness compiles ahead
+    evaluate = training._evaluate_fn(algorithm.evaluate)  # the very function the harness compiles ahead
 
     rows = []
     for i, (where, options) in enumerate(VARIANTS):
-        lowered = evaluate.lower(config, task, state, jax.random.key(1), args.eval_envs + i, args.eval_steps)
+        lowered = evaluate.lower(task, state, jax.random.key(1), args.eval_envs + i, args.eval_steps)
         timing: dict[str, float] = {}
 
         def compile_it(lowered=lowered, options=options, timing=timing) -> None:

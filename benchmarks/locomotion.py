@@ -192,7 +192,7 @@ def run_task(
     if smoke:  # two updates of 8 envs; 50-step evaluations
         fields.update(num_envs=8, unroll_length=8, num_minibatches=4, num_epochs=1, total_steps=128)
         eval_envs = min(eval_envs, 8)
-    config = ppo.Config(**fields)
+    config, hyperparams = ppo.configure(**fields)
     episode = 50 if smoke else mjzoo.envs.defaults(name)["episode_steps"]
     # Training first: launch-to-first-update counts from the process start to its first record.
     # Every chunk evaluates (not the default 5% budget), to time the stated return.
@@ -209,7 +209,7 @@ def run_task(
     )  # a new measurement replaces the last
     launched = launch_seconds()
     start = time.perf_counter()
-    train_state, _ = ppo.train(config, spec.train_task(impl), settings)
+    train_state, _ = training.run(ppo.make(config), spec.train_task(impl), settings, hyperparams)
     total = time.perf_counter() - start
     curve, steps_per_s = training_curve(run_dir / "metrics.jsonl", total)
     eval_task = spec.eval_task(impl)
@@ -220,6 +220,7 @@ def run_task(
         "impl": impl,
         "seed": seed,
         "config": training.config_dict(config),
+        "hyperparams": training.hyperparams_dict(hyperparams),
         "raw_steps_per_s": raw,
         "steps_per_s": steps_per_s,
         "fraction_of_raw": steps_per_s / raw,

@@ -154,7 +154,7 @@ def brax_env_steps(config: dict) -> int:
 
 def train_mjzoo(env, name: str, config: dict, seed: int, overrides: dict) -> dict:
     """mjzoo PPO on `playground.task(env)` with the same hyperparameters (and
-    `overrides` of `ppo.Config`), for as many env steps as Brax trains, evaluated about as
+    `overrides` of `ppo.configure`'s fields), for as many env steps as Brax trains, evaluated about as
     often as Brax's `num_evals`."""
     fields = {**playground.ppo_hyperparameters(name), "total_steps": brax_env_steps(config), **overrides}
     if config["num_envs"] != fields["num_envs"]:  # --smoke
@@ -164,7 +164,7 @@ def train_mjzoo(env, name: str, config: dict, seed: int, overrides: dict) -> dic
             num_minibatches=config["num_minibatches"],
             num_epochs=config["num_updates_per_batch"],
         )
-    ppo_config = ppo.Config(**fields)
+    ppo_config, hyperparams = ppo.configure(**fields)
     per_chunk = max(1, ppo_config.num_updates // max(1, config["num_evals"] - 1))
     with tempfile.TemporaryDirectory() as out:
         settings = training.Settings(
@@ -179,7 +179,7 @@ def train_mjzoo(env, name: str, config: dict, seed: int, overrides: dict) -> dic
             seed=seed,
         )
         start = time.perf_counter()
-        training.run(ppo, ppo_config, playground.task(env), settings)
+        training.run(ppo.make(ppo_config), playground.task(env), settings, hyperparams)
         curve, train_steps_per_s = training_curve(Path(out) / "metrics.jsonl", time.perf_counter() - start)
     return {
         "steps_per_s": wall_steps_per_s(curve),
@@ -358,7 +358,7 @@ def main() -> None:
         nargs="*",
         default=[],
         metavar="FIELD=VALUE",
-        help="ppo.Config overrides for mjzoo (e.g. compute_dtype=bfloat16)",
+        help="ppo.configure overrides for mjzoo (e.g. compute_dtype=bfloat16 learning_rate=1e-3)",
     )
     parser.add_argument("--threshold", type=float, default=0.9, help="fraction of the better final return")
     parser.add_argument("--smoke", action="store_true", help="tiny sizes, to check the script on a CPU")

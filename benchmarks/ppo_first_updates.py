@@ -5,7 +5,7 @@ healthy update moves the policy a little (KL ~ 0.01, clip fraction ~ 0.05); a sc
 that explodes in one update is the failure fixed in `distributions.entropy`.
 
     python benchmarks/ppo_first_updates.py --env PendulumSwingup --num-envs 256 --updates 3
-    python benchmarks/ppo_first_updates.py --set entropy_coef=0.0     # ppo.Config overrides
+    python benchmarks/ppo_first_updates.py --set entropy_coef=0.0     # ppo.configure overrides
 """
 
 from __future__ import annotations
@@ -27,14 +27,14 @@ def main() -> None:
     parser.add_argument("--impl", default="jax", choices=["jax", "warp"])
     parser.add_argument("--num-envs", type=int, default=None, help="default: Playground's (2048)")
     parser.add_argument("--updates", type=int, default=3)
-    parser.add_argument("--set", nargs="*", default=[], metavar="FIELD=VALUE", help="ppo.Config fields")
+    parser.add_argument("--set", nargs="*", default=[], metavar="FIELD=VALUE", help="ppo.configure fields")
     args = parser.parse_args()
     task = playground.task(args.env, impl=args.impl)
     fields = {**playground.ppo_hyperparameters(args.env), **arguments.parse_assignments(tuple(args.set), "--set")}
-    config = ppo.Config(**{**fields, **({"num_envs": args.num_envs} if args.num_envs else {})})
+    config, hyperparams = ppo.configure(**{**fields, **({"num_envs": args.num_envs} if args.num_envs else {})})
     policy_net = ppo._networks(config, task)[0]
     update = jax.jit(ppo.update, static_argnums=0)
-    state = ppo.init(config, task, jax.random.key(0))
+    state = ppo.init(config, task, hyperparams, jax.random.key(0))
     for i in range(args.updates):
         state, m = update(config, task, state)
         obs = ppo._inputs(config, state.obs_stats, state.collector.env_state.obs)[0]

@@ -110,14 +110,16 @@ def per_update(run, state, updates: int, repeats: int) -> float:
     return float(np.median(times))
 
 
-def profile(env: str, base: ppo.Config, fields: dict[str, str], repeats: int, devices: int = 1) -> dict:
+def profile(env: str, base: dict, fields: dict[str, str], repeats: int, devices: int = 1) -> dict:
+    """`base`: `ppo.configure`'s fields; `fields` a variant's changes of them."""
     fields = dict(fields)
     precision = fields.pop("precision", None)
     flat_adam = fields.pop("flat_adam", None) == "1"
     values = arguments.parse_assignments(tuple(f"{f}={v}" for f, v in fields.items()), "--variants")
-    config = dataclasses.replace(base, **values)
+    config, hyperparams = ppo.configure(**{**base, **values})
+    components = ppo.NO_COMPONENTS
     if flat_adam:  # the config's own optimizer over all parameters concatenated, not one update per array
-        config = dataclasses.replace(config, optimizer=optax.flatten(ppo._optimizer(config)))
+        components = ppo.Components(optimizer=optax.flatten(ppo._optimizer(config, ppo.as_leaves(hyperparams))))
     if devices not in (1, jax.device_count()):  # the harness's chunk (timed too) meshes every device
         raise SystemExit(
             f"ppo_profile: --devices {devices} of {jax.device_count()}: show it only those (CUDA_VISIBLE_DEVICES)"
@@ -132,11 +134,12 @@ def profile(env: str, base: ppo.Config, fields: dict[str, str], repeats: int, de
     placed_task = replicate(task, placed)  # as `training.run` holds it
     scope = jax.default_matmul_precision(precision) if precision else contextlib.nullcontext()
     with scope:
-        state = shard_envs(ppo.init(config, task, jax.random.key(0)), ppo.PER_ENV_FIELDS, placed)
+        algorithm = ppo.make(config, optimizer=components.optimizer)
+        state = shard_envs(algorithm.init(task, hyperparams, jax.random.key(0)), ppo.PER_ENV_FIELDS, placed)
         # Traced under the env mesh, as the harness's chunk is (`learning.learn` splits minibatches by it).
-        rollout = jax.jit(in_mesh(lambda t, s, k: ppo.rollout(config, t, s, k)[1], placed))
-        improve = jax.jit(in_mesh(lambda t, s, d, k: ppo.improve(config, t, s, d, k)[0], placed))
-        update = jax.jit(in_mesh(lambda t, s: ppo.update(config, t, s)[0], placed))
+        rollout = jax.jit(in_mesh(lambda t, s, k: ppo.rollout(config, t, s, k, components)[1], placed))
+        improve = jax.jit(in_mesh(lambda t, s, d, k: ppo.improve(config, t, s, d, k, components)[0], placed))
+        update = jax.jit(in_mesh(lambda t, s: algorithm.update(t, s)[0], placed))
         key = jax.random.key(1)
         start = time.perf_counter()
         data = jax.block_until_ready(rollout(placed_task, state, key))
@@ -149,15 +152,15 @@ def profile(env: str, base: ppo.Config, fields: dict[str, str], repeats: int, de
         t_improve = best_of(improve, placed_task, state, data, key, repeats=repeats)
         t_update = best_of(update, placed_task, state, repeats=repeats)
         t_onward = per_update(lambda s: update(placed_task, s), state, 1, repeats)
-        chunk = training._chunk_fn(ppo, config, CHUNK)
+        chunk = training._chunk_fn(algorithm.update, CHUNK)
         t_chunk = per_update(lambda s: chunk(placed_task, s)[0], state, CHUNK, repeats)
         defaults = mjzoo.envs.defaults(env)
         steps = defaults.get("episode_steps") or defaults.get("episode_length", 1000)
-        evaluate = jax.jit(lambda s, k: ppo.evaluate(config, task, s, k, 128, steps)[0])
+        evaluate = jax.jit(lambda s, k: algorithm.evaluate(task, s, k, 128, steps)[0])
         t_evaluate = best_of(evaluate, state, key, repeats=1)
         # As the harness runs it: the task an argument, every result (env 0's trajectory too) returned.
-        in_loop = training._evaluate_fn(ppo)
-        t_in_loop = best_of(lambda s, k: in_loop(config, placed_task, s, k, 128, steps), state, key, repeats=1)
+        in_loop = training._evaluate_fn(algorithm.evaluate)
+        t_in_loop = best_of(lambda s, k: in_loop(placed_task, s, k, 128, steps), state, key, repeats=1)
     sgd_steps = config.num_epochs * config.num_minibatches
     return {
         "env": env,
@@ -197,7 +200,7 @@ def main() -> None:
     args = parser.parse_args()
     base = mjzoo_config(total_steps=10**9)
     if args.smoke:
-        base = dataclasses.replace(base, **SMOKE)
+        base = {**base, **SMOKE}
     device = jax.devices()[0].device_kind
     print(f"device: {device}, jax {jax.__version__}", flush=True)
     rows = []
@@ -210,12 +213,11 @@ def main() -> None:
     for env in args.envs:
         config = base
         if args.env_config:
-            config = ppo.Config(
-                **{**mjzoo.envs.hyperparameters(env, "ppo"), "total_steps": 10**9, **(SMOKE if args.smoke else {})}
-            )
+            config = {**mjzoo.envs.hyperparameters(env, "ppo"), "total_steps": 10**9, **(SMOKE if args.smoke else {})}
+        structure = ppo.configure(**config)[0]
         print(
-            f"{env}: per update (unless a variant changes it) {config.steps_per_update:,} env steps x devices, "
-            f"{config.num_epochs * config.num_minibatches} minibatch steps",
+            f"{env}: per update (unless a variant changes it) {structure.steps_per_update:,} env steps x devices, "
+            f"{structure.num_epochs * structure.num_minibatches} minibatch steps",
             flush=True,
         )
         for name, fields in map(parse_variant, args.variants):

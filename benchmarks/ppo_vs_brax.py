@@ -33,7 +33,6 @@ and time to its threshold.
 from __future__ import annotations
 
 import argparse
-import dataclasses
 import json
 import os
 import sys
@@ -67,12 +66,13 @@ HYPER = dict(
 )
 
 
-def mjzoo_config(total_steps: int) -> ppo.Config:
-    """The same algorithm in mjzoo's terms: Brax collects batch*minibatches/envs = 16
-    unrolls of 30 steps per env per update; mjzoo collects one unroll of 480."""
+def mjzoo_config(total_steps: int) -> dict:
+    """The same algorithm in mjzoo's terms, as `ppo.configure`'s fields: Brax collects
+    batch*minibatches/envs = 16 unrolls of 30 steps per env per update; mjzoo collects
+    one unroll of 480."""
     h = HYPER
     unrolls = h["batch_size"] * h["num_minibatches"] // h["num_envs"]
-    return ppo.Config(
+    return dict(
         num_envs=h["num_envs"],
         unroll_length=h["unroll_length"] * unrolls,
         num_minibatches=h["num_minibatches"],
@@ -93,7 +93,7 @@ def mjzoo_config(total_steps: int) -> ppo.Config:
 
 
 def train_mjzoo(task: mjzoo.Task, total_steps: int, episode_length: int, seed: int = 0, **overrides) -> dict:
-    config = dataclasses.replace(mjzoo_config(total_steps), **overrides)
+    config, hyperparams = ppo.configure(**{**mjzoo_config(total_steps), **overrides})
     with tempfile.TemporaryDirectory() as out:
         # Evaluate about as often as Brax does with num_evals=20 (every ~2M steps); Brax
         # writes no checkpoints, so neither do we here.
@@ -108,7 +108,7 @@ def train_mjzoo(task: mjzoo.Task, total_steps: int, episode_length: int, seed: i
             seed=seed,
         )
         start = time.perf_counter()
-        training.run(ppo, config, task, settings)
+        training.run(ppo.make(config), task, settings, hyperparams)
         curve, train_steps_per_s = training_curve(Path(out) / "metrics.jsonl", time.perf_counter() - start)
     return {
         "steps_per_s": wall_steps_per_s(curve),
@@ -286,7 +286,7 @@ def main() -> None:
         nargs="*",
         default=[],
         metavar="FIELD=VALUE",
-        help="ppo.Config overrides for mjzoo (e.g. compute_dtype=bfloat16)",
+        help="ppo.configure overrides for mjzoo (e.g. compute_dtype=bfloat16 learning_rate=1e-3)",
     )
     add_impl_argument(parser)
     args = parser.parse_args()

@@ -112,7 +112,7 @@ def worker(
         fields["num_minibatches"] = fields.get("num_minibatches", ppo.Config.num_minibatches) * devices
     if scale == "unroll":  # one device's batch per update, minibatches and gradient steps
         fields["unroll_length"] = fields.get("unroll_length", ppo.Config.unroll_length) // devices
-    config = algorithm.Config(**fields)
+    config, hyperparams = algorithm.configure(**fields)
     with tempfile.TemporaryDirectory() as own:
         out = run_dir or (
             Path(own) if joined is None else result.parent / "run"
@@ -133,7 +133,7 @@ def worker(
         )
         task = mjzoo.envs.make(env, **({"impl": impl} if impl else {}))
         start = time.perf_counter()
-        training.run(algorithm, config, task, settings)
+        training.run(algorithm.make(config), task, settings, hyperparams)
         if not distributed.is_primary():  # process 0 writes the metrics and the result
             return
         curve, steps_per_s = training_curve(out / "metrics.jsonl", time.perf_counter() - start)

@@ -49,10 +49,13 @@ def probe(variant: str, env: str, num_envs: int, graph_mode: str) -> None:
 
         config = ppo.Config(num_envs=num_envs, unroll_length=8, num_minibatches=4, num_epochs=1, total_steps=10**6)
         init = jax.jit(ppo.init, static_argnums=0)
+        hyperparams = ppo.Hyperparams()
         update = jax.jit(lambda t, s: ppo.update(config, t, s)[0].collector.env_state.data.qpos)
         results = []
         for devices in (jax.devices()[:1], jax.devices()[:2]):
-            state = placement.shard_envs(init(config, task, jax.random.key(0)), ppo.PER_ENV_FIELDS, devices)
+            state = placement.shard_envs(
+                init(config, task, hyperparams, jax.random.key(0)), ppo.PER_ENV_FIELDS, devices
+            )
             with jax.set_mesh(placement.env_mesh(devices)):
                 results.append(np.asarray(update(placement.replicate(task, devices), state)))
     else:

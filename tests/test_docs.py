@@ -1,5 +1,5 @@
 """The documentation's Python examples run as written: README.md, docs/own-task.md and
-docs/planner-sweeps.md.
+docs/sweeps.md.
 
 Each ```python block is one test. A document's blocks share one namespace and run in
 the order the document reads (the README's PPO block trains the task its first block
@@ -8,7 +8,8 @@ composed), so a test first runs any earlier block of its document that has not r
 they write lands in the repository. Tracebacks point at the document's own lines.
 
 A few lines are not run, for time alone: see NOT_RUN. Each shows as a skipped test with
-its reason (pytest -ra), and the test fails if its document no longer has that line.
+its reason (pytest -ra), and the test fails if its document no longer has that line. A
+few run smaller than printed (SHRUNK: the same code on fewer steps), checked alike.
 """
 
 from __future__ import annotations
@@ -20,7 +21,7 @@ from pathlib import Path
 import pytest
 
 ROOT = Path(__file__).resolve().parents[1]
-DOCS = ("README.md", "docs/own-task.md", "docs/planner-sweeps.md")
+DOCS = ("README.md", "docs/own-task.md", "docs/sweeps.md")
 _FENCE = re.compile(r"^```python\n(.*?)^```", re.S | re.M)
 
 
@@ -33,8 +34,12 @@ def _blocks(doc: str) -> list[tuple[int, str]]:
 BLOCKS = {doc: _blocks(doc) for doc in DOCS}
 
 _PPO_TRAIN = (
-    "ppo.train compiles two more programs (a chunk of updates and the evaluation) and runs them: "
-    "minutes on a 2-core CPU. The harness it calls is tested in tests/algorithms/test_ppo.py."
+    "training.run compiles two more programs (a chunk of updates and the evaluation) and runs them: "
+    "minutes on a 2-core CPU. It is tested in tests/algorithms/test_ppo.py."
+)
+_WHOLE_RUN = (
+    "ppo.train's whole run compiles its own program (init and a scan of updates): minutes on a "
+    "2-core CPU. tests/algorithms/test_sweeps.py runs it, vmapped and alone."
 )
 _EXPORTED = (
     "needs a trained run's exported policy (runs/cb): tests/interop/test_export.py exports one and "
@@ -43,25 +48,39 @@ _EXPORTED = (
 # Lines the block tests leave out, by document (matched by what the line contains), and why.
 NOT_RUN = {
     "README.md": {
-        "ppo.train(": _PPO_TRAIN,
-        "amp.train(": _PPO_TRAIN.replace("ppo.train", "amp.train").replace(
-            "tests/algorithms/test_ppo.py", "tests/algorithms/test_amp.py"
-        ),
+        "training.run(ppo.make": _PPO_TRAIN,
+        "run(config, task, hyperparams, jax.random.key(0))": _WHOLE_RUN,
+        "training.run(amp.make": _PPO_TRAIN.replace("tests/algorithms/test_ppo.py", "tests/algorithms/test_amp.py"),
         **dict.fromkeys(
             ('export.load("runs/cb', "act(obs)", 'run_in_mujoco("runs/cb', "sim2sim.replay(task, start"), _EXPORTED
         ),
     },
-    "docs/own-task.md": {"ppo.train(": _PPO_TRAIN},
-    "docs/planner-sweeps.md": {},
+    "docs/own-task.md": {"training.run(ppo.make": _PPO_TRAIN},
+    "docs/sweeps.md": {},
 }
+# Lines run smaller than printed, by document: {what the line contains: (its replacement there, why)}.
+SHRUNK = {
+    "README.md": {},
+    "docs/own-task.md": {},
+    "docs/sweeps.md": {
+        "total_steps=327_680": (
+            "total_steps=2 * 64 * 32",
+            "two updates, not 160: the 12 runs learn on a GPU in minutes, on a busy 2-core CPU in an hour",
+        )
+    },
+}
+MIN_BLOCKS = {"README.md": 3, "docs/own-task.md": 3, "docs/sweeps.md": 2}
 
 
 def _source(doc: str, line: int, source: str) -> str:
-    """`source` with each NOT_RUN line replaced by `pass` (same indentation, same line count)."""
+    """`source` with each NOT_RUN line replaced by `pass` and each SHRUNK marker by its
+    replacement (same indentation, same line count)."""
     lines = source.splitlines()
     for i, text in enumerate(lines):
         if any(marker in text for marker in NOT_RUN[doc]):
             lines[i] = text[: len(text) - len(text.lstrip())] + "pass  # not run here: see NOT_RUN"
+        for marker, (replacement, _) in SHRUNK[doc].items():
+            lines[i] = lines[i].replace(marker, replacement)
     return "\n" * (line - 1) + "\n".join(lines) + "\n"  # line numbers as in the document
 
 
@@ -102,7 +121,7 @@ def _run(docs: dict, doc: str, index: int) -> dict:
 
 @pytest.mark.parametrize("doc", DOCS)
 def test_docs_have_python_examples(doc):
-    assert len(BLOCKS[doc]) >= 3, f"expected {doc}'s Python examples, found {len(BLOCKS[doc])} blocks"
+    assert len(BLOCKS[doc]) >= MIN_BLOCKS[doc], f"expected {doc}'s Python examples, found {len(BLOCKS[doc])} blocks"
 
 
 @pytest.mark.parametrize(
@@ -132,3 +151,18 @@ def test_doc_line_not_run(doc, marker):
     found = [line for _, source in BLOCKS[doc] for line in source.splitlines() if marker in line]
     assert len(found) == 1, f"NOT_RUN names {marker!r}, which {doc}'s Python blocks have {len(found)} times"
     pytest.skip(f"{doc} line {found[0].strip()!r} not run: {NOT_RUN[doc][marker]}")
+
+
+@pytest.mark.parametrize("doc, marker", [(doc, marker) for doc in DOCS for marker in sorted(SHRUNK[doc])])
+def test_doc_line_shrunk(doc, marker):
+    found = [line for _, source in BLOCKS[doc] for line in source.splitlines() if marker in line]
+    assert len(found) == 1, f"SHRUNK names {marker!r}, which {doc}'s Python blocks have {len(found)} times"
+    pytest.skip(f"{doc} runs {marker!r} as {SHRUNK[doc][marker][0]!r}: {SHRUNK[doc][marker][1]}")
+
+
+def test_sweeps_page_draws_every_rate_and_seed(docs):
+    """docs/sweeps.md's vmapped sweep gives [rate, seed, update] curves and a PNG of them."""
+    namespace = _run(docs, "docs/sweeps.md", len(BLOCKS["docs/sweeps.md"]) - 1)
+    assert namespace["returns"].shape == (4, 3, namespace["config"].num_updates)
+    assert namespace["states"].hyperparams.learning_rate.shape == (4, 3)
+    assert Path("sweep.png").stat().st_size > 10_000  # in the test's temporary working directory

@@ -386,7 +386,7 @@ task = mjzoo.envs.make("hopper", impl="warp")
 init, update = jax.jit(ppo.init, static_argnums=0), jax.jit(lambda t, s: ppo.update(config, t, s))
 states = []
 for devices in (jax.devices()[:1], jax.devices()):
-    state = placement.shard_envs(init(config, task, jax.random.key(0)), ppo.PER_ENV_FIELDS, devices)
+    state = placement.shard_envs(init(config, task, ppo.Hyperparams(), jax.random.key(0)), ppo.PER_ENV_FIELDS, devices)
     with jax.set_mesh(placement.env_mesh(devices)):  # Warp's physics splits over it
         for _ in range(2):
             state, _ = update(placement.replicate(task, devices), state)

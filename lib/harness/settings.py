@@ -10,9 +10,11 @@ import numbers
 from pathlib import Path
 from typing import Any
 
+import numpy as np
+
 from mjzoo.harness import rendering
 
-__all__ = ["Settings", "EvalSchedule", "checkpoint_due", "config_dict"]
+__all__ = ["Settings", "EvalSchedule", "checkpoint_due", "config_dict", "hyperparams_dict"]
 
 
 @dataclasses.dataclass(frozen=True, kw_only=True)
@@ -178,3 +180,20 @@ def config_dict(config: Any) -> dict[str, Any]:
         return f"<custom {type(value).__name__}>"
 
     return {f.name: plain(getattr(config, f.name)) for f in dataclasses.fields(config)}
+
+
+def hyperparams_dict(hyperparams: Any) -> dict[str, Any]:
+    """A hyperparameter dataclass pytree as one flat JSON-ready dict (what the algorithm's
+    `configure` takes back): nested ones (AMP's `ppo`) merged in, scalars as floats, a
+    batch of them as a list. Not a dataclass (a user's own pytree): {}."""
+    if not dataclasses.is_dataclass(hyperparams):
+        return {}
+    flat: dict[str, Any] = {}
+    for field in dataclasses.fields(hyperparams):
+        value = getattr(hyperparams, field.name)
+        if dataclasses.is_dataclass(value):
+            flat.update(hyperparams_dict(value))
+            continue
+        array = np.asarray(value, dtype=np.float64)
+        flat[field.name] = float(array) if array.ndim == 0 else array.tolist()
+    return flat

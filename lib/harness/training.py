@@ -1,12 +1,14 @@
 """The training harness shared by the RL algorithms: a host loop over jitted chunks of
 updates, with evaluation, metrics, checkpoints, a progress bar, curves and a video.
 
-An algorithm is any module that satisfies `Algorithm` (`init`, `update`, `evaluate`
-and `PER_ENV_FIELDS`), run with a config that satisfies `AlgorithmConfig`
-(`num_updates`, `steps_per_update`); `run` checks both and does the rest (in every
-process of a multi-process run alike, `mjzoo.harness.distributed`; process 0 writes):
+It drives an algorithm value (`mjzoo.learning.Algorithm`, e.g. `ppo.make(config)`):
 
-    out/config.json       the algorithm config and the run settings
+    state, last = training.run(ppo.make(config), task, Settings(out_dir="runs/x"), hyperparams)
+
+`run` checks the value and does the rest (in every process of a multi-process run
+alike, `mjzoo.harness.distributed`; process 0 writes):
+
+    out/config.json       the algorithm's config and hyperparameters, and the run settings
     out/metrics.jsonl     one JSON object per logged chunk: step, eval/return, losses, reward terms, perf/*
     out/tensorboard/      the same scalars for TensorBoard
     out/checkpoints/      atomic, exactly resumable train states
@@ -24,9 +26,9 @@ import shutil
 import threading
 import time
 import warnings
+from collections.abc import Callable
 from pathlib import Path
-from types import ModuleType
-from typing import Any
+from typing import Any, NamedTuple
 
 import jax
 import jax.numpy as jnp
@@ -36,32 +38,30 @@ from mujoco import mjx
 from mjzoo import tree
 from mjzoo.harness import checkpoints, compilation, distributed, plotting, rendering
 from mjzoo.harness import metrics as metrics_lib
-from mjzoo.harness.contract import Algorithm, AlgorithmConfig, check_algorithm, check_state
+from mjzoo.harness.contract import Algorithm, check_algorithm, check_state
 from mjzoo.harness.devices import env_mesh_scope, env_shardings, replicate, shard_envs, template_data
-from mjzoo.harness.settings import EvalSchedule, Settings, checkpoint_due, config_dict
+from mjzoo.harness.settings import EvalSchedule, Settings, checkpoint_due, config_dict, hyperparams_dict
+from mjzoo.learning.algorithm import TrainingWarning
 from mjzoo.running import control_dt
 from mjzoo.types import Task
 
 __all__ = [
     "RUN_FILES",
     "Algorithm",
-    "AlgorithmConfig",
+    "Hooks",
     "PhysicsCapacityError",
     "Settings",
     "TrainingWarning",
     "check_algorithm",
     "config_dict",
     "existing",
+    "hyperparams_dict",
     "physics_info",
     "replicate",
     "run",
     "seconds_to_steps",
     "shard_envs",
 ]
-
-
-class TrainingWarning(UserWarning):
-    """Training has gone wrong in a way its metrics show (an algorithm's `diagnose`)."""
 
 
 # A chunk still compiling this long after init is a cold compile (a cached one loads in ~2 s).
@@ -96,19 +96,45 @@ def _claim(out: Path, settings: Settings) -> None:
         shutil.rmtree(path) if path.is_dir() else path.unlink()
 
 
-@functools.lru_cache(maxsize=8)  # runs in one process with one config share the compile
-def _chunk_fn(algorithm: ModuleType, config: Any, length: int):
+class Hooks(NamedTuple):
+    """Callbacks `run` calls as it goes: to watch a run, or to drive one in a test (a fake
+    clock advanced by them, a fake background compile). Each is optional.
+
+    Attributes:
+      on_chunk: ``(updates done, the chunk's metrics on the device)``, as soon as a chunk
+        has run, before `run` reads the clock that times it.
+      on_evaluation: ``(step, eval return)``, as soon as an evaluation has run, before
+        `run` reads the clock that times it.
+      on_metrics: ``(step, metrics)``, each chunk's full metrics, as `run` has gathered
+        them (what a metrics line would hold, whatever `Settings` logs).
+      compile_evaluation: how the evaluation compiles in the background while training
+        goes on: ``(function, *args, background=bool) -> handle`` with
+        `threading.Thread`'s `join(timeout)` and `is_alive()` (or None: compiled);
+        default `compilation.compile_ahead`.
+    """
+
+    on_chunk: Callable[[int, dict[str, jax.Array]], None] | None = None
+    on_evaluation: Callable[[int, float], None] | None = None
+    on_metrics: Callable[[int, dict[str, float]], None] | None = None
+    compile_evaluation: Callable[..., Any] = compilation.compile_ahead
+
+
+NO_HOOKS = Hooks()
+
+
+@functools.lru_cache(maxsize=8)  # runs in one process with one algorithm value share the compile
+def _chunk_fn(update: Callable, length: int):
     def chunk(task: Task, state):
         with env_mesh_scope():  # Warp's physics splits over the devices by it (worlds.vmap_transition)
-            state, metrics = jax.lax.scan(lambda s, _: algorithm.update(config, task, s), state, None, length=length)
+            state, metrics = jax.lax.scan(lambda s, _: update(task, s), state, None, length=length)
         return state, jax.tree.map(jnp.nanmean, metrics)  # NaN: nothing to report that update
 
     return jax.jit(chunk, donate_argnums=1)
 
 
 @functools.lru_cache(maxsize=8)
-def _evaluate_fn(algorithm: ModuleType):
-    return jax.jit(algorithm.evaluate, static_argnums=(0, 4, 5))
+def _evaluate_fn(evaluate: Callable):
+    return jax.jit(evaluate, static_argnums=(3, 4))
 
 
 def _resume(out_dir: Path, state: Any) -> Any:
@@ -149,8 +175,8 @@ def _eval_steps(task: Task, settings: Settings) -> int:
 
 
 @functools.lru_cache(maxsize=8)
-def _init_fn(algorithm: ModuleType):
-    return jax.jit(algorithm.init, static_argnums=0)
+def _init_fn(init: Callable):
+    return jax.jit(init)
 
 
 def physics_info(task: Task) -> dict[str, Any]:
@@ -182,9 +208,6 @@ class PhysicsCapacityError(RuntimeError):
     """A Warp run's contacts or constraints overflowed the capacities of its physics."""
 
 
-_clock = time.perf_counter  # the loop's clock (tests put a fake one here)
-
-
 class _Loop:
     """`run`'s host loop, one chunk at a time: train, evaluate when due, write the
     metrics line, checkpoint, show progress, check capacity and diagnose."""
@@ -192,7 +215,6 @@ class _Loop:
     def __init__(
         self,
         algorithm: Algorithm,
-        config: AlgorithmConfig,
         task: Task,
         settings: Settings,
         out: Path | None,
@@ -200,20 +222,22 @@ class _Loop:
         eval_steps: int,
         launched: float,
         shown: dict[str, str],
-        chunk_ahead: threading.Thread | None = None,
+        chunk_ahead: threading.Thread | None,
+        clock: Callable[[], float],
+        hooks: Hooks,
     ) -> None:
-        self.algorithm, self.config, self.settings = algorithm, config, settings
+        self.algorithm, self.settings, self.clock, self.hooks = algorithm, settings, clock, hooks
         self.task, self.host_task = replicate(task), task  # videos are drawn by one process, from its own copy
         self.out, self.key, self.launched, self.shown = out, key, launched, shown
         self.schedule = EvalSchedule(settings, launched)
-        self.per_chunk = _per_chunk(config, settings)
-        self.chunk = _chunk_fn(algorithm, config, self.per_chunk)
+        self.per_chunk = _per_chunk(algorithm, settings)
+        self.chunk = _chunk_fn(algorithm.update, self.per_chunk)
         self.chunk_ahead = chunk_ahead  # the chunk compiling while init ran (`_compile_chunk_ahead`)
-        self.evaluate, self.eval_steps = _evaluate_fn(algorithm), eval_steps
-        self.total_updates = -(-config.num_updates // self.per_chunk) * self.per_chunk
+        self.evaluate, self.eval_steps = _evaluate_fn(algorithm.evaluate), eval_steps
+        self.total_updates = -(-algorithm.num_updates // self.per_chunk) * self.per_chunk
         self.writer = metrics_lib.MetricsWriter(out) if out is not None and distributed.is_primary() else None
         self.progress = metrics_lib.Progress(
-            self.total_updates * config.steps_per_update,
+            self.total_updates * algorithm.steps_per_update,
             "train",
             file=None if distributed.is_primary() else io.StringIO(),
         )
@@ -240,7 +264,7 @@ class _Loop:
 
     def step(self, state: Any) -> Any:
         """Trains one chunk and does its bookkeeping; returns the new state."""
-        start = _clock()
+        start = self.clock()
         shapes = compilation.described(state) if not self.history else None  # before the chunk donates it
         if shapes is not None and self.overlaps and compilation.still_compiling(self.chunk_ahead, COLD_GRACE_S):
             self.compile_evaluation_ahead(shapes)  # a cold compile: the evaluation's goes beside it, not after
@@ -253,11 +277,13 @@ class _Loop:
         if shapes is not None and self.overlaps and self.ahead is None:  # while the first chunk runs, not while it
             self.compile_evaluation_ahead(shapes)  # traces: beside a cached chunk's load it slowed the first update
         jax.block_until_ready(state)
-        end = _clock()
         updates, per_chunk = int(state.updates), self.per_chunk
-        step, number = updates * self.config.steps_per_update, updates // per_chunk
+        if self.hooks.on_chunk is not None:
+            self.hooks.on_chunk(updates, chunk_metrics)
+        end = self.clock()
+        step, number = updates * self.algorithm.steps_per_update, updates // per_chunk
         metrics = {
-            "perf/steps_per_s": per_chunk * self.config.steps_per_update / max(end - start, 1e-9),
+            "perf/steps_per_s": per_chunk * self.algorithm.steps_per_update / max(end - start, 1e-9),
             **{k: float(v) for k, v in distributed.fetch(chunk_metrics).items() if np.isfinite(v)},
         }
         if not self.history:  # this launch's first chunk: compile (and init) included
@@ -272,12 +298,14 @@ class _Loop:
             )
             evaluated, save = (bool(x) for x in distributed.agree(due))  # process 0's clock: one collective for both
             metrics.update(self._evaluate(state, step, final) if evaluated else {"perf/eval_s": 0.0})
-        metrics["perf/elapsed_s"] = _clock() - self.launched
+        metrics["perf/elapsed_s"] = self.clock() - self.launched
         if self.settings.profile_memory:
             metrics.update(metrics_lib.device_memory()[0])
         self._write(state, step, number, metrics, evaluated, save)
         if self.settings.progress:
             self.progress.update(step, **self.shown, sps=f"{metrics['perf/steps_per_s']:,.0f}")
+        if self.hooks.on_metrics is not None:
+            self.hooks.on_metrics(step, metrics)
         self.last = metrics
         self.history.append(metrics)
         _check_capacity(self.task, metrics)
@@ -292,29 +320,32 @@ class _Loop:
         calls it before the chunk runs (`compilation.overlaps_safely`)."""
         key = jax.random.fold_in(self.key, 0)
         s = self.settings
-        self.ahead = compilation.compile_ahead(
-            self.evaluate, self.config, self.task, state, key, s.eval_envs, self.eval_steps, background=self.overlaps
+        self.ahead = self.hooks.compile_evaluation(
+            self.evaluate, self.task, state, key, s.eval_envs, self.eval_steps, background=self.overlaps
         )
 
     def _evaluate(self, state: Any, step: int, final: bool) -> dict[str, float]:
         """Evaluates (`settings.eval_envs` episodes) and writes a video when one is due."""
-        start = _clock()
+        start = self.clock()
         compilation.wait(self.ahead, "training: the evaluation")  # compiling it twice at once would waste a core
         self.ahead = None
-        compiled = _clock()  # the budget is for evaluating: waiting for the compile is a one-off
+        compiled = self.clock()  # the budget is for evaluating: waiting for the compile is a one-off
         key, s = jax.random.fold_in(self.key, int(state.updates)), self.settings
-        mean, _, trajectory = self.evaluate(self.config, self.task, state, key, s.eval_envs, self.eval_steps)
-        result = {"eval/return": float(distributed.fetch(mean)), "perf/eval_s": _clock() - start}  # waits for it
-        self.schedule.spent(_clock() - compiled)
+        mean, _, trajectory = self.evaluate(self.task, state, key, s.eval_envs, self.eval_steps)
+        eval_return = float(distributed.fetch(mean))  # waits for it
+        if self.hooks.on_evaluation is not None:
+            self.hooks.on_evaluation(step, eval_return)
+        result = {"eval/return": eval_return, "perf/eval_s": self.clock() - start}
+        self.schedule.spent(self.clock() - compiled)
         self.evaluations += 1
         self.shown["ret"] = f"{result['eval/return']:.1f}"
         due = s.video_every and self.evaluations % s.video_every == 0
         self.trajectory = distributed.fetch(trajectory) if self.out and (due or final and s.video) else trajectory
         if due and self.out is not None and self.trajectory is not None and distributed.is_primary():
-            start = _clock()
+            start = self.clock()
             path = write_video(self.host_task, self.trajectory, self.out / "videos" / f"eval_{step}.mp4", s.render)
             self.video = (step, path) if path is not None else self.video
-            result["perf/video_s"] = _clock() - start
+            result["perf/video_s"] = self.clock() - start
         return result
 
     def _write(
@@ -331,7 +362,7 @@ class _Loop:
             self.pending = {}
         if save:
             checkpoints.save(self.out / "checkpoints", step, state)  # by every process, as orbax needs
-            self.saved = _clock()
+            self.saved = self.clock()
 
     def close(self) -> None:
         self.progress.close()
@@ -349,25 +380,27 @@ def _owned(state: Any) -> Any:
 
 def _start(
     algorithm: Algorithm,
-    config: AlgorithmConfig,
     task: Task,
+    hyperparams: Any,
     settings: Settings,
     out: Path | None,
     key: jax.Array,
     physics: dict[str, Any],
 ) -> Any:
-    """The initial (or resumed) train state, placed on the devices, config.json written."""
-    state = _init_fn(algorithm)(config, task, key)
+    """The initial (or resumed: its hyperparameters too) train state, placed on the
+    devices, config.json written."""
+    state = _init_fn(algorithm.init)(task, hyperparams, key)
     check_state(algorithm, state)
-    state = shard_envs(_owned(state), algorithm.PER_ENV_FIELDS)
+    state = shard_envs(_owned(state), algorithm.per_env_fields)
     if out is not None:
         # Restore (each process its shards) before writing anything: a run that cannot resume is left as it was.
         if settings.resume and checkpoints.latest_step(out / "checkpoints") is not None:
             state = _resume(out, state)
         out.mkdir(parents=True, exist_ok=True)
         run_info = {
-            "algorithm": algorithm.__name__.split(".")[-1],
-            "config": config_dict(config),
+            "algorithm": algorithm.name,
+            "config": config_dict(algorithm.config),
+            "hyperparams": hyperparams_dict(getattr(state, "hyperparams", hyperparams)),  # a resumed run's own
             "physics": physics,
             "settings": {k: str(v) if isinstance(v, Path) else v for k, v in dataclasses.asdict(settings).items()},
         }
@@ -376,27 +409,41 @@ def _start(
     return state
 
 
-def run(algorithm: Algorithm, config: AlgorithmConfig, task: Task, settings: Settings) -> tuple[Any, dict[str, float]]:
-    """Trains `task` with `algorithm` under `config`; returns the final state and the
-    last chunk's metrics (all of them, whatever `settings` logs; it always evaluated).
+def run(
+    algorithm: Algorithm,
+    task: Task,
+    settings: Settings,
+    hyperparams: Any = None,
+    *,
+    clock: Callable[[], float] = time.perf_counter,
+    hooks: Hooks = NO_HOOKS,
+) -> tuple[Any, dict[str, float]]:
+    """Trains `task` with `algorithm` (`mjzoo.learning.Algorithm`, e.g. `ppo.make(config)`)
+    and `hyperparams` (None: the algorithm's defaults; a resumed run continues with the
+    ones its checkpoint holds); returns the final state and the last chunk's metrics
+    (all of them, whatever `settings` logs; it always evaluated).
+
+    `clock` times everything the loop schedules by (evaluations, checkpoints, perf/*);
+    `hooks` (`Hooks`) are called as the run goes.
 
     Metrics of note: perf/steps_per_s (training only), perf/eval_s (evaluating in this
     chunk; 0 without; the first includes compiling), perf/video_s, perf/first_update_s
     (once: from this call to the end of the first chunk, compiles included),
     perf/elapsed_s (since this call)."""
-    launched = _clock()
+    launched = clock()
     if settings.compile_cache:
         compilation.enable_cache()
-    check_algorithm(algorithm, config)
+    check_algorithm(algorithm)
+    hyperparams = algorithm.hyperparams if hyperparams is None else hyperparams
     eval_steps = _eval_steps(task, settings)  # a wrong length fails here, before anything is written
     out = Path(settings.out_dir) if settings.out_dir else None
     if out is not None:
         _claim(out, settings)
     key, physics = jax.random.key(settings.seed), physics_info(task)
-    chunk_ahead = _compile_chunk_ahead(algorithm, config, task, settings, key)
-    state = _start(algorithm, config, task, settings, out, key, physics)
+    chunk_ahead = _compile_chunk_ahead(algorithm, task, hyperparams, settings, key)
+    state = _start(algorithm, task, hyperparams, settings, out, key, physics)
     shown = {"physics": physics["impl"]} if physics else {}
-    loop = _Loop(algorithm, config, task, settings, out, key, eval_steps, launched, shown, chunk_ahead)
+    loop = _Loop(algorithm, task, settings, out, key, eval_steps, launched, shown, chunk_ahead, clock, hooks)
     try:
         while not loop.done(state):
             state = loop.step(state)
@@ -407,13 +454,13 @@ def run(algorithm: Algorithm, config: AlgorithmConfig, task: Task, settings: Set
     return state, loop.last
 
 
-def _per_chunk(config: AlgorithmConfig, settings: Settings) -> int:
+def _per_chunk(algorithm: Algorithm, settings: Settings) -> int:
     """Updates per chunk; a run shorter than one chunk is one chunk of its own length."""
-    return min(settings.updates_per_chunk, max(1, config.num_updates))
+    return min(settings.updates_per_chunk, max(1, algorithm.num_updates))
 
 
 def _compile_chunk_ahead(
-    algorithm: Algorithm, config: AlgorithmConfig, task: Task, settings: Settings, key: jax.Array
+    algorithm: Algorithm, task: Task, hyperparams: Any, settings: Settings, key: jax.Array
 ) -> threading.Thread | None:
     """Starts compiling the training chunk on a thread (or loading it from the cache) from
     the shapes init will return (`eval_shape`, whose trace init's call reuses) and the
@@ -421,11 +468,11 @@ def _compile_chunk_ahead(
     holds the GIL. Not on Warp's GPU physics (`compilation.overlaps_safely`)."""
     if not compilation.overlaps_safely(getattr(task, "model", None)):
         return None
-    shapes = _init_fn(algorithm).eval_shape(config, task, key)
-    shardings = env_shardings(shapes, algorithm.PER_ENV_FIELDS)
+    shapes = _init_fn(algorithm.init).eval_shape(task, hyperparams, key)
+    shardings = env_shardings(shapes, algorithm.per_env_fields)
     described = lambda x, s: jax.ShapeDtypeStruct(x.shape, x.dtype, sharding=s)  # noqa: E731 (strong, as `_owned`)
     state = jax.tree.map(described, shapes, shardings)
-    chunk = _chunk_fn(algorithm, config, _per_chunk(config, settings))
+    chunk = _chunk_fn(algorithm.update, _per_chunk(algorithm, settings))
     try:
         return compilation.compile_ahead(chunk.lower(replicate(task), state))
     except Exception:  # noqa: BLE001 (the chunk's own call raises it where it belongs)
@@ -448,7 +495,7 @@ def _finish(out: Path, loop: _Loop, settings: Settings) -> None:
     plotting.plot_curves(out / "metrics.jsonl", out / "curves.png", config=settings.render)
     if not settings.video or loop.trajectory is None:
         return
-    final_step = int(loop.total_updates * loop.config.steps_per_update)
+    final_step = int(loop.total_updates * loop.algorithm.steps_per_update)
     if loop.video is not None and loop.video[0] == final_step:
         shutil.copyfile(loop.video[1], out / "eval.mp4")
     else:

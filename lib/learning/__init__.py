@@ -5,7 +5,9 @@ tested against hand-computed values under jit and vmap; `mjzoo.algorithms.ppo` i
 assembled from them, and so can a user's own algorithm be (docs/own-algorithm.md
 writes an A2C from them).
 
+    algorithm       an RL algorithm as a value the harness drives (`Algorithm`)
     collection      auto-resetting batched experience, time-major (`collect`, `Collector`)
+    hyperparams     checking and splitting an algorithm's numbers (`check_ranges`, `split_fields`)
     evaluation      deterministic first-episode returns from a policy (`evaluate`)
     actions         [-1, 1] actions onto a task's controls (`to_controls`)
     advantages      generalized advantage estimation (`gae`)
@@ -22,10 +24,12 @@ writes an A2C from them).
 from mjzoo.learning import (
     actions,
     advantages,
+    algorithm,
     collection,
     discriminators,
     distributions,
     evaluation,
+    hyperparams,
     learner,
     losses,
     motion_features,
@@ -35,6 +39,7 @@ from mjzoo.learning import (
 )
 from mjzoo.learning.actions import to_controls
 from mjzoo.learning.advantages import gae
+from mjzoo.learning.algorithm import Algorithm, TrainingWarning
 from mjzoo.learning.collection import (
     Collector,
     Policy,
@@ -71,6 +76,7 @@ from mjzoo.learning.normalization import (
 from mjzoo.learning.replay import Replay
 
 __all__ = [
+    "Algorithm",
     "Collector",
     "Evaluation",
     "Network",
@@ -78,9 +84,11 @@ __all__ = [
     "RecurrentNetwork",
     "Replay",
     "RunningStats",
+    "TrainingWarning",
     "Transitions",
     "actions",
     "advantages",
+    "algorithm",
     "clipped_surrogate_loss",
     "collect",
     "collection",
@@ -97,6 +105,7 @@ __all__ = [
     "gae",
     "gradient_penalty",
     "gru_mlp",
+    "hyperparams",
     "init_stats",
     "kl_penalty_loss",
     "learn",

@@ -315,6 +315,11 @@ def _is_kernel(params: PyTree) -> PyTree:
     return jax.tree.map(lambda x: jnp.ndim(x) >= 2, params)
 
 
+def _known(value: Any) -> bool:
+    """A host number (not a traced one, nor an array of several)."""
+    return not isinstance(value, jax.core.Tracer) and jnp.ndim(value) == 0
+
+
 def discriminator_optimizer(
     learning_rate: float | optax.Schedule,
     weight_decay: float = 1e-4,
@@ -329,18 +334,20 @@ def discriminator_optimizer(
     AdamW's decoupled decay (lr * weight_decay * w per step), not an L2 term in the loss.
 
     Args:
-      learning_rate: > 0, or an optax schedule.
-      weight_decay: >= 0.
-      max_grad_norm: > 0, or None for no clipping.
+      learning_rate: > 0 (traced or not), or an optax schedule.
+      weight_decay: >= 0 (traced or not).
+      max_grad_norm: > 0 (traced or not; inf: no effect), or None for no clipping.
 
     Returns:
       An optax `GradientTransformation`; `update` needs the params (for the decay).
     """
-    if not callable(learning_rate) and not learning_rate > 0:
+    # Numbers are checked where they are numbers: traced ones (a hyperparameter sweep) are
+    # the caller's to check (AMP's Hyperparams are, on the host).
+    if _known(learning_rate) and not callable(learning_rate) and not learning_rate > 0:
         raise ValueError(f"discriminator_optimizer: learning_rate={learning_rate!r} must be > 0 or a schedule")
-    if not weight_decay >= 0:
+    if _known(weight_decay) and not weight_decay >= 0:
         raise ValueError(f"discriminator_optimizer: weight_decay={weight_decay!r} must be >= 0")
-    if max_grad_norm is not None and not max_grad_norm > 0:
+    if max_grad_norm is not None and _known(max_grad_norm) and not max_grad_norm > 0:
         raise ValueError(f"discriminator_optimizer: max_grad_norm={max_grad_norm!r} must be > 0 or None")
     adam = optax.adamw(learning_rate, weight_decay=weight_decay, mask=_is_kernel)
     return adam if max_grad_norm is None else optax.chain(optax.clip_by_global_norm(max_grad_norm), adam)

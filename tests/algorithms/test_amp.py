@@ -26,7 +26,7 @@ from mjzoo.algorithms import amp
 from mjzoo.harness import training
 from mjzoo.learning import motion_features
 
-SMALL = amp.Config(
+SMALL, HP = amp.configure(
     num_envs=8,
     unroll_length=8,
     num_minibatches=2,
@@ -92,25 +92,37 @@ def swing():
         (dict(disc_minibatches=3), "disc_minibatches=3 is invalid; expected a divisor of num_envs \\* unroll_length"),
         (dict(task_weight=0.0, style_weight=0.0), "style_weight=0.0 is invalid; expected > 0 where task_weight is 0"),
         (dict(disc_loss="wasserstein"), "disc_loss='wasserstein' is invalid"),
-        (dict(replay_keep_probability=1.5), "replay_keep_probability=1.5 is invalid; expected in \\[0, 1\\]"),
+        (dict(replay_keep_probability=1.5), "replay_keep_probability=1.5 is invalid; expected in \\[0.0, 1.0\\]"),
         (dict(policy_obs_key="state"), "policy_obs_key='state' is invalid"),
         (dict(num_envs=0), "num_envs=0 is invalid"),  # PPO's own checks hold too
+        (dict(discount=2.0), "ppo.Hyperparams: discount=2.0 is invalid"),
+        (dict(disc_learning_rate=0.0), "amp.Hyperparams: disc_learning_rate=0.0 is invalid"),
+        (
+            dict(style_wieght=1.0),
+            "amp.configure: unknown field\\(s\\) \\['style_wieght'\\]; fields: \\[.*'style_weight'",
+        ),
     ],
 )
 def test_config_errors_name_the_field(fields, message):
     with pytest.raises(ValueError, match=message):
-        amp.Config(**{**dict(num_envs=8, unroll_length=8, num_minibatches=2, disc_minibatches=2), **fields})
+        amp.configure(**{**dict(num_envs=8, unroll_length=8, num_minibatches=2, disc_minibatches=2), **fields})
+
+
+def test_configure_puts_each_number_where_it_belongs():
+    config, hp = amp.configure(num_frames=3, learning_rate=1e-3, style_weight=2.0, disc_max_grad_norm=None)
+    assert config.num_frames == 3 and hp.ppo.learning_rate == 1e-3 and hp.style_weight == 2.0
+    assert hp.disc_max_grad_norm == float("inf") and hp.ppo.max_grad_norm == 1.0
 
 
 def test_a_task_without_a_reference_is_refused():
     task = mjzoo.envs.make("pendulum_swingup")
     with pytest.raises(ValueError, match="the task has no motion reference to imitate; attach one with"):
-        amp.init(SMALL, task, jax.random.key(0))
+        amp.init(SMALL, task, HP, jax.random.key(0))
 
 
 @pytest.fixture(scope="module")
 def started(swing):
-    return amp.init(SMALL, swing, jax.random.key(0))
+    return amp.init(SMALL, swing, HP, jax.random.key(0))
 
 
 @pytest.fixture(scope="module")
@@ -184,7 +196,7 @@ def test_reference_windows_are_consecutive_frames_featurized_like_the_simulation
 def test_seeds_vmap(swing):
     """Several seeds train in one program: init and update vmapped over keys."""
     keys = jax.random.split(jax.random.key(0), 2)
-    states = jax.vmap(lambda k: amp.init(SMALL, swing, k))(keys)
+    states = jax.vmap(lambda k: amp.init(SMALL, swing, HP, k))(keys)
     states, metrics = jax.jit(jax.vmap(lambda s: amp.update(SMALL, swing, s)))(states)
     assert metrics["disc/loss"].shape == (2,)
     assert not np.allclose(states.disc_params[0]["kernel"][0], states.disc_params[0]["kernel"][1])
@@ -199,21 +211,15 @@ def test_diagnose_warns_when_the_discriminator_has_won():
     assert amp.diagnose([{"disc/accuracy_reference": 1.0, "disc/accuracy_policy": 0.2}] * 3) is None
 
 
-def test_train_writes_the_discriminators_diagnostics_and_warns_once(swing, monkeypatch, tmp_path):
-    monkeypatch.setattr(
-        amp, "diagnose", lambda history: "amp: the discriminator has won" if len(history) >= 1 else None
+def test_train_writes_the_discriminators_diagnostics_and_warns_once(swing, tmp_path):
+    algorithm = amp.make(SMALL)._replace(
+        diagnose=lambda history: "amp: the discriminator has won" if len(history) >= 1 else None
+    )
+    settings = training.Settings(
+        out_dir=tmp_path / "run", updates_per_chunk=2, eval_envs=2, eval_steps=20, video=False, progress=False
     )
     with pytest.warns(training.TrainingWarning, match="the discriminator has won") as caught:
-        amp.train(
-            SMALL,
-            swing,
-            out_dir=tmp_path / "run",
-            updates_per_chunk=2,
-            eval_envs=2,
-            eval_steps=20,
-            video=False,
-            progress=False,
-        )
+        training.run(algorithm, swing, settings, HP.replace(disc_learning_rate=3e-4))
     assert len([w for w in caught if issubclass(w.category, training.TrainingWarning)]) == 1  # not once per chunk
     lines = [json.loads(line) for line in (tmp_path / "run" / "metrics.jsonl").read_text().splitlines()]
     assert [line["step"] for line in lines] == [128, 256]
@@ -228,7 +234,13 @@ def test_train_writes_the_discriminators_diagnostics_and_warns_once(swing, monke
         "eval/return",
     ):
         assert name in lines[-1], name
-    assert json.loads((tmp_path / "run" / "config.json").read_text())["algorithm"] == "amp"
+    saved = json.loads((tmp_path / "run" / "config.json").read_text())
+    assert saved["algorithm"] == "amp" and saved["config"]["disc_hidden_sizes"] == [16]
+    assert (
+        saved["hyperparams"]["disc_learning_rate"] == pytest.approx(3e-4) and saved["hyperparams"]["style_weight"] == 1
+    )
+    assert saved["config"] == training.config_dict(SMALL)
+    assert saved["hyperparams"] == pytest.approx(training.hyperparams_dict(HP.replace(disc_learning_rate=3e-4)))
 
 
 @pytest.mark.skipif(sys.platform != "linux", reason="forces host devices with XLA_FLAGS")
@@ -241,10 +253,10 @@ def test_two_devices_give_one_devices_result():
         from mjzoo import motion
         from mjzoo.algorithms import amp
         from mjzoo.harness import devices, training
-        from tests.algorithms.test_amp import SMALL, sway_clip
+        from tests.algorithms.test_amp import HP, SMALL, sway_clip
         task = mjzoo.envs.make("pendulum_swingup")
         task = motion.with_reference(task, motion.reference(sway_clip(task), task.mj_model, mjzoo.control_dt(task)))
-        state = amp.init(SMALL, task, jax.random.key(0))
+        state = amp.init(SMALL, task, HP, jax.random.key(0))
         one = jax.jit(amp.update, static_argnums=0)(SMALL, task, jax.device_put(state, jax.devices()[0]))[0]
         sharded = training.shard_envs(state, amp.PER_ENV_FIELDS)
         assert len(sharded.ppo.collector.start.sharding.device_set) == 2

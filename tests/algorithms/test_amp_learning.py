@@ -22,10 +22,11 @@ import mjzoo
 import mjzoo.envs
 from mjzoo import motion
 from mjzoo.algorithms import amp, ppo
+from mjzoo.harness import training
 from tests.algorithms.test_amp import sway_clip
 
 STEPS = 64 * 32 * 80  # 164k env steps
-AMP = amp.Config(
+AMP, AMP_HP = amp.configure(
     num_envs=64,
     unroll_length=32,
     num_minibatches=4,
@@ -41,7 +42,7 @@ AMP = amp.Config(
     gradient_penalty_weight=1.0,
     total_steps=STEPS,
 )
-PPO = ppo.Config(
+PPO, PPO_HP = ppo.configure(
     num_envs=64,
     unroll_length=32,
     num_minibatches=4,
@@ -63,15 +64,16 @@ def style_errors(task: mjzoo.Task, act, params, seed: int = 1) -> list[float]:
     return [motion.nearest_window_error(np.asarray(task.motion.qpos), q[100:], [0], 10) for q in qpos]
 
 
-@pytest.mark.filterwarnings("ignore::mjzoo.harness.training.TrainingWarning")
+@pytest.mark.filterwarnings("ignore::mjzoo.learning.TrainingWarning")
 def test_style_alone_teaches_the_reference_motion():
     task = mjzoo.envs.make("pendulum_swingup")
     task = motion.with_reference(task, motion.reference(sway_clip(task), task.mj_model, mjzoo.control_dt(task)))
 
-    state, _ = amp.train(AMP, task, updates_per_chunk=20, eval_envs=2, eval_steps=10, video=False, progress=False)
+    settings = training.Settings(updates_per_chunk=20, eval_envs=2, eval_steps=10, video=False, progress=False)
+    state, _ = training.run(amp.make(AMP), task, settings, AMP_HP)
     learned = style_errors(task, amp.policy(AMP, task), amp.policy_params(state))
     hanging = style_errors(task, lambda params, obs, key: jnp.zeros(1), None)
-    state, _ = ppo.train(PPO, task, updates_per_chunk=20, eval_envs=2, eval_steps=10, video=False, progress=False)
+    state, _ = training.run(ppo.make(PPO), task, settings, PPO_HP)
     task_reward = style_errors(task, ppo.policy(PPO, task), ppo.policy_params(state))
 
     assert max(hanging) > 0.15  # hanging is ~0.2 rad from every reference window

@@ -1,5 +1,6 @@
-"""PPO: config validation, one-jit updates without retracing, learning on real tasks,
-exact resume, multi-device equivalence, vmapped seeds, user networks and optimizers."""
+"""PPO: config and hyperparameter validation, one-jit updates without retracing, exact
+resume (hyperparameters included), multi-device equivalence, vmapped seeds, user
+networks and optimizers, an import that loads no harness."""
 
 from __future__ import annotations
 
@@ -24,6 +25,7 @@ from mjzoo.harness import checkpoints, training
 from mjzoo.learning import networks
 
 SMALL = ppo.Config(num_envs=8, unroll_length=8, num_minibatches=2, num_epochs=1, total_steps=8 * 8 * 4)
+HP = ppo.Hyperparams()
 
 
 @pytest.mark.parametrize(
@@ -31,7 +33,6 @@ SMALL = ppo.Config(num_envs=8, unroll_length=8, num_minibatches=2, num_epochs=1,
     [
         ("num_envs", 0, "num_envs=0 is invalid; expected an integer >= 1"),
         ("num_minibatches", 3, "num_minibatches=3 is invalid; expected a divisor of num_envs \\* unroll_length = 64"),
-        ("discount", 1.5, "discount=1.5 is invalid; expected in \\[0, 1\\]"),
         ("activation", "gelu", "activation='gelu' is invalid"),
         ("lr_schedule", "step", "lr_schedule='step' is invalid"),
         ("compute_dtype", "float16", "compute_dtype='float16' is invalid; expected float32 or bfloat16"),
@@ -41,6 +42,39 @@ def test_config_errors_name_the_field(field, value, message):
     fields = dict(num_envs=8, unroll_length=8, num_minibatches=2)
     with pytest.raises(ValueError, match=message):
         ppo.Config(**{**fields, field: value})
+
+
+@pytest.mark.parametrize(
+    "field,value,message",
+    [
+        ("discount", 1.5, "discount=1.5 is invalid; expected in \\[0.0, 1.0\\]"),
+        ("learning_rate", 0.0, "learning_rate=0.0 is invalid; expected in \\(0.0, inf\\)"),
+        ("clip_epsilon", -0.1, "clip_epsilon=-0.1 is invalid"),
+        ("entropy_coef", "big", "entropy_coef='big' is invalid; expected a number"),
+        ("learning_rate", np.array([1e-3, -1.0]), "learning_rate=\\[0.001, -1.0\\] is invalid"),  # every element
+    ],
+)
+def test_hyperparameter_errors_name_the_field(field, value, message):
+    with pytest.raises(ValueError, match="^ppo.Hyperparams: " + message):
+        ppo.Hyperparams(**{field: value})
+
+
+def test_configure_splits_one_flat_dict_and_names_unknown_fields():
+    config, hp = ppo.configure(num_envs=8, unroll_length=8, num_minibatches=2, learning_rate=1e-3, max_grad_norm=None)
+    assert config == ppo.Config(num_envs=8, unroll_length=8, num_minibatches=2)
+    assert hp == ppo.Hyperparams(learning_rate=1e-3, max_grad_norm=float("inf"))  # None: off, as before
+    with pytest.raises(
+        ValueError, match=r"ppo.configure: unknown field\(s\) \['lerning_rate'\]; fields: \[.*'learning_rate'"
+    ):
+        ppo.configure(lerning_rate=1e-3)
+    with pytest.raises(ValueError, match="ppo.Hyperparams: gae_lambda=2.0 is invalid"):
+        ppo.configure(gae_lambda=2.0)
+
+
+def test_importing_ppo_loads_no_harness():
+    code = "import sys, mjzoo.algorithms.ppo, mjzoo.algorithms.amp; print(sorted({'rich', 'imageio', 'mjzoo.harness'} & set(sys.modules)))"
+    result = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=300, check=True)
+    assert result.stdout.strip() == "[]"
 
 
 @pytest.fixture(scope="module")
@@ -59,9 +93,25 @@ def small_update():
     return jax.jit(update), traces
 
 
+def test_hyperparameters_live_in_the_state_and_change_without_a_retrace(pendulum, small_update):
+    """Another learning rate is another state, not another program: the update reads it."""
+    update, traces = small_update
+    before = len(traces)
+    steps = {}
+    for rate in (1e-4, 1e-2):
+        state = ppo.init(SMALL, pendulum, HP.replace(learning_rate=rate), jax.random.key(5))
+        assert float(state.hyperparams.learning_rate) == np.float32(rate)
+        new, _ = update(pendulum, state)
+        steps[rate] = max(
+            jax.tree.leaves(jax.tree.map(lambda a, b: float(jnp.max(jnp.abs(a - b))), state.params, new.params))
+        )
+    assert len(traces) - before <= 1  # at most this fixture's first compile
+    assert steps[1e-2] > 10 * steps[1e-4]  # Adam's steps scale with the rate
+
+
 def test_update_is_one_jit_that_does_not_retrace(pendulum, small_update):
     update, traces = small_update
-    state = ppo.init(SMALL, pendulum, jax.random.key(0))
+    state = ppo.init(SMALL, pendulum, HP, jax.random.key(0))
     state, metrics = update(pendulum, state)
     other = mjzoo.envs.make("pendulum_swingup", upright_weight=2.0, effort_weight=0.5)
     state, metrics = update(other, state)
@@ -74,7 +124,7 @@ def test_update_is_one_jit_that_does_not_retrace(pendulum, small_update):
 
 def test_update_changes_parameters_and_normalizer(pendulum, small_update):
     update, _ = small_update
-    state = ppo.init(SMALL, pendulum, jax.random.key(1))
+    state = ppo.init(SMALL, pendulum, HP, jax.random.key(1))
     new, _ = update(pendulum, state)
     moved = jax.tree.map(lambda a, b: float(jnp.max(jnp.abs(a - b))), state.params, new.params)
     assert max(jax.tree.leaves(moved)) > 0
@@ -87,7 +137,7 @@ def test_a_bfloat16_update_keeps_float32_state_and_moves_like_float32(pendulum):
     states = {}
     for dtype in ("float32", "bfloat16"):
         config = dataclasses.replace(SMALL, compute_dtype=dtype)
-        state = ppo.init(config, pendulum, jax.random.key(2))
+        state = ppo.init(config, pendulum, HP, jax.random.key(2))
         states[dtype] = (state, jax.jit(ppo.update, static_argnums=0)(config, pendulum, state)[0])
     (before, f32), (_, bf16) = states["float32"], states["bfloat16"]
     assert all(x.dtype == jnp.float32 for x in jax.tree.leaves(bf16.params))
@@ -97,7 +147,7 @@ def test_a_bfloat16_update_keeps_float32_state_and_moves_like_float32(pendulum):
 
 
 def test_deployable_policy_acts_within_ctrlrange(pendulum):
-    state = ppo.init(SMALL, pendulum, jax.random.key(2))
+    state = ppo.init(SMALL, pendulum, HP, jax.random.key(2))
     act = jax.jit(ppo.policy(SMALL, pendulum))
     obs = jnp.array([-1.0, 0.0, 0.3])
     action = act(ppo.policy_params(state), obs, jax.random.key(0))
@@ -113,9 +163,9 @@ def test_vmapped_seeds_equal_separate_runs(pendulum):
     keys = jax.random.split(jax.random.key(3), 2)
     update = jax.jit(lambda task, s: ppo.update(SMALL, task, s))
     batched = jax.jit(jax.vmap(lambda s: ppo.update(SMALL, pendulum, s)))
-    states, _ = batched(jax.vmap(lambda k: ppo.init(SMALL, pendulum, k))(keys))
+    states, _ = batched(jax.vmap(lambda k: ppo.init(SMALL, pendulum, HP, k))(keys))
     for i, key in enumerate(keys):
-        single, _ = update(pendulum, ppo.init(SMALL, pendulum, key))
+        single, _ = update(pendulum, ppo.init(SMALL, pendulum, HP, key))
         chex.assert_trees_all_close(
             jax.tree.map(lambda x, i=i: x[i], states.params), single.params, rtol=1e-5, atol=1e-6
         )
@@ -123,7 +173,8 @@ def test_vmapped_seeds_equal_separate_runs(pendulum):
 
 
 def test_user_network_and_optimizer(pendulum):
-    """An (init, apply) pair from another library (here flax.linen) and any optax optimizer."""
+    """An (init, apply) pair from another library (here flax.linen) and any optax
+    optimizer, given to `ppo.make` (the Config holds no callables)."""
     import flax.linen as nn
 
     class Tiny(nn.Module):
@@ -133,18 +184,30 @@ def test_user_network_and_optimizer(pendulum):
 
     module = Tiny()
     net = networks.Network(init=lambda key, x: module.init(key, x), apply=module.apply)
-    config = ppo.Config(
-        num_envs=8, unroll_length=8, num_minibatches=2, num_epochs=1, policy_network=net, optimizer=optax.sgd(1e-2)
-    )
-    state = ppo.init(config, pendulum, jax.random.key(4))
-    new, metrics = jax.jit(lambda t, s: ppo.update(config, t, s))(pendulum, state)
+    config = ppo.Config(num_envs=8, unroll_length=8, num_minibatches=2, num_epochs=1)
+    algo = ppo.make(config, policy_network=net, optimizer=optax.sgd(1e-2))
+    state = algo.init(pendulum, HP, jax.random.key(4))
+    new, metrics = jax.jit(algo.update)(pendulum, state)
     assert "params" in new.params["policy"]  # flax's own layout, untouched by us
     moved = jax.tree.map(lambda a, b: float(jnp.max(jnp.abs(a - b))), state.params["policy"], new.params["policy"])
     assert max(jax.tree.leaves(moved)) > 0 and np.isfinite(metrics["loss/total"])
+    # A function of the learning rate gets the state's (traced) rate: 10x the rate, 10x SGD's one step.
+    algo = ppo.make(dataclasses.replace(config, num_minibatches=1), optimizer=optax.sgd)
+    steps = []
+    for rate in (1e-3, 1e-2):
+        state = algo.init(pendulum, HP.replace(learning_rate=rate, max_grad_norm=float("inf")), jax.random.key(4))
+        new, _ = jax.jit(algo.update)(pendulum, state)
+        steps.append(jax.tree.map(jnp.subtract, new.params["value"], state.params["value"]))
+    assert max(float(jnp.max(jnp.abs(x))) for x in jax.tree.leaves(steps[1])) > 1e-4  # far above the tolerance
+    # (new - old rounds to float32 at the params' scale: ~1e-7, 10x in the first step)
+    chex.assert_trees_all_close(jax.tree.map(lambda x: 10 * x, steps[0]), steps[1], rtol=1e-3, atol=3e-6)
 
 
-def _train(tmp_path, name: str, resume: bool = False):
-    config = ppo.Config(num_envs=8, unroll_length=8, num_minibatches=2, num_epochs=2, total_steps=8 * 8 * 4)
+CONFIG = ppo.Config(num_envs=8, unroll_length=8, num_minibatches=2, num_epochs=2, total_steps=8 * 8 * 4)
+ALGO = ppo.make(CONFIG)  # one value for every run: they share the chunk's compile
+
+
+def _train(tmp_path, name: str, resume: bool = False, hyperparams: ppo.Hyperparams | None = None):
     settings = training.Settings(
         out_dir=tmp_path / name,
         updates_per_chunk=2,
@@ -156,11 +219,12 @@ def _train(tmp_path, name: str, resume: bool = False):
         resume=resume,
         progress=False,
     )
-    return ppo.train(config, mjzoo.envs.make("cartpole_balance"), settings)
+    return training.run(ALGO, mjzoo.envs.make("cartpole_balance"), settings, hyperparams)
 
 
 def test_a_crashed_run_resumes_to_the_same_result(tmp_path, monkeypatch):
-    whole, _ = _train(tmp_path, "whole")
+    hp = HP.replace(learning_rate=1e-3, entropy_coef=0.0)
+    whole, _ = _train(tmp_path, "whole", hyperparams=hp)
     save = checkpoints.save
 
     def crash_after_first(directory, step, tree):
@@ -170,11 +234,17 @@ def test_a_crashed_run_resumes_to_the_same_result(tmp_path, monkeypatch):
 
     monkeypatch.setattr(checkpoints, "save", crash_after_first)
     with pytest.raises(KeyboardInterrupt):
-        _train(tmp_path, "crashed")  # dies at its second checkpoint, after 4 of 4 updates ran
+        _train(tmp_path, "crashed", hyperparams=hp)  # dies at its second checkpoint, after 4 of 4 updates ran
     monkeypatch.setattr(checkpoints, "save", save)
     assert checkpoints.latest_step(tmp_path / "crashed" / "checkpoints") == 128
-    resumed, _ = _train(tmp_path, "crashed", resume=True)  # continues from update 2
+    resumed, _ = _train(tmp_path, "crashed", resume=True)  # continues from update 2, with the checkpoint's numbers
     assert int(resumed.updates) == int(whole.updates) == 4
+    assert float(resumed.hyperparams.learning_rate) == np.float32(1e-3)
+    saved = json.loads((tmp_path / "crashed" / "config.json").read_text())
+    assert saved["algorithm"] == "ppo" and saved["config"]["num_epochs"] == 2
+    assert saved["hyperparams"]["learning_rate"] == pytest.approx(1e-3) and saved["hyperparams"]["entropy_coef"] == 0.0
+    assert saved["config"] == training.config_dict(CONFIG)
+    assert saved["hyperparams"] == pytest.approx(training.hyperparams_dict(hp))  # float32, as the state holds them
     chex.assert_trees_all_equal(resumed.params, whole.params)
     chex.assert_trees_all_equal(resumed.collector.env_state.obs, whole.collector.env_state.obs)
     lines = [json.loads(line) for line in (tmp_path / "crashed" / "metrics.jsonl").read_text().splitlines()]
@@ -207,7 +277,7 @@ TWO_DEVICES = textwrap.dedent(
     update = jax.jit(update, static_argnums=0)
     results = []
     for config_, placed in ((config, jax.devices()[:1]), (whole, jax.devices()), (config, jax.devices())):
-        state = training.shard_envs(ppo.init(config_, task, jax.random.key(0)), ppo.PER_ENV_FIELDS, placed)
+        state = training.shard_envs(ppo.init(config_, task, ppo.Hyperparams(), jax.random.key(0)), ppo.PER_ENV_FIELDS, placed)
         task_ = training.replicate(task, placed)
         for _ in range(3):
             state, _ = update(config_, task_, state)
@@ -232,7 +302,7 @@ TWO_DEVICES = textwrap.dedent(
 
     assert loop_collectives(whole) == 0  # each device computes every step whole
     assert loop_collectives(config) >= 1  # each its share, the gradients summed every step
-    odd = ppo.init(dataclasses.replace(config, num_envs=5, num_minibatches=1), task, jax.random.key(0))
+    odd = ppo.init(dataclasses.replace(config, num_envs=5, num_minibatches=1), task, ppo.Hyperparams(), jax.random.key(0))
     try:  # an uneven split is refused, naming the fix
         training.shard_envs(odd, ppo.PER_ENV_FIELDS)
         raise AssertionError("5 envs were split over 2 devices")

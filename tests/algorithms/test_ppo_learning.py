@@ -16,11 +16,10 @@ from mjzoo.harness import training
 def test_learns_cartpole_balance():
     """From a random policy (return ~40 of ~550) to balancing for the whole episode."""
     task = mjzoo.envs.make("cartpole_balance")
-    config = ppo.Config(**{**mjzoo.envs.hyperparameters("cartpole_balance", "ppo"), "total_steps": 163_840})
-    before = ppo.evaluate(config, task, ppo.init(config, task, jax.random.key(0)), jax.random.key(1), 16, 500)[0]
-    state, last = ppo.train(
-        config, task, training.Settings(updates_per_chunk=10, eval_envs=16, eval_steps=500, progress=False)
-    )
+    config, hp = ppo.configure(**{**mjzoo.envs.hyperparameters("cartpole_balance", "ppo"), "total_steps": 163_840})
+    before = ppo.evaluate(config, task, ppo.init(config, task, hp, jax.random.key(0)), jax.random.key(1), 16, 500)[0]
+    settings = training.Settings(updates_per_chunk=10, eval_envs=16, eval_steps=500, progress=False)
+    state, last = training.run(ppo.make(config), task, settings, hp)
     assert float(before) < 150
     assert last["eval/return"] > 500
 
@@ -37,7 +36,7 @@ def test_recurrent_gru_policy_learns_a_partially_observed_task():
     seeds learned and lost it again (544 then 384 at the end), and which ones changed with
     XLA's rounding; with 0.1, 11 runs (seeds 0-7, two auto-reset forms) all ended >= 527."""
     task = mjzoo.with_observation(mjzoo.envs.make("cartpole_balance"), positions_only)
-    config = ppo.Config(
+    config, hp = ppo.configure(
         num_envs=64,
         unroll_length=32,
         num_minibatches=4,
@@ -48,9 +47,8 @@ def test_recurrent_gru_policy_learns_a_partially_observed_task():
         recurrent=True,
         total_steps=163_840,
     )
-    state, last = ppo.train(
-        config, task, training.Settings(updates_per_chunk=20, eval_envs=16, eval_steps=500, progress=False)
-    )
+    settings = training.Settings(updates_per_chunk=20, eval_envs=16, eval_steps=500, progress=False)
+    state, last = training.run(ppo.make(config), task, settings, hp)
     assert jax.tree.leaves(state.collector.carry)[0].shape == (64, config.gru_hidden_size)
     assert last["eval/return"] > 450
 
@@ -59,10 +57,9 @@ def test_learns_pendulum_swingup():
     """From hanging still (random-policy return ~20) to swinging up and holding upright:
     a mean deterministic return >= 380 of ~500 means upright within ~3 s and held."""
     task = mjzoo.envs.make("pendulum_swingup")
-    config = ppo.Config(**mjzoo.envs.hyperparameters("pendulum_swingup", "ppo"))
-    state, last = ppo.train(
-        config, task, training.Settings(updates_per_chunk=10, eval_envs=16, eval_steps=500, progress=False)
-    )
+    config, hp = ppo.configure(**mjzoo.envs.hyperparameters("pendulum_swingup", "ppo"))
+    settings = training.Settings(updates_per_chunk=10, eval_envs=16, eval_steps=500, progress=False)
+    state, last = training.run(ppo.make(config), task, settings, hp)
     assert last["eval/return"] >= 380
     _, _, trajectory = ppo.evaluate(config, task, state, jax.random.key(7), 4, 500)
     angle = np.asarray(trajectory.next_state.data.qpos[-50:, 0])  # the last second

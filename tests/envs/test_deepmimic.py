@@ -191,7 +191,7 @@ def test_walk_amp_resets_from_the_clip_and_traces(amp_task):
     assert nxt.obs.shape == (75,)
     from mjzoo.algorithms import amp
 
-    assert amp.Config(**deepmimic.AMP).task_weight == 0.0
+    assert amp.configure(**deepmimic.AMP)[1].task_weight == 0.0
 
 
 def test_walk_amp_style_error(amp_task, clips):

@@ -165,9 +165,9 @@ def test_style_measure_errors_name_the_argument(walk):
 
 
 def test_amp_hyperparameters_make_valid_configs_on_the_models_bodies(walk):
-    walk_config, joystick_config = amp.Config(**ha.AMP), amp.Config(**ha.JOYSTICK_AMP)
-    assert walk_config.num_envs == 2048 and walk_config.style_weight == 1.0
-    assert 0.0 <= walk_config.task_weight < walk_config.style_weight
-    assert joystick_config.task_weight > 0 and joystick_config.style_weight > 0
+    (walk_config, walk_hp), (_, joystick_hp) = amp.configure(**ha.AMP), amp.configure(**ha.JOYSTICK_AMP)
+    assert walk_config.num_envs == 2048 and walk_hp.style_weight == 1.0
+    assert 0.0 <= walk_hp.task_weight < walk_hp.style_weight
+    assert joystick_hp.task_weight > 0 and joystick_hp.style_weight > 0
     bodies = {walk.mj_model.body(i).name for i in range(walk.mj_model.nbody)}
     assert set(walk_config.key_bodies) <= bodies and len(walk_config.key_bodies) == 4

@@ -105,5 +105,5 @@ def test_style_error_rejects_bad_input(task):
 def test_amp_hyperparameters_make_a_style_only_config():
     from mjzoo.algorithms import amp
 
-    config = amp.Config(**teachers.AMP)
+    _, config = amp.configure(**teachers.AMP)  # the numbers: (Config, Hyperparams)
     assert config.task_weight == 0.0 and config.style_weight > 0

@@ -10,7 +10,6 @@ import glob
 import json
 import subprocess
 import sys
-import types
 from pathlib import Path
 
 import jax
@@ -18,6 +17,7 @@ import jax.numpy as jnp
 import pytest
 
 import mjzoo.envs
+from mjzoo import learning
 from mjzoo.algorithms import ppo
 from mjzoo.harness import checkpoints, cli, rendering, training
 
@@ -55,8 +55,9 @@ def write_run(directory: Path, algorithm: str = "ppo", **config) -> Path:
     """task.json and config.json as `mjzoo train` writes them (no checkpoints yet)."""
     directory.mkdir(parents=True, exist_ok=True)
     (directory / "task.json").write_text(json.dumps({"env": ENV, "overrides": {}}))
-    fields = training.config_dict(ppo.Config(**{**TINY, **config}))
-    (directory / "config.json").write_text(json.dumps({"algorithm": algorithm, "config": fields, "settings": {}}))
+    structure, numbers = ppo.configure(**{**TINY, **config})
+    fields = {"config": training.config_dict(structure), "hyperparams": training.hyperparams_dict(numbers)}
+    (directory / "config.json").write_text(json.dumps({"algorithm": algorithm, **fields, "settings": {}}))
     return directory
 
 
@@ -200,7 +201,8 @@ def test_plan_refuses_an_out_that_holds_a_plan_run(capsys, tmp_path):
 @pytest.fixture(scope="module")
 def ppo_state():
     """PPO's initial train state for TINY on the env (one compile for the module)."""
-    return ppo.init(ppo.Config(**TINY), mjzoo.envs.make(ENV), jax.random.key(0))
+    config, hyperparams = ppo.configure(**TINY)
+    return ppo.init(config, mjzoo.envs.make(ENV), hyperparams, jax.random.key(0))
 
 
 def test_eval_falls_back_past_a_damaged_checkpoint(capsys, tmp_path, monkeypatch, ppo_state):
@@ -262,18 +264,30 @@ class Count:
     total: jax.Array
 
 
-@dataclasses.dataclass(frozen=True)
-class CountConfig:
-    num_updates: int
-    steps_per_update: int = 10
-    num_envs: int = 1
+def counter(num_updates: int) -> learning.Algorithm:
+    """An algorithm value whose state counts its updates."""
+    return learning.Algorithm(
+        name="counter",
+        config=None,
+        hyperparams=None,
+        init=_count_init,
+        update=_count_update,
+        evaluate=_count_evaluate,
+        steps_per_update=10,
+        num_updates=num_updates,
+    )
 
 
-COUNTER = types.ModuleType("counter")  # an algorithm whose state counts its updates
-COUNTER.init = lambda config, task, key: Count(jnp.zeros((), jnp.int32), jnp.zeros(()))
-COUNTER.update = lambda config, task, s: (Count(s.updates + 1, s.total + 1.0), {"loss/total": s.total})
-COUNTER.evaluate = lambda config, task, s, key, n, steps: (s.total, jnp.zeros(n), None)
-COUNTER.PER_ENV_FIELDS = ()
+def _count_init(task, hyperparams, key):
+    return Count(jnp.zeros((), jnp.int32), jnp.zeros(()))
+
+
+def _count_update(task, s):
+    return Count(s.updates + 1, s.total + 1.0), {"loss/total": s.total}
+
+
+def _count_evaluate(task, s, key, n, steps):
+    return s.total, jnp.zeros(n), None
 
 
 def test_training_resumes_from_the_newest_intact_checkpoint(tmp_path):
@@ -282,10 +296,10 @@ def test_training_resumes_from_the_newest_intact_checkpoint(tmp_path):
     settings = training.Settings(
         out_dir=tmp_path, updates_per_chunk=1, eval_steps=1, video=False, progress=False, checkpoint_every=1
     )
-    training.run(COUNTER, CountConfig(num_updates=3), {}, settings)
+    training.run(counter(3), {}, settings)
     damage(tmp_path / "checkpoints", 30)
     with pytest.warns(checkpoints.DamagedCheckpointWarning, match="checkpoint 30 is damaged .*restored checkpoint 20"):
-        state, last = training.run(COUNTER, CountConfig(num_updates=4), {}, dataclasses.replace(settings, resume=True))
+        state, last = training.run(counter(4), {}, dataclasses.replace(settings, resume=True))
     assert int(state.updates) == 4 and last["eval/return"] == 4.0
     assert checkpoints.all_steps(tmp_path / "checkpoints") == [20, 30, 40]
     assert (tmp_path / "checkpoints" / "30.damaged").is_dir()
@@ -296,10 +310,10 @@ def test_training_resumes_from_the_newest_intact_checkpoint(tmp_path):
 def test_a_bug_past_the_checks_keeps_its_exception(tmp_path, monkeypatch):
     """Only the checks' errors are the user's: a ValueError from inside training is a bug."""
 
-    def broken(config, task, settings):
+    def broken(algorithm, task, settings, hyperparams=None):
         raise ValueError("a bug deep inside")
 
-    monkeypatch.setattr(ppo, "train", broken)
+    monkeypatch.setattr(training, "run", broken)
     with pytest.raises(ValueError, match="a bug deep inside"):
         cli.main(["train", "ppo", ENV, "--out", str(tmp_path / "run")])
 
@@ -425,12 +439,12 @@ def test_schedule_and_render_flags_reach_the_settings_and_a_resume_keeps_them(tm
 def test_training_refuses_a_directory_that_holds_a_run_unless_told(tmp_path):
     """From Python too: no file of an earlier run is touched without resume or overwrite."""
     settings = training.Settings(out_dir=tmp_path, updates_per_chunk=1, eval_steps=1, video=False, progress=False)
-    training.run(COUNTER, CountConfig(num_updates=2), {}, settings)
+    training.run(counter(2), {}, settings)
     before = snapshot(tmp_path)
     with pytest.raises(FileExistsError, match=r"already holds a run \(config.json, metrics.jsonl, checkpoints/"):
-        training.run(COUNTER, CountConfig(num_updates=1), {}, settings)
+        training.run(counter(1), {}, settings)
     assert snapshot(tmp_path) == before
-    state, _ = training.run(COUNTER, CountConfig(num_updates=1), {}, dataclasses.replace(settings, overwrite=True))
+    state, _ = training.run(counter(1), {}, dataclasses.replace(settings, overwrite=True))
     assert int(state.updates) == 1 and checkpoints.all_steps(tmp_path / "checkpoints") == [10]
     steps = [json.loads(line)["step"] for line in (tmp_path / "metrics.jsonl").read_text().splitlines()]
     assert steps == [10]

@@ -75,7 +75,7 @@ def test_a_factory_spec_builds_from_python(user_dir, monkeypatch):
     assert isinstance(task, mjzoo.Task) and int(task.time_limit) == 7
     assert mjzoo.envs.defaults(SPEC) == {"episode_steps": 20, "upright_weight": 1.0}
     assert mjzoo.envs.factory(SPEC).__name__ == "make_pendulum"
-    assert mjzoo.envs.hyperparameters(SPEC, "ppo") == {}  # ppo.Config's own defaults
+    assert mjzoo.envs.hyperparameters(SPEC, "ppo") == {}  # ppo.configure's own defaults
     with pytest.raises(TypeError, match=r"unknown override\(s\) \['mass'\]; make_pendulum takes"):
         mjzoo.envs.make(SPEC, mass=2.0)
     assert mjzoo.envs.takes(SPEC, "episode_steps") and not mjzoo.envs.takes(SPEC, "mass")
@@ -193,19 +193,13 @@ def test_train_writes_the_spec_and_eval_runs_its_episode_length(capsys, cli_run,
 
 
 def test_eval_of_a_run_trained_from_python_needs_task(capsys, in_user_dir, monkeypatch):
-    """`ppo.train(..., out_dir=...)` writes no task.json: --task names the task, and its
+    """`training.run(..., Settings(out_dir=...))` writes no task.json: --task names the task, and its
     --env-overrides set it up as it was trained."""
     monkeypatch.syspath_prepend(str(in_user_dir))
     run = in_user_dir / "runs" / "python"
-    ppo.train(
-        ppo.Config(**TINY),
-        mjzoo.envs.make(SPEC, episode_steps=10),
-        out_dir=run,
-        eval_envs=2,
-        updates_per_chunk=2,
-        video=False,
-        progress=False,
-    )  # (the CLI run's compiles serve)
+    config, hyperparams = ppo.configure(**TINY)
+    settings = training.Settings(out_dir=run, eval_envs=2, updates_per_chunk=2, video=False, progress=False)
+    training.run(ppo.make(config), mjzoo.envs.make(SPEC, episode_steps=10), settings, hyperparams)
     assert not (run / "task.json").exists()
     assert_usage_error(capsys, ["eval", str(run)], f"{run}: has no task.json (trained from Python?)", "--task")
     seen = []

@@ -2,7 +2,6 @@
 
 from __future__ import annotations
 
-import dataclasses
 import os
 import subprocess
 import sys
@@ -10,6 +9,7 @@ import threading
 import time
 import types
 from pathlib import Path
+from typing import Any
 
 import jax
 import jax.numpy as jnp
@@ -161,54 +161,49 @@ def test_the_train_state_is_owned_by_one_program_whatever_its_shapes():
     )
 
 
-@dataclasses.dataclass(frozen=True)
-class Updates:
-    num_updates: int
-
-
 def test_the_chunk_compiled_ahead_from_inits_shapes_serves_every_chunk(monkeypatch):
     """`training.run` compiles its chunk on a thread while init compiles, from the shapes
     init will return: the described state (PRNG keys, the device's sharding) must be the
     placed state exactly, or the first chunk compiles again. And init's weakly typed leaf
     (`scale`) is made strong, as the chunk returns it, or the second chunk compiles again
     (Playground's CheetahRun: 49 s of an H100 run)."""
-    import types
 
     from mjzoo.harness import devices, training
+    from tests.harness.test_training import counter
 
-    algorithm = types.ModuleType("stepper")
-    algorithm.PER_ENV_FIELDS = ("per_env",)
-    algorithm.init = lambda config, task, key: {
-        "updates": jnp.zeros((), jnp.int32),
-        "per_env": jnp.zeros(4),
-        "scale": jnp.asarray(1.0),
-        "key": key,
-    }
-    algorithm.update = lambda config, task, s: (
-        {
-            **s,
-            "updates": s["updates"] + 1,
-            "per_env": s["per_env"] * s["scale"],
-            "scale": s["scale"] * task["gain"][0],  # strong, as data.time steps
-            "key": jax.random.fold_in(s["key"], 1),
+    algorithm = counter(
+        num_updates=4,
+        init=lambda task, hyperparams, key: {
+            "updates": jnp.zeros((), jnp.int32),
+            "per_env": jnp.zeros(4),
+            "scale": jnp.asarray(1.0),
+            "key": key,
         },
-        {},
+        update=lambda task, s: (
+            {
+                **s,
+                "updates": s["updates"] + 1,
+                "per_env": s["per_env"] * s["scale"],
+                "scale": s["scale"] * task["gain"][0],  # strong, as data.time steps
+                "key": jax.random.fold_in(s["key"], 1),
+            },
+            {},
+        ),
     )
-    config = Updates(num_updates=4)
     settings = training.Settings(updates_per_chunk=2, video=False, progress=False)
     task, key = {"gain": jnp.ones(3)}, jax.random.key(0)
     monkeypatch.setattr(compilation, "overlaps_safely", lambda model: False)  # as on Warp's GPU physics
-    assert training._compile_chunk_ahead(algorithm, config, task, settings, key) is None  # the chunk compiles first
+    assert training._compile_chunk_ahead(algorithm, task, None, settings, key) is None  # the chunk compiles first
     monkeypatch.undo()
-    ahead = training._compile_chunk_ahead(algorithm, config, task, settings, key)
+    ahead = training._compile_chunk_ahead(algorithm, task, None, settings, key)
     assert ahead is not None  # one device
     ahead.join()
     state = devices.shard_envs(
-        training._owned(training._init_fn(algorithm)(config, task, key)), algorithm.PER_ENV_FIELDS
+        training._owned(training._init_fn(algorithm.init)(task, None, key)), algorithm.per_env_fields
     )
     _compiles.clear()
-    state, _ = training._chunk_fn(algorithm, config, 2)(devices.replicate(task), state)
-    state, _ = training._chunk_fn(algorithm, config, 2)(devices.replicate(task), state)
+    state, _ = training._chunk_fn(algorithm.update, 2)(devices.replicate(task), state)
+    state, _ = training._chunk_fn(algorithm.update, 2)(devices.replicate(task), state)
     assert _compiles == []
     assert int(state["updates"]) == 4
 
@@ -227,20 +222,19 @@ class State:
     updates: jax.Array
     per_env: jax.Array
     key: jax.Array
-@dataclasses.dataclass(frozen=True)
-class Updates:
-    num_updates: int
-algorithm = types.ModuleType("stepper")
-algorithm.PER_ENV_FIELDS = ("per_env",)
-algorithm.init = lambda config, task, key: State(jnp.zeros((), jnp.int32), jnp.zeros((4, 3)), key)
-algorithm.update = lambda config, task, s: (State(s.updates + 1, s.per_env + task["gain"], jax.random.fold_in(s.key, 1)), {})
-config, settings = Updates(num_updates=4), training.Settings(updates_per_chunk=2, video=False, progress=False)
+algorithm = types.SimpleNamespace(
+    per_env_fields=("per_env",),
+    num_updates=4,
+    init=lambda task, hyperparams, key: State(jnp.zeros((), jnp.int32), jnp.zeros((4, 3)), key),
+    update=lambda task, s: (State(s.updates + 1, s.per_env + task["gain"], jax.random.fold_in(s.key, 1)), {}),
+)
+settings = training.Settings(updates_per_chunk=2, video=False, progress=False)
 task, key = {"gain": jnp.ones(3)}, jax.random.key(0)
-training._compile_chunk_ahead(algorithm, config, task, settings, key).join()
-state = devices.shard_envs(training._owned(training._init_fn(algorithm)(config, task, key)), algorithm.PER_ENV_FIELDS)
+training._compile_chunk_ahead(algorithm, task, None, settings, key).join()
+state = devices.shard_envs(training._owned(training._init_fn(algorithm.init)(task, None, key)), algorithm.per_env_fields)
 assert len(state.per_env.addressable_shards) == 2 and state.per_env.addressable_shards[0].data.shape == (2, 3)
 compiles.clear()
-state, _ = training._chunk_fn(algorithm, config, 2)(devices.replicate(task), state)
+state, _ = training._chunk_fn(algorithm.update, 2)(devices.replicate(task), state)
 assert compiles == [], compiles
 print("chunks", int(state.updates))
 """
@@ -262,62 +256,56 @@ def test_the_chunk_compiles_ahead_for_the_env_batch_split_over_two_devices():
     assert "chunks 2" in done.stdout
 
 
-def test_the_evaluation_compiled_ahead_serves_the_first_evaluation(monkeypatch):
+def test_the_evaluation_compiled_ahead_serves_the_first_evaluation():
     """`training.run` traces and compiles the evaluation on a thread while the first chunk
     runs: the first evaluation's call compiles nothing more on the main thread."""
     from mjzoo.harness import training
-    from tests.harness.test_training import TASK, CountConfig, counter
+    from tests.harness.test_training import TASK, counter
 
-    algorithm = counter(evaluate=lambda config, task, s, key, n, steps: (s.per_env.sum() * steps, jnp.zeros(n), None))
-    during = _main_thread_compiles_per_evaluation(monkeypatch)
+    algorithm = counter(evaluate=lambda task, s, key, n, steps: (s.per_env.sum() * steps, jnp.zeros(n), None))
+    during, hooks = _main_thread_compiles_per_evaluation()
     settings = training.Settings(updates_per_chunk=1, eval_every=1, eval_steps=3, video=False, progress=False)
-    _, last = training.run(algorithm, CountConfig(num_updates=2), TASK, settings)
+    _, last = training.run(algorithm, TASK, settings, hooks=hooks)
     assert last["eval/return"] == 4 * 2.0 * 3  # four envs at 2.0, times 3 steps
     assert during == [0, 0]
 
 
-def _main_thread_compiles_per_evaluation(monkeypatch) -> list[int]:
+def _main_thread_compiles_per_evaluation(**hooks) -> tuple[list[int], Any]:
     """A list that `training.run`'s evaluations fill with the compiles each made on the
-    main thread."""
+    main thread (from the end of its chunk to its result), and the `training.Hooks`
+    (with `hooks`) that fill it."""
     from mjzoo.harness import training
 
-    during, evaluate_for_real = [], training._Loop._evaluate
-
-    def evaluate(loop, *args):
-        before = _threads.count("MainThread")
-        result = evaluate_for_real(loop, *args)
-        during.append(_threads.count("MainThread") - before)
-        return result
-
-    monkeypatch.setattr(training._Loop, "_evaluate", evaluate)
-    return during
+    during, before = [], []
+    hooks = training.Hooks(
+        on_chunk=lambda updates, metrics: before.append(_threads.count("MainThread")),
+        on_evaluation=lambda step, value: during.append(_threads.count("MainThread") - before[-1]),
+        **hooks,
+    )
+    return during, hooks
 
 
 def test_beside_warp_on_a_gpu_the_evaluation_compiles_alone_before_the_first_chunk(monkeypatch):
     """Warp is not thread-safe while it captures its CUDA graphs (`overlaps_safely`): the
     evaluation then compiles on the main thread, after init has run and before the chunk
-    is called, and the chunk is not compiled ahead; the first evaluation still finds it."""
+    runs, and the chunk is not compiled ahead; the first evaluation still finds it."""
     from mjzoo.harness import training
-    from tests.harness.test_training import TASK, CountConfig, counter
+    from tests.harness.test_training import TASK, counter
 
-    algorithm = counter(evaluate=lambda config, task, s, key, n, steps: (s.per_env.sum() * steps, jnp.zeros(n), None))
+    algorithm = counter(evaluate=lambda task, s, key, n, steps: (s.per_env.sum() * steps, jnp.zeros(n), None))
     monkeypatch.setattr(compilation, "overlaps_safely", lambda model: False)
     events = []
-    compile_for_real, chunk_fn = training._Loop.compile_evaluation_ahead, training._chunk_fn
 
-    def compile_evaluation_ahead(loop, shapes):
-        compile_for_real(loop, shapes)
-        events.append(("evaluation compiled", threading.current_thread().name, loop.ahead))
+    def compile_evaluation(*args, **kwargs):
+        ahead = compilation.compile_ahead(*args, **kwargs)
+        events.append(("evaluation compiled", threading.current_thread().name, ahead))
+        return ahead
 
-    def chunk(*args):
-        real = chunk_fn(*args)
-        return lambda *inputs: events.append(("chunk", None, None)) or real(*inputs)
-
-    monkeypatch.setattr(training._Loop, "compile_evaluation_ahead", compile_evaluation_ahead)
-    monkeypatch.setattr(training, "_chunk_fn", chunk)
-    during = _main_thread_compiles_per_evaluation(monkeypatch)
+    during, hooks = _main_thread_compiles_per_evaluation(compile_evaluation=compile_evaluation)
+    chunk_ran = hooks.on_chunk
+    hooks = hooks._replace(on_chunk=lambda *args: events.append(("chunk", None, None)) or chunk_ran(*args))
     settings = training.Settings(updates_per_chunk=1, eval_every=1, eval_steps=3, video=False, progress=False)
-    _, last = training.run(algorithm, CountConfig(num_updates=2), TASK, settings)
+    _, last = training.run(algorithm, TASK, settings, hooks=hooks)
     assert events[:2] == [("evaluation compiled", "MainThread", None), ("chunk", None, None)]
     assert last["eval/return"] == 4 * 2.0 * 3 and during == [0, 0]
 
@@ -328,9 +316,9 @@ def test_the_evaluation_compiles_beside_a_cold_chunk_and_after_a_cached_one(monk
     evaluation's compile starts then, beside it, not once the chunk runs. A chunk done
     by then (loaded from the cache) runs first, and the evaluation compiles while it does."""
     from mjzoo.harness import training
-    from tests.harness.test_training import TASK, CountConfig, counter
+    from tests.harness.test_training import TASK, counter
 
-    algorithm = counter(evaluate=lambda config, task, s, key, n, steps: (s.per_env.sum() * steps, jnp.zeros(n), None))
+    algorithm = counter(evaluate=lambda task, s, key, n, steps: (s.per_env.sum() * steps, jnp.zeros(n), None))
     events = []
     compile_for_real, chunk_fn, ahead_for_real = (
         training._Loop.compile_evaluation_ahead,
@@ -364,7 +352,7 @@ def test_the_evaluation_compiles_beside_a_cold_chunk_and_after_a_cached_one(monk
     monkeypatch.setattr(training._Loop, "compile_evaluation_ahead", compile_evaluation_ahead)
     monkeypatch.setattr(training, "_chunk_fn", Chunk)
     settings = training.Settings(updates_per_chunk=1, eval_every=1, eval_steps=3, video=False, progress=False)
-    _, last = training.run(algorithm, CountConfig(num_updates=2), TASK, settings)
+    _, last = training.run(algorithm, TASK, settings)
     expected = [("evaluation", True), ("chunk", None)] if cold else [("chunk", None), ("evaluation", False)]
     assert events[:2] == expected and events.count(("chunk", None)) == 2
     assert last["eval/return"] == 4 * 2.0 * 3

@@ -1,6 +1,8 @@
-"""`training.run`'s algorithm contract (`training.Algorithm`): what a module lacks is
-named in one error before anything runs; the per-env fields it names are the ones
-sharded; evaluation runs the task's own episode length unless told otherwise."""
+"""`training.run` drives an algorithm value (`mjzoo.learning.Algorithm`): what a value
+lacks is named in one error before anything runs; the per-env fields it names are the
+ones sharded; evaluation runs the task's own episode length unless told otherwise; the
+schedules of evaluations, checkpoints and metrics lines, driven by a fake clock through
+`run`'s `clock` and `hooks`."""
 
 from __future__ import annotations
 
@@ -19,6 +21,7 @@ import numpy as np
 import pytest
 
 import mjzoo
+from mjzoo import learning
 from mjzoo.harness import metrics, rendering, training
 from mjzoo.harness.cli import runs
 from tests.harness.test_rendering import egl_installed
@@ -41,29 +44,34 @@ class Count:
 
 @dataclasses.dataclass(frozen=True)
 class CountConfig:
-    num_updates: int = 2
     steps_per_update: int = 10
 
 
-def counter(**overrides) -> types.ModuleType:
-    """An algorithm whose state counts its updates; its evaluation returns num_steps."""
-    module = types.ModuleType("counter")
-    module.PER_ENV_FIELDS = ("per_env",)
-    module.init = lambda config, task, key: Count(jnp.zeros((), jnp.int32), jnp.zeros(4))
-    module.update = lambda config, task, s: (Count(s.updates + 1, s.per_env + 1.0), {})
-    module.evaluate = lambda config, task, s, key, n, steps: (jnp.float32(steps), jnp.zeros(n), None)
-    for name, value in overrides.items():
-        setattr(module, name, value) if value is not None else delattr(module, name)
-    return module
+def counter(num_updates: int = 2, **overrides) -> learning.Algorithm:
+    """An algorithm value whose state counts its updates; its evaluation returns num_steps."""
+    algorithm = learning.Algorithm(
+        name="counter",
+        config=CountConfig(),
+        hyperparams=None,
+        init=lambda task, hyperparams, key: Count(jnp.zeros((), jnp.int32), jnp.zeros(4)),
+        update=lambda task, s: (Count(s.updates + 1, s.per_env + 1.0), {}),
+        evaluate=lambda task, s, key, n, steps: (jnp.float32(steps), jnp.zeros(n), None),
+        policy=lambda task, deterministic=True: lambda params, obs, key: obs,
+        policy_params=lambda s: s,
+        steps_per_update=10,
+        num_updates=num_updates,
+        per_env_fields=("per_env",),
+    )
+    return algorithm._replace(**overrides)
 
 
 SETTINGS = training.Settings(updates_per_chunk=1, video=False, progress=False)
 
 
 def test_evaluation_runs_the_task_s_own_episode_length():
-    state, last = training.run(counter(), CountConfig(), TASK, SETTINGS)
+    state, last = training.run(counter(), TASK, SETTINGS)
     assert last["eval/return"] == 7.0 and int(state.updates) == 2
-    _, last = training.run(counter(), CountConfig(), TASK, dataclasses.replace(SETTINGS, eval_steps=3))
+    _, last = training.run(counter(), TASK, dataclasses.replace(SETTINGS, eval_steps=3))
     assert last["eval/return"] == 3.0
 
 
@@ -71,18 +79,20 @@ def test_a_task_without_time_limit_needs_eval_steps():
     with pytest.raises(
         ValueError, match="eval_steps=None evaluates the task's own episode length, but the task has no time limit"
     ):
-        training.run(counter(), CountConfig(), TASK.replace(time_limit=None), SETTINGS)
+        training.run(counter(), TASK.replace(time_limit=None), SETTINGS)
 
 
-def test_what_a_module_lacks_is_named_at_once():
+def test_what_an_algorithm_value_lacks_is_named_at_once():
+    lacking = types.SimpleNamespace(**{**counter()._asdict(), "evaluate": None, "per_env_fields": None})
+    del lacking.steps_per_update
     with pytest.raises(
         TypeError,
-        match=r"counter is not an algorithm of the training.Algorithm contract; it lacks "
-        r"evaluate\(\), PER_ENV_FIELDS \(.*\), config.steps_per_update",
+        match=r"counter is not an algorithm value of the mjzoo.learning.Algorithm contract \(e.g. ppo.make\(config\)\); "
+        r"it lacks evaluate\(\), per_env_fields \(.*\), steps_per_update \(an int >= 1\)",
     ):
-        training.run(counter(evaluate=None, PER_ENV_FIELDS=None), types.SimpleNamespace(num_updates=1), TASK, SETTINGS)
+        training.run(lacking, TASK, SETTINGS)
     with pytest.raises(TypeError, match=r"must be a dataclass with the fields \['per_env_typo'\]"):
-        training.run(counter(PER_ENV_FIELDS=("per_env_typo",)), CountConfig(), TASK, SETTINGS)
+        training.run(counter(per_env_fields=("per_env_typo",)), TASK, SETTINGS)
 
 
 def test_per_env_fields_are_sharded_the_rest_replicated():
@@ -94,58 +104,59 @@ def test_per_env_fields_are_sharded_the_rest_replicated():
 def test_init_is_jitted_by_the_harness():
     traces = []
 
-    def init(config, task, key):
+    def init(task, hyperparams, key):
         traces.append(isinstance(key, jax.core.Tracer))
         return Count(jnp.zeros((), jnp.int32), jnp.zeros(4))
 
-    training.run(counter(init=init), CountConfig(), TASK, SETTINGS)
+    training.run(counter(init=init), TASK, SETTINGS)
     assert traces == [True]  # traced (under jit), once
 
 
-# KSim's validation and logging options. One algorithm module for all of them, so they
-# share one compile of its chunk (the harness caches it per module, config and length).
-LOGGING = counter(update=lambda config, task, s: (Count(s.updates + 1, s.per_env + 1.0), {"loss/n": s.updates * 1.0}))
+# KSim's validation and logging options. One update function for all of them, so they
+# share one compile of its chunk (the harness caches it per update function and length).
+def _logging_update(task, s):
+    return Count(s.updates + 1, s.per_env + 1.0), {"loss/n": s.updates * 1.0}
+
+
+def logging(num_updates: int = 2) -> learning.Algorithm:
+    return counter(num_updates, update=_logging_update)
 
 
 class FakeClock:
-    """training._clock: each chunk of updates takes 10 s, each evaluation `eval_s`;
-    nothing else takes time. The evaluation's background compile ends at
-    `eval_compile_s` after launch (the evaluation itself then compiles at its first call)."""
+    """`run`'s clock, driven by its hooks: each chunk of updates takes 10 s, each
+    evaluation `eval_s`; nothing else takes time. The evaluation's background compile
+    ends at `eval_compile_s` after launch (the evaluation itself then compiles at its
+    first call)."""
 
-    def __init__(self, monkeypatch: pytest.MonkeyPatch, eval_s: float = 0.0, eval_compile_s: float = 0.0) -> None:
+    def __init__(self, eval_s: float = 0.0, eval_compile_s: float = 0.0) -> None:
         self.now = 0.0
-        real_chunk, real_evaluate = training._chunk_fn, training._evaluate_fn
 
-        def timed(real, seconds):
-            def make(*args):
-                function = real(*args)
+        def advance(seconds: float):
+            def hook(*_) -> None:
+                self.now += seconds
 
-                def run(*inputs):
-                    self.now += seconds
-                    return function(*inputs)
-
-                return run
-
-            return make
-
-        monkeypatch.setattr(training, "_clock", lambda: self.now)
-        monkeypatch.setattr(training, "_chunk_fn", timed(real_chunk, 10.0))
-        monkeypatch.setattr(training, "_evaluate_fn", timed(real_evaluate, eval_s))
+            return hook
 
         def join(timeout: float | None = None) -> None:  # a look (timeout 0) takes no time; a wait, until done
             if timeout != 0:
                 self.now = max(self.now, eval_compile_s)
 
         compiling = types.SimpleNamespace(join=join, is_alive=lambda: self.now < eval_compile_s)
-        monkeypatch.setattr(
-            training._Loop, "compile_evaluation_ahead", lambda loop, state: setattr(loop, "ahead", compiling)
+        self.hooks = training.Hooks(
+            on_chunk=advance(10.0),
+            on_evaluation=advance(eval_s),
+            compile_evaluation=lambda *args, **kwargs: compiling,
         )
 
+    def __call__(self) -> float:
+        return self.now
 
-def lines(tmp_path, chunks: int, **settings) -> list[dict]:
+
+def lines(tmp_path, chunks: int, clock: FakeClock | None = None, **settings) -> list[dict]:
     """metrics.jsonl of a run of `chunks` one-update chunks (step = 10 x chunk number)."""
+    clock = clock or FakeClock()
     settings = dataclasses.replace(SETTINGS, out_dir=tmp_path, checkpoint_every=0, overwrite=True, **settings)
-    training.run(LOGGING, CountConfig(num_updates=chunks), TASK, settings)
+    training.run(logging(chunks), TASK, settings, clock=clock, hooks=clock.hooks)
     return metrics.read_metrics(tmp_path)
 
 
@@ -167,8 +178,7 @@ def evaluated(records: list[dict]) -> list[int]:
         ({"eval_every": 0, "eval_first_seconds": 0}, [1, 7]),  # KSim's "first validation after M seconds"
     ],
 )
-def test_evaluation_schedule(tmp_path, monkeypatch, settings, chunks):
-    FakeClock(monkeypatch)
+def test_evaluation_schedule(tmp_path, settings, chunks):
     records = lines(tmp_path, 7, log_every=1, **settings)
     assert [r["step"] for r in records] == [10 * c for c in range(1, 8)]  # every chunk logged (log_every=1)
     assert evaluated(records) == chunks
@@ -188,9 +198,8 @@ def test_evaluation_schedule(tmp_path, monkeypatch, settings, chunks):
         (0.2, list(range(1, 13))),
     ],
 )
-def test_evaluation_by_budget_keeps_its_share_of_the_wall_clock(tmp_path, monkeypatch, budget, chunks):
-    FakeClock(monkeypatch, eval_s=2.0)
-    records = lines(tmp_path, 12, log_every=1, eval_budget=budget)
+def test_evaluation_by_budget_keeps_its_share_of_the_wall_clock(tmp_path, budget, chunks):
+    records = lines(tmp_path, 12, FakeClock(eval_s=2.0), log_every=1, eval_budget=budget)
     assert evaluated(records) == chunks
     before_last = records[-2]  # the last chunk always evaluates, whatever the budget
     assert sum(r["perf/eval_s"] for r in records[:-1]) <= budget * before_last["perf/elapsed_s"] + 1e-9
@@ -208,12 +217,11 @@ def test_evaluation_by_budget_keeps_its_share_of_the_wall_clock(tmp_path, monkey
     ],
 )
 def test_an_evaluation_still_compiling_is_put_off_by_the_budget_and_waited_for_on_request(
-    tmp_path, monkeypatch, settings, chunks, first_eval_s
+    tmp_path, settings, chunks, first_eval_s
 ):
     """The evaluation compiles in the background until t=30 (a humanoid's on a GPU: ~20 s
     after the first update)."""
-    FakeClock(monkeypatch, eval_s=2.0, eval_compile_s=30.0)
-    records = lines(tmp_path, 12, log_every=1, **settings)
+    records = lines(tmp_path, 12, FakeClock(eval_s=2.0, eval_compile_s=30.0), log_every=1, **settings)
     assert evaluated(records) == chunks
     assert records[chunks[0] - 1]["perf/eval_s"] == first_eval_s
 
@@ -230,16 +238,35 @@ def test_an_evaluation_still_compiling_is_put_off_by_the_budget_and_waited_for_o
     ],
 )
 def test_checkpoint_schedule(tmp_path, monkeypatch, settings, chunks):
-    FakeClock(monkeypatch)
-    saved = []
-    monkeypatch.setattr(training.checkpoints, "save", lambda directory, step, state: saved.append(step))
+    clock, saved = FakeClock(), []
+    monkeypatch.setattr(training.checkpoints, "save", lambda directory, step, state: saved.append(step))  # no disk
     run = dataclasses.replace(SETTINGS, out_dir=tmp_path, **settings)
-    training.run(LOGGING, CountConfig(num_updates=7), TASK, run)
+    training.run(logging(7), TASK, run, clock=clock, hooks=clock.hooks)
     assert saved == [10 * c for c in chunks]
 
 
-def test_log_every_and_log_train_metrics_choose_what_metrics_jsonl_holds(tmp_path, monkeypatch):
-    FakeClock(monkeypatch)
+def test_hooks_see_every_chunk_evaluation_and_metrics_line():
+    seen = []
+    hooks = training.Hooks(
+        on_chunk=lambda updates, m: seen.append(("chunk", updates, float(m["loss/n"]))),
+        on_evaluation=lambda step, value: seen.append(("evaluation", step, value)),
+        on_metrics=lambda step, m: seen.append(("metrics", step, m["loss/n"])),
+    )
+    settings = dataclasses.replace(SETTINGS, eval_every=2, eval_steps=3)
+    training.run(logging(3), TASK, settings, hooks=hooks)
+    assert seen == [
+        ("chunk", 1, 0.0),
+        ("metrics", 10, 0.0),
+        ("chunk", 2, 1.0),
+        ("evaluation", 20, 3.0),
+        ("metrics", 20, 1.0),
+        ("chunk", 3, 2.0),
+        ("evaluation", 30, 3.0),  # the last chunk always evaluates
+        ("metrics", 30, 2.0),
+    ]
+
+
+def test_log_every_and_log_train_metrics_choose_what_metrics_jsonl_holds(tmp_path):
     records = lines(tmp_path, 6, eval_every=3, log_every=2)
     assert [r["step"] // 10 for r in records] == [2, 3, 4, 6]  # every 2nd chunk, and each evaluation
     assert evaluated(records) == [3, 6]
@@ -250,9 +277,11 @@ def test_log_every_and_log_train_metrics_choose_what_metrics_jsonl_holds(tmp_pat
     assert {k.split("/")[0] for r in records for k in r if k != "step"} == {"eval", "perf"}
 
 
-def test_progress_shows_the_first_update_and_the_training_rate(tmp_path, monkeypatch, capsys):
-    FakeClock(monkeypatch)
-    _, last = training.run(LOGGING, CountConfig(num_updates=2), TASK, dataclasses.replace(SETTINGS, progress=True))
+def test_progress_shows_the_first_update_and_the_training_rate(capsys):
+    clock = FakeClock()
+    _, last = training.run(
+        logging(2), TASK, dataclasses.replace(SETTINGS, progress=True), clock=clock, hooks=clock.hooks
+    )
     assert last["perf/steps_per_s"] == 1.0 and last["perf/elapsed_s"] == 20.0  # 10 steps in 10 s of chunk
     assert "first=10.0s" in capsys.readouterr().out
 
@@ -260,14 +289,14 @@ def test_progress_shows_the_first_update_and_the_training_rate(tmp_path, monkeyp
 def test_profile_memory_on_the_cpu_records_nothing_and_says_so_once(tmp_path):
     settings = dataclasses.replace(SETTINGS, out_dir=tmp_path, profile_memory=True, checkpoint_every=0)
     with pytest.warns(training.TrainingWarning, match=r"profile_memory: cpu0 report no memory statistics") as caught:
-        _, last = training.run(LOGGING, CountConfig(), TASK, settings)
+        _, last = training.run(logging(), TASK, settings)
     assert len(caught) == 1 and not [k for k in last if k.startswith("memory/")]
 
 
 def test_eval_seconds_is_converted_at_the_task_s_control_rate(monkeypatch):
     # mjzoo.control_dt measures a step of the task (a compile of MJX's step: ~15 s here).
     monkeypatch.setattr(training, "control_dt", lambda task: 0.02 if task is TASK else None)
-    _, last = training.run(LOGGING, CountConfig(), TASK, dataclasses.replace(SETTINGS, eval_seconds=5.0))
+    _, last = training.run(logging(), TASK, dataclasses.replace(SETTINGS, eval_seconds=5.0))
     assert last["eval/return"] == 250.0  # the counter's evaluation returns its step count; 5 / 0.02 = 249.99...
 
 
@@ -303,7 +332,7 @@ def test_numpy_numbers_are_kept_as_python_ones_for_config_json():
 def test_config_json_holds_the_settings_and_the_cli_reads_it_back(tmp_path):
     render = rendering.RenderConfig(width=64, height=48, lookat=(0.0, 0.0, 1.0))
     settings = dataclasses.replace(SETTINGS, out_dir=tmp_path, render=render, eval_every_seconds=60.0)
-    training.run(LOGGING, CountConfig(), TASK, settings)
+    training.run(logging(), TASK, settings)
     _, info = runs.read_run(tmp_path)
     saved = info["settings"]
     assert saved["render"]["lookat"] == [0.0, 0.0, 1.0] and saved["eval_every_seconds"] == 60.0
@@ -334,7 +363,7 @@ class State(NamedTuple):
 class Trajectory(NamedTuple):
     next_state: State
 
-def evaluate(config, task, s, key, n, steps):
+def evaluate(task, s, key, n, steps):
     qpos = jnp.full((4, 1), 0.02) * s.updates  # each evaluation's video differs (the box in view)
     data = Data(jnp.arange(4) * 0.02, qpos, jnp.zeros((4, 0, 3)), jnp.zeros((4, 0, 4)))
     return jnp.float32(steps), jnp.zeros(n), Trajectory(State(data))
@@ -344,7 +373,7 @@ out = Path(sys.argv[1])
 for chunks in (5, 4):  # the final evaluation is not (5) or is (4) one of video_every's
     settings = dataclasses.replace(t.SETTINGS, out_dir=out / str(chunks), video=True, video_every=2, eval_every=1,
                                    render=rendering.RenderConfig(width=64, height=48))
-    training.run(algorithm, t.CountConfig(num_updates=chunks), t.TASK, settings)
+    training.run(algorithm._replace(num_updates=chunks), t.TASK, settings)
 print(json.dumps(sorted(str(p.relative_to(out)) for p in out.rglob("*.mp4"))))
 """
 

@@ -263,7 +263,7 @@ def test_cli_export(task, tmp_path, capsys):
     (run / "config.json").write_text(
         json.dumps({"algorithm": "ppo", "config": training.config_dict(config), "settings": {}})
     )
-    state = ppo.init(config, task, jax.random.key(0))
+    state = ppo.init(config, task, ppo.Hyperparams(), jax.random.key(0))
     state = state.replace(params={**state.params, "policy": balancing_params()["policy"]})
     checkpoints.save(run / "checkpoints", 1, state)
 

@@ -101,7 +101,7 @@ def test_done_is_terminated_and_a_dict_observation_trains_with_ppo():
         policy_obs_key="state",
         value_obs_key="privileged_state",
     )
-    train_state = ppo.init(config, task, jax.random.key(2))
+    train_state = ppo.init(config, task, ppo.Hyperparams(), jax.random.key(2))
     train_state, metrics = jax.jit(ppo.update, static_argnums=0)(config, task, train_state)
     assert all(np.isfinite(np.asarray(v)).all() for v in jax.tree.leaves(metrics))
 

@@ -21,6 +21,7 @@ __all__ = [
     "at_least_one",
     "parse_assignments",
     "algorithm_module",
+    "build_algorithm",
     "build_config",
     "build_planner",
     "episode_steps",
@@ -108,6 +109,40 @@ def build_planner(module: ModuleType, spec: str, overrides: dict[str, Any], what
         return configure(module, values)
     except ValueError as e:  # "mppi: unknown field(s) ...": the flag says where it came from
         raise UsageError(f"{what}: {str(e).removeprefix(f'{name}: ')}") from None
+
+
+def build_algorithm(
+    module: ModuleType, spec: str, overrides: dict[str, Any], what: str = "--config"
+) -> tuple[Any, Any]:
+    """An RL algorithm's (Config, Hyperparams): its defaults, then the task's, then
+    `overrides` (the command line, or a saved config.json's "config" and "hyperparams"
+    merged), each checked against its field's type first, then split by the module's
+    `configure` (whose range errors name the field)."""
+    hints = {**_number_hints(module.Hyperparams), **typing.get_type_hints(module.Config)}
+    overrides = {k: v for k, v in overrides.items() if not str(v).startswith("<custom")}
+    values = {**mjzoo.envs.hyperparameters(spec, module.__name__.split(".")[-1]), **overrides}
+    unknown = sorted(set(values) - set(hints))
+    if unknown:
+        raise UsageError(f"{what}: unknown field(s) {unknown}; fields: {sorted(hints)}")
+    for name, value in values.items():
+        values[name] = _as_type(value, hints[name])
+        if values[name] is _MISMATCH:
+            raise UsageError(f"{what}: {name}={value!r} must be {_describe(hints[name])}")
+    with checking(ValueError):
+        return module.configure(**values)
+
+
+def _number_hints(hyperparams: type) -> dict[str, Any]:
+    """Each number of a Hyperparams dataclass (nested ones' too, as AMP's `ppo`), as the
+    command line gives it: a number, or None (for a switch off at inf; `configure` says
+    where None is wrong)."""
+    hints: dict[str, Any] = {}
+    for field in dataclasses.fields(hyperparams):
+        if dataclasses.is_dataclass(field.default):
+            hints.update(_number_hints(type(field.default)))
+        else:
+            hints[field.name] = float | None
+    return hints
 
 
 def _as_type(value: Any, hint: Any) -> Any:

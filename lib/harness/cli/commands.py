@@ -22,6 +22,7 @@ from mjzoo.harness.cli.arguments import (
     UsageError,
     algorithm_module,
     at_least_one,
+    build_algorithm,
     build_config,
     build_planner,
     checking,
@@ -148,7 +149,8 @@ def train(
     task.json, config.json, metrics.jsonl, TensorBoard events, checkpoints, curves.png
     and eval.mp4 to --out (default runs/ENV-ALGORITHM), which must not hold a run.
 
-    --config takes NAME=VALUE fields of the algorithm's Config, over the env's defaults;
+    --config takes NAME=VALUE fields of the algorithm's Config and Hyperparams (one flat
+    list, split by its `configure`), over the env's defaults;
     a factory has none, so the Config's own apply; --rollout-seconds gives its
     unroll_length in simulated seconds. --env-overrides takes NAME=VALUE
     overrides of the env, as `mjzoo envs` lists them, or a factory's keyword arguments.
@@ -191,7 +193,7 @@ def train(
         run_settings["render"] = _render(run_settings.pop("render", None), render)
         task = mjzoo.envs.make(env, **env_values)
         config_values.update(_lengths(task, total_steps, rollout_seconds))
-        cfg = build_config(module, env, config_values)
+        cfg, hyperparams = build_algorithm(module, env, config_values)
         devices.check_split(cfg.num_envs)
         if (
             task.time_limit is None
@@ -213,7 +215,7 @@ def train(
         (out / "task.json").write_text(json.dumps({"env": env, "overrides": env_values}, indent=2))
     # resuming: only damaged checkpoints, or another network's; Warp: capacities outgrown
     with checking(checkpoints.CheckpointError, training.PhysicsCapacityError):
-        _, last = module.train(cfg, task, settings)
+        _, last = training.run(module.make(cfg), task, settings, hyperparams)
     if not distributed.is_primary():
         return
     print(f"final eval/return {last.get('eval/return', float('nan')):.2f}")
@@ -266,7 +268,8 @@ def _resumed(
     for what, ours, theirs in (("env", env, saved["env"]), ("algorithm", algorithm, info["algorithm"])):
         if ours != theirs:
             raise UsageError(f"--resume {resume}: that run's {what} is {theirs}, not {ours}")
-    config_values = {**info["config"], **parse_assignments(config, "--config")}
+    # The hyperparameters come back with the checkpoint; these are for the config's checks.
+    config_values = {**info["config"], **info.get("hyperparams", {}), **parse_assignments(config, "--config")}
     from mjzoo.harness import training
 
     kept = {f.name for f in dataclasses.fields(training.Settings)} - set(_NOT_KEPT)

@@ -12,7 +12,7 @@ import jax
 
 import mjzoo
 from mjzoo.harness import checkpoints, training
-from mjzoo.harness.cli.arguments import UsageError, algorithm_module, build_config, checking, parse_assignments
+from mjzoo.harness.cli.arguments import UsageError, algorithm_module, build_algorithm, checking, parse_assignments
 
 __all__ = ["Trained", "refuse_existing", "read_run", "load", "restore"]
 
@@ -32,7 +32,7 @@ def refuse_existing(out: Path, markers: tuple[str, ...], hint: str) -> None:
 def read_run(run: Path, flag: str = "") -> tuple[dict | None, dict]:
     """(task.json or None, config.json) of a run directory, checked complete (a
     checkpoint included) before anything is built from them. A run trained from Python
-    (`ppo.train(..., out_dir=...)`) has no task.json."""
+    (`training.run(ppo.make(config), task, Settings(out_dir=...))`) has no task.json."""
     where = f"{flag}{run}"
     if not run.is_dir():
         raise UsageError(f"{where}: {'not a directory' if run.exists() else 'no such run directory'}")
@@ -57,10 +57,12 @@ def _read_json(path: Path, where: str) -> dict:
 
 
 class Trained(NamedTuple):
-    """A run read back for use: its algorithm module and config, and the task to run it on."""
+    """A run read back for use: its algorithm module, config and hyperparameters, and the
+    task to run it on."""
 
     module: ModuleType
     cfg: Any
+    hyperparams: Any
     spec: str
     overrides: dict[str, Any]
     task: mjzoo.Task
@@ -80,14 +82,15 @@ def load(run: Path, task: str | None, env_overrides: tuple[str, ...]) -> Trained
     own = saved["overrides"] if saved is not None and saved["env"] == spec else {}
     overrides = {**own, **parse_assignments(env_overrides, "--env-overrides")}
     module = algorithm_module(info["algorithm"])
-    cfg = build_config(module, spec, info["config"], str(run / "config.json"))
-    return Trained(module, cfg, spec, overrides, mjzoo.envs.make(spec, **overrides))
+    saved_values = {**info["config"], **info.get("hyperparams", {})}
+    cfg, hyperparams = build_algorithm(module, spec, saved_values, str(run / "config.json"))
+    return Trained(module, cfg, hyperparams, spec, overrides, mjzoo.envs.make(spec, **overrides))
 
 
 def restore(run: Path, trained: Trained) -> Any:
     """The newest intact checkpoint's train state (a one-line warning for each damaged
     newer one; a `UsageError` if none is intact or they hold another network)."""
-    template = trained.module.init(trained.cfg, trained.task, jax.random.key(0))
+    template = trained.module.init(trained.cfg, trained.task, trained.hyperparams, jax.random.key(0))
     with checking(checkpoints.CheckpointError):
         state, _, _ = checkpoints.restore_newest_intact(run / "checkpoints", like=template)
     return state

@@ -1,0 +1,81 @@
+"""Checking and splitting an algorithm's numbers: the pieces `ppo` and `amp` build their
+`Hyperparams` and `configure` from, for a user's algorithm to reuse.
+
+A Hyperparams class is a frozen dataclass registered as a pytree, every field a number
+(or a batch of numbers, to sweep under `jax.vmap`). It checks its ranges where values
+are host numbers (`check_ranges`, in `__post_init__`); traced values, and the
+placeholders JAX rebuilds a pytree with, pass unchecked.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+from typing import Any
+
+import jax
+import jax.numpy as jnp
+import numpy as np
+
+__all__ = ["INF", "as_leaves", "check_ranges", "host_value", "split_fields"]
+
+INF = float("inf")  # a number that switches a clip off, so the switch can be swept too
+
+
+def host_value(value: Any) -> np.ndarray | None:
+    """A hyperparameter's value on the host, or None where it is not a number yet (traced,
+    or a placeholder JAX puts in a pytree while it rebuilds one: None, object(), a shape).
+    Raises TypeError for a string."""
+    if isinstance(value, (str, bytes)):
+        raise TypeError(f"a hyperparameter must be a number, not {value!r}")
+    if isinstance(value, (bool, np.bool_)) or not isinstance(value, (int, float, np.ndarray, np.number, jax.Array)):
+        return None
+    if isinstance(value, jax.core.Tracer):
+        return None
+    return np.asarray(value, dtype=np.float64)
+
+
+def check_ranges(obj: Any, where: str, ranges: dict[str, tuple[float, float, str]]) -> None:
+    """Raises a ValueError naming the first field of `obj` whose host value (every
+    element, for a batch) is outside its range. `ranges`: {field: (low, high, ends)},
+    `ends` one of "[]", "[)", "(]", "()" saying which ends are allowed."""
+    for field, (low, high, ends) in ranges.items():
+        try:
+            value = host_value(getattr(obj, field))
+        except TypeError:
+            raise ValueError(f"{where}: {field}={getattr(obj, field)!r} is invalid; expected a number") from None
+        if value is None:
+            continue
+        above = value >= low if ends[0] == "[" else value > low
+        below = value <= high if ends[1] == "]" else value < high
+        if not np.all(above & below):
+            shown = getattr(obj, field)
+            shown = shown if np.ndim(shown) == 0 else np.asarray(shown).tolist()
+            raise ValueError(f"{where}: {field}={shown!r} is invalid; expected in {ends[0]}{low}, {high}{ends[1]}")
+
+
+def split_fields(
+    where: str, structure: set[str], numbers: set[str], fields: dict[str, Any], off_at_inf: tuple[str, ...] = ()
+) -> tuple[dict[str, Any], dict[str, Any]]:
+    """(the Config's fields, the Hyperparams' fields) of one flat dict, by name; a
+    ValueError lists the valid names when one is neither. None for a number in
+    `off_at_inf` means INF (off: what a Config's None meant before); None for another
+    number is a ValueError (Hyperparams lets None pass, as JAX rebuilds pytrees with it)."""
+    unknown = sorted(set(fields) - structure - numbers)
+    if unknown:
+        raise ValueError(f"{where}: unknown field(s) {unknown}; fields: {sorted(structure | numbers)}")
+    config = {k: v for k, v in fields.items() if k in structure}
+    hyper = {k: (INF if v is None and k in off_at_inf else v) for k, v in fields.items() if k in numbers}
+    for name in [k for k, v in hyper.items() if v is None]:
+        raise ValueError(f"{where}: {name}=None is invalid; expected a number")
+    return config, hyper
+
+
+def as_leaves(hyperparams: Any) -> Any:
+    """Hyperparameters as float32 arrays, as a train state holds them (one dtype for a
+    checkpoint and for the chunk's compile, whatever Python numbers they were given as)."""
+    return jax.tree.map(lambda x: jnp.asarray(x, jnp.float32), hyperparams)
+
+
+def field_names(cls: type) -> set[str]:
+    """The names of a dataclass's fields."""
+    return {f.name for f in dataclasses.fields(cls)}

@@ -1,0 +1,79 @@
+"""Sweeps are one program: `jax.vmap` of `ppo.train` over hyperparameters (and seeds)
+gives each separate run's parameters, traced once."""
+
+from __future__ import annotations
+
+import chex
+import jax
+import jax.numpy as jnp
+import numpy as np
+import pytest
+
+import mjzoo.envs
+from mjzoo.algorithms import ppo
+
+CONFIG = ppo.Config(num_envs=8, unroll_length=8, num_minibatches=2, num_epochs=1, total_steps=8 * 8 * 3)
+RATES = (1e-4, 3e-4, 1e-3, 3e-3)
+# Batched and lone runs sum in other orders, and Adam's normalized steps carry a rounding
+# difference on, growing with the rate (a few of 4096 weights: ~1e-5 at 1e-2, 2e-4 at
+# 3e-2, after 3 updates); the rates' own differences are over 5x the tolerance (checked),
+# so the comparison still tells the runs apart.
+TOLERANCE = dict(rtol=1e-3, atol=1e-4)
+
+
+def max_difference(a, b) -> float:
+    return max(float(jnp.max(jnp.abs(x - y))) for x, y in zip(jax.tree.leaves(a), jax.tree.leaves(b)))
+
+
+@pytest.fixture(scope="module")
+def cartpole():
+    return mjzoo.envs.make("cartpole_balance")
+
+
+def batched(hyperparams: ppo.Hyperparams, n: int, **swept) -> ppo.Hyperparams:
+    """`hyperparams` with every leaf [n]: the `swept` ones as given, the rest repeated."""
+    return jax.tree.map(lambda x: jnp.full((n,), x, jnp.float32), hyperparams).replace(
+        **{k: jnp.asarray(v, jnp.float32) for k, v in swept.items()}
+    )
+
+
+@pytest.fixture(scope="module")
+def separate(cartpole):
+    """Each (rate, seed) run on its own: one program, since the numbers are not static."""
+    run = jax.jit(ppo.train, static_argnums=0)
+    return lambda rate, key: run(CONFIG, cartpole, ppo.Hyperparams(learning_rate=rate), key)[0].params
+
+
+def test_a_sweep_over_learning_rates_is_one_program_of_the_separate_runs(cartpole, separate):
+    @chex.assert_max_traces(n=1)
+    def train(hyperparams, key):
+        return ppo.train(CONFIG, cartpole, hyperparams, key)
+
+    sweep = jax.jit(jax.vmap(train, in_axes=(0, None)))
+    key = jax.random.key(0)
+    states, metrics = sweep(batched(ppo.Hyperparams(), len(RATES), learning_rate=RATES), key)
+    chex.assert_shape(metrics["loss/total"], (len(RATES), CONFIG.num_updates))
+    np.testing.assert_allclose(states.hyperparams.learning_rate, np.float32(RATES))
+    runs = [jax.tree.map(lambda x, i=i: x[i], states.params) for i in range(len(RATES))]
+    for run, rate in zip(runs, RATES):
+        chex.assert_trees_all_close(run, separate(rate, key), **TOLERANCE)
+    for one, other in zip(runs, runs[1:]):  # each rate made a run of its own
+        assert max_difference(one, other) > 5 * TOLERANCE["atol"]
+    sweep(batched(ppo.Hyperparams(), len(RATES), learning_rate=RATES[::-1]), jax.random.key(1))  # no retrace
+
+
+def test_seeds_by_learning_rates_in_one_call(cartpole, separate):
+    @chex.assert_max_traces(n=1)
+    def train(hyperparams, key):
+        return ppo.train(CONFIG, cartpole, hyperparams, key)
+
+    rates, keys = RATES[1:3], jax.random.split(jax.random.key(2), 2)
+    over_seeds = jax.vmap(train, in_axes=(None, 0))
+    grid = jax.jit(jax.vmap(over_seeds, in_axes=(0, None)))  # [rate, seed]
+    states, metrics = grid(batched(ppo.Hyperparams(), len(rates), learning_rate=rates), keys)
+    chex.assert_shape(metrics["train/episodes"], (len(rates), len(keys), CONFIG.num_updates))
+    for i, rate in enumerate(rates):
+        for j, key in enumerate(keys):
+            one = jax.tree.map(lambda x, i=i, j=j: x[i, j], states.params)
+            chex.assert_trees_all_close(one, separate(rate, key), **TOLERANCE)
+    assert max_difference(states.params["policy"], jax.tree.map(lambda x: x[:, ::-1], states.params["policy"])) > 1e-3
