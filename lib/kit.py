@@ -371,9 +371,8 @@ def _function(what: str, fn, p: dict) -> tuple[jax.tree_util.Partial, dict]:
             value = np.asarray(leaves[index], np.float64)
             value = value.ravel()[0] if value.size and np.all(value == value.ravel()[0]) else value
             if name in p and not np.array_equal(np.asarray(p[name]), np.asarray(value, np.float32)):
-                raise ValueError(
-                    f"mjzoo.task: {what} gives {name}={value!r}, but the task already has {name}={p[name]}"
-                )
+                given, have = np.asarray(value).tolist(), np.asarray(p[name]).tolist()
+                raise ValueError(f"mjzoo.task: {what} gives {name}={given}, but the task already has {name}={have}")
             p = {**p, name: p[name] if name in p else jnp.asarray(value, jnp.float32)}
         func = jax.tree_util.Partial(fn.item.func)  # the function in the treedef, not a leaf
         return bind(_with_named, func, tuple(leaves), Static(treedef), Static(fn.slots)), p
