@@ -83,6 +83,7 @@ __all__ = [
 
 Array = jax.Array
 Term = tuple[Callable, float]
+Partial = jax.tree_util.Partial
 # Brax's MJX settings for its free-floating models (fast, few solver iterations).
 MJX_OPTIONS = dict(solver="newton", iterations=1, ls_iterations=4, disable_euler_damping=True)
 _PLANAR = dict(solver="newton", iterations=4, ls_iterations=4, disable_euler_damping=True)
@@ -101,6 +102,8 @@ def bare(physics: physics_lib.Physics, observe: Callable, actuator: Callable | N
     ``qpos0``), steps driven by `actuator` (a catalog actuator, e.g. `actuators.pd`;
     default: the action is the controls), observed by the item `observe`; no reward
     term, no termination, no time limit."""
+    # Items of the catalog's form, (model, state) and (model, data, action, key): Partials.
+    observe, actuator = (fn if fn is None or isinstance(fn, Partial) else Partial(fn) for fn in (observe, actuator))
     return mjzoo.task(
         physics, observe=observe, start=at_pose, actuator=actuator, params={"qpos0": reset_pose(physics.mj_model)}
     )

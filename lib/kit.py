@@ -130,6 +130,8 @@ def task(
             _identifier("terminate", name)
         fns[name], p = _function(f"termination {name!r}" if name else "terminate", fn, p)
     observe, p = _function("observe", observe or joint_state, p)
+    # A catalog observation is kept as it is, so `mjzoo.interop.contract` can read it.
+    observe, own = (observe.args[0], True) if observe.func is _own_numbers else (observe, False)
     items = []
     for i, fn in enumerate(((start,) if start is not None else ()) + tuple(resets)):
         item, p = _function("start" if start is not None and i == 0 else f"reset item {i}", fn, p)
@@ -158,6 +160,7 @@ def task(
             weighted.append((name, fn, weight, sign))
     core_spec = Spec(
         observe=observe,
+        observe_own=own,
         terms={},
         ends={name: fn for name, fn in fns.items() if name},
         start=items[0] if start is not None else None,
@@ -202,7 +205,7 @@ def task(
 class Spec:
     """The functions of a kit task (Partials taking `p` first); the numbers live in `p`."""
 
-    observe: jax.tree_util.Partial
+    observe: jax.tree_util.Partial  # a catalog item (observe_own) or a function of `p` first
     terms: dict[str, tuple[jax.tree_util.Partial, Static]]  # Static: (weight's name, sign)
     ends: dict[str, jax.tree_util.Partial]  # the named terminations, recorded in metrics
     start: jax.tree_util.Partial | None
@@ -210,6 +213,10 @@ class Spec:
     actuator: jax.tree_util.Partial | None
     data0: mjx.Data  # the reset template, `Physics.data0`
     n_substeps: int = dataclasses.field(metadata=dict(static=True))
+    observe_own: bool = dataclasses.field(default=False, metadata=dict(static=True))
+
+    def observed(self, p: dict, model: mjx.Model, state: State):
+        return self.observe(model, state) if self.observe_own else self.observe(p, model, state)
 
 
 def joint_state(p: dict, model: mjx.Model, state: State) -> Array:
@@ -269,7 +276,7 @@ def _start(spec: Spec, p: dict, model: mjx.Model, key: Array) -> State:
         data, written = out if isinstance(out, tuple) else (out, {})
         info.update(written)
     state = State.create(physics_lib.forward(model, data), jnp.zeros((0,), jnp.float32), info)
-    return state.replace(obs=spec.observe(p, model, state))
+    return state.replace(obs=spec.observed(p, model, state))
 
 
 def _step(spec: Spec, p: dict, model: mjx.Model, state: State, action: Array, key: Array) -> State:
@@ -279,7 +286,7 @@ def _step(spec: Spec, p: dict, model: mjx.Model, state: State, action: Array, ke
     else:
         data = _actuated(spec.actuator, p, model, state.data, action, spec.n_substeps, key)
     next_state = state.replace(data=data)
-    return next_state.replace(obs=spec.observe(p, model, next_state))
+    return next_state.replace(obs=spec.observed(p, model, next_state))
 
 
 def _actuated(actuator, p: dict, model: mjx.Model, data: mjx.Data, action: Array, n_substeps: int, key: Array):
