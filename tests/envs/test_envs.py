@@ -177,7 +177,7 @@ def test_an_override_of_a_compatible_type_is_accepted(monkeypatch):
         received.append(dict(steps=steps, weight=weight, height=height, sizes=sizes, flag=flag, hook=hook, extra=extra))
         return task  # a factory returns a Task: make refuses anything else
 
-    monkeypatch.setitem(mjzoo.envs._REGISTRY, "typed", typed)
+    monkeypatch.setitem(mjzoo.envs._REGISTRY, "typed", mjzoo.envs.EnvSpec(make=typed, description="typed factory"))
     accepted = dict(
         steps=np.int64(7), weight=2, height=None, sizes=[32, 32], flag=np.bool_(True), hook=print, extra="x"
     )
