@@ -7,9 +7,10 @@
 Every function here takes a *task spec*: a registered name, ``package.module:factory``
 naming a function whose keyword arguments are the overrides, or ``playground:NAME``, a
 MuJoCo Playground env through `mjzoo.interop.playground` (its config fields the
-overrides; needs ``pip install 'mjzoo[playground]'``). A factory's module may define
-``PLANNING`` (a `base.PlanningSetup`), as the envs here do, for `mjzoo plan`; Playground
-envs plan with `PLAYGROUND_PLANNING`.
+overrides; needs ``pip install 'mjzoo[playground]'``). A registered env's record
+(`EnvSpec`, `record(name)`) holds its factory, hyperparameters and planning setup; a
+factory's module may define ``PLANNING`` (a `base.PlanningSetup`) for `mjzoo plan`;
+Playground envs plan with `PLAYGROUND_PLANNING`.
 
 Every task comes truncated after its episode length and guarded against diverging
 physics; overrides change weights, targets, episode length and physics options
@@ -26,16 +27,20 @@ import inspect
 import numbers
 import warnings
 from types import ModuleType
-from typing import Any, Callable
+from typing import TYPE_CHECKING, Any, Callable
 
 import numpy as np
 
 from mjzoo import physics
 from mjzoo.envs import base, cartpole, cylinder_push, humanoid_amp, joystick, locomotion, pendulum, point_mass, teachers
-from mjzoo.planning.realtime import Problem, default_backend
-from mjzoo.planning.sampling import SamplingConfig
 from mjzoo.running import control_dt
 from mjzoo.types import Task
+
+EnvSpec = base.EnvSpec
+
+if TYPE_CHECKING:
+    from mjzoo.planning.realtime import Problem
+    from mjzoo.planning.sampling import SamplingConfig
 
 __all__ = [
     "make",
@@ -44,6 +49,8 @@ __all__ = [
     "defaults",
     "takes",
     "register",
+    "record",
+    "EnvSpec",
     "hyperparameters",
     "planning",
     "closed_loop_problem",
@@ -51,45 +58,27 @@ __all__ = [
     "PLAYGROUND_PLANNING",
 ]
 
-_REGISTRY: dict[str, Callable[..., Task]] = {
-    "pendulum_swingup": pendulum.swingup,
-    "cartpole_balance": cartpole.balance,
-    "cartpole_swingup": cartpole.swingup,
-    "point_mass": point_mass.reach,
-    "cylinder_push": cylinder_push.push,
+# One typed record per env (`base.EnvSpec`), defined beside it in its module: the factory,
+# its hyperparameters per algorithm, its closed-loop planning setup.
+_REGISTRY: dict[str, base.EnvSpec] = {
+    "pendulum_swingup": pendulum.SWINGUP,
+    "cartpole_balance": cartpole.BALANCE,
+    "cartpole_swingup": cartpole.SWINGUP,
+    "point_mass": point_mass.REACH,
+    "cylinder_push": cylinder_push.PUSH,
     # Brax's models, from the installed brax package (envs/locomotion.py)
-    "hopper": locomotion.hopper,
-    "walker": locomotion.walker,
-    "cheetah": locomotion.cheetah,
-    "ant": locomotion.ant,
-    "humanoid_walk": locomotion.humanoid_walk,
-    "humanoid_run": locomotion.humanoid_run,
-    "humanoid_standup": locomotion.humanoid_standup,
-    "ant_joystick": joystick.joystick,  # train with joystick.joystick_curriculum()
+    "hopper": locomotion.HOPPER,
+    "walker": locomotion.WALKER,
+    "cheetah": locomotion.CHEETAH,
+    "ant": locomotion.ANT,
+    "humanoid_walk": locomotion.HUMANOID_WALK,
+    "humanoid_run": locomotion.HUMANOID_RUN,
+    "humanoid_standup": locomotion.HUMANOID_STANDUP,
+    "ant_joystick": joystick.JOYSTICK,  # train with joystick.joystick_curriculum()
     # AMP: move like a reference motion (envs/humanoid_amp.py)
-    "humanoid_amp_walk": humanoid_amp.humanoid_amp_walk,
-    "humanoid_amp_joystick": humanoid_amp.humanoid_amp_joystick,
-    "cartpole_amp_swingup": teachers.cartpole_amp_swingup,  # MPPI's swing-up as the reference
-}
-# Per-env algorithm defaults, defined beside each env.
-_HYPERPARAMETERS: dict[str, dict[str, dict[str, Any]]] = {
-    "pendulum_swingup": {"ppo": pendulum.PPO, **pendulum.PLANNING.configs},
-    "cartpole_balance": {"ppo": cartpole.BALANCE_PPO},
-    "cartpole_swingup": {"ppo": cartpole.SWINGUP_PPO, **cartpole.SWINGUP_PLANNING.configs},
-    "point_mass": {"ppo": point_mass.PPO, **point_mass.PLANNING.configs},
-    "cylinder_push": {"ppo": cylinder_push.PPO, **cylinder_push.PLANNING.configs},
-    **{name: {"ppo": config} for name, config in locomotion.PPO.items()},
-    "ant_joystick": {"ppo": joystick.PPO},
-    "humanoid_amp_walk": {"amp": humanoid_amp.AMP},
-    "humanoid_amp_joystick": {"amp": humanoid_amp.JOYSTICK_AMP},
-    "cartpole_amp_swingup": {"amp": teachers.AMP},
-}
-# How the sampling planners solve each env closed loop.
-_PLANNING: dict[str, base.PlanningSetup] = {
-    "pendulum_swingup": pendulum.PLANNING,
-    "cartpole_swingup": cartpole.SWINGUP_PLANNING,
-    "point_mass": point_mass.PLANNING,
-    "cylinder_push": cylinder_push.PLANNING,
+    "humanoid_amp_walk": humanoid_amp.WALK,
+    "humanoid_amp_joystick": humanoid_amp.JOYSTICK,
+    "cartpole_amp_swingup": teachers.CARTPOLE_AMP_SWINGUP,  # MPPI's swing-up as the reference
 }
 # A user's factory without `PLANNING`: one episode (`closed_loop_problem` measures it),
 # replanning every step, the planners' own default configs, no success criterion.
@@ -120,20 +109,39 @@ def names() -> list[str]:
     return sorted(_REGISTRY)
 
 
+def record(name: str) -> base.EnvSpec:
+    """The registered env's record (KeyError naming the registered ones if unknown)."""
+    factory(name)
+    return _REGISTRY[name]
+
+
 def register(
     name: str,
-    factory: Callable[..., Task],
+    factory: Callable[..., Task] | base.EnvSpec,
     hyperparameters: dict[str, dict] | None = None,
     planning_setup: base.PlanningSetup | None = None,
 ) -> None:
-    """Adds a task factory (keyword-only arguments, each an override) under `name`, with
-    optional per-algorithm default hyperparameters ({"ppo": {...}}) and planning setup."""
+    """Adds an env under `name`: its record (`base.EnvSpec`), or a task factory
+    (keyword-only arguments, each an override) with optional default hyperparameters
+    ({"ppo": {...}, "amp": {...}}) and planning setup (which holds the planners')."""
     if name in _REGISTRY:
         raise ValueError(f"a task named {name!r} is already registered")
-    _REGISTRY[name] = factory
-    _HYPERPARAMETERS[name] = dict(hyperparameters or {})
-    if planning_setup is not None:
-        _PLANNING[name] = planning_setup
+    if isinstance(factory, base.EnvSpec):
+        if hyperparameters or planning_setup:
+            raise ValueError("register: an EnvSpec carries its own hyperparameters and planning setup")
+        _REGISTRY[name] = factory
+        return
+    learned = dict(hyperparameters or {})
+    others = sorted(set(learned) - {"ppo", "amp"})
+    if others:
+        raise ValueError(f"register: hyperparameters for {others} belong in the planning setup's configs")
+    _REGISTRY[name] = base.EnvSpec(
+        make=factory,
+        description=(factory.__doc__ or "").strip().partition("\n")[0],
+        ppo=learned.get("ppo"),
+        amp=learned.get("amp"),
+        planning=planning_setup,
+    )
 
 
 def planning(spec: str) -> base.PlanningSetup:
@@ -153,9 +161,11 @@ def planning(spec: str) -> base.PlanningSetup:
                 f"{spec}: its module's PLANNING (type {type(setup).__name__}) is not a mjzoo.envs.base.PlanningSetup"
             )
         return setup
-    if spec not in _PLANNING:
-        raise KeyError(f"{spec!r} has no planning setup; envs with one: {sorted(_PLANNING)}")
-    return _PLANNING[spec]
+    setup = _REGISTRY[spec].planning
+    if setup is None:
+        planned = sorted(name for name, entry in _REGISTRY.items() if entry.planning is not None)
+        raise KeyError(f"{spec!r} has no planning setup; envs with one: {planned}")
+    return setup
 
 
 def closed_loop_problem(
@@ -174,6 +184,10 @@ def closed_loop_problem(
     limit; `overrides` go to both tasks. A Playground env steps MJX itself, so it plans
     on MJX ("auto": "mjx", with a warning on a CPU; "native" is refused). `hyperparams`:
     the planner's numbers (None: its defaults; `mjzoo.planning.configure`)."""
+    # Imported here, not at the top: the registry is data (records of envs) and loads
+    # nothing of the real-time machinery until a problem is asked for.
+    from mjzoo.planning.realtime import Problem, default_backend
+
     setup = planning(spec)
     build = functools.partial(make, spec, **overrides)
     if _is_playground(spec):
@@ -218,8 +232,7 @@ def hyperparameters(spec: str, algorithm: str) -> dict[str, Any]:
         return _playground(spec).ppo_hyperparameters(_playground_name(spec))
     if _is_user(spec) or _is_playground(spec):
         return dict(planning(spec).configs.get(algorithm, {}))
-    factory(spec)
-    return dict(_HYPERPARAMETERS.get(spec, {}).get(algorithm, {}))
+    return record(spec).hyperparameters(algorithm)
 
 
 _KEYWORDS = (inspect.Parameter.POSITIONAL_OR_KEYWORD, inspect.Parameter.KEYWORD_ONLY)
@@ -334,7 +347,7 @@ def factory(spec: str) -> Callable[..., Task]:
         close = difflib.get_close_matches(name, _REGISTRY, n=1)
         hint = f" (did you mean {close[0]!r}?)" if close else ""
         raise KeyError(f"unknown env {name!r}{hint}; registered envs: {names()}")
-    return _REGISTRY[name]
+    return _REGISTRY[name].make
 
 
 def _is_user(spec: str) -> bool:

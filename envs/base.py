@@ -1,6 +1,8 @@
-"""What every concrete task shares: where its model files live, how its numbers become
-pytree leaves, and how its four functions become a `Task` with an episode limit and a
-divergence guard."""
+"""What every shipped env shares: where its model files live, and its record in the
+registry (`EnvSpec`: the factory, hyperparameters per algorithm, the planning setup).
+
+Every env is built the one public way, `mjzoo.task` (lib/kit.py); this module holds
+nothing a user's own task would need but the model files."""
 
 from __future__ import annotations
 
@@ -8,24 +10,17 @@ import dataclasses
 from pathlib import Path
 from typing import Any, Callable
 
-import jax
-import jax.numpy as jnp
 import numpy as np
-from mujoco import mjx
 
 from mjzoo import physics as physics_lib
-from mjzoo.combinators import with_divergence_guard, with_time_limit
 from mjzoo.planning.closed_loop import Hooks
-from mjzoo.types import State, Task, bind
+from mjzoo.types import Task
 
 __all__ = [
     "ASSETS",
     "load",
     "brax_asset",
-    "floats",
-    "build",
-    "advance",
-    "never_terminate",
+    "EnvSpec",
     "PlanningSetup",
     "held_near",
 ]
@@ -44,45 +39,6 @@ def brax_asset(asset: str, **physics_options: Any) -> physics_lib.Physics:
     import brax  # a dependency; imported here so envs without its models do not pay for it
 
     return physics_lib.load(Path(brax.__file__).parent / "envs" / "assets" / asset, **physics_options)
-
-
-def floats(**values: Any) -> dict[str, jax.Array]:
-    """Numbers as float32 leaves, so tasks built with different values share a trace."""
-    return {k: jnp.asarray(v, jnp.float32) for k, v in values.items()}
-
-
-def build(
-    physics: physics_lib.Physics,
-    params: Any,
-    reset: Callable,
-    step: Callable,
-    reward: Callable,
-    terminate: Callable,
-    *,
-    episode_steps: int,
-) -> Task:
-    """A Task of module-level functions bound to `params`, guarded against divergence
-    and truncated after `episode_steps` control steps."""
-    task = Task(
-        model=physics.model,
-        start=bind(reset, params),
-        step=bind(step, params),
-        reward=bind(reward, params),
-        terminate=bind(terminate, params),
-        mj_model=physics.mj_model,
-    )
-    return with_time_limit(with_divergence_guard(task), episode_steps)
-
-
-def advance(model: mjx.Model, state: State, action: jax.Array, n_substeps: int) -> mjx.Data:
-    """Physics of one control step: `action` as the controls (MuJoCo clamps them to
-    ctrlrange), held for `n_substeps` physics steps."""
-    return physics_lib.step(model, state.data, jnp.asarray(action, jnp.float32), n_substeps)
-
-
-def never_terminate(params: Any, model: mjx.Model, state: State) -> tuple[jax.Array, jax.Array]:
-    """For tasks that end only by their time limit."""
-    return jnp.zeros((), bool), jnp.zeros((), bool)
 
 
 @dataclasses.dataclass(frozen=True)
@@ -130,3 +86,36 @@ def held_near(
 def wrap(angle: np.ndarray) -> np.ndarray:
     """Angles in (-pi, pi]."""
     return np.arctan2(np.sin(angle), np.cos(angle))
+
+
+@dataclasses.dataclass(frozen=True, kw_only=True)
+class EnvSpec:
+    """A registered env's record: how to build it and how each algorithm solves it.
+
+    Attributes:
+      make: the factory, keyword-only arguments (each an override, `mjzoo.envs.make`).
+      description: one line, for listings.
+      ppo: PPO's config fields that solve it (`mjzoo train ppo NAME`); None: none tuned.
+      amp: AMP's config fields (the envs with a motion reference).
+      planning: how the sampling planners solve it closed loop; None: not set up.
+    """
+
+    make: Callable[..., Task]
+    description: str
+    ppo: dict[str, Any] | None = None
+    amp: dict[str, Any] | None = None
+    planning: PlanningSetup | None = None
+
+    def __post_init__(self):
+        if not callable(self.make):
+            raise TypeError(f"EnvSpec: make must be a function returning a Task, got {type(self.make).__name__}")
+        if self.planning is not None and not isinstance(self.planning, PlanningSetup):
+            raise TypeError(f"EnvSpec: planning must be a PlanningSetup, got {type(self.planning).__name__}")
+
+    def hyperparameters(self, algorithm: str) -> dict[str, Any]:
+        """Config fields for `algorithm` ("ppo", "amp", or a planner module's name: its
+        planning config); empty if it has none."""
+        learned = {"ppo": self.ppo, "amp": self.amp}.get(algorithm)
+        if learned is not None:
+            return dict(learned)
+        return dict(self.planning.configs.get(algorithm, {})) if self.planning else {}

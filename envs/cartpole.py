@@ -18,17 +18,18 @@ Truncated after `episode_steps` (500 steps of 0.02 s = 10 s).
 
 from __future__ import annotations
 
-import dataclasses
-
 import jax
 import jax.numpy as jnp
+import numpy as np
 from mujoco import mjx
 
+import mjzoo
 from mjzoo.catalog.rewards import tolerance
 from mjzoo.envs import base
+from mjzoo.envs.base import ASSETS
 from mjzoo.types import State, Task
 
-__all__ = ["Params", "balance", "swingup"]
+__all__ = ["balance", "swingup", "BALANCE", "SWINGUP"]
 
 Array = jax.Array
 
@@ -77,90 +78,81 @@ SWINGUP_PLANNING = base.PlanningSetup(
 )
 
 
-@jax.tree_util.register_dataclass
-@dataclasses.dataclass(frozen=True)
-class Params:
-    upright_weight: Array
-    centered_weight: Array
-    velocity_weight: Array
-    effort_weight: Array
-    centered_margin: Array
-    velocity_margin: Array
-    init_angle: Array  # pole angle at reset, rad (0 upright, pi hanging)
-    init_noise: Array  # uniform half-width of the reset noise on every coordinate
-    fall_angle: Array  # |angle| beyond which the episode terminates (inf: never)
-    data0: mjx.Data  # the reset template, `Physics.data0`
-    n_substeps: int = dataclasses.field(metadata=dict(static=True))
+def observe(p: dict, model: mjx.Model, state: State) -> Array:
+    """[5] cart position, cos and sin of the pole angle, cart and pole velocities."""
+    qpos, qvel = state.data.qpos, state.data.qvel
+    return jnp.stack([qpos[0], jnp.cos(qpos[1]), jnp.sin(qpos[1]), qvel[0], qvel[1]])
 
 
-def observe(data: mjx.Data) -> Array:
-    cart, angle = data.qpos[0], data.qpos[1]
-    return jnp.stack([cart, jnp.cos(angle), jnp.sin(angle), data.qvel[0], data.qvel[1]])
-
-
-def reset(p: Params, model: mjx.Model, key: Array) -> State:
+def start(p: dict, model: mjx.Model, data: mjx.Data, key: Array) -> mjx.Data:
+    """The pole at `init_angle` (rad; 0 upright), the cart centred, every coordinate
+    and velocity within U(+-init_noise)."""
     qpos_key, qvel_key = jax.random.split(key)
-    data = p.data0
-    qpos = jnp.array([0.0, 1.0]) * p.init_angle + jax.random.uniform(
-        qpos_key, (2,), minval=-p.init_noise, maxval=p.init_noise
+    qpos = jnp.array([0.0, 1.0]) * p["init_angle"] + jax.random.uniform(
+        qpos_key, (2,), minval=-p["init_noise"], maxval=p["init_noise"]
     )
-    qvel = jax.random.uniform(qvel_key, (2,), minval=-p.init_noise, maxval=p.init_noise)
-    data = data.replace(qpos=qpos.astype(data.qpos.dtype), qvel=qvel.astype(data.qvel.dtype))
-    return State.create(data, observe(data))
+    qvel = jax.random.uniform(qvel_key, (2,), minval=-p["init_noise"], maxval=p["init_noise"])
+    return data.replace(qpos=qpos.astype(data.qpos.dtype), qvel=qvel.astype(data.qvel.dtype))
 
 
-def step(p: Params, model: mjx.Model, state: State, action: Array, key: Array) -> State:
-    data = base.advance(model, state, action, p.n_substeps)
-    return state.replace(data=data, obs=observe(data))
+def upright(p: dict, model: mjx.Model, state: State, action: Array, next_state: State) -> Array:
+    """In [0, 1]: (1 + cos angle) / 2."""
+    return (1.0 + jnp.cos(next_state.data.qpos[1])) / 2.0
 
 
-def reward(p: Params, model: mjx.Model, state: State, action: Array, next_state: State) -> dict[str, Array]:
-    data = next_state.data
-    return {
-        "upright": p.upright_weight * (1.0 + jnp.cos(data.qpos[1])) / 2.0,
-        "centered": p.centered_weight * tolerance(data.qpos[0], margin=p.centered_margin),
-        "velocity": -p.velocity_weight * (1.0 - tolerance(data.qvel[1], margin=p.velocity_margin)),
-        "effort": -p.effort_weight * jnp.mean(jnp.square(jnp.clip(action, -1.0, 1.0))),
-    }
+def centered(p: dict, model: mjx.Model, state: State, action: Array, next_state: State) -> Array:
+    """In [0, 1]: 1 at the rail's centre, 0.1 at `centered_margin` m."""
+    return tolerance(next_state.data.qpos[0], margin=p["centered_margin"])
 
 
-def terminate(p: Params, model: mjx.Model, state: State) -> tuple[Array, Array]:
+def swinging(p: dict, model: mjx.Model, state: State, action: Array, next_state: State) -> Array:
+    """In [0, 1]: 0 with the pole still, 0.9 at `velocity_margin` rad/s."""
+    return 1.0 - tolerance(next_state.data.qvel[1], margin=p["velocity_margin"])
+
+
+def effort(p: dict, model: mjx.Model, state: State, action: Array, next_state: State) -> Array:
+    """In [0, 1]: the mean squared action, clipped to [-1, 1]."""
+    return jnp.mean(jnp.square(jnp.clip(action, -1.0, 1.0)))
+
+
+def fallen(p: dict, model: mjx.Model, state: State) -> Array:
+    """Whether the pole leans more than `fall_angle` rad from upright."""
     leaning = jnp.abs(jnp.arctan2(jnp.sin(state.data.qpos[1]), jnp.cos(state.data.qpos[1])))
-    return leaning > p.fall_angle, jnp.zeros((), bool)
+    return leaning > p["fall_angle"]
 
 
 def _make(
     *,
-    episode_steps,
-    upright_weight,
-    centered_weight,
-    velocity_weight,
-    effort_weight,
-    centered_margin,
-    velocity_margin,
-    init_angle,
-    init_noise,
-    fall_angle,
-    ctrl_dt,
+    episode_steps: int,
+    upright_weight: float,
+    centered_weight: float,
+    velocity_weight: float,
+    effort_weight: float,
+    centered_margin: float,
+    velocity_margin: float,
+    init_angle: float,
+    init_noise: float,
+    fall_angle: float | None,
+    ctrl_dt: float,
     **physics_options,
 ) -> Task:
-    physics = base.load("cartpole.xml", ctrl_dt=ctrl_dt, **physics_options)
-    params = Params(
-        **base.floats(
-            upright_weight=upright_weight,
-            centered_weight=centered_weight,
-            velocity_weight=velocity_weight,
-            effort_weight=effort_weight,
-            centered_margin=centered_margin,
-            velocity_margin=velocity_margin,
-            init_angle=init_angle,
-            init_noise=init_noise,
-            fall_angle=fall_angle,
-        ),
-        data0=physics.data0,
-        n_substeps=physics.n_substeps,
+    params = dict(
+        centered_margin=centered_margin, velocity_margin=velocity_margin, init_angle=init_angle, init_noise=init_noise
     )
-    return base.build(physics, params, reset, step, reward, terminate, episode_steps=episode_steps)
+    if fall_angle is not None:
+        params["fall_angle"] = fall_angle
+    return mjzoo.task(
+        ASSETS / "cartpole.xml",
+        observe=observe,
+        start=start,
+        rewards={"upright": (upright, upright_weight), "centered": (centered, centered_weight)},
+        costs={"velocity": (swinging, velocity_weight), "effort": (effort, effort_weight)},
+        terminate=None if fall_angle is None else fallen,
+        time_limit=episode_steps,
+        params=params,
+        ctrl_dt=ctrl_dt,
+        **physics_options,
+    )
 
 
 def balance(
@@ -197,7 +189,16 @@ def swingup(
     """Swing up from hanging down and balance; never terminates."""
     return _make(
         **{k: v for k, v in locals().items() if k != "physics_options"},
-        init_angle=jnp.pi,
-        fall_angle=jnp.inf,
+        init_angle=float(np.pi),
+        fall_angle=None,
         **physics_options,
     )
+
+
+BALANCE = base.EnvSpec(make=balance, description="cart-pole: keep the pole up from near upright", ppo=BALANCE_PPO)
+SWINGUP = base.EnvSpec(
+    make=swingup,
+    description="cart-pole: swing the pole up from hanging and balance",
+    ppo=SWINGUP_PPO,
+    planning=SWINGUP_PLANNING,
+)

@@ -17,20 +17,20 @@ Keeps ``info["goal"]`` (2,), also shown by the model's mocap marker.
 
 from __future__ import annotations
 
-import dataclasses
-
 import jax
 import jax.numpy as jnp
 import numpy as np
 from mujoco import mjx
 
+import mjzoo
 from mjzoo.catalog.rewards import tolerance
 from mjzoo.combinators import with_reward
 from mjzoo.envs import base
+from mjzoo.envs.base import ASSETS
 from mjzoo.planning.closed_loop import Hooks
 from mjzoo.types import State, Task, bind
 
-__all__ = ["Params", "push"]
+__all__ = ["push", "PUSH", "PPO", "PLANNING"]
 
 Array = jax.Array
 CONTACT_DISTANCE = 0.15  # pusher radius + cylinder radius
@@ -93,59 +93,56 @@ PLANNING = base.PlanningSetup(
 )
 
 
-@jax.tree_util.register_dataclass
-@dataclasses.dataclass(frozen=True)
-class Params:
-    goal_weight: Array
-    approach_weight: Array
-    effort_weight: Array
-    margin: Array
-    spawn_range: Array  # cylinder and goal uniform in [-r, r]^2, pusher in [-1.6 r, 1.6 r]^2
-    data0: mjx.Data  # the reset template, `Physics.data0`
-    n_substeps: int = dataclasses.field(metadata=dict(static=True))
-
-
 def positions(data: mjx.Data) -> tuple[Array, Array]:
     """(pusher xy, cylinder xy)."""
     return data.qpos[0:2], data.qpos[2:4]
 
 
-def observe(data: mjx.Data, goal: Array) -> Array:
+def observe(p: dict, model: mjx.Model, state: State) -> Array:
+    """[12] pusher position and velocity, cylinder position and velocity, goal minus
+    cylinder, cylinder minus pusher."""
+    data, goal = state.data, state.info["goal"]
     pusher, cylinder = positions(data)
     return jnp.concatenate([pusher, data.qvel[0:2], cylinder, data.qvel[2:4], goal - cylinder, cylinder - pusher])
 
 
-def reset(p: Params, model: mjx.Model, key: Array) -> State:
+def start(p: dict, model: mjx.Model, data: mjx.Data, key: Array) -> tuple[mjx.Data, dict[str, Array]]:
+    """Cylinder and goal uniform in [-spawn_range, spawn_range]^2, the pusher in 1.6
+    times that, moved clear of the cylinder; keeps ``info["goal"]``."""
     pusher_key, cylinder_key, goal_key = jax.random.split(key, 3)
-    cylinder = jax.random.uniform(cylinder_key, (2,), minval=-p.spawn_range, maxval=p.spawn_range)
-    goal = jax.random.uniform(goal_key, (2,), minval=-p.spawn_range, maxval=p.spawn_range)
-    pusher = jax.random.uniform(pusher_key, (2,), minval=-1.6 * p.spawn_range, maxval=1.6 * p.spawn_range)
+    r = p["spawn_range"]
+    cylinder = jax.random.uniform(cylinder_key, (2,), minval=-r, maxval=r)
+    goal = jax.random.uniform(goal_key, (2,), minval=-r, maxval=r)
+    pusher = jax.random.uniform(pusher_key, (2,), minval=-1.6 * r, maxval=1.6 * r)
     # Never start overlapping: move the pusher out along the line from the cylinder.
     offset = pusher - cylinder
     gap = jnp.linalg.norm(offset)
     direction = jnp.where(gap > 1e-6, offset / jnp.maximum(gap, 1e-6), jnp.array([1.0, 0.0]))
     pusher = jnp.where(gap < 2 * CONTACT_DISTANCE, cylinder + 2 * CONTACT_DISTANCE * direction, pusher)
-    data = p.data0
     data = data.replace(qpos=jnp.concatenate([pusher, cylinder]), mocap_pos=data.mocap_pos.at[0, :2].set(goal))
-    return State.create(data, observe(data, goal), info={"goal": goal})
+    return data, {"goal": goal}
 
 
-def step(p: Params, model: mjx.Model, state: State, action: Array, key: Array) -> State:
-    data = base.advance(model, state, action, p.n_substeps)
-    return state.replace(data=data, obs=observe(data, state.info["goal"]))
+def _linear(p: dict, distance: Array) -> Array:
+    return tolerance(distance, margin=p["margin"], sigmoid="linear", value_at_margin=0.0)
 
 
-def reward(p: Params, model: mjx.Model, state: State, action: Array, next_state: State) -> dict[str, Array]:
-    pusher, cylinder = positions(next_state.data)
-    to_goal = next_state.info["goal"] - cylinder
-    distance = jnp.linalg.norm(to_goal)
-    behind = cylinder - CONTACT_DISTANCE * to_goal / jnp.maximum(distance, 1e-6)
-    linear = dict(margin=p.margin, sigmoid="linear", value_at_margin=0.0)
-    return {
-        "goal": p.goal_weight * tolerance(distance, **linear),
-        "approach": p.approach_weight * tolerance(jnp.linalg.norm(behind - pusher), **linear),
-        "effort": -p.effort_weight * jnp.mean(jnp.square(jnp.clip(action, -1.0, 1.0))),
-    }
+def on_goal(p: dict, model: mjx.Model, state: State, action: Array, next_state: State) -> Array:
+    """In [0, 1]: 1 with the cylinder on the goal, 0 at `margin` m."""
+    _, cylinder = positions(next_state.data)
+    return _linear(p, jnp.linalg.norm(next_state.info["goal"] - cylinder))
+
+
+def behind(p: dict, model: mjx.Model, state: State, action: Array, next_state: State) -> Array:
+    """In [0, 1]: 1 with the pusher right behind the cylinder (opposite the goal), 0 at
+    `margin` m from there."""
+    pusher, _ = positions(next_state.data)
+    return _linear(p, jnp.linalg.norm(_behind(next_state.data, next_state.info["goal"]) - pusher))
+
+
+def effort(p: dict, model: mjx.Model, state: State, action: Array, next_state: State) -> Array:
+    """In [0, 1]: the mean squared action, clipped to [-1, 1]."""
+    return jnp.mean(jnp.square(jnp.clip(action, -1.0, 1.0)))
 
 
 def push(
@@ -160,16 +157,19 @@ def push(
     **physics_options,
 ) -> Task:
     """The cylinder-push task; keyword arguments override weights and physics."""
-    physics = base.load("cylinder_push.xml", ctrl_dt=ctrl_dt, **physics_options)
-    params = Params(
-        **base.floats(
-            goal_weight=goal_weight,
-            approach_weight=approach_weight,
-            effort_weight=effort_weight,
-            margin=margin,
-            spawn_range=spawn_range,
-        ),
-        data0=physics.data0,
-        n_substeps=physics.n_substeps,
+    return mjzoo.task(
+        ASSETS / "cylinder_push.xml",
+        observe=observe,
+        start=start,
+        rewards={"goal": (on_goal, goal_weight), "approach": (behind, approach_weight)},
+        costs={"effort": (effort, effort_weight)},
+        time_limit=episode_steps,
+        params=dict(margin=margin, spawn_range=spawn_range),
+        ctrl_dt=ctrl_dt,
+        **physics_options,
     )
-    return base.build(physics, params, reset, step, reward, base.never_terminate, episode_steps=episode_steps)
+
+
+PUSH = base.EnvSpec(
+    make=push, description="planar pusher: shove a sliding cylinder onto a goal", ppo=PPO, planning=PLANNING
+)

@@ -45,11 +45,12 @@ from typing import Any
 import mujoco
 import numpy as np
 
+import mjzoo
 from mjzoo import motion
 from mjzoo import physics as physics_lib
-from mjzoo.catalog import resets, rewards, terminations
-from mjzoo.combinators import with_divergence_guard, with_time_limit
-from mjzoo.envs import locomotion
+from mjzoo.catalog import resets, terminations
+from mjzoo.envs import base, locomotion
+from mjzoo.kit import alive, named
 from mjzoo.motion import deepmimic as deepmimic_format
 from mjzoo.types import Task
 
@@ -69,6 +70,7 @@ __all__ = [
     "walk",
     "walk_amp",
     "walk_clips",
+    "WALK_AMP",
 ]
 
 SCALE = 0.25  # pybullet loads the URDF with globalScaling=0.25; the clips are in those metres
@@ -196,12 +198,19 @@ def walk(
     `mjzoo.catalog.resets.reference_state`. Physics options override `OPTIONS`."""
     physics = physics_lib.load(humanoid_xml(), **{**OPTIONS, **physics_options})
     m = physics.mj_model
-    observe = locomotion.free_base_observation(m)
-    noise = resets.joint_position_noise(m, reset_noise), resets.joint_velocities(m, reset_noise)
-    task = resets.with_resets(locomotion.bare(physics, observe), *noise, observe=observe)
-    task = terminations.with_terminations(task, {"fallen": terminations.base_too_low(m, min_height)})
-    task = rewards.terms(task, {"alive": (rewards.alive(task), alive_weight)})
-    return with_time_limit(with_divergence_guard(task), episode_steps)
+    return mjzoo.task(
+        physics,
+        observe=locomotion.free_base_observation(m),
+        start=locomotion.at_pose,
+        resets=(
+            named(resets.joint_position_noise(m, reset_noise), "reset_noise"),
+            named(resets.joint_velocities(m, reset_noise), "reset_noise"),
+        ),
+        terminate={"fallen": named(terminations.base_too_low(m, min_height), "min_height")},
+        rewards={"alive": (alive, alive_weight)},
+        time_limit=episode_steps,
+        params={"qpos0": locomotion.reset_pose(m)},
+    )
 
 
 def walk_amp(*, reference_init: float = 0.8, episode_steps: int = 300, **overrides: Any) -> Task:
@@ -380,3 +389,6 @@ def _quat(mat: np.ndarray) -> np.ndarray:
 
 def _fmt(values: np.ndarray) -> str:
     return " ".join(f"{v:.6g}" for v in np.where(np.abs(values) < 1e-12, 0.0, values))
+
+
+WALK_AMP = base.EnvSpec(make=walk_amp, description="the DeepMimic humanoid imitating its walk clip (AMP)", amp=AMP)

@@ -52,6 +52,7 @@ walked in the teacher's style after 16.4M steps (211 s with compiling) and ended
 
 from __future__ import annotations
 
+import functools
 from collections.abc import Sequence
 from pathlib import Path
 from typing import Any
@@ -59,13 +60,14 @@ from typing import Any
 import mujoco
 import numpy as np
 
+import mjzoo
 from mjzoo import checks, motion
 from mjzoo import physics as physics_lib
 from mjzoo.catalog import commands, resets, rewards, terminations
-from mjzoo.combinators import with_divergence_guard, with_time_limit
 from mjzoo.envs import base
-from mjzoo.envs.locomotion import MJX_OPTIONS, PPO, bare, free_base_observation
-from mjzoo.types import Task
+from mjzoo.envs.locomotion import MJX_OPTIONS, PPO, at_pose, free_base_observation, reset_pose
+from mjzoo.kit import alive, named
+from mjzoo.types import Task, bind
 
 __all__ = [
     "AMP",
@@ -79,6 +81,8 @@ __all__ = [
     "hinge_columns",
     "humanoid_amp_joystick",
     "humanoid_amp_walk",
+    "WALK",
+    "JOYSTICK",
     "style_error",
     "walk_reference",
     "walks_like_teacher",
@@ -192,32 +196,37 @@ def walks_like_teacher(error: float, speed: float, fell: bool) -> bool:
 def _humanoid(
     physics: physics_lib.Physics,
     reference: motion.Reference,
+    *,
     reference_probability: float,
     reset_noise: float,
-    observe=None,
-) -> Task:
-    """`bare` humanoid reset to the default pose with joint noise, or (with
-    `reference_probability`) to a reference frame."""
-    m = physics.mj_model
-    observe = observe or free_base_observation(m)
-    noise = resets.joint_position_noise(m, reset_noise), resets.joint_velocities(m, reset_noise)
-    start = resets.reference_state(reference, reference_probability)
-    return resets.with_resets(bare(physics, observe), *noise, start, observe=observe)
-
-
-def _finish(
-    task: Task,
-    reference: motion.Reference,
     min_height: float,
     episode_steps: int,
-    terms: dict[str, tuple[Any, float]],
     alive_weight: float,
     effort_weight: float,
+    rewards_: dict[str, tuple[Any, float]] | None = None,
+    combinators: Sequence[Any] = (),
 ) -> Task:
-    m = task.mj_model
-    task = terminations.with_terminations(task, {"too_low": terminations.base_too_low(m, min_height, body="torso")})
-    spec = {**terms, "alive": (rewards.alive(task), alive_weight), "effort": (rewards.effort, -effort_weight)}
-    task = with_time_limit(with_divergence_guard(rewards.terms(task, spec)), episode_steps)
+    """The humanoid started at its pose with joint noise, or (with
+    `reference_probability`) at a reference frame, fallen below `min_height` (m), paid
+    alive and the `rewards_` terms, charged effort, with the teacher's walk attached."""
+    m = physics.mj_model
+    noise = (
+        named(resets.joint_position_noise(m, reset_noise), "reset_noise"),
+        named(resets.joint_velocities(m, reset_noise), "reset_noise"),
+    )
+    start = resets.reference_state(reference, reference_probability)
+    task = mjzoo.task(
+        physics,
+        observe=free_base_observation(m),
+        start=at_pose,
+        resets=(*noise, start),
+        combinators=combinators,
+        terminate={"too_low": named(terminations.base_too_low(m, min_height, body="torso"), "min_height")},
+        rewards={**(rewards_ or {}), "alive": (alive, alive_weight)},
+        costs={"effort": (bind(rewards.effort), effort_weight)},
+        time_limit=episode_steps,
+        params={"qpos0": reset_pose(m)},
+    )
     # What `motion.with_reference` checks holds by construction (the reference is
     # resampled to the physics' own ctrl_dt, on this model), and its check compiles a
     # step of the humanoid (minutes on a CPU): attached directly. The tests check it.
@@ -246,8 +255,16 @@ def humanoid_amp_walk(
     U(+-`reset_noise`) joint noise; falls when the torso is below `min_height` (m)."""
     physics = _physics(ctrl_dt, physics_options)
     reference = walk_reference(physics.mj_model, physics.ctrl_dt)
-    task = _humanoid(physics, reference, reference_probability, reset_noise)
-    return _finish(task, reference, min_height, episode_steps, {}, alive_weight, effort_weight)
+    return _humanoid(
+        physics,
+        reference,
+        reference_probability=reference_probability,
+        reset_noise=reset_noise,
+        min_height=min_height,
+        episode_steps=episode_steps,
+        alive_weight=alive_weight,
+        effort_weight=effort_weight,
+    )
 
 
 def humanoid_amp_joystick(
@@ -277,12 +294,33 @@ def humanoid_amp_joystick(
     physics = _physics(ctrl_dt, physics_options)
     m = physics.mj_model
     reference = walk_reference(m, physics.ctrl_dt)
-    task = _humanoid(physics, reference, reference_probability, reset_noise)
-    task = commands.with_velocity_command(
-        task, vx=speed, vy=(0.0, 0.0), yaw_rate=yaw_rate, resample_interval=resample_interval
+    command = functools.partial(
+        commands.with_velocity_command, vx=speed, vy=(0.0, 0.0), yaw_rate=yaw_rate, resample_interval=resample_interval
     )
-    terms = {
-        "tracking": (rewards.linear_velocity_tracking(m, tracking_sigma), tracking_weight),
-        "yaw_tracking": (rewards.angular_velocity_tracking(m, tracking_sigma), yaw_tracking_weight),
+    tracking = {
+        "tracking": (named(rewards.linear_velocity_tracking(m, tracking_sigma), "tracking_sigma"), tracking_weight),
+        "yaw_tracking": (
+            named(rewards.angular_velocity_tracking(m, tracking_sigma), "tracking_sigma"),
+            yaw_tracking_weight,
+        ),
     }
-    return _finish(task, reference, min_height, episode_steps, terms, alive_weight, effort_weight)
+    return _humanoid(
+        physics,
+        reference,
+        reference_probability=reference_probability,
+        reset_noise=reset_noise,
+        min_height=min_height,
+        episode_steps=episode_steps,
+        alive_weight=alive_weight,
+        effort_weight=effort_weight,
+        rewards_=tracking,
+        combinators=(command,),
+    )
+
+
+WALK = base.EnvSpec(make=humanoid_amp_walk, description="Brax's humanoid walking in a teacher's style (AMP)", amp=AMP)
+JOYSTICK = base.EnvSpec(
+    make=humanoid_amp_joystick,
+    description="Brax's humanoid following velocity commands in a teacher's style (AMP)",
+    amp=JOYSTICK_AMP,
+)

@@ -1,13 +1,14 @@
 """Joystick: Brax's ant follows random velocity commands under pushes, action latency,
 observation noise and randomized friction and masses, with a curriculum.
 
-Built only from the catalog, innermost first (docs/catalog.md's nesting order):
+One `mjzoo.task` of catalog items, its combinators innermost first (docs/catalog.md's
+nesting order), the reward terms and terminations around them:
 
-  the ant (`locomotion.bare`, 0.05 s control steps), reset with joint noise and a random
+  the ant (`locomotion.at_pose`, 0.05 s control steps), reset with joint noise and a random
   heading; action latency U{0, 1} steps; the action history (for the action rate); a
   velocity command [vx, vy, yaw rate] ~ U(+-1 m/s, +-1 m/s, +-1 rad/s), stand still with
   probability 0.1, redrawn every 5-10 s and appended to the observation; observation
-  noise; terminations; randomized friction (x U(0.5, 1.5)) and link masses
+  noise; randomized friction (x U(0.5, 1.5)) and link masses
   (x U(0.8, 1.2)) per episode; velocity pushes of up to `push` m/s every 5-10 s; the
   divergence guard and the time limit.
 
@@ -32,8 +33,10 @@ otherwise (`curriculum.by_episode_length`).
 
 from __future__ import annotations
 
+import functools
 from typing import Any, Callable
 
+import mjzoo
 from mjzoo.catalog import (
     actuators,
     commands,
@@ -46,13 +49,14 @@ from mjzoo.catalog import (
     terminations,
     trackers,
 )
-from mjzoo.combinators import with_auto_reset, with_divergence_guard, with_time_limit
+from mjzoo.combinators import with_auto_reset
 from mjzoo.envs import base
-from mjzoo.envs.locomotion import MJX_OPTIONS, actuated_pose, bare
+from mjzoo.envs.locomotion import MJX_OPTIONS, actuated_pose, at_pose, reset_pose
+from mjzoo.kit import named
 from mjzoo.perturbations import with_domain_randomization, with_observation_noise
-from mjzoo.types import Task
+from mjzoo.types import Task, bind
 
-__all__ = ["joystick", "joystick_curriculum", "PPO"]
+__all__ = ["joystick", "joystick_curriculum", "JOYSTICK", "PPO"]
 
 # PPO hyperparameters (`mjzoo train ppo ant_joystick`; the benchmark trains the
 # curriculum), after MuJoCo Playground's for its quadruped joysticks.
@@ -111,36 +115,55 @@ def joystick(
         observations.joint_positions,
         observations.joint_velocities,
     )
-    noisy_start = resets.joint_position_noise(m, 0.1), resets.joint_velocities(m, 0.1), resets.base_heading(m)
-    task = resets.with_resets(bare(physics, observe, actuator), *noisy_start, observe=observe)
-    task = trackers.with_action_history(actuators.with_action_latency(task, max_action_latency), length=2)
-    task = commands.with_velocity_command(
-        task, vx=(-1.0, 1.0), vy=(-1.0, 1.0), yaw_rate=(-1.0, 1.0), resample_interval=(5.0, 10.0), stand_probability=0.1
-    )
-    task = rewards.terms(
-        task,
-        {
-            "tracking": (rewards.linear_velocity_tracking(m, tracking_sigma), tracking_weight),
-            "progress": (rewards.command_progress(m), progress_weight),
-            "yaw_tracking": (rewards.angular_velocity_tracking(m, tracking_sigma), yaw_tracking_weight),
-            "vertical": (rewards.vertical_velocity(m), -vertical_weight),
-            "roll_pitch": (rewards.roll_pitch_velocity(m), -roll_pitch_weight),
-            "action_rate": (rewards.action_rate, -action_rate_weight),
-            "effort": (rewards.effort, -effort_weight),
-        },
-    )
-    task = with_observation_noise(task, level * noise)
-    task = terminations.with_terminations(
-        task,
-        {
-            "tilted": terminations.not_upright(m, 1.2),
-            "too_low": terminations.base_too_low(m, 0.2),
-        },
+    jitter = (
+        named(resets.joint_position_noise(m, 0.1), "reset_noise"),
+        named(resets.joint_velocities(m, 0.1), "reset_noise"),
     )
     physics_draw = randomizers.combine(randomizers.scale_friction(m, 0.5, 1.5), randomizers.scale_masses(m, 0.8, 1.2))
-    task = with_domain_randomization(task, physics_draw)
-    task = events.with_velocity_pushes(task, interval=(5.0, 10.0), linear=(level * push, level * push, 0.0))
-    return with_time_limit(with_divergence_guard(task), episode_steps)
+    # Innermost first (docs/catalog.md's order); the terms below see the states they make.
+    layers = (
+        functools.partial(actuators.with_action_latency, max_latency=max_action_latency),
+        functools.partial(trackers.with_action_history, length=2),
+        functools.partial(
+            commands.with_velocity_command,
+            vx=(-1.0, 1.0),
+            vy=(-1.0, 1.0),
+            yaw_rate=(-1.0, 1.0),
+            resample_interval=(5.0, 10.0),
+            stand_probability=0.1,
+        ),
+        functools.partial(with_observation_noise, scale=level * noise),
+        functools.partial(with_domain_randomization, randomize=physics_draw),
+        functools.partial(events.with_velocity_pushes, interval=(5.0, 10.0), linear=(level * push, level * push, 0.0)),
+    )
+    return mjzoo.task(
+        physics,
+        observe=observe,
+        start=at_pose,
+        resets=(*jitter, resets.base_heading(m)),
+        actuator=actuator,
+        combinators=layers,
+        rewards={
+            "tracking": (named(rewards.linear_velocity_tracking(m, tracking_sigma), "tracking_sigma"), tracking_weight),
+            "progress": (rewards.command_progress(m), progress_weight),
+            "yaw_tracking": (
+                named(rewards.angular_velocity_tracking(m, tracking_sigma), "tracking_sigma"),
+                yaw_tracking_weight,
+            ),
+        },
+        costs={
+            "vertical": (rewards.vertical_velocity(m), vertical_weight),
+            "roll_pitch": (rewards.roll_pitch_velocity(m), roll_pitch_weight),
+            "action_rate": (bind(rewards.action_rate), action_rate_weight),
+            "effort": (bind(rewards.effort), effort_weight),
+        },
+        terminate={
+            "tilted": named(terminations.not_upright(m, 1.2), "max_tilt"),
+            "too_low": named(terminations.base_too_low(m, 0.2), "min_height"),
+        },
+        time_limit=episode_steps,
+        params={"qpos0": reset_pose(m)},
+    )
 
 
 def joystick_curriculum(rule: curriculum.Rule | None = None, **overrides: Any) -> Task:
@@ -153,3 +176,8 @@ def joystick_curriculum(rule: curriculum.Rule | None = None, **overrides: Any) -
         return with_auto_reset(joystick(level=level, **overrides))
 
     return curriculum.with_curriculum(at, rule)
+
+
+JOYSTICK = base.EnvSpec(
+    make=joystick, description="Brax's ant following velocity commands under pushes and noise", ppo=PPO
+)

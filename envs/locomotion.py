@@ -1,11 +1,22 @@
-"""Running and standing tasks on Brax's bundled models, built only from the catalog.
+"""Running and standing tasks on Brax's bundled models: `mjzoo.task` of catalog items.
 
-Each task is `bare` (a model and nothing else) wrapped in catalog items:
+Each task is one `mjzoo.task` call (`gym_task`) whose pieces are catalog items built
+from the loaded model, their numbers made the task's named parameters by
+`mjzoo.kit.named`, so `task.with_params(min_height=0.9)` reaches them:
 
-    task = locomotion.bare(physics, observe)                  # reset pose, torque physics
-    task = resets.with_resets(task, resets.joint_position_noise(m, 0.01), observe=observe)
-    task = terminations.with_terminations(task, {"fallen": terminations.base_too_low(m, 1.0)})
-    task = rewards.terms(task, {"forward": (rewards.forward_velocity(m), 1.25), ...})
+    physics = base.brax_asset("hopper.xml", ctrl_dt=0.008)
+    m = physics.mj_model
+    task = mjzoo.task(
+        physics,
+        observe=observations.concat(...),
+        start=at_pose,                                            # Brax's pose: qpos0
+        resets=(named(resets.joint_position_noise(m, 5e-3), "reset_noise"), ...),
+        terminate={"too_low": named(terminations.base_too_low(m, 0.7, body="torso"), "min_height")},
+        rewards={"forward": (rewards.forward_velocity(m, "torso"), 1.0), "alive": (alive, 1.0)},
+        costs={"effort": (bind(rewards.effort), 1e-3)},
+        time_limit=1000,
+        params={"qpos0": reset_pose(m)},
+    )
 
 Actions are the motors' controls (MuJoCo clamps them to ``ctrlrange``; PPO maps its
 [-1, 1] actions onto that range), held over the physics substeps of a control step. The models are loaded at run time from
@@ -30,24 +41,24 @@ hinge joint's position and velocity.
 
 from __future__ import annotations
 
-import dataclasses
 from typing import Any, Callable, Mapping
 
 import jax
-import jax.numpy as jnp
 import mujoco
 import numpy as np
 from mujoco import mjx
 
+import mjzoo
 from mjzoo import names
 from mjzoo import physics as physics_lib
-from mjzoo.catalog import actuators, observations, resets, rewards, terminations
-from mjzoo.combinators import with_divergence_guard, with_time_limit
+from mjzoo.catalog import observations, resets, rewards, terminations
 from mjzoo.envs import base
-from mjzoo.types import State, Task, bind
+from mjzoo.kit import alive, named
+from mjzoo.types import Task, bind
 
 __all__ = [
     "bare",
+    "at_pose",
     "reset_pose",
     "actuated_pose",
     "gym_task",
@@ -61,50 +72,40 @@ __all__ = [
     "free_base_observation",
     "MJX_OPTIONS",
     "PPO",
+    "HOPPER",
+    "WALKER",
+    "CHEETAH",
+    "ANT",
+    "HUMANOID_WALK",
+    "HUMANOID_RUN",
+    "HUMANOID_STANDUP",
 ]
 
 Array = jax.Array
 Term = tuple[Callable, float]
+Partial = jax.tree_util.Partial
 # Brax's MJX settings for its free-floating models (fast, few solver iterations).
 MJX_OPTIONS = dict(solver="newton", iterations=1, ls_iterations=4, disable_euler_damping=True)
 _PLANAR = dict(solver="newton", iterations=4, ls_iterations=4, disable_euler_damping=True)
 
 
-# --- the bare model -----------------------------------------------------------------
+# --- the model at its pose -------------------------------------------------------------
 
 
-@jax.tree_util.register_dataclass
-@dataclasses.dataclass(frozen=True)
-class Params:
-    qpos0: Array  # [nq] the reset pose
-    observe: Callable  # observation item (model, state) -> [k]
-    actuator: Callable | None  # catalog actuator (model, data, action, key) -> ctrl [nu]
-    data0: mjx.Data  # the reset template, `Physics.data0`
-    n_substeps: int = dataclasses.field(metadata=dict(static=True))
+def at_pose(p: dict, model: mjx.Model, data: mjx.Data, key: Array) -> mjx.Data:
+    """Start: at rest in the pose `qpos0` [nq] (`reset_pose`)."""
+    return data.replace(qpos=p["qpos0"])
 
 
 def bare(physics: physics_lib.Physics, observe: Callable, actuator: Callable | None = None) -> Task:
-    """The model alone: reset to its pose (`reset_pose`), a step of `n_substeps` physics
-    steps driven by `actuator` (a catalog actuator, e.g. `actuators.pd`; default: the
-    action is the controls), observed by the item `observe`; no reward term, no
-    termination, no time limit."""
-    # Plain functions become Partials (pytrees); a Partial stays itself, since wrapping it
-    # again makes a treedef that compares by identity and retraces every new task.
-    as_leaf = lambda fn: fn if fn is None or isinstance(fn, jax.tree_util.Partial) else jax.tree_util.Partial(fn)  # noqa: E731
-    params = Params(
-        jnp.asarray(reset_pose(physics.mj_model), jnp.float32),
-        as_leaf(observe),
-        as_leaf(actuator),
-        physics.data0,
-        physics.n_substeps,
-    )
-    return Task(
-        model=physics.model,
-        start=bind(_reset, params),
-        step=bind(_step, params),
-        reward=bind(_no_terms),
-        terminate=bind(base.never_terminate, ()),
-        mj_model=physics.mj_model,
+    """The model alone: starts at rest in its pose (`reset_pose`, the parameter
+    ``qpos0``), steps driven by `actuator` (a catalog actuator, e.g. `actuators.pd`;
+    default: the action is the controls), observed by the item `observe`; no reward
+    term, no termination, no time limit."""
+    # Items of the catalog's form, (model, state) and (model, data, action, key): Partials.
+    observe, actuator = (fn if fn is None or isinstance(fn, Partial) else Partial(fn) for fn in (observe, actuator))
+    return mjzoo.task(
+        physics, observe=observe, start=at_pose, actuator=actuator, params={"qpos0": reset_pose(physics.mj_model)}
     )
 
 
@@ -121,25 +122,6 @@ def actuated_pose(mj_model: mujoco.MjModel) -> np.ndarray:
     """[nu] the reset pose (`reset_pose`) of the joint each actuator drives: the default
     targets of PD actuators (`actuators.pd`), whose order is the actuators', not the joints'."""
     return reset_pose(mj_model)[mj_model.jnt_qposadr[mj_model.actuator_trnid[:, 0]]]
-
-
-def _reset(p: Params, model: mjx.Model, key: Array) -> State:
-    data = physics_lib.forward(model, p.data0.replace(qpos=p.qpos0))
-    state = State.create(data, jnp.zeros((0,), jnp.float32))
-    return state.replace(obs=p.observe(model, state))
-
-
-def _step(p: Params, model: mjx.Model, state: State, action: Array, key: Array) -> State:
-    if p.actuator is None:
-        data = base.advance(model, state, action, p.n_substeps)
-    else:
-        data = actuators.step(model, state.data, p.actuator, action, p.n_substeps, key)
-    next_state = state.replace(data=data)
-    return next_state.replace(obs=p.observe(model, next_state))
-
-
-def _no_terms(model, state, action, next_state) -> dict[str, Array]:
-    return {}
 
 
 def free_base_observation(mj_model) -> Callable:
@@ -176,28 +158,38 @@ def gym_task(
     reset_noise: float,
     episode_steps: int,
 ) -> Task:
-    """`bare` with joint reset noise U(+-reset_noise) (rad, rad/s), the `fallen`
-    terminations, the `progress` reward terms, alive (if `fallen`) and effort, a
-    divergence guard and a time limit."""
+    """The model started at its pose (``qpos0``) with joint noise U(+-reset_noise)
+    (rad, rad/s), ended by the `fallen` terminations, paid the `progress` reward terms
+    and alive (if `fallen`), charged effort, truncated after `episode_steps`."""
     m = physics.mj_model
-    noise = resets.joint_position_noise(m, reset_noise), resets.joint_velocities(m, reset_noise)
-    task = resets.with_resets(bare(physics, observe), *noise, observe=observe)
-    spec = dict(progress)
+    noise = (
+        named(resets.joint_position_noise(m, reset_noise), "reset_noise"),
+        named(resets.joint_velocities(m, reset_noise), "reset_noise"),
+    )
+    terms = dict(progress)
     if fallen:
-        task = terminations.with_terminations(task, fallen)
-        spec["alive"] = (rewards.alive(task), alive_weight)
-    spec["effort"] = (rewards.effort, -effort_weight)
-    return with_time_limit(with_divergence_guard(rewards.terms(task, spec)), episode_steps)
+        terms["alive"] = (alive, alive_weight)
+    return mjzoo.task(
+        physics,
+        observe=observe,
+        start=at_pose,
+        resets=noise,
+        terminate=fallen or None,
+        rewards=terms,
+        costs={"effort": (bind(rewards.effort), effort_weight)},
+        time_limit=episode_steps,
+        params={"qpos0": reset_pose(m)},
+    )
 
 
 def _upright_torso(
     m, min_height: float, max_tilt: float | None = None, max_height: float | None = None
 ) -> dict[str, Callable]:
-    fallen = {"too_low": terminations.base_too_low(m, min_height, body="torso")}
+    fallen = {"too_low": named(terminations.base_too_low(m, min_height, body="torso"), "min_height")}
     if max_height is not None:
-        fallen["too_high"] = terminations.base_too_high(m, max_height, body="torso")
+        fallen["too_high"] = named(terminations.base_too_high(m, max_height, body="torso"), "max_height")
     if max_tilt is not None:
-        fallen["tilted"] = terminations.not_upright(m, max_tilt, body="torso")
+        fallen["tilted"] = named(terminations.not_upright(m, max_tilt, body="torso"), "max_tilt")
     return fallen
 
 
@@ -347,6 +339,8 @@ def _free_runner(
     physics = base.brax_asset(asset, **options)
     m = physics.mj_model
     forward = rewards.forward_velocity(m, max_speed=max_speed)
+    if max_speed is not None:
+        forward = named(forward, "max_speed")
     return gym_task(
         physics,
         free_base_observation(m),
@@ -477,3 +471,16 @@ PPO = {
         _HUMANOID, unroll_length=240, learning_rate=6e-4, entropy_coef=1e-2, total_steps=100_000_000
     ),
 }
+
+
+HOPPER = base.EnvSpec(make=hopper, description="Brax's one-legged hopper running along +x", ppo=PPO["hopper"])
+WALKER = base.EnvSpec(make=walker, description="Brax's planar biped walker running along +x", ppo=PPO["walker"])
+CHEETAH = base.EnvSpec(make=cheetah, description="Brax's planar half-cheetah running along +x", ppo=PPO["cheetah"])
+ANT = base.EnvSpec(make=ant, description="Brax's four-legged ant running along +x", ppo=PPO["ant"])
+HUMANOID_WALK = base.EnvSpec(
+    make=humanoid_walk, description="Brax's humanoid walking along +x (up to 1.5 m/s)", ppo=PPO["humanoid_walk"]
+)
+HUMANOID_RUN = base.EnvSpec(make=humanoid_run, description="Brax's humanoid running along +x", ppo=PPO["humanoid_run"])
+HUMANOID_STANDUP = base.EnvSpec(
+    make=humanoid_standup, description="Brax's humanoid getting up from its back", ppo=PPO["humanoid_standup"]
+)

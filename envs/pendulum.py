@@ -19,18 +19,18 @@ Solved: a deterministic PPO policy swings up in about 2 s and holds, mean return
 
 from __future__ import annotations
 
-import dataclasses
-
 import jax
 import jax.numpy as jnp
 from mujoco import mjx
 
+import mjzoo
 from mjzoo.catalog.rewards import tolerance
 from mjzoo.combinators import with_reward
 from mjzoo.envs import base
+from mjzoo.envs.base import ASSETS
 from mjzoo.types import State, Task
 
-__all__ = ["Params", "swingup"]
+__all__ = ["swingup", "SWINGUP", "PPO", "PLANNING"]
 
 Array = jax.Array
 
@@ -86,54 +86,40 @@ PLANNING = base.PlanningSetup(
 )
 
 
-@jax.tree_util.register_dataclass
-@dataclasses.dataclass(frozen=True)
-class Params:
-    upright_weight: Array
-    velocity_weight: Array
-    effort_weight: Array
-    small_velocity_margin: Array  # rad/s, of the upright term's small-velocity factor
-    velocity_bound: Array  # rad/s, free speed of the velocity term
-    velocity_margin: Array  # rad/s beyond the bound at which the velocity term is full
-    init_noise: Array  # rad and rad/s, uniform half-width around hanging still
-    data0: mjx.Data  # the reset template, `Physics.data0`
-    n_substeps: int = dataclasses.field(metadata=dict(static=True))
+def observe(p: dict, model: mjx.Model, state: State) -> Array:
+    """[3] cos and sin of the angle from upright, angular velocity (rad/s)."""
+    angle = state.data.qpos[0]
+    return jnp.stack([jnp.cos(angle), jnp.sin(angle), state.data.qvel[0]])
 
 
-def observe(data: mjx.Data) -> Array:
-    angle = data.qpos[0]
-    return jnp.stack([jnp.cos(angle), jnp.sin(angle), data.qvel[0]])
+def hanging(p: dict, model: mjx.Model, data: mjx.Data, key: Array) -> mjx.Data:
+    """Start: hanging down (angle pi) and still, each within U(+-init_noise) rad, rad/s."""
+    noise = jax.random.uniform(key, (2,), minval=-p["init_noise"], maxval=p["init_noise"])
+    return data.replace(qpos=data.qpos.at[0].set(jnp.pi + noise[0]), qvel=data.qvel.at[0].set(noise[1]))
 
 
-def reset(p: Params, model: mjx.Model, key: Array) -> State:
-    noise = jax.random.uniform(key, (2,), minval=-p.init_noise, maxval=p.init_noise)
-    data = p.data0
-    data = data.replace(qpos=data.qpos.at[0].set(jnp.pi + noise[0]), qvel=data.qvel.at[0].set(noise[1]))
-    return State.create(data, observe(data))
+def upright(p: dict, model: mjx.Model, state: State, action: Array, next_state: State) -> Array:
+    """In [0, 1]: (1 + cos angle) / 2, halved unless slow (dm_control's small_velocity)."""
+    angle, speed = next_state.data.qpos[0], next_state.data.qvel[0]
+    small_velocity = (1.0 + tolerance(speed, margin=p["small_velocity_margin"])) / 2.0
+    return (1.0 + jnp.cos(angle)) / 2.0 * small_velocity
 
 
-def step(p: Params, model: mjx.Model, state: State, action: Array, key: Array) -> State:
-    data = base.advance(model, state, action, p.n_substeps)
-    return state.replace(data=data, obs=observe(data))
-
-
-def reward(p: Params, model: mjx.Model, state: State, action: Array, next_state: State) -> dict[str, Array]:
-    data = next_state.data
-    angle, speed = data.qpos[0], data.qvel[0]
-    small_velocity = (1.0 + tolerance(speed, margin=p.small_velocity_margin)) / 2.0
-    fast = 1.0 - tolerance(
-        speed,
-        lower=-p.velocity_bound,
-        upper=p.velocity_bound,
-        margin=p.velocity_margin,
+def too_fast(p: dict, model: mjx.Model, state: State, action: Array, next_state: State) -> Array:
+    """In [0, 1]: 0 up to velocity_bound rad/s, 1 at velocity_bound + velocity_margin."""
+    return 1.0 - tolerance(
+        next_state.data.qvel[0],
+        lower=-p["velocity_bound"],
+        upper=p["velocity_bound"],
+        margin=p["velocity_margin"],
         sigmoid="linear",
         value_at_margin=0.0,
     )
-    return {
-        "upright": p.upright_weight * (1.0 + jnp.cos(angle)) / 2.0 * small_velocity,
-        "velocity": -p.velocity_weight * fast,
-        "effort": -p.effort_weight * jnp.mean(jnp.square(jnp.clip(action, -1.0, 1.0))),
-    }
+
+
+def effort(p: dict, model: mjx.Model, state: State, action: Array, next_state: State) -> Array:
+    """In [0, 1]: the mean squared action, clipped to [-1, 1]."""
+    return jnp.mean(jnp.square(jnp.clip(action, -1.0, 1.0)))
 
 
 def swingup(
@@ -150,18 +136,27 @@ def swingup(
     **physics_options,
 ) -> Task:
     """The pendulum swing-up task; keyword arguments override weights and physics."""
-    physics = base.load("pendulum.xml", ctrl_dt=ctrl_dt, **physics_options)
-    params = Params(
-        **base.floats(
-            upright_weight=upright_weight,
-            velocity_weight=velocity_weight,
-            effort_weight=effort_weight,
+    return mjzoo.task(
+        ASSETS / "pendulum.xml",
+        observe=observe,
+        start=hanging,
+        rewards={"upright": (upright, upright_weight)},
+        costs={"velocity": (too_fast, velocity_weight), "effort": (effort, effort_weight)},
+        time_limit=episode_steps,
+        params=dict(
             small_velocity_margin=small_velocity_margin,
             velocity_bound=velocity_bound,
             velocity_margin=velocity_margin,
             init_noise=init_noise,
         ),
-        data0=physics.data0,
-        n_substeps=physics.n_substeps,
+        ctrl_dt=ctrl_dt,
+        **physics_options,
     )
-    return base.build(physics, params, reset, step, reward, base.never_terminate, episode_steps=episode_steps)
+
+
+SWINGUP = base.EnvSpec(
+    make=swingup,
+    description="torque-limited pendulum: swing up and balance",
+    ppo=PPO,
+    planning=PLANNING,
+)

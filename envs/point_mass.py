@@ -12,19 +12,19 @@ Keeps ``info["goal"]`` (2,), the target, also shown by the model's mocap marker,
 
 from __future__ import annotations
 
-import dataclasses
-
 import jax
 import jax.numpy as jnp
 import numpy as np
 from mujoco import mjx
 
+import mjzoo
 from mjzoo.catalog.rewards import tolerance
 from mjzoo.envs import base
+from mjzoo.envs.base import ASSETS
 from mjzoo.planning.closed_loop import Hooks
 from mjzoo.types import State, Task, bind
 
-__all__ = ["Params", "reach"]
+__all__ = ["reach", "REACH", "PPO", "PLANNING"]
 
 Array = jax.Array
 MASS_BODY = 2  # the mass in point_mass.xml (0: world, 1: the mocap target)
@@ -51,7 +51,7 @@ def new_goal_when_reached(radius: Array, spawn_range: Array, sim_task: Task, sta
         reached, jax.random.uniform(key, (2,), minval=-spawn_range, maxval=spawn_range), state.info["goal"]
     )
     data = state.data.replace(mocap_pos=state.data.mocap_pos.at[0, :2].set(goal))
-    return state.replace(data=data, obs=observe(data, goal), info={**state.info, "goal": goal})
+    return state.replace(data=data, obs=_observation(data, goal), info={**state.info, "goal": goal})
 
 
 def gusts(force: Array, sim_task: Task, state: State, key: Array) -> State:
@@ -112,42 +112,34 @@ PLANNING = base.PlanningSetup(
 )
 
 
-@jax.tree_util.register_dataclass
-@dataclasses.dataclass(frozen=True)
-class Params:
-    reach_weight: Array
-    effort_weight: Array
-    target_radius: Array
-    reach_margin: Array
-    spawn_range: Array  # start and target are uniform in [-spawn_range, spawn_range]^2
-    data0: mjx.Data  # the reset template, `Physics.data0`
-    n_substeps: int = dataclasses.field(metadata=dict(static=True))
+def observe(p: dict, model: mjx.Model, state: State) -> Array:
+    """[6] position (m), velocity (m/s), target minus position (m)."""
+    return _observation(state.data, state.info["goal"])
 
 
-def observe(data: mjx.Data, goal: Array) -> Array:
+def _observation(data: mjx.Data, goal: Array) -> Array:
     return jnp.concatenate([data.qpos, data.qvel, goal - data.qpos])
 
 
-def reset(p: Params, model: mjx.Model, key: Array) -> State:
+def start(p: dict, model: mjx.Model, data: mjx.Data, key: Array) -> tuple[mjx.Data, dict[str, Array]]:
+    """The mass and its target uniform in [-spawn_range, spawn_range]^2 (the target also
+    on the mocap marker); keeps ``info["goal"]`` and ``info["plan_cost"]`` (0)."""
     start_key, goal_key = jax.random.split(key)
-    start = jax.random.uniform(start_key, (2,), minval=-p.spawn_range, maxval=p.spawn_range)
-    goal = jax.random.uniform(goal_key, (2,), minval=-p.spawn_range, maxval=p.spawn_range)
-    data = p.data0
-    data = data.replace(qpos=start, mocap_pos=data.mocap_pos.at[0, :2].set(goal))
-    return State.create(data, observe(data, goal), info={"goal": goal, "plan_cost": jnp.zeros((), jnp.float32)})
+    position = jax.random.uniform(start_key, (2,), minval=-p["spawn_range"], maxval=p["spawn_range"])
+    goal = jax.random.uniform(goal_key, (2,), minval=-p["spawn_range"], maxval=p["spawn_range"])
+    data = data.replace(qpos=position, mocap_pos=data.mocap_pos.at[0, :2].set(goal))
+    return data, {"goal": goal, "plan_cost": jnp.zeros((), jnp.float32)}
 
 
-def step(p: Params, model: mjx.Model, state: State, action: Array, key: Array) -> State:
-    data = base.advance(model, state, action, p.n_substeps)
-    return state.replace(data=data, obs=observe(data, state.info["goal"]))
-
-
-def reward(p: Params, model: mjx.Model, state: State, action: Array, next_state: State) -> dict[str, Array]:
+def reached(p: dict, model: mjx.Model, state: State, action: Array, next_state: State) -> Array:
+    """In [0, 1]: 1 within `target_radius` m of the target, 0.1 at `reach_margin` beyond."""
     distance = jnp.linalg.norm(next_state.info["goal"] - next_state.data.qpos)
-    return {
-        "reach": p.reach_weight * tolerance(distance, upper=p.target_radius, margin=p.reach_margin),
-        "effort": -p.effort_weight * jnp.mean(jnp.square(jnp.clip(action, -1.0, 1.0))),
-    }
+    return tolerance(distance, upper=p["target_radius"], margin=p["reach_margin"])
+
+
+def effort(p: dict, model: mjx.Model, state: State, action: Array, next_state: State) -> Array:
+    """In [0, 1]: the mean squared action, clipped to [-1, 1]."""
+    return jnp.mean(jnp.square(jnp.clip(action, -1.0, 1.0)))
 
 
 def reach(
@@ -162,16 +154,19 @@ def reach(
     **physics_options,
 ) -> Task:
     """The point-mass reaching task; keyword arguments override weights and physics."""
-    physics = base.load("point_mass.xml", ctrl_dt=ctrl_dt, **physics_options)
-    params = Params(
-        **base.floats(
-            reach_weight=reach_weight,
-            effort_weight=effort_weight,
-            target_radius=target_radius,
-            reach_margin=reach_margin,
-            spawn_range=spawn_range,
-        ),
-        data0=physics.data0,
-        n_substeps=physics.n_substeps,
+    return mjzoo.task(
+        ASSETS / "point_mass.xml",
+        observe=observe,
+        start=start,
+        rewards={"reach": (reached, reach_weight)},
+        costs={"effort": (effort, effort_weight)},
+        time_limit=episode_steps,
+        params=dict(target_radius=target_radius, reach_margin=reach_margin, spawn_range=spawn_range),
+        ctrl_dt=ctrl_dt,
+        **physics_options,
     )
-    return base.build(physics, params, reset, step, reward, base.never_terminate, episode_steps=episode_steps)
+
+
+REACH = base.EnvSpec(
+    make=reach, description="point mass: reach a target drawn at every reset", ppo=PPO, planning=PLANNING
+)

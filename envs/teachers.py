@@ -111,7 +111,7 @@ def cartpole_amp_swingup(
 
 
 def _observe(model, state: State) -> jax.Array:
-    return cartpole.observe(state.data)
+    return cartpole.observe({}, model, state)
 
 
 def style_error(task: Task, qpos, window: int = STYLE_WINDOW, both_ways: bool = True) -> float:
@@ -141,3 +141,8 @@ def style_error(task: Task, qpos, window: int = STYLE_WINDOW, both_ways: bool = 
     if not both_ways:
         return run_to_reference
     return 0.5 * (run_to_reference + motion.nearest_window_error(qpos, ref, columns, window))
+
+
+CARTPOLE_AMP_SWINGUP = base.EnvSpec(
+    make=cartpole_amp_swingup, description="cart-pole swing-up learned from MPPI's runs (AMP)", amp=AMP
+)

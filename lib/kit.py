@@ -1,31 +1,42 @@
-"""A kit for one's own task: from an MJCF model and a few plain functions to a `Task`.
+"""The one way to build a task: from a model and a few plain functions to a `Task`.
 
     task = mjzoo.task(
-        REACHER_XML,                                    # a file, an XML string or an MjModel
+        REACHER_XML,                                    # a file, XML text, an MjModel or a loaded Physics
         observe=observe,                                # (p, model, state) -> obs
-        rewards={"reach": (reach, 1.0), "effort": (effort, "effort_weight")},
-        resets=(random_arm, random_goal),               # (p, model, data, key) -> data | (data, info)
-        terminate=None,                                 # (p, model, state) -> bool []
+        rewards={"reach": (reach, 1.0)},                # + weight * fn(p, model, state, action, next_state)
+        costs={"effort": (effort, 0.01)},               # - weight * fn(...)
+        start=random_arm,                               # (p, model, data, key) -> data | (data, info)
+        resets=(random_goal,),                          # more items like start, each with its own key
+        terminate={"fell": fell},                       # (p, model, state) -> bool [], or one function
         time_limit=200,
-        params={"effort_weight": -0.01, "goal_radius": 0.2},
+        params={"goal_radius": 0.2},
         ctrl_dt=0.02,                                   # physics options, as mjzoo.physics.load
     )
-    task.with_params(reach_weight=2.0)                  # no rebuild, no retrace
+    task.with_params(reach_weight=2.0, goal_radius=0.1)  # no rebuild, no retrace
+
+Every shipped env (`mjzoo.envs`) is built this way: `envs/pendulum.py` is the plain
+example, `envs/locomotion.py` the one made of catalog items.
 
 Every plain function gets the task's named parameters first: `p`, a dict of float32
-leaves holding `params` and each reward term's weight (``"<term>_weight"``, or the
-parameter named in its place). A `jax.tree_util.Partial` (a catalog item, or
-``mjzoo.bind(fn, ...)``) carries its own numbers and is called without `p`. Since
-every number is a leaf, `mjzoo.with_params` changes any of them on the built task.
+leaves holding `params` and each term's weight (``"<term>_weight"``, or the parameter
+named in its place). A `jax.tree_util.Partial` (a catalog item, or ``mjzoo.bind(fn,
+...)``) carries its own numbers and is called without `p`; `named(item, "name", ...)`
+moves a catalog item's numbers into `p` under those names. Since every number is a
+leaf with a name, `mjzoo.with_params` changes any of them on the built task.
 
 What the task does:
-  start: the model's ``qpos0`` at rest, then each reset item in order (each with its own
-    key; what an item returns next to its data goes to `state.info`), `mjx.forward`,
-    then `observe`.
-  step: the action as the controls (MuJoCo clamps them to ctrlrange), held for ctrl_dt
-    / dt physics steps, then `observe`; `info` is kept.
-  reward: ``{name: weight * fn(p, model, state, action, next_state)}``, each a scalar.
-  terminate: `terminate` on the next state (terminated, never truncated), or never.
+  start: the model at rest at ``qpos0`` (the data template), `start` given the reset key
+    itself, then each reset item in order with keys drawn as `catalog.resets.with_resets`
+    draws them (what an item returns next to its data goes to `state.info`),
+    `mjx.forward`, then `observe`.
+  step: the action as the controls (MuJoCo clamps them to ctrlrange) or, with
+    `actuator`, the controls it computes before each physics substep, for ctrl_dt / dt
+    substeps; then `observe`; `info` is kept. Each named termination is recorded in
+    ``metrics["termination/<name>"]`` (1.0 / 0.0).
+  reward: ``{name: weight * fn(...)}`` for `rewards`, then ``{name: -weight * fn(...)}``
+    for `costs`, each a scalar; `alive` as a term pays 1 per step not terminated.
+  terminate: any of the `terminate` functions on the next state (terminated, never
+    truncated), or never.
 It is guarded against diverging physics (`with_divergence_guard`) and, with
 `time_limit`, truncated after that many steps (`with_time_limit`). Without `observe`
 it observes joint positions and velocities; without rewards it has no reward term.
@@ -45,25 +56,31 @@ import mujoco
 import numpy as np
 from mujoco import mjx
 
-from mjzoo import checks
+from mjzoo import checks, worlds
 from mjzoo import physics as physics_lib
 from mjzoo.combinators import with_divergence_guard, with_time_limit
 from mjzoo.tree import Static
 from mjzoo.types import State, Task, bind
 
-__all__ = ["task", "joint_state"]
+__all__ = ["task", "named", "alive", "joint_state"]
 
 Array = jax.Array
 Term = Callable | tuple[Callable, float | str]
+_RESETS_STREAM = 0x4E5  # `catalog.resets.RESETS_STREAM`: reset items draw keys as with_resets does
+_SUBSTEP_STREAM = 0xAC7  # `catalog.actuators.SUBSTEP_STREAM`: an actuator's keys as actuators.step's
 
 
 def task(
-    model: str | os.PathLike | mujoco.MjModel,
+    model: str | os.PathLike | mujoco.MjModel | physics_lib.Physics,
     *,
     observe: Callable | None = None,
     rewards: Mapping[str, Term] | None = None,
-    terminate: Callable | None = None,
+    costs: Mapping[str, Term] | None = None,
+    terminate: Callable | Mapping[str, Callable] | None = None,
+    start: Callable | None = None,
     resets: Sequence[Callable] = (),
+    actuator: Callable | None = None,
+    combinators: Sequence[Callable[[Task], Task]] = (),
     time_limit: int | None = None,
     params: Mapping[str, Any] | None = None,
     **physics_options: Any,
@@ -71,16 +88,30 @@ def task(
     """A `Task` from a model and plain functions (see the module docstring).
 
     Args:
-      model: an MJCF file path, MJCF text, or a compiled `mujoco.MjModel` (then the only
-        physics option is ctrl_dt: set the others on its `opt`).
+      model: an MJCF file path, MJCF text, a compiled `mujoco.MjModel` (then the only
+        physics options are ctrl_dt, impl and capacities: set the others on its `opt`),
+        or a `mjzoo.physics.Physics` already loaded (no physics options; load it first
+        to build catalog items from its ``mj_model``).
       observe: ``(p, model, state) -> obs`` (any pytree of arrays), from ``state.data``
         and ``state.info``; default: `joint_state`, qpos and qvel [nq + nv].
       rewards: ``{name: fn}`` (weight 1) or ``{name: (fn, weight)}``, with ``fn(p,
         model, state, action, next_state) -> scalar`` and `weight` a number (the
-        parameter ``"<name>_weight"``) or the name of a parameter.
-      terminate: ``(p, model, state) -> bool []``, whether `state` ends the episode.
-      resets: reset items ``(p, model, data, key) -> data`` or ``-> (data, {name:
-        value})``, the entries kept in `state.info` (a goal, a target).
+        parameter ``"<name>_weight"``) or the name of a parameter; `alive` as `fn` pays
+        1 per step that `terminate` does not end.
+      costs: as `rewards`, each term charged: ``-weight * fn(...)`` with weight >= 0 as
+        a rule, so a weight is a magnitude (``effort_weight=0.01``).
+      terminate: ``(p, model, state) -> bool []``, whether `state` ends the episode, or
+        ``{name: fn}``: ended when any is true, each recorded in metrics.
+      start: ``(p, model, data, key) -> data`` or ``-> (data, {name: value})``, the first
+        reset item, given the model at rest and the reset key itself.
+      resets: reset items as `start`, after it, each with a key of its own.
+      actuator: ``(p, model, data, action, key) -> ctrl [nu]`` evaluated before each
+        physics substep (a catalog actuator, e.g. `actuators.pd`); default: the action
+        is the controls.
+      combinators: ``Task -> Task`` functions (catalog ones: commands, latency, noise,
+        domain randomization, pushes) applied in order to the model's own task (start,
+        step, observation) before the terms: `rewards`, `costs` and `terminate` see the
+        states they make (``info["command"]``), and the guard and time limit wrap them.
       time_limit: steps after which an episode is truncated; None: no limit.
       params: named numbers (scalars or arrays) given to every function as `p`.
       **physics_options: `mjzoo.physics.load`'s (dt, ctrl_dt, solver, iterations, ...).
@@ -92,35 +123,75 @@ def task(
     """
     physics = _physics(model, physics_options)
     p = _params(params or {})
-    terms = {}
-    for name, entry in (rewards or {}).items():
-        fn, weight = entry if isinstance(entry, tuple) else (entry, 1.0)
-        _identifier("rewards", name)
-        if isinstance(weight, str):
-            if weight not in p:
-                raise ValueError(
-                    f"mjzoo.task: the weight of reward term {name!r} names the parameter {weight!r}, "
-                    f"which params lacks; params: {', '.join(p) or 'none'}"
-                )
-        else:
-            value = checks.number("mjzoo.task", f"the weight of {name!r}", weight)
-            weight, p = f"{name}_weight", _add(p, f"{name}_weight", value)
-        terms[name] = (_function(f"reward term {name!r}", fn), Static(weight))
-    spec = Spec(
-        observe=_function("observe", observe or joint_state),
-        terms=terms,
-        terminate=None if terminate is None else _function("terminate", terminate),
-        resets=tuple(_function(f"reset item {i}", fn) for i, fn in enumerate(resets)),
+    ends = terminate if isinstance(terminate, Mapping) else ({} if terminate is None else {"": terminate})
+    fns = {}
+    for name, fn in ends.items():
+        if name:
+            _identifier("terminate", name)
+        fns[name], p = _function(f"termination {name!r}" if name else "terminate", fn, p)
+    observe, p = _function("observe", observe or joint_state, p)
+    # A catalog observation is kept as it is, so `mjzoo.interop.contract` can read it.
+    observe, own = (observe.args[0], True) if observe.func is _own_numbers else (observe, False)
+    items = []
+    for i, fn in enumerate(((start,) if start is not None else ()) + tuple(resets)):
+        item, p = _function("start" if start is not None and i == 0 else f"reset item {i}", fn, p)
+        items.append(item)
+    act = None
+    if actuator is not None:
+        act, p = _function("actuator", actuator, p)
+    weighted = []  # (name, fn, weight's name, sign): the terms, bound once `p` is complete
+    for sign, kind, entries in ((1.0, "reward", rewards), (-1.0, "cost", costs)):
+        for name, entry in (entries or {}).items():
+            fn, weight = entry if isinstance(entry, tuple) else (entry, 1.0)
+            _identifier(f"{kind}s", name)
+            if any(name == other for other, *_ in weighted):
+                raise ValueError(f"mjzoo.task: the term {name!r} is both a reward and a cost")
+            if isinstance(weight, str):
+                if weight not in p:
+                    raise ValueError(
+                        f"mjzoo.task: the weight of {kind} term {name!r} names the parameter {weight!r}, "
+                        f"which params lacks; params: {', '.join(p) or 'none'}"
+                    )
+            else:
+                value = checks.number("mjzoo.task", f"the weight of {name!r}", weight)
+                weight, p = f"{name}_weight", _add(p, f"{name}_weight", value)
+            if fn is not alive:
+                fn, p = _function(f"{kind} term {name!r}", fn, p)
+            weighted.append((name, fn, weight, sign))
+    core_spec = Spec(
+        observe=observe,
+        observe_own=own,
+        terms={},
+        ends={name: fn for name, fn in fns.items() if name},
+        start=items[0] if start is not None else None,
+        resets=tuple(items[1:] if start is not None else items),
+        actuator=act,
         data0=physics.data0,
         n_substeps=physics.n_substeps,
     )
-    built = Task(
+    core = Task(
         model=physics.model,
-        start=bind(_start, spec, p),
-        step=bind(_step, spec, p),
-        reward=bind(_reward, spec, p),
-        terminate=bind(_terminate, spec, p),
+        start=bind(_start, core_spec, p),
+        step=bind(_step, core_spec, p),
+        reward=bind(_no_terms),
+        terminate=bind(_never),
         mj_model=physics.mj_model,
+    )
+    for layer in combinators:
+        core = layer(core)
+        if not isinstance(core, Task):
+            raise TypeError(f"mjzoo.task: a combinator returned {type(core).__name__}, not a Task")
+    ended = bind(_terminate, tuple(fns.values()), p, core.terminate)
+    terms = {}
+    for name, fn, weight, sign in weighted:
+        fn = bind(_own_numbers, bind(_alive, ended)) if fn is alive else fn
+        terms[name] = (fn, Static((weight, sign)))
+    spec = dataclasses.replace(core_spec, terms=terms)
+    built = core.replace(
+        start=bind(_start_ends, spec, core.start),
+        step=bind(_step_ends, spec, p, core.step),
+        reward=bind(_reward, spec, p, core.reward),
+        terminate=ended,
     )
     built = with_divergence_guard(built)
     if time_limit is not None:
@@ -134,12 +205,18 @@ def task(
 class Spec:
     """The functions of a kit task (Partials taking `p` first); the numbers live in `p`."""
 
-    observe: jax.tree_util.Partial
-    terms: dict[str, tuple[jax.tree_util.Partial, Static]]
-    terminate: jax.tree_util.Partial | None
+    observe: jax.tree_util.Partial  # a catalog item (observe_own) or a function of `p` first
+    terms: dict[str, tuple[jax.tree_util.Partial, Static]]  # Static: (weight's name, sign)
+    ends: dict[str, jax.tree_util.Partial]  # the named terminations, recorded in metrics
+    start: jax.tree_util.Partial | None
     resets: tuple[jax.tree_util.Partial, ...]
+    actuator: jax.tree_util.Partial | None
     data0: mjx.Data  # the reset template, `Physics.data0`
     n_substeps: int = dataclasses.field(metadata=dict(static=True))
+    observe_own: bool = dataclasses.field(default=False, metadata=dict(static=True))
+
+    def observed(self, p: dict, model: mjx.Model, state: State):
+        return self.observe(model, state) if self.observe_own else self.observe(p, model, state)
 
 
 def joint_state(p: dict, model: mjx.Model, state: State) -> Array:
@@ -148,33 +225,132 @@ def joint_state(p: dict, model: mjx.Model, state: State) -> Array:
     return jnp.concatenate([state.data.qpos, state.data.qvel])
 
 
+def alive(p: dict, model: mjx.Model, state: State, action: Array, next_state: State) -> Array:
+    """Reward term: 1 per transition that the task's `terminate` does not end, else 0.
+    A marker: `task` puts its own terminations in its place."""
+    raise TypeError("mjzoo.kit.alive is a reward term of mjzoo.task, which binds it to the task's terminations")
+
+
+def named(item: jax.tree_util.Partial, *names: str) -> jax.tree_util.Partial:
+    """A catalog item whose numbers are the task's named parameters `names`.
+
+    The item's floating-point leaves (in the order its constructor binds them; integer
+    indices are not numbers to tune) become the parameters `names`, one each, with the
+    item's values as defaults: a scalar where all of a leaf's values are equal (a
+    per-joint scale given as one number), else the array. Two items may share a name
+    (one reset noise for positions and velocities) if their values agree.
+
+        terminate={"too_low": named(terminations.base_too_low(m, 0.7), "min_height")}
+    """
+    if not isinstance(item, jax.tree_util.Partial):
+        raise TypeError(f"mjzoo.named: expected a catalog item (a jax.tree_util.Partial), got {type(item).__name__}")
+    slots = [i for i, leaf in enumerate(jax.tree.leaves((item.args, item.keywords))) if _floating(leaf)]
+    if len(slots) != len(names):
+        raise ValueError(
+            f"mjzoo.named: {getattr(item.func, '__name__', item.func)} binds {len(slots)} number(s), "
+            f"but {len(names)} name(s) were given: {names}"
+        )
+    for name in names:
+        _identifier("named", name)
+    return _Named(item, tuple(zip(slots, names)))
+
+
+@dataclasses.dataclass(frozen=True)
+class _Named:
+    item: jax.tree_util.Partial
+    slots: tuple[tuple[int, str], ...]  # (leaf index, parameter name)
+
+    def __call__(self, *args):
+        raise TypeError("mjzoo.named(...) is an argument of mjzoo.task, which gives it the task's parameters")
+
+
 # --- the task's four functions ------------------------------------------------------
 
 
 def _start(spec: Spec, p: dict, model: mjx.Model, key: Array) -> State:
     data, info = spec.data0, {}
-    for item, item_key in zip(spec.resets, jax.random.split(key, len(spec.resets))):
+    keys = jax.random.split(jax.random.fold_in(key, _RESETS_STREAM), max(len(spec.resets), 1))
+    calls = ([(spec.start, key)] if spec.start is not None else []) + list(zip(spec.resets, keys))
+    for item, item_key in calls:
         out = item(p, model, data, item_key)
         data, written = out if isinstance(out, tuple) else (out, {})
         info.update(written)
     state = State.create(physics_lib.forward(model, data), jnp.zeros((0,), jnp.float32), info)
-    return state.replace(obs=spec.observe(p, model, state))
+    return state.replace(obs=spec.observed(p, model, state))
 
 
 def _step(spec: Spec, p: dict, model: mjx.Model, state: State, action: Array, key: Array) -> State:
-    data = physics_lib.step(model, state.data, jnp.asarray(action, jnp.float32), spec.n_substeps)
+    action = jnp.asarray(action, jnp.float32)
+    if spec.actuator is None:
+        data = physics_lib.step(model, state.data, action, spec.n_substeps)
+    else:
+        data = _actuated(spec.actuator, p, model, state.data, action, spec.n_substeps, key)
     next_state = state.replace(data=data)
-    return next_state.replace(obs=spec.observe(p, model, next_state))
+    return next_state.replace(obs=spec.observed(p, model, next_state))
 
 
-def _reward(spec: Spec, p: dict, model, state, action, next_state) -> dict[str, Array]:
-    terms = spec.terms.items()
-    return {name: p[weight.value] * fn(p, model, state, action, next_state) for name, (fn, weight) in terms}
+def _actuated(actuator, p: dict, model: mjx.Model, data: mjx.Data, action: Array, n_substeps: int, key: Array):
+    """`n_substeps` physics steps, the controls from `actuator` before each (as
+    `catalog.actuators.step`: key_i = fold_in(fold_in(key, tag), i))."""
+    key = jax.random.fold_in(key, _SUBSTEP_STREAM)
+
+    def substep(i, data: mjx.Data) -> mjx.Data:
+        ctrl = actuator(p, model, data, action, jax.random.fold_in(key, i))
+        return physics_lib.substep(model, data.replace(ctrl=jnp.asarray(ctrl, data.ctrl.dtype)))
+
+    return jax.lax.fori_loop(0, n_substeps, substep, worlds.clear_overflow(data))
 
 
-def _terminate(spec: Spec, p: dict, model: mjx.Model, state: State) -> tuple[Array, Array]:
-    never = jnp.zeros((), bool)
-    return (never if spec.terminate is None else spec.terminate(p, model, state)), never
+def _start_ends(spec: Spec, start_fn, model: mjx.Model, key: Array) -> State:
+    """The start, each named termination's metric at 0."""
+    state = start_fn(model, key)
+    if not spec.ends:
+        return state
+    zeros = {f"termination/{name}": jnp.zeros((), jnp.float32) for name in spec.ends}
+    return state.replace(metrics={**state.metrics, **zeros})
+
+
+def _step_ends(spec: Spec, p: dict, step_fn, model: mjx.Model, state: State, action: Array, key: Array) -> State:
+    """The step, each named termination recorded on the state it returns (1.0 / 0.0)."""
+    next_state = step_fn(model, state, action, key)
+    if not spec.ends:
+        return next_state
+    flags = {f"termination/{name}": _flag(fn, p, model, next_state) for name, fn in spec.ends.items()}
+    return next_state.replace(metrics={**next_state.metrics, **flags})
+
+
+def _reward(spec: Spec, p: dict, reward_fn, model, state, action, next_state) -> dict[str, Array]:
+    terms = dict(reward_fn(model, state, action, next_state))
+    for name, (fn, weight) in spec.terms.items():
+        weight_name, sign = weight.value
+        value = p[weight_name] * fn(p, model, state, action, next_state)
+        terms[name] = value if sign > 0 else -value
+    return terms
+
+
+def _flag(fn, p: dict, model: mjx.Model, state: State) -> Array:
+    return jnp.asarray(fn(p, model, state), bool).astype(jnp.float32)
+
+
+def _terminate(fns: tuple, p: dict, terminate_fn, model: mjx.Model, state: State) -> tuple[Array, Array]:
+    terminated, truncated = terminate_fn(model, state)
+    terminated = jnp.asarray(terminated, bool)
+    if fns:
+        terminated = terminated | jnp.any(jnp.stack([jnp.asarray(fn(p, model, state), bool) for fn in fns]))
+    return terminated, jnp.asarray(truncated, bool) & ~terminated
+
+
+def _no_terms(model, state, action, next_state) -> dict[str, Array]:
+    return {}
+
+
+def _never(model: mjx.Model, state: State) -> tuple[Array, Array]:
+    return jnp.zeros((), bool), jnp.zeros((), bool)
+
+
+def _alive(terminate_fn, model, state, action, next_state) -> Array:
+    terminated, _ = terminate_fn(model, next_state)
+    return 1.0 - jnp.asarray(terminated, jnp.float32)
 
 
 def _own_numbers(item: jax.tree_util.Partial, p: dict, *args):
@@ -182,14 +358,52 @@ def _own_numbers(item: jax.tree_util.Partial, p: dict, *args):
     return item(*args)
 
 
+def _with_named(func, leaves: tuple, treedef: Static, slots: Static, p: dict, *args):
+    """A catalog item called with its numbered leaves taken from `p` (`named`)."""
+    leaves = list(leaves)
+    for index, name in slots.value:
+        leaves[index] = jnp.broadcast_to(p[name], jnp.shape(leaves[index])).astype(_dtype(leaves[index]))
+    bound_args, keywords = jax.tree.unflatten(treedef.value, leaves)
+    return func(*bound_args, *args, **keywords)
+
+
 # --- construction -------------------------------------------------------------------
 
 
-def _function(what: str, fn) -> jax.tree_util.Partial:
+def _function(what: str, fn, p: dict) -> tuple[jax.tree_util.Partial, dict]:
+    """`fn` as a Partial taking `p` first, and `p` with the numbers `named` adds."""
+    if isinstance(fn, _Named):
+        leaves, treedef = jax.tree.flatten((fn.item.args, fn.item.keywords))
+        for index, name in fn.slots:
+            value = np.asarray(leaves[index], np.float64)
+            value = value.ravel()[0] if value.size and np.all(value == value.ravel()[0]) else value
+            if name in p and not np.array_equal(np.asarray(p[name]), np.asarray(value, np.float32)):
+                given, have = np.asarray(value).tolist(), np.asarray(p[name]).tolist()
+                raise ValueError(f"mjzoo.task: {what} gives {name}={given}, but the task already has {name}={have}")
+            p = {**p, name: p[name] if name in p else jnp.asarray(value, jnp.float32)}
+        func = jax.tree_util.Partial(fn.item.func)  # the function in the treedef, not a leaf
+        return bind(_with_named, func, tuple(leaves), Static(treedef), Static(fn.slots)), p
     if not callable(fn):
         raise TypeError(f"mjzoo.task: {what} must be callable, got {type(fn).__name__}")
     checks.retrace_hazard("mjzoo.task", what, fn)
-    return bind(_own_numbers, fn) if isinstance(fn, jax.tree_util.Partial) else jax.tree_util.Partial(fn)
+    if isinstance(fn, jax.tree_util.Partial):
+        return bind(_own_numbers, fn), p
+    return jax.tree_util.Partial(fn), p
+
+
+def _floating(leaf) -> bool:
+    try:
+        return isinstance(leaf, float) or np.issubdtype(_dtype(leaf), np.floating)
+    except TypeError:  # a PRNG key's dtype
+        return False
+
+
+def _dtype(leaf):
+    """A leaf's dtype as JAX holds it: a Python float float32 (weakly typed), float64
+    float32 unless x64 is on."""
+    if isinstance(leaf, float):
+        return np.dtype(np.float32)
+    return jax.dtypes.canonicalize_dtype(leaf.dtype if hasattr(leaf, "dtype") else np.asarray(leaf).dtype)
 
 
 def _params(values: Mapping[str, Any]) -> dict[str, Array]:
@@ -216,7 +430,7 @@ def _add(p: dict, name: str, value: Array) -> dict:
             f"mjzoo.task: the parameter {name!r} is given in params and as a reward term's weight; "
             f"give the term the weight {name!r} (its name) or drop it from params"
         )
-    return {**p, name: value}
+    return {**p, name: jnp.asarray(value, jnp.float32)}
 
 
 def _identifier(where: str, name) -> None:
@@ -230,6 +444,10 @@ def _physics(model, options: dict[str, Any]) -> physics_lib.Physics:
         raise TypeError(
             f"mjzoo.task: unknown physics option {', '.join(unknown)}; options: {', '.join(physics_lib.OPTIONS)}"
         )
+    if isinstance(model, physics_lib.Physics):
+        if options:
+            raise ValueError("mjzoo.task: a loaded Physics takes no physics options; give them to mjzoo.physics.load")
+        return model
     if not isinstance(model, mujoco.MjModel):
         return physics_lib.load(model, **options)
     if set(options) - {"ctrl_dt", "impl", "max_contacts", "max_constraints"}:

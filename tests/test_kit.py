@@ -191,3 +191,71 @@ def _joint_state(model, state):
 
 def _marked(model, data, key):
     return data, {"mark": jnp.float32(7.0)}
+
+
+# --- what the shipped envs need: costs, named terminations, alive, start, catalog numbers
+
+
+def _still(p, model, data, key):
+    return data, {"start_key": jax.random.key_data(key)}
+
+
+def _effort(model, state, action, next_state):
+    return jnp.sum(jnp.square(action))
+
+
+def _far(min_x, model, state):
+    return state.data.qpos[0] > min_x
+
+
+def test_costs_named_terminations_alive_and_a_catalog_number_made_a_parameter():
+    task = mjzoo.task(
+        XML,
+        start=_still,
+        rewards={"alive": (mjzoo.kit.alive, 2.0)},
+        costs={"effort": (mjzoo.bind(_effort), 0.25)},
+        terminate={"far": mjzoo.kit.named(mjzoo.bind(_far, 0.005), "limit")},
+    )
+    assert {k: float(v) for k, v in mjzoo.params(task).items()} == pytest.approx(
+        {"alive_weight": 2.0, "effort_weight": 0.25, "limit": 0.005}
+    )
+    start, after = step(task, jax.random.key(3))
+    # start gets the reset key itself; the cost is charged, the weight a magnitude.
+    np.testing.assert_array_equal(start.info["start_key"], jax.random.key_data(jax.random.key(3)))
+    assert float(mjzoo.reward_terms(after)["effort"]) == -0.25
+    # 0.01 m > 0.005 m: terminated, named in metrics, and alive pays nothing for it.
+    assert bool(after.terminated) and float(after.metrics["termination/far"]) == 1.0
+    assert float(start.metrics["termination/far"]) == 0.0
+    assert float(mjzoo.reward_terms(after)["alive"]) == 0.0
+    _, after = step(task.with_params(limit=1.0), jax.random.key(3))
+    assert not bool(after.terminated) and float(mjzoo.reward_terms(after)["alive"]) == 2.0
+
+
+def test_named_needs_one_name_per_number_and_agreeing_shared_names():
+    with pytest.raises(ValueError, match="binds 1 number"):
+        mjzoo.kit.named(mjzoo.bind(_far, 0.005), "a", "b")
+    item = mjzoo.kit.named(mjzoo.bind(_far, 0.005), "limit")
+    other = mjzoo.kit.named(mjzoo.bind(_far, 0.5), "limit")
+    with pytest.raises(ValueError, match="limit=0.5.*already has limit"):
+        mjzoo.task(XML, terminate={"a": item, "b": other})
+    with pytest.raises(ValueError, match="'effort' is both a reward and a cost"):
+        mjzoo.task(XML, rewards={"effort": push}, costs={"effort": push})
+
+
+def test_combinators_run_inside_the_terms_and_a_loaded_physics_is_taken():
+    physics = mjzoo.physics.load(XML, ctrl_dt=0.2)
+    doubled = mjzoo.task(physics, combinators=(_double_action,), rewards={"push": push}, params={})
+    _, after = step(doubled, jax.random.key(0))
+    # The term sees the action the transition was given; the physics the doubled one:
+    # two 0.1 s steps of 2 N from rest.
+    np.testing.assert_allclose(after.data.qpos, [0.06], rtol=1e-5)
+    with pytest.raises(ValueError, match="a loaded Physics takes no physics options"):
+        mjzoo.task(physics, ctrl_dt=0.1)
+
+
+def _double_action(task):
+    return task.replace(step=mjzoo.bind(_doubled_step, task.step))
+
+
+def _doubled_step(step_fn, model, state, action, key):
+    return step_fn(model, state, 2.0 * action, key)

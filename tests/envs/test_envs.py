@@ -106,23 +106,16 @@ def test_point_mass_goal_is_in_info_obs_and_marker():
 def test_point_mass_reach_is_one_on_the_target_and_falls_to_a_tenth_at_the_margin():
     pm = mjzoo.envs.point_mass
     task = mjzoo.envs.make("point_mass")
-    params = pm.Params(
-        **mjzoo.envs.base.floats(
-            reach_weight=1.0, effort_weight=0.01, target_radius=0.03, reach_margin=0.5, spawn_range=0.4
-        ),
-        data0=mjzoo.reset(task, jax.random.key(0)).data,
-        n_substeps=2,
-    )
+    p = mjzoo.params(task)  # the task's own numbers, as its functions get them
     state = mjzoo.reset(task, jax.random.key(0))
     goal = state.info["goal"]
     at = lambda xy: state.replace(data=state.data.replace(qpos=xy))  # noqa: E731
-    terms = pm.reward(params, task.model, state, jnp.zeros(2), at(goal))
-    np.testing.assert_allclose(terms["reach"], 1.0)
-    np.testing.assert_allclose(terms["effort"], 0.0)
+    np.testing.assert_allclose(pm.reached(p, task.model, state, jnp.zeros(2), at(goal)), 1.0)
+    np.testing.assert_allclose(pm.effort(p, task.model, state, jnp.zeros(2), at(goal)), 0.0)
     # 0.03 m radius + 0.5 m margin away: the gaussian tolerance's value at the margin, 0.1.
-    terms = pm.reward(params, task.model, state, jnp.ones(2), at(goal + jnp.array([0.53, 0.0])))
-    np.testing.assert_allclose(terms["reach"], 0.1, rtol=1e-4)
-    np.testing.assert_allclose(terms["effort"], -0.01)
+    far = at(goal + jnp.array([0.53, 0.0]))
+    np.testing.assert_allclose(pm.reached(p, task.model, state, jnp.ones(2), far), 0.1, rtol=1e-4)
+    np.testing.assert_allclose(pm.effort(p, task.model, state, jnp.ones(2), far), 1.0)
 
 
 def test_cylinder_push_moves_the_cylinder_when_pushed():
@@ -184,7 +177,7 @@ def test_an_override_of_a_compatible_type_is_accepted(monkeypatch):
         received.append(dict(steps=steps, weight=weight, height=height, sizes=sizes, flag=flag, hook=hook, extra=extra))
         return task  # a factory returns a Task: make refuses anything else
 
-    monkeypatch.setitem(mjzoo.envs._REGISTRY, "typed", typed)
+    monkeypatch.setitem(mjzoo.envs._REGISTRY, "typed", mjzoo.envs.EnvSpec(make=typed, description="typed factory"))
     accepted = dict(
         steps=np.int64(7), weight=2, height=None, sizes=[32, 32], flag=np.bool_(True), hook=print, extra="x"
     )
