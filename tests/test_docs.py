@@ -65,7 +65,7 @@ SHRUNK = {
     "docs/sweeps.md": {
         "total_steps=327_680": (
             "total_steps=2 * 64 * 32",
-            "two updates, not 160: the 12 runs learn on a GPU in minutes, on a busy 2-core CPU in an hour",
+            "two updates, not 160: the 12 whole runs of 327k steps take too long for the suite on a 2-core CPU",
         )
     },
 }

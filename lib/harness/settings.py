@@ -170,7 +170,10 @@ class EvalSchedule:
 
 
 def config_dict(config: Any) -> dict[str, Any]:
-    """A dataclass config as JSON-ready data; user-supplied functions become their names."""
+    """A dataclass config as JSON-ready data; user-supplied functions become their names.
+    Not a dataclass (a user's algorithm without one): {}."""
+    if not dataclasses.is_dataclass(config):
+        return {}
 
     def plain(value):
         if isinstance(value, (bool, int, float, str)) or value is None:

@@ -368,7 +368,7 @@ def test_resume_keeps_the_runs_own_settings(capsys, tmp_path, monkeypatch, ppo_s
     (run / "config.json").write_text(json.dumps(info))
     checkpoints.save(run / "checkpoints", 64, ppo_state)
     seen = []
-    monkeypatch.setattr(ppo, "train", lambda config, task, settings: (seen.append(settings), (None, {}))[1])
+    monkeypatch.setattr(training, "run", lambda algorithm, task, settings, hp: (seen.append(settings), (None, {}))[1])
     cli.main(["train", "ppo", ENV, "--resume", str(run), "--no-video"])
     cli.main(["train", "ppo", ENV, "--resume", str(run), "--seed", "5"])
     assert [(s.seed, s.eval_envs, s.updates_per_chunk, s.resume) for s in seen] == [(3, 2, 1, True), (5, 2, 1, True)]
@@ -379,9 +379,13 @@ def test_schedule_and_render_flags_reach_the_settings_and_a_resume_keeps_them(tm
     """KSim's validation, logging and render options on the command line; a resumed run
     keeps what it started with (config.json) unless the flag is given again."""
     seen, configs = [], []
-    monkeypatch.setattr(
-        ppo, "train", lambda config, task, settings: (seen.append(settings), configs.append(config), (None, {}))[2]
-    )
+
+    def run(algorithm, task, settings, hyperparams):
+        seen.append(settings)
+        configs.append(algorithm.config)
+        return None, {}
+
+    monkeypatch.setattr(training, "run", run)
     run = tmp_path / "run"
     cli.main(
         [
