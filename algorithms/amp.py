@@ -435,6 +435,9 @@ def train(
     return jax.lax.scan(lambda s, _: update(config, task, s, components), state, None, length=config.num_updates)
 
 
+# One value per (config, pieces): the harness caches compiles by the value's functions, so
+# two runs of equal settings in one process share them.
+@functools.lru_cache(maxsize=32)
 def make(
     config: Config,
     *,
