@@ -22,7 +22,6 @@ __all__ = [
     "parse_assignments",
     "algorithm_module",
     "build_algorithm",
-    "build_config",
     "build_planner",
     "episode_steps",
     "slug",
@@ -77,25 +76,6 @@ def algorithm_module(name: str, choices: tuple[str, ...] = ALGORITHMS) -> Module
     if name not in choices:
         raise UsageError(f"unknown algorithm {name!r}; choices: {', '.join(choices)}")
     return importlib.import_module(f"mjzoo.algorithms.{name}")
-
-
-def build_config(module: ModuleType, spec: str, overrides: dict[str, Any], what: str = "--config") -> Any:
-    """The algorithm's Config: its defaults, then the task's, then `overrides` (from the
-    command line or a saved config.json, whose user-supplied pieces cannot be rebuilt),
-    each checked against its field's type first: ppo.Config compares, e.g., a string
-    learning rate with 0 and fails without naming it."""
-    hints = typing.get_type_hints(module.Config)
-    fields = [f.name for f in dataclasses.fields(module.Config)]
-    overrides = {k: v for k, v in overrides.items() if not str(v).startswith("<custom")}
-    values = {**mjzoo.envs.hyperparameters(spec, module.__name__.split(".")[-1]), **overrides}
-    unknown = sorted(set(values) - set(fields))
-    if unknown:
-        raise UsageError(f"{what}: unknown field(s) {unknown}; fields: {sorted(fields)}")
-    for name, value in values.items():
-        values[name] = _as_type(value, hints[name])
-        if values[name] is _MISMATCH:
-            raise UsageError(f"{what}: {name}={value!r} must be {_describe(hints[name])}")
-    return module.Config(**values)
 
 
 def build_planner(module: ModuleType, spec: str, overrides: dict[str, Any], what: str = "--config") -> tuple[Any, Any]:

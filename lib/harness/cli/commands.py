@@ -23,7 +23,6 @@ from mjzoo.harness.cli.arguments import (
     algorithm_module,
     at_least_one,
     build_algorithm,
-    build_config,
     build_planner,
     checking,
     episode_steps,
