@@ -1,15 +1,18 @@
 """Adversarial Motion Priors (Peng et al., 2021): PPO whose reward adds a style term, the
 judgment of a discriminator trained to tell the policy's motion from a reference's.
 
-    task = mjzoo.motion.with_reference(task, mjzoo.motion.reference(clips, task.mj_model, dt))
+    reference = mjzoo.motion.reference(clips, task.mj_model, dt)  # or mjzoo.envs.reference(spec, task)
     config, hyperparams = amp.configure(num_envs=256, total_steps=5_000_000, task_weight=0.0)  # style only
-    state = amp.init(config, task, hyperparams, jax.random.key(0))
+    state = amp.init(config, task, reference, hyperparams, jax.random.key(0))
     state, metrics = jax.jit(amp.update, static_argnums=0)(config, task, state)
-    mjzoo.harness.training.run(amp.make(config), task, settings, hyperparams)  # with files, as PPO
+    mjzoo.harness.training.run(amp.make(config, reference), task, settings, hyperparams)  # with files, as PPO
     act = amp.policy(config, task)            # deployable: act(amp.policy_params(state), obs, key)
 
-The task carries its reference (`Task.motion`, a `mjzoo.motion.Reference` at the task's
-control rate). Each `update`, one jit:
+AMP is given its reference (a `mjzoo.motion.Reference` at the task's control rate):
+the task knows nothing of it. `init` stores it in the train state, as it stores the
+hyperparameters, so its arrays are ordinary leaves: `update` reads them from the state,
+another clip of the same shape compiles nothing new, and a checkpoint records what the
+run imitated. Each `update`, one jit:
 
 1. `ppo.rollout` on the task observed through `learning.with_feature_window`: each
    state's observation is ``{"policy": the task's own, "motion": [num_frames, F]}``,
@@ -180,6 +183,9 @@ class TrainState:
       disc_stats: running statistics of discriminator inputs ([num_frames, F]).
       replay: `learning.replay.Replay` of past policy windows [replay_size, num_frames, F].
       hyperparams: AMP's `Hyperparams` (float32 leaves), PPO's among them.
+      reference: the `mjzoo.motion.Reference` the discriminator learns from (qpos
+        [frames, nq], qvel [frames, nv] at the task's control rate); `update` reads it
+        here, never from the task.
     """
 
     ppo: ppo.TrainState
@@ -188,6 +194,7 @@ class TrainState:
     disc_stats: normalization.RunningStats
     replay: replay.Replay
     hyperparams: Hyperparams
+    reference: motion.Reference
 
     @property
     def updates(self) -> Array:
@@ -218,13 +225,24 @@ def style_task(config: Config, task: Task) -> Task:
     return motion_features.with_feature_window(task, _features(config, task), config.num_frames)
 
 
-def _reference(task: Task) -> motion.Reference:
-    if not isinstance(task.motion, motion.Reference):
-        raise ValueError(
-            "amp: the task has no motion reference to imitate; attach one with "
-            "mjzoo.motion.with_reference(task, mjzoo.motion.reference(clips, task.mj_model, dt))"
+def _checked_reference(who: str, task: Task, reference: Any) -> motion.Reference:
+    """`reference`, or a TypeError saying how to give AMP one (it is AMP's data: the task
+    holds none). Widths are checked here; the control step is `motion.check_reference`'s
+    (it compiles a step, so it is the caller's choice)."""
+    if not isinstance(reference, motion.Reference):
+        raise TypeError(
+            f"{who}: AMP needs a motion reference to imitate, got {type(reference).__name__}; give one: "
+            "amp.make(config, reference) or amp.init(config, task, reference, ...), with reference = "
+            "mjzoo.motion.reference(clips, task.mj_model, dt) or, for a registered env, "
+            "mjzoo.envs.reference(spec, task)"
         )
-    return task.motion
+    m = task.mj_model
+    if reference.qpos.shape[-1] != m.nq or reference.qvel.shape[-1] != m.nv:
+        raise ValueError(
+            f"{who}: the reference has nq={reference.qpos.shape[-1]}, nv={reference.qvel.shape[-1]} "
+            f"but the task's model nq={m.nq}, nv={m.nv}"
+        )
+    return reference
 
 
 def _discriminator(config: Config) -> networks.Network:
@@ -245,10 +263,13 @@ def _logit(config: Config) -> Callable[[Any, Array], Array]:
     return lambda params, window: net.apply(params, window.reshape(-1))
 
 
-def reference_windows(config: Config, task: Task, template: Any, key: Array, num: int) -> Array:
-    """`num` windows [num, num_frames, F] cut at random from the task's reference (clips
-    by weight, starts uniform), featurized by the function the simulation's are."""
-    ref = _reference(task)
+def reference_windows(
+    config: Config, task: Task, reference: motion.Reference, template: Any, key: Array, num: int
+) -> Array:
+    """`num` windows [num, num_frames, F] cut at random from `reference` (clips by
+    weight, starts uniform), featurized on `task`'s model by the function the
+    simulation's are."""
+    ref = reference
     frame_features = motion_features.frames_features(_features(config, task), task.model, template, ref.qpos, ref.qvel)
     clip, start = jax.vmap(lambda k: motion.sample_frame(ref, k, config.num_frames))(jax.random.split(key, num))
     index = jax.vmap(lambda c, t: motion.frame_index(ref, c, t + jnp.arange(config.num_frames)))(clip, start)
@@ -262,14 +283,15 @@ def reference_windows(config: Config, task: Task, template: Any, key: Array, num
 def init(
     config: Config,
     task: Task,
+    reference: motion.Reference,
     hyperparams: Hyperparams,
     key: Array,
     components: ppo.Components = ppo.NO_COMPONENTS,
 ) -> TrainState:
     """A fresh train state: PPO's (on `style_task`), the discriminator, an empty replay,
-    and `hyperparams`, which `update` reads from it."""
+    and `reference` and `hyperparams`, which `update` reads from it."""
     ppo_key, disc_key = jax.random.split(key)
-    _reference(task)
+    reference = _checked_reference("amp.init", task, reference)
     hyperparams = hyperparams_lib.as_leaves(hyperparams)
     ppo_state = ppo.init(_ppo(config), style_task(config, task), hyperparams.ppo, ppo_key, components=components)
     window = jax.tree.map(lambda x: x[0], ppo_state.collector.env_state.obs["motion"])  # [num_frames, F]
@@ -281,6 +303,7 @@ def init(
         disc_stats=normalization.init_stats(window),
         replay=replay.create(config.replay_size, window),
         hyperparams=hyperparams,
+        reference=reference,
     )
 
 
@@ -291,7 +314,7 @@ def update(
     config: Config, task: Task, train_state: TrainState, components: ppo.Components = ppo.NO_COMPONENTS
 ) -> tuple[TrainState, dict[str, Array]]:
     """One AMP update (see the module docstring): collect, style reward, PPO, discriminator,
-    with the state's hyperparameters. Jit it with `config` static; `task` and
+    with the state's hyperparameters and reference. Jit it with `config` static; `task` and
     `train_state` are ordinary arguments."""
     ts, pcfg, windowed, hp = train_state, _ppo(config), style_task(config, task), train_state.hyperparams
     ts = ts.replace(ppo=ts.ppo.replace(hyperparams=hp.ppo))  # AMP's hold PPO's: one source of the numbers
@@ -331,7 +354,7 @@ def _learn_discriminator(
         ts.replay, windows.reshape((t * n,) + windows.shape[2:]), insert_key, hp.replay_keep_probability
     )
     replayed = replay.sample(buffer, replay_key, t * n).reshape(windows.shape)
-    reference = reference_windows(config, task, template, reference_key, t * n).reshape(windows.shape)
+    reference = reference_windows(config, task, ts.reference, template, reference_key, t * n).reshape(windows.shape)
     stats = normalization.update_stats(ts.disc_stats, windows, num_batch_dims=2)
     stats = normalization.update_stats(stats, reference, num_batch_dims=2)
     logit = _logit(config)
@@ -424,6 +447,7 @@ def diagnose(history: Sequence[dict[str, float]], chunks: int = 3) -> str | None
 def train(
     config: Config,
     task: Task,
+    reference: motion.Reference,
     hyperparams: Hyperparams,
     key: Array,
     components: ppo.Components = ppo.NO_COMPONENTS,
@@ -431,28 +455,63 @@ def train(
     """A whole run, `init` then `config.num_updates` `update`s in one `lax.scan`, as
     `ppo.train`: jit it with `config` static, vmap it over hyperparameters and keys.
     Returns (final TrainState, per-update metrics, each [num_updates])."""
-    state = init(config, task, hyperparams, key, components=components)
+    state = init(config, task, reference, hyperparams, key, components=components)
     return jax.lax.scan(lambda s, _: update(config, task, s, components), state, None, length=config.num_updates)
 
 
-# One value per (config, pieces): the harness caches compiles by the value's functions, so
-# two runs of equal settings in one process share them.
-@functools.lru_cache(maxsize=32)
 def make(
     config: Config,
+    reference: motion.Reference,
     *,
     policy_network: networks.Network | networks.RecurrentNetwork | None = None,
     value_network: networks.Network | None = None,
     optimizer: optax.GradientTransformation | Callable[[Any], optax.GradientTransformation] | None = None,
 ) -> Algorithm:
-    """AMP as a value (`mjzoo.learning.Algorithm`), as `ppo.make`; its `diagnose` warns
-    when the discriminator has won."""
+    """AMP as a value (`mjzoo.learning.Algorithm`), as `ppo.make`, imitating `reference`
+    (a `mjzoo.motion.Reference`; e.g. `mjzoo.envs.reference(spec, task)`); its
+    `diagnose` warns when the discriminator has won.
+
+    Only `init` binds the reference (it puts it in the train state); `update`,
+    `evaluate` and `policy` read it from the state or need none, so they come from a
+    cache keyed by (config, pieces), as `ppo.make`'s: the harness caches compiles by
+    those functions, so runs of equal settings in one process share them, whatever
+    clip each imitates. A reference's arrays are not hashable, so `make` itself is not
+    memoized; its `init` compiles once per value."""
+    if not isinstance(reference, motion.Reference):
+        raise TypeError(
+            f"amp.make: AMP needs a motion reference to imitate, got {type(reference).__name__}; give one: "
+            "amp.make(config, reference) with reference = mjzoo.motion.reference(clips, task.mj_model, dt) "
+            "or, for a registered env, mjzoo.envs.reference(spec, task)"
+        )
+    shared = _make(config, policy_network, value_network, optimizer)
     components = ppo.Components(policy_network, value_network, optimizer)
+
+    def bound_init(task: Task, hyperparams: Hyperparams, key: Array) -> TrainState:
+        return init(config, task, reference, hyperparams, key, components=components)
+
+    return shared._replace(init=bound_init)
+
+
+# One value per (config, pieces): the harness caches compiles by the value's functions, so
+# two runs of equal settings in one process share them.
+@functools.lru_cache(maxsize=32)
+def _make(
+    config: Config,
+    policy_network: networks.Network | networks.RecurrentNetwork | None,
+    value_network: networks.Network | None,
+    optimizer: optax.GradientTransformation | Callable[[Any], optax.GradientTransformation] | None,
+) -> Algorithm:
+    """AMP's functions that need no reference; `init` is bound by `make`."""
+    components = ppo.Components(policy_network, value_network, optimizer)
+
+    def unbound_init(task: Task, hyperparams: Hyperparams, key: Array) -> TrainState:
+        raise TypeError("amp: this Algorithm has no reference; make it with amp.make(config, reference)")
+
     return Algorithm(
         name="amp",
         config=config,
         hyperparams=Hyperparams(),
-        init=lambda task, hyperparams, key: init(config, task, hyperparams, key, components=components),
+        init=unbound_init,
         update=lambda task, state: update(config, task, state, components),
         evaluate=lambda task, state, key, num_envs, num_steps=None: evaluate(
             config, task, state, key, num_envs, num_steps, components

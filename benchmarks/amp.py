@@ -58,7 +58,7 @@ from task_overhead import inputs, raw_steps_per_s  # noqa: E402
 
 import mjzoo  # noqa: E402
 import mjzoo.envs  # noqa: E402
-from mjzoo import learning  # noqa: E402
+from mjzoo import learning, motion  # noqa: E402
 from mjzoo.algorithms import amp, ppo  # noqa: E402
 from mjzoo.envs import humanoid_amp  # noqa: E402
 from mjzoo.harness import rendering, training  # noqa: E402
@@ -95,15 +95,17 @@ def recording(algorithm: learning.Algorithm, episodes: list) -> learning.Algorit
     return algorithm._replace(evaluate=evaluate)
 
 
-def measure_episode(style_task: mjzoo.Task, qpos: np.ndarray, terminated: np.ndarray, truncated: np.ndarray) -> dict:
+def measure_episode(
+    reference: motion.Reference, qpos: np.ndarray, terminated: np.ndarray, truncated: np.ndarray
+) -> dict:
     """Style error (steps `STYLE_FROM`.. of the first episode), forward speed, length,
     fall and whether it walks in the teacher's style, of one recorded episode."""
     done = np.flatnonzero(terminated | truncated)
     length = int(done[0]) + 1 if done.size else len(qpos)
     fell = bool(done.size and terminated[done[0]])
     steady = qpos[min(STYLE_FROM, max(length - humanoid_amp.STYLE_WINDOW, 0)) : length]
-    error = humanoid_amp.style_error(style_task, steady, window=min(humanoid_amp.STYLE_WINDOW, len(steady)))
-    speed = humanoid_amp.forward_speed(steady, float(style_task.motion.dt)) if len(steady) > 1 else float("nan")
+    error = humanoid_amp.style_error(reference, steady, window=min(humanoid_amp.STYLE_WINDOW, len(steady)))
+    speed = humanoid_amp.forward_speed(steady, float(reference.dt)) if len(steady) > 1 else float("nan")
     whole = length == len(qpos) and humanoid_amp.walks_like_teacher(error, speed, fell)
     return {
         "style_error": error,
@@ -122,7 +124,7 @@ def train(
     algorithm: learning.Algorithm,
     hyperparams,
     task: mjzoo.Task,
-    style_task: mjzoo.Task,
+    reference: motion.Reference,
     out: Path,
     quick: bool,
     video: bool,
@@ -145,16 +147,16 @@ def train(
     training.run(recording(algorithm, episodes), task, settings, hyperparams)
     total = time.perf_counter() - start
     curve, steps_per_s = training_curve(out / label / "metrics.jsonl", total)
-    measured = [measure_episode(style_task, *episode) for episode in episodes]  # one per chunk, in order
+    measured = [measure_episode(reference, *episode) for episode in episodes]  # one per chunk, in order
     points = [
         {"step": step, "elapsed_s": seconds, "eval_return": ret, **m}
         for (step, seconds, ret), m in zip(curve, measured)
     ]
     first = next((p for p in points if p["walks_like_teacher"]), None)
     qpos = episodes[-1][0]
-    np.savez_compressed(out / label / "final_policy.npz", qpos=qpos, dt=float(style_task.motion.dt))
+    np.savez_compressed(out / label / "final_policy.npz", qpos=qpos, dt=float(reference.dt))
     if video:
-        render(style_task, qpos, out / label / "final_policy.mp4")
+        render(task, qpos, out / label / "final_policy.mp4", float(reference.dt))
     last = measured[-1]
     print(
         f"{label}: {steps_per_s:,.0f} steps/s, final return {curve[-1][2]:.1f}, style {last['style_error']:.3f} rad, "
@@ -174,21 +176,21 @@ def train(
     }
 
 
-def render(task: mjzoo.Task, qpos: np.ndarray, path: Path) -> None:
+def render(task: mjzoo.Task, qpos: np.ndarray, path: Path, dt: float) -> None:
     """The video of an episode's qpos [T, nq] at the task's control rate."""
     config = rendering.with_model_camera(rendering.RenderConfig(), task.mj_model)
-    rendering.render_video(task.mj_model, qpos, path, dt=float(task.motion.dt), config=config)
+    rendering.render_video(task.mj_model, qpos, path, dt=dt, config=config)
     print(f"wrote {path}")
 
 
-def teacher(style_task: mjzoo.Task, path: Path | None) -> dict:
+def teacher(reference: motion.Reference, path: Path | None) -> dict:
     """The teacher's style measures: from its episodes file ([E, T, nq] qpos; the
     reference was cut from episode 0, so 1.. are measured), else `TEACHER`."""
     if path is None:
         return TEACHER
     qpos = np.load(path)["qpos"]
     done = np.zeros(qpos.shape[1], bool)
-    rows = [measure_episode(style_task, q, done, done) for q in qpos[1:]]
+    rows = [measure_episode(reference, q, done, done) for q in qpos[1:]]
     errors = [r["style_error"] for r in rows]
     return {
         "style_error": float(np.mean(errors)),
@@ -252,9 +254,10 @@ def main() -> None:
     parser.add_argument("--render", action="store_true", help="only render the saved final episodes under --out")
     args = parser.parse_args()
     style_task = humanoid_amp.humanoid_amp_walk()
+    reference = humanoid_amp.reference(style_task)  # what AMP imitates and the style is measured against
     if args.render:
         for saved in sorted(args.out.glob("*/final_policy.npz")):
-            render(style_task, np.load(saved)["qpos"], saved.with_suffix(".mp4"))
+            render(style_task, np.load(saved)["qpos"], saved.with_suffix(".mp4"), float(reference.dt))
         return
     device = jax.devices()[0].device_kind
     print(f"device: {device}, jax {jax.__version__}", flush=True)
@@ -272,16 +275,16 @@ def main() -> None:
         "style_threshold_rad": humanoid_amp.STYLE_THRESHOLD,
         "min_speed_m_s": humanoid_amp.MIN_SPEED,
         "style_from_step": STYLE_FROM,
-        "teacher": teacher(style_task, args.teacher_episodes),
+        "teacher": teacher(reference, args.teacher_episodes),
     }
     args.out.mkdir(parents=True, exist_ok=True)
     path = args.out / f"amp_{jax.default_backend()}_{'_'.join(args.trainers)}{'_quick' if args.quick else ''}.json"
     for key, label, algorithm, hyperparams, task in (
         ("ppo", "ppo_walk", ppo.make(ppo_config), ppo_hyperparams, walk),
-        ("amp", "amp_walk", amp.make(amp_config), amp_hyperparams, style_task),
+        ("amp", "amp_walk", amp.make(amp_config, reference), amp_hyperparams, style_task),
     ):
         if key in args.trainers:
-            result[key] = train(label, algorithm, hyperparams, task, style_task, args.out, args.quick, video)
+            result[key] = train(label, algorithm, hyperparams, task, reference, args.out, args.quick, video)
             path.write_text(json.dumps(result, indent=2))  # what is done survives a run cut short
     if len(args.trainers) == 2:
         result["amp_overhead"] = result["ppo"]["steps_per_s"] / result["amp"]["steps_per_s"] - 1.0

@@ -8,9 +8,14 @@ Every function here takes a *task spec*: a registered name, ``package.module:fac
 naming a function whose keyword arguments are the overrides, or ``playground:NAME``, a
 MuJoCo Playground env through `mjzoo.interop.playground` (its config fields the
 overrides; needs ``pip install 'mjzoo[playground]'``). A registered env's record
-(`EnvSpec`, `record(name)`) holds its factory, hyperparameters and planning setup; a
-factory's module may define ``PLANNING`` (a `base.PlanningSetup`) for `mjzoo plan`;
-Playground envs plan with `PLAYGROUND_PLANNING`.
+(`EnvSpec`, `record(name)`) holds its factory, hyperparameters, planning setup and,
+for AMP, the motion to imitate (`reference`); a factory's module may define
+``PLANNING`` (a `base.PlanningSetup`) for `mjzoo plan` and ``REFERENCE`` (a function
+``(task, **overrides) -> mjzoo.motion.Reference``, as `EnvSpec.reference`) for
+`mjzoo train amp`; Playground envs plan with `PLAYGROUND_PLANNING`.
+
+    task = mjzoo.envs.make("humanoid_amp_walk", ctrl_dt=0.01)
+    reference = mjzoo.envs.reference("humanoid_amp_walk", task, ctrl_dt=0.01)  # for amp.make
 
 Every task comes truncated after its episode length and guarded against diverging
 physics; overrides change weights, targets, episode length and physics options
@@ -31,7 +36,7 @@ from typing import TYPE_CHECKING, Any, Callable
 
 import numpy as np
 
-from mjzoo import physics
+from mjzoo import motion, physics
 from mjzoo.envs import base, cartpole, cylinder_push, humanoid_amp, joystick, locomotion, pendulum, point_mass, teachers
 from mjzoo.running import control_dt
 from mjzoo.types import Task
@@ -54,6 +59,7 @@ __all__ = [
     "hyperparameters",
     "planning",
     "closed_loop_problem",
+    "reference",
     "PLAYGROUND",
     "PLAYGROUND_PLANNING",
 ]
@@ -222,6 +228,34 @@ def closed_loop_problem(
         backend=backend,
         hyperparams=hyperparams,
     )
+
+
+def reference(spec: str, task: Task, **overrides: Any) -> motion.Reference:
+    """The motion AMP imitates on `task`, which ``make(spec, **overrides)`` built: a
+    registered env's `EnvSpec.reference`, or a user module's ``REFERENCE`` (a function
+    ``(task, **overrides) -> mjzoo.motion.Reference`` beside the factory), called with
+    the task and the same overrides. KeyError (registered envs) or ValueError (a user's
+    module, a Playground env) naming where a reference comes from if there is none."""
+    factory(spec)
+    if _is_playground(spec):
+        raise ValueError(f"{spec}: Playground's envs have no motion reference; AMP needs one (amp.make(config, ref))")
+    if _is_user(spec):
+        module_name = spec.partition(":")[0]
+        build = getattr(importlib.import_module(module_name), "REFERENCE", None)
+        if build is None:
+            raise ValueError(
+                f"{spec}: module {module_name!r} defines no REFERENCE, the function (task, **overrides) -> "
+                "mjzoo.motion.Reference that AMP imitates; define one beside the factory"
+            )
+    else:
+        build = _REGISTRY[spec].reference
+        if build is None:
+            imitated = sorted(name for name, entry in _REGISTRY.items() if entry.reference is not None)
+            raise KeyError(f"{spec!r} has no motion reference for AMP; envs with one: {imitated}")
+    ref = build(task, **overrides)
+    if not isinstance(ref, motion.Reference):
+        raise TypeError(f"{spec}: its reference function returned {type(ref).__name__}, not a mjzoo.motion.Reference")
+    return ref
 
 
 def hyperparameters(spec: str, algorithm: str) -> dict[str, Any]:

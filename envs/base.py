@@ -13,6 +13,7 @@ from typing import Any, Callable
 import numpy as np
 
 from mjzoo import physics as physics_lib
+from mjzoo.motion import Reference
 from mjzoo.planning.closed_loop import Hooks
 from mjzoo.types import Task
 
@@ -98,6 +99,10 @@ class EnvSpec:
       ppo: PPO's config fields that solve it (`mjzoo train ppo NAME`); None: none tuned.
       amp: AMP's config fields (the envs with a motion reference).
       planning: how the sampling planners solve it closed loop; None: not set up.
+      reference: for an env AMP imitates with: ``reference(task, **overrides) ->
+        mjzoo.motion.Reference``, called with the task `make(**overrides)` built and
+        those overrides (it ignores the ones it does not read); `mjzoo.envs.reference`
+        calls it. None: the env has no motion to imitate.
     """
 
     make: Callable[..., Task]
@@ -105,12 +110,15 @@ class EnvSpec:
     ppo: dict[str, Any] | None = None
     amp: dict[str, Any] | None = None
     planning: PlanningSetup | None = None
+    reference: Callable[..., Reference] | None = None
 
     def __post_init__(self):
         if not callable(self.make):
             raise TypeError(f"EnvSpec: make must be a function returning a Task, got {type(self.make).__name__}")
         if self.planning is not None and not isinstance(self.planning, PlanningSetup):
             raise TypeError(f"EnvSpec: planning must be a PlanningSetup, got {type(self.planning).__name__}")
+        if self.reference is not None and not callable(self.reference):
+            raise TypeError(f"EnvSpec: reference must be a function of the task, got {type(self.reference).__name__}")
 
     def hyperparameters(self, algorithm: str) -> dict[str, Any]:
         """Config fields for `algorithm` ("ppo", "amp", or a planner module's name: its

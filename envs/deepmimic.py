@@ -11,8 +11,9 @@ binary wheel, ~100 MB; nothing is compiled).
 
     clips = deepmimic.walk_clips()               # [walk, run] as mjzoo.motion.Clip
     task = deepmimic.walk()                      # alive reward only: AMP adds the style
-    task = motion.with_reference(task, motion.reference(clips, task.mj_model, dt=...))
-    task = deepmimic.walk_amp()                  # that, with the walk clip and RSI: for `AMP`
+    reference = motion.reference(clips, task.mj_model, dt=...)   # AMP's: amp.make(config, reference)
+    task = deepmimic.walk_amp()                  # the walk with RSI from the walk clip: for `AMP`
+    reference = deepmimic.walk_amp_reference(task)   # that clip, looping, at the control step
 
 The model is the URDF in MuJoCo's z-up basis (`mjzoo.motion.deepmimic.to_z_up`):
 x forward, y left, z up; the root a free joint, each spherical joint a ball joint,
@@ -69,6 +70,7 @@ __all__ = [
     "style_error",
     "walk",
     "walk_amp",
+    "walk_amp_reference",
     "walk_clips",
     "WALK_AMP",
 ]
@@ -214,35 +216,42 @@ def walk(
 
 
 def walk_amp(*, reference_init: float = 0.8, episode_steps: int = 300, **overrides: Any) -> Task:
-    """`walk(**overrides)` with the walk clip attached as its reference (`Task.motion`,
-    looping, one frame per control step) and a fraction `reference_init` in [0, 1] of
-    its episodes starting at a clip frame (`resets.reference_state`), for `AMP`."""
+    """`walk(**overrides)` for `AMP` imitating the walk clip (`walk_amp_reference`), a
+    fraction `reference_init` in [0, 1] of its episodes starting at a clip frame
+    (`resets.reference_state`)."""
     task = walk(episode_steps=episode_steps, **overrides)
-    m = task.mj_model
-    # The control step from the options, not `motion.with_reference`'s measured one:
-    # that compiles a step of this humanoid, minutes on a CPU. `walk` has already
-    # checked that ctrl_dt is a whole number of physics steps.
-    dt = float({**OPTIONS, **overrides}["ctrl_dt"])
-    ref = motion.reference(walk_clips(("walk",)), m, dt=dt, loop=True)
     if reference_init:
-        observe = locomotion.free_base_observation(m)
+        ref = walk_amp_reference(task, **overrides)
+        observe = locomotion.free_base_observation(task.mj_model)
         task = resets.with_resets(task, resets.reference_state(ref, reference_init), observe=observe)
-    return task.replace(motion=ref)
+    return task
 
 
-def style_error(task: Task, qpos, window: int = 15) -> float:
+def walk_amp_reference(task: Task, *, ctrl_dt: float = OPTIONS["ctrl_dt"], **_: Any) -> motion.Reference:
+    """The walk clip on `task`'s model (`walk_amp(ctrl_dt=ctrl_dt, ...)`), looping, one
+    frame per control step: what AMP imitates. The control step is the override, not
+    `motion.check_reference`'s measured one: measuring compiles a step of this humanoid,
+    minutes on a CPU (`walk` has checked that it is a whole number of physics steps)."""
+    return motion.reference(walk_clips(("walk",)), task.mj_model, dt=float(ctrl_dt), loop=True)
+
+
+def style_error(task: Task, reference: motion.Reference, qpos, window: int = 15) -> float:
     """The mean knee and elbow angle error (rad) of a run's windows of `window` frames
     (default 0.5 s) to their nearest windows of the task's looping reference (taken
     twice over, so windows across its end exist): `motion.nearest_window_error`.
-    `qpos` [T, nq] of a run of `walk_amp`, T >= `window`."""
-    if not isinstance(task.motion, motion.Reference):
-        raise TypeError("deepmimic.style_error: the task has no motion reference; build it with walk_amp")
+    `qpos` [T, nq] of a run of `walk_amp` (`task`: its model), T >= `window`;
+    `reference` the looping clip (`walk_amp_reference(task)`)."""
+    if not isinstance(reference, motion.Reference):
+        raise TypeError(
+            "deepmimic.style_error: reference must be a motion.Reference (deepmimic.walk_amp_reference(task)), "
+            f"got {type(reference).__name__}"
+        )
     qpos, m = np.asarray(qpos), task.mj_model
     if qpos.ndim != 2 or qpos.shape[1] != m.nq:
         raise ValueError(f"deepmimic.style_error: qpos has shape {qpos.shape}; expected [T, {m.nq}]")
     columns = [m.jnt_qposadr[m.joint(name).id] for name in STYLE_JOINTS]
-    reference = np.concatenate([np.asarray(task.motion.qpos)] * 2)
-    return motion.nearest_window_error(reference, qpos, columns, window)
+    twice = np.concatenate([np.asarray(reference.qpos)] * 2)
+    return motion.nearest_window_error(twice, qpos, columns, window)
 
 
 # --- URDF -> MJCF -------------------------------------------------------------------
@@ -391,4 +400,9 @@ def _fmt(values: np.ndarray) -> str:
     return " ".join(f"{v:.6g}" for v in np.where(np.abs(values) < 1e-12, 0.0, values))
 
 
-WALK_AMP = base.EnvSpec(make=walk_amp, description="the DeepMimic humanoid imitating its walk clip (AMP)", amp=AMP)
+WALK_AMP = base.EnvSpec(
+    make=walk_amp,
+    description="the DeepMimic humanoid imitating its walk clip (AMP)",
+    amp=AMP,
+    reference=walk_amp_reference,
+)

@@ -6,12 +6,13 @@ frames (9 s) at its control step, 0.015 s, cut from step 200 of one episode (pas
 start from rest). The tasks pay no forward velocity: what makes the humanoid walk, and
 walk like the teacher, is AMP's style reward.
 
-    task = humanoid_amp.humanoid_amp_walk()           # task.motion: the walking reference
-    config = amp.Config(**humanoid_amp.AMP)
-    state, _ = amp.train(config, task, out_dir="runs/amp_walk")
+    task = humanoid_amp.humanoid_amp_walk()
+    reference = humanoid_amp.reference(task)          # the walk, at the task's control step
+    config, hyperparams = amp.configure(**humanoid_amp.AMP)
+    state, _ = amp.train(config, task, reference, hyperparams, jax.random.key(0))
     qpos = ...                                        # [T, nq] of a deterministic episode
-    humanoid_amp.style_error(task, qpos)              # rad; < STYLE_THRESHOLD: the teacher's style
-    humanoid_amp.forward_speed(qpos, task.motion.dt)  # m/s; the teacher walks at 1.9
+    humanoid_amp.style_error(reference, qpos)         # rad; < STYLE_THRESHOLD: the teacher's style
+    humanoid_amp.forward_speed(qpos, reference.dt)    # m/s; the teacher walks at 1.9
 
 | task | reward terms (weight) | observation | notes |
 |---|---|---|---|
@@ -81,6 +82,7 @@ __all__ = [
     "hinge_columns",
     "humanoid_amp_joystick",
     "humanoid_amp_walk",
+    "reference",
     "WALK",
     "JOYSTICK",
     "style_error",
@@ -126,37 +128,25 @@ def walk_reference(mj_model: mujoco.MjModel, dt: float) -> motion.Reference:
     return motion.reference(motion.load(REFERENCE_PATH, mj_model, name="walk"), mj_model, dt, loop=False)
 
 
+def reference(task: Task, *, ctrl_dt: float = 0.015, **_: Any) -> motion.Reference:
+    """The walk AMP imitates on `task` (`humanoid_amp_walk(ctrl_dt=ctrl_dt, ...)` or the
+    joystick; the other overrides do not change it): `walk_reference` at `ctrl_dt`.
+    The envs' record (`mjzoo.envs.reference`) calls it with the task's overrides."""
+    return walk_reference(task.mj_model, ctrl_dt)
+
+
 def hinge_columns(mj_model: mujoco.MjModel) -> np.ndarray:
     """int [J] the qpos columns of the model's hinge joints (the humanoid: 17, 7..23)."""
     hinge = mj_model.jnt_type == mujoco.mjtJoint.mjJNT_HINGE
     return np.asarray(mj_model.jnt_qposadr[hinge], np.int64)
 
 
-def _reference_qpos(task_or_reference: Task | motion.Reference, who: str) -> np.ndarray:
-    ref = task_or_reference.motion if isinstance(task_or_reference, Task) else task_or_reference
-    if not isinstance(ref, motion.Reference):
-        raise TypeError(
-            f"{who}: task_or_reference must be a motion.Reference or a Task that carries one "
-            f"(Task.motion), got {type(task_or_reference).__name__} with no reference"
-        )
-    return np.asarray(ref.qpos)
-
-
-def _columns(task_or_reference: Task | motion.Reference, nq: int) -> np.ndarray:
-    """The hinges of the task's model; for a bare Reference, Brax's humanoid's (a free
-    root, then 17 hinges)."""
-    if isinstance(task_or_reference, Task):
-        return hinge_columns(task_or_reference.mj_model)
-    return np.arange(7, nq)
-
-
-def style_error(task_or_reference: Task | motion.Reference, qpos, window: int = STYLE_WINDOW) -> float:
+def style_error(reference: motion.Reference, qpos, window: int = STYLE_WINDOW) -> float:
     """The mean joint-angle error (rad) of `qpos` to the nearest reference windows.
 
     Args:
-      task_or_reference: a Task carrying its reference (`Task.motion`; its model's hinge
-        joints are compared) or a `motion.Reference` of Brax's humanoid (qpos columns
-        7.. compared: everything past the free root).
+      reference: a `motion.Reference` of Brax's humanoid (`reference(task)`); qpos
+        columns 7.. are compared: the 17 hinges past the free root.
       qpos: [T, nq] a simulated episode's positions, T >= `window`.
       window: frames per window.
 
@@ -165,16 +155,21 @@ def style_error(task_or_reference: Task | motion.Reference, qpos, window: int = 
       windows of the smallest mean |angle error| to a window of the reference's frames.
     """
     who = "humanoid_amp.style_error"
-    ref = _reference_qpos(task_or_reference, who)
+    if not isinstance(reference, motion.Reference):
+        raise TypeError(
+            f"{who}: reference must be a motion.Reference (humanoid_amp.reference(task)), "
+            f"got {type(reference).__name__}"
+        )
+    ref = np.asarray(reference.qpos)
     qpos = np.asarray(qpos, np.float64)
     if qpos.ndim != 2 or qpos.shape[1] != ref.shape[1]:
         raise ValueError(f"{who}: qpos has shape {qpos.shape}; expected [T, nq={ref.shape[1]}]")
-    return motion.nearest_window_error(ref, qpos, _columns(task_or_reference, ref.shape[1]), window)
+    return motion.nearest_window_error(ref, qpos, np.arange(7, ref.shape[1]), window)
 
 
 def forward_speed(qpos, dt: float) -> float:
     """The root's mean forward (world +x) speed (m/s) over `qpos` [T, nq] (T >= 2), a
-    frame every `dt` s (the control step; a task with a reference: ``task.motion.dt``)."""
+    frame every `dt` s (the control step; its reference's ``reference.dt``)."""
     qpos = np.asarray(qpos, np.float64)
     if qpos.ndim != 2 or qpos.shape[0] < 2:
         raise ValueError(f"humanoid_amp.forward_speed: qpos has shape {qpos.shape}; expected [T >= 2, nq]")
@@ -208,7 +203,7 @@ def _humanoid(
 ) -> Task:
     """The humanoid started at its pose with joint noise, or (with
     `reference_probability`) at a reference frame, fallen below `min_height` (m), paid
-    alive and the `rewards_` terms, charged effort, with the teacher's walk attached."""
+    alive and the `rewards_` terms, charged effort."""
     m = physics.mj_model
     noise = (
         named(resets.joint_position_noise(m, reset_noise), "reset_noise"),
@@ -227,10 +222,7 @@ def _humanoid(
         time_limit=episode_steps,
         params={"qpos0": reset_pose(m)},
     )
-    # What `motion.with_reference` checks holds by construction (the reference is
-    # resampled to the physics' own ctrl_dt, on this model), and its check compiles a
-    # step of the humanoid (minutes on a CPU): attached directly. The tests check it.
-    return task.replace(motion=reference)
+    return task
 
 
 def _physics(ctrl_dt: float, physics_options: dict[str, Any]) -> physics_lib.Physics:
@@ -250,7 +242,7 @@ def humanoid_amp_walk(
 ) -> Task:
     """Brax's humanoid free to walk, for AMP (module docstring): reward "alive"
     (`alive_weight` per step not fallen) and effort (-`effort_weight` x sum of squared
-    actions), no forward velocity; the teacher's walk attached (`Task.motion`); starts at
+    actions), no forward velocity (AMP's reference: `reference`); starts at
     a reference frame with `reference_probability`, else the default pose with
     U(+-`reset_noise`) joint noise; falls when the torso is below `min_height` (m)."""
     physics = _physics(ctrl_dt, physics_options)
@@ -318,9 +310,15 @@ def humanoid_amp_joystick(
     )
 
 
-WALK = base.EnvSpec(make=humanoid_amp_walk, description="Brax's humanoid walking in a teacher's style (AMP)", amp=AMP)
+WALK = base.EnvSpec(
+    make=humanoid_amp_walk,
+    description="Brax's humanoid walking in a teacher's style (AMP)",
+    amp=AMP,
+    reference=reference,
+)
 JOYSTICK = base.EnvSpec(
     make=humanoid_amp_joystick,
     description="Brax's humanoid following velocity commands in a teacher's style (AMP)",
     amp=JOYSTICK_AMP,
+    reference=reference,
 )

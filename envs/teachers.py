@@ -5,9 +5,11 @@ every two steps). Its closed-loop runs are motion clips like any motion capture:
 policy trained by adversarial motion priors (`mjzoo.algorithms.amp`) on them should
 move like the planner and then act at the price of one network evaluation.
 
-    task = teachers.cartpole_amp_swingup()          # cartpole_swingup + task.motion
-    state, _ = amp.train(amp.Config(**teachers.AMP), task, seed=0)
-    err = teachers.style_error(task, qpos)          # qpos [T, 2] of a run, from hanging
+    task = teachers.cartpole_amp_swingup()          # cartpole_swingup (+ optional clip starts)
+    reference = teachers.reference(task)            # the planner's clip at the control step
+    config, hyperparams = amp.configure(**teachers.AMP)
+    state, _ = amp.train(config, task, reference, hyperparams, jax.random.key(0))
+    err = teachers.style_error(task, reference, qpos)  # qpos [T, 2] of a run, from hanging
 
 The clip ``envs/assets/cartpole_swingup_mppi.npz`` (401 frames at 50 fps, 8 s) is
 episode 3 of MPPI's closed loop on ``cartpole_swingup`` with the env's own planning
@@ -39,6 +41,7 @@ mirrored one), AMP style-only 0.78, AMP half task 0.92, PPO 2.3, random 0.86.
 from __future__ import annotations
 
 from pathlib import Path
+from typing import Any
 
 import jax
 import mujoco
@@ -49,7 +52,15 @@ from mjzoo.catalog import resets
 from mjzoo.envs import base, cartpole
 from mjzoo.types import State, Task
 
-__all__ = ["AMP", "CARTPOLE_CLIP", "STYLE_WINDOW", "cartpole_amp_swingup", "cartpole_clip", "style_error"]
+__all__ = [
+    "AMP",
+    "CARTPOLE_CLIP",
+    "STYLE_WINDOW",
+    "cartpole_amp_swingup",
+    "cartpole_clip",
+    "reference",
+    "style_error",
+]
 
 CARTPOLE_CLIP: Path = base.ASSETS / "cartpole_swingup_mppi.npz"
 STYLE_WINDOW = 25  # frames (0.5 s) per compared window: about one pump of the swing-up
@@ -92,9 +103,9 @@ def cartpole_amp_swingup(
     **physics_options,
 ) -> Task:
     """`cartpole.swingup(...)` (its reward weights, episode length and physics options)
-    with the planner's clip as its reference (`Task.motion`, resampled to one frame per
-    control step, not looping); a fraction `reference_init` in [0, 1] of the episodes
-    starts at a clip frame (`resets.reference_state`), the others hanging."""
+    for AMP with the planner's clip as its reference (`reference`); a fraction
+    `reference_init` in [0, 1] of the episodes starts at a clip frame
+    (`resets.reference_state`), the others hanging."""
     task = cartpole.swingup(
         episode_steps=episode_steps,
         upright_weight=upright_weight,
@@ -104,17 +115,27 @@ def cartpole_amp_swingup(
         ctrl_dt=ctrl_dt,
         **physics_options,
     )
-    ref = motion.reference(cartpole_clip(task.mj_model), task.mj_model, dt=ctrl_dt, loop=False)
     if reference_init:
+        ref = reference(task, ctrl_dt=ctrl_dt)
         task = resets.with_resets(task, resets.reference_state(ref, reference_init), observe=_observe)
-    return motion.with_reference(task, ref)
+    return task
+
+
+def reference(task: Task, *, ctrl_dt: float = 0.02, **_: Any) -> motion.Reference:
+    """The planner's clip (`cartpole_clip`) on `task`'s model, resampled to one frame per
+    control step `ctrl_dt` (the task's, `cartpole_amp_swingup(ctrl_dt=...)`), not
+    looping: what AMP imitates. The envs' record (`mjzoo.envs.reference`) calls it with
+    the task's overrides; the others do not change it."""
+    return motion.reference(cartpole_clip(task.mj_model), task.mj_model, dt=ctrl_dt, loop=False)
 
 
 def _observe(model, state: State) -> jax.Array:
     return cartpole.observe({}, model, state)
 
 
-def style_error(task: Task, qpos, window: int = STYLE_WINDOW, both_ways: bool = True) -> float:
+def style_error(
+    task: Task, reference: motion.Reference, qpos, window: int = STYLE_WINDOW, both_ways: bool = True
+) -> float:
     """How far a run moves from the task's reference, in m and rad averaged over the
     slider and hinge: `motion.nearest_window_error` of the run's windows to their
     nearest reference windows and, with `both_ways`, averaged with that of the
@@ -124,16 +145,20 @@ def style_error(task: Task, qpos, window: int = STYLE_WINDOW, both_ways: bool = 
     (0.16); both ways, the clip's swing and balance must also appear in the run.
 
     Args:
-      task: a task with a reference (`cartpole_amp_swingup`).
+      task: the cart-pole task the run is of (`cartpole_amp_swingup`): its model.
+      reference: the motion to compare with (`reference(task)`).
       qpos: [T, 2] the run's cart position and hinge angle, T >= `window`; the angle
         as simulated (continuous, not wrapped): a pole that spins over the top is
         2 pi away from one that swung up once, as it should be.
       window: frames per compared window.
       both_ways: also measure the reference against the run.
     """
-    if not isinstance(task.motion, motion.Reference):
-        raise TypeError("teachers.style_error: the task has no motion reference; build it with cartpole_amp_swingup")
-    qpos, ref = np.asarray(qpos), np.asarray(task.motion.qpos)
+    if not isinstance(reference, motion.Reference):
+        raise TypeError(
+            "teachers.style_error: reference must be a motion.Reference (teachers.reference(task)), "
+            f"got {type(reference).__name__}"
+        )
+    qpos, ref = np.asarray(qpos), np.asarray(reference.qpos)
     if qpos.ndim != 2 or qpos.shape[1] != task.mj_model.nq:
         raise ValueError(f"teachers.style_error: qpos has shape {qpos.shape}; expected [T, {task.mj_model.nq}]")
     columns = np.arange(task.mj_model.nq)
@@ -144,5 +169,8 @@ def style_error(task: Task, qpos, window: int = STYLE_WINDOW, both_ways: bool = 
 
 
 CARTPOLE_AMP_SWINGUP = base.EnvSpec(
-    make=cartpole_amp_swingup, description="cart-pole swing-up learned from MPPI's runs (AMP)", amp=AMP
+    make=cartpole_amp_swingup,
+    description="cart-pole swing-up learned from MPPI's runs (AMP)",
+    amp=AMP,
+    reference=reference,
 )

@@ -146,10 +146,6 @@ class Task:
         `with_action_repeat`); None: episodes have no limit. A leaf, so tasks with
         other limits share a trace; read it on the host (`int(task.time_limit)`) for a
         static length, e.g. how long evaluation runs.
-      motion: the motion the task's agent should move like (`mjzoo.motion.Reference`:
-        clips at the task's control rate, as JAX arrays), set by
-        `mjzoo.motion.with_reference`; AMP's discriminator learns from it and style
-        measures compare with it. None: the task has none.
     """
 
     model: mjx.Model
@@ -160,7 +156,6 @@ class Task:
     mj_model: mujoco.MjModel = dataclasses.field(metadata=dict(static=True))
     action_dim: int | None = dataclasses.field(default=None, metadata=dict(static=True))
     time_limit: Array | None = None
-    motion: Any = None
 
     def replace(self, **changes: Any) -> "Task":
         return dataclasses.replace(self, **changes)

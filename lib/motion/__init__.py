@@ -1,14 +1,14 @@
 """Motion references: recorded trajectories a policy should move like.
 
 Clips are host data (numpy) checked against the MuJoCo model they were recorded for;
-a `Reference` is the JAX pytree a task holds (`Task.motion`): every clip resampled to
-the task's control step. AMP's discriminator, reference-state initialization
+a `Reference` is a JAX pytree, every clip resampled to a task's control step, that AMP
+is given (`amp.make(config, reference)`), not the task. AMP's discriminator, reference-state initialization
 (`mjzoo.catalog.resets.reference_state`) and style measures read it.
 
     clips        the `Clip` type and its .npz file format (`save`, `load_file`)
     checking     `check` a clip against a model, `load` a checked clip, velocities from positions
     resampling   `resample` to another frame rate (linear, slerp for quaternions)
-    references   the `Reference` pytree, `reference`, `sample_frame`, `frames`, `with_reference`
+    references   the `Reference` pytree, `reference`, `sample_frame`, `frames`, `check_reference`
     formats      public formats: IsaacLab humanoid-AMP .npz (`isaaclab_npz`)
     deepmimic    DeepMimic's motion text files (`deepmimic.load`), y-up to z-up
     measures     style measures: `nearest_window_error`
@@ -19,13 +19,14 @@ from mjzoo.motion.checking import check, load, velocities_from_positions
 from mjzoo.motion.clips import Clip, load_file, save
 from mjzoo.motion.formats import isaaclab_npz
 from mjzoo.motion.measures import nearest_window_error
-from mjzoo.motion.references import Reference, frame_index, frames, reference, sample_frame, with_reference
+from mjzoo.motion.references import Reference, check_reference, frame_index, frames, reference, sample_frame
 from mjzoo.motion.resampling import resample, slerp
 
 __all__ = [
     "Clip",
     "Reference",
     "check",
+    "check_reference",
     "checking",
     "clips",
     "deepmimic",
@@ -45,5 +46,4 @@ __all__ = [
     "save",
     "slerp",
     "velocities_from_positions",
-    "with_reference",
 ]

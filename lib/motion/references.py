@@ -6,7 +6,7 @@ control step and concatenated along one frame axis, with each clip's start, leng
 sampling weight and whether it loops; pure functions index it:
 
     ref = motion.reference([walk, run], mj_model, dt=0.02, weights=[0.8, 0.2])
-    task = motion.with_reference(task, ref)               # task.motion = ref
+    ref = motion.check_reference(task, ref)               # AMP's: amp.make(config, ref)
     clip, t = motion.sample_frame(ref, key, min_remaining=2)
     qpos, qvel = motion.frames(ref, clip, t, 2)           # [2, nq], [2, nv]
 
@@ -33,7 +33,7 @@ from mjzoo.motion.resampling import resample
 from mjzoo.running import control_dt
 from mjzoo.types import Task
 
-__all__ = ["Reference", "reference", "sample_frame", "frame_index", "frames", "with_reference"]
+__all__ = ["Reference", "reference", "sample_frame", "frame_index", "frames", "check_reference"]
 
 Array = jax.Array
 
@@ -130,11 +130,13 @@ def frames(ref: Reference, clip: Array, t: Array, num_frames: int) -> tuple[Arra
     return ref.qpos[index], ref.qvel[index]
 
 
-def with_reference(task: Task, ref: Reference) -> Task:
-    """`task` with ``motion=ref``, once `ref` has a frame per control step of the task
-    (``ref.dt`` == `mjzoo.running.control_dt(task)`, to 1e-6 s) and the widths of its
-    model (nq, nv). Host code: measuring the control step compiles one step of the task."""
-    who = "motion.with_reference"
+def check_reference(task: Task, ref: Reference) -> Reference:
+    """`ref`, once it has a frame per control step of `task` (``ref.dt`` ==
+    `mjzoo.running.control_dt(task)`, to 1e-6 s) and the widths of its model (nq, nv);
+    else a ValueError naming the mismatch. The task is only read: a reference is AMP's
+    data (`amp.make(config, ref)`), not the task's. Host code: measuring the control
+    step compiles one step of the task."""
+    who = "motion.check_reference"
     if not isinstance(ref, Reference):
         raise TypeError(f"{who}: ref must be a motion.Reference (motion.reference(...)), got {type(ref).__name__}")
     m = task.mj_model
@@ -150,4 +152,4 @@ def with_reference(task: Task, ref: Reference) -> Task:
             f"step is {step:.6g} s; build it with motion.reference(clips, mj_model, "
             f"dt={step:.6g})"
         )
-    return task.replace(motion=ref)
+    return ref

@@ -8,6 +8,7 @@ hanging (`sway_clip`), recorded in C MuJoCo.
 
 from __future__ import annotations
 
+import dataclasses
 import json
 import os
 import subprocess
@@ -79,10 +80,14 @@ def sway_clip(
 
 @pytest.fixture(scope="module")
 def swing():
-    """The pendulum task with the sway attached as its reference."""
-    task = mjzoo.envs.make("pendulum_swingup")
-    ref = motion.reference(sway_clip(task), task.mj_model, mjzoo.control_dt(task))
-    return motion.with_reference(task, ref)
+    """The pendulum task AMP learns on."""
+    return mjzoo.envs.make("pendulum_swingup")
+
+
+@pytest.fixture(scope="module")
+def sway(swing):
+    """The sway as AMP's reference, at the task's control step."""
+    return motion.check_reference(swing, motion.reference(sway_clip(swing), swing.mj_model, mjzoo.control_dt(swing)))
 
 
 @pytest.mark.parametrize(
@@ -114,15 +119,26 @@ def test_configure_puts_each_number_where_it_belongs():
     assert hp.disc_max_grad_norm == float("inf") and hp.ppo.max_grad_norm == 1.0
 
 
-def test_a_task_without_a_reference_is_refused():
+def test_the_reference_is_amps_not_the_tasks():
+    """`Task` has no motion field; AMP without a reference says how to give it one."""
+    assert "motion" not in {f.name for f in dataclasses.fields(mjzoo.Task)}
     task = mjzoo.envs.make("pendulum_swingup")
-    with pytest.raises(ValueError, match="the task has no motion reference to imitate; attach one with"):
-        amp.init(SMALL, task, HP, jax.random.key(0))
+    how = "AMP needs a motion reference to imitate, got NoneType; give one: amp.make\\(config, reference\\)"
+    with pytest.raises(TypeError, match=how):
+        amp.init(SMALL, task, None, HP, jax.random.key(0))
+    with pytest.raises(TypeError, match=how):
+        amp.make(SMALL, None)
+
+
+def test_a_reference_of_another_model_is_refused(swing, sway):
+    cartpole = mjzoo.envs.make("cartpole_swingup")
+    with pytest.raises(ValueError, match="the reference has nq=1, nv=1 but the task's model nq=2, nv=2"):
+        amp.init(SMALL, cartpole, sway, HP, jax.random.key(0))
 
 
 @pytest.fixture(scope="module")
-def started(swing):
-    return amp.init(SMALL, swing, HP, jax.random.key(0))
+def started(swing, sway):
+    return amp.init(SMALL, swing, sway, HP, jax.random.key(0))
 
 
 @pytest.fixture(scope="module")
@@ -142,6 +158,8 @@ def test_update_is_one_jit_that_does_not_retrace(swing, started, small_update):
     state, metrics = update(swing, state)
     other = swing.with_params(upright_weight=2.0)  # a changed number is a leaf: no retrace
     state, metrics = update(other, state)
+    # another clip of the same shape is a leaf of the state too: no retrace
+    update(other, state.replace(reference=dataclasses.replace(state.reference, qpos=0.5 * state.reference.qpos)))
     assert len(traces) == 1
     assert int(state.updates) == 3
     for name in (
@@ -174,10 +192,12 @@ def test_the_policy_sees_the_tasks_observation_and_the_discriminator_the_window(
     assert action.shape == (1,) and -1.0 <= float(action[0]) <= 1.0
 
 
-def test_reference_windows_are_consecutive_frames_featurized_like_the_simulation(swing, started):
+def test_reference_windows_are_consecutive_frames_featurized_like_the_simulation(swing, sway, started):
     template = jax.tree.map(lambda x: x[0], started.ppo.collector.env_state.data)
-    windows = jax.jit(amp.reference_windows, static_argnums=(0, 4))(SMALL, swing, template, jax.random.key(3), 256)
-    ref = swing.motion
+    windows = jax.jit(amp.reference_windows, static_argnums=(0, 5))(
+        SMALL, swing, sway, template, jax.random.key(3), 256
+    )
+    ref = sway
     assert windows.shape == (256, 2, 2)
     # every window is (angle, velocity) of two consecutive reference frames, velocity per second
     frames = np.stack([np.asarray(ref.qpos[:, 0]), np.asarray(ref.qvel[:, 0])], axis=-1)
@@ -193,10 +213,10 @@ def test_reference_windows_are_consecutive_frames_featurized_like_the_simulation
     np.testing.assert_allclose(np.stack(simulated), frames[5:7], atol=1e-6)
 
 
-def test_seeds_vmap(swing):
+def test_seeds_vmap(swing, sway):
     """Several seeds train in one program: init and update vmapped over keys."""
     keys = jax.random.split(jax.random.key(0), 2)
-    states = jax.vmap(lambda k: amp.init(SMALL, swing, HP, k))(keys)
+    states = jax.vmap(lambda k: amp.init(SMALL, swing, sway, HP, k))(keys)
     states, metrics = jax.jit(jax.vmap(lambda s: amp.update(SMALL, swing, s)))(states)
     assert metrics["disc/loss"].shape == (2,)
     assert not np.allclose(states.disc_params[0]["kernel"][0], states.disc_params[0]["kernel"][1])
@@ -211,8 +231,8 @@ def test_diagnose_warns_when_the_discriminator_has_won():
     assert amp.diagnose([{"disc/accuracy_reference": 1.0, "disc/accuracy_policy": 0.2}] * 3) is None
 
 
-def test_train_writes_the_discriminators_diagnostics_and_warns_once(swing, tmp_path):
-    algorithm = amp.make(SMALL)._replace(
+def test_train_writes_the_discriminators_diagnostics_and_warns_once(swing, sway, tmp_path):
+    algorithm = amp.make(SMALL, sway)._replace(
         diagnose=lambda history: "amp: the discriminator has won" if len(history) >= 1 else None
     )
     settings = training.Settings(
@@ -255,8 +275,8 @@ def test_two_devices_give_one_devices_result():
         from mjzoo.harness import devices, training
         from tests.algorithms.test_amp import HP, SMALL, sway_clip
         task = mjzoo.envs.make("pendulum_swingup")
-        task = motion.with_reference(task, motion.reference(sway_clip(task), task.mj_model, mjzoo.control_dt(task)))
-        state = amp.init(SMALL, task, HP, jax.random.key(0))
+        ref = motion.reference(sway_clip(task), task.mj_model, mjzoo.control_dt(task))
+        state = amp.init(SMALL, task, ref, HP, jax.random.key(0))
         one = jax.jit(amp.update, static_argnums=0)(SMALL, task, jax.device_put(state, jax.devices()[0]))[0]
         sharded = training.shard_envs(state, amp.PER_ENV_FIELDS)
         assert len(sharded.ppo.collector.start.sharding.device_set) == 2

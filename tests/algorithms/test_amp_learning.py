@@ -53,7 +53,7 @@ PPO, PPO_HP = ppo.configure(
 )
 
 
-def style_errors(task: mjzoo.Task, act, params, seed: int = 1) -> list[float]:
+def style_errors(task: mjzoo.Task, reference: motion.Reference, act, params, seed: int = 1) -> list[float]:
     """The style measure of 4 deterministic episodes of `act(params, obs, key)`."""
 
     def episode(key):
@@ -61,20 +61,20 @@ def style_errors(task: mjzoo.Task, act, params, seed: int = 1) -> list[float]:
         return trajectory.next_state.data.qpos
 
     qpos = np.asarray(jax.jit(jax.vmap(episode))(jax.random.split(jax.random.key(seed), 4)))
-    return [motion.nearest_window_error(np.asarray(task.motion.qpos), q[100:], [0], 10) for q in qpos]
+    return [motion.nearest_window_error(np.asarray(reference.qpos), q[100:], [0], 10) for q in qpos]
 
 
 @pytest.mark.filterwarnings("ignore::mjzoo.learning.TrainingWarning")
 def test_style_alone_teaches_the_reference_motion():
     task = mjzoo.envs.make("pendulum_swingup")
-    task = motion.with_reference(task, motion.reference(sway_clip(task), task.mj_model, mjzoo.control_dt(task)))
+    reference = motion.reference(sway_clip(task), task.mj_model, mjzoo.control_dt(task))
 
     settings = training.Settings(updates_per_chunk=20, eval_envs=2, eval_steps=10, video=False, progress=False)
-    state, _ = training.run(amp.make(AMP), task, settings, AMP_HP)
-    learned = style_errors(task, amp.policy(AMP, task), amp.policy_params(state))
-    hanging = style_errors(task, lambda params, obs, key: jnp.zeros(1), None)
+    state, _ = training.run(amp.make(AMP, reference), task, settings, AMP_HP)
+    learned = style_errors(task, reference, amp.policy(AMP, task), amp.policy_params(state))
+    hanging = style_errors(task, reference, lambda params, obs, key: jnp.zeros(1), None)
     state, _ = training.run(ppo.make(PPO), task, settings, PPO_HP)
-    task_reward = style_errors(task, ppo.policy(PPO, task), ppo.policy_params(state))
+    task_reward = style_errors(task, reference, ppo.policy(PPO, task), ppo.policy_params(state))
 
     assert max(hanging) > 0.15  # hanging is ~0.2 rad from every reference window
     assert max(learned) < 0.5 * min(hanging), (learned, hanging)

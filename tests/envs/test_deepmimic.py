@@ -171,14 +171,19 @@ def amp_task(model):
     return deepmimic.walk_amp()
 
 
-def test_walk_amp_carries_the_walk_clip_at_the_control_step(amp_task, clips):
-    ref, m = amp_task.motion, amp_task.mj_model
+@pytest.fixture(scope="module")
+def amp_reference(amp_task):
+    return deepmimic.WALK_AMP.reference(amp_task)
+
+
+def test_walk_amps_reference_is_the_walk_clip_at_the_control_step(amp_task, amp_reference, clips):
+    ref, m = amp_reference, amp_task.mj_model
     assert isinstance(ref, motion.Reference) and ref.names == ("walk",) and bool(ref.loop[0])
     assert float(ref.dt) == pytest.approx(1 / 30) == pytest.approx(8 * m.opt.timestep)  # 8 physics steps
     walk = clips["walk"]  # 39 frames at 30.0012 fps (1.2666 s): 38 at 30 fps
     assert ref.qpos.shape == (int(walk.duration * 30) + 1, m.nq)
     np.testing.assert_allclose(ref.qpos[0], walk.qpos[0], atol=1e-6)
-    assert float(deepmimic.walk_amp(ctrl_dt=1 / 60, reference_init=0.0).motion.dt) == pytest.approx(1 / 60)
+    assert float(deepmimic.walk_amp_reference(amp_task, ctrl_dt=1 / 60).dt) == pytest.approx(1 / 60)
     for body in deepmimic.AMP["key_bodies"]:
         m.body(body)  # KeyError if the model lacks one
 
@@ -194,11 +199,13 @@ def test_walk_amp_resets_from_the_clip_and_traces(amp_task):
     assert amp.configure(**deepmimic.AMP)[1].task_weight == 0.0
 
 
-def test_walk_amp_style_error(amp_task, clips):
+def test_walk_amp_style_error(amp_task, amp_reference, clips):
     walk = clips["walk"].qpos
-    assert deepmimic.style_error(amp_task, walk) < 1e-3  # the clip itself, against its resampled frames
-    assert deepmimic.style_error(amp_task, np.roll(walk, 10, axis=0)) < 0.01  # a loop: any phase (0.006: the seam)
+    assert deepmimic.style_error(amp_task, amp_reference, walk) < 1e-3  # the clip itself, against its resampled frames
+    assert (
+        deepmimic.style_error(amp_task, amp_reference, np.roll(walk, 10, axis=0)) < 0.01
+    )  # a loop: any phase (0.006: the seam)
     still = np.tile(walk[:1], (30, 1))  # frozen in the first frame: the knees' and elbows' swing is missed
-    assert deepmimic.style_error(amp_task, still) > 0.1  # 0.15 rad
+    assert deepmimic.style_error(amp_task, amp_reference, still) > 0.1  # 0.15 rad
     with pytest.raises(ValueError, match="qpos has shape"):
-        deepmimic.style_error(amp_task, walk[:, :5])
+        deepmimic.style_error(amp_task, amp_reference, walk[:, :5])

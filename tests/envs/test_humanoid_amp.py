@@ -1,4 +1,4 @@
-"""The humanoid AMP tasks (envs/humanoid_amp.py): construction, the reference they carry,
+"""The humanoid AMP tasks (envs/humanoid_amp.py): construction, the reference AMP imitates,
 the style measure by hand, and the start from a reference frame.
 
 One compile of the humanoid in this file (a jitted reset, shared by the tasks of both
@@ -12,6 +12,7 @@ import numpy as np
 import pytest
 
 import mjzoo
+import mjzoo.envs
 from mjzoo import motion
 from mjzoo.algorithms import amp
 from mjzoo.envs import humanoid_amp as ha
@@ -20,6 +21,12 @@ from mjzoo.envs import humanoid_amp as ha
 @pytest.fixture(scope="module")
 def walk():
     return ha.humanoid_amp_walk()
+
+
+@pytest.fixture(scope="module")
+def walk_ref(walk):
+    """The walk's reference as `mjzoo train amp` finds it: through the env's record."""
+    return mjzoo.envs.reference("humanoid_amp_walk", walk)
 
 
 @pytest.fixture(scope="module")
@@ -55,10 +62,10 @@ def _reference(qpos, dt=0.5) -> motion.Reference:
 # --- the reference --------------------------------------------------------------------
 
 
-def test_the_walk_carries_the_teachers_clip_at_its_control_step(walk, joystick):
+def test_the_walks_reference_is_the_teachers_clip_at_its_control_step(walk, walk_ref, joystick):
     clip = np.load(ha.REFERENCE_PATH)
-    for task in (walk, joystick):
-        ref = task.motion
+    assert "motion" not in vars(walk)  # AMP's data, not the task's
+    for task, ref in ((walk, walk_ref), (joystick, mjzoo.envs.reference("humanoid_amp_joystick", joystick))):
         assert isinstance(ref, motion.Reference) and ref.names == ("walk",)
         # 601 frames at the control step already: resampling keeps them, up to the file's fps
         # (66.666664, float32) against 1 / 0.015 (a 4e-8 relative time shift).
@@ -68,14 +75,18 @@ def test_the_walk_carries_the_teachers_clip_at_its_control_step(walk, joystick):
         # The control step: 5 physics steps of 3 ms.
         assert float(ref.dt) == pytest.approx(5 * task.mj_model.opt.timestep)
     assert list(ha.hinge_columns(walk.mj_model)) == list(range(7, 24))
+    # another control step (an override of the task) resamples it: the same overrides as the task's
+    assert float(mjzoo.envs.reference("humanoid_amp_walk", walk, ctrl_dt=0.03).dt) == pytest.approx(0.03)
+    with pytest.raises(KeyError, match="'humanoid_walk' has no motion reference for AMP; envs with one: "):
+        mjzoo.envs.reference("humanoid_walk", walk)
 
 
-def test_a_reset_with_probability_one_starts_exactly_at_a_reference_frame(walk, resets):
+def test_a_reset_with_probability_one_starts_exactly_at_a_reference_frame(walk, walk_ref, resets):
     always, never = resets
     frame = int(always.info["reference_frame"])
     assert int(always.info["reference_clip"]) == 0 and 0 <= frame < 601
-    np.testing.assert_allclose(always.data.qpos, walk.motion.qpos[frame], atol=1e-6)
-    np.testing.assert_allclose(always.data.qvel, walk.motion.qvel[frame], atol=1e-6)
+    np.testing.assert_allclose(always.data.qpos, walk_ref.qpos[frame], atol=1e-6)
+    np.testing.assert_allclose(always.data.qvel, walk_ref.qvel[frame], atol=1e-6)
     # The observation is recomputed from that state: base height first.
     assert always.obs[0] == pytest.approx(float(always.data.xpos[1, 2]), abs=1e-5)
     # Probability 0: the default pose (hinges at 0, or the nearest end of a range that excludes
@@ -125,15 +136,15 @@ def test_style_error_by_hand_on_a_small_reference():
     assert ha.style_error(ref, sim, window=1) == pytest.approx(0.05 / 3, abs=1e-6)
 
 
-def test_the_teachers_own_frames_have_no_style_error_and_an_offset_costs_at_most_itself(walk):
-    qpos = np.asarray(walk.motion.qpos[100:160], np.float64)
-    assert ha.style_error(walk, qpos) == pytest.approx(0.0, abs=1e-6)
+def test_the_teachers_own_frames_have_no_style_error_and_an_offset_costs_at_most_itself(walk_ref):
+    qpos = np.asarray(walk_ref.qpos[100:160], np.float64)
+    assert ha.style_error(walk_ref, qpos) == pytest.approx(0.0, abs=1e-6)
     moved = qpos.copy()
     moved[:, :7] += 3.0  # the root is not compared
-    assert ha.style_error(walk, moved) == pytest.approx(0.0, abs=1e-6)
+    assert ha.style_error(walk_ref, moved) == pytest.approx(0.0, abs=1e-6)
     bent = qpos.copy()
     bent[:, 7:] += 0.2
-    assert 0.0 < ha.style_error(walk, bent) <= 0.2 + 1e-6  # its own window is 0.2 off; a nearer one may exist
+    assert 0.0 < ha.style_error(walk_ref, bent) <= 0.2 + 1e-6  # its own window is 0.2 off; a nearer one may exist
 
 
 def test_forward_speed_and_the_walk_criterion():
@@ -147,14 +158,13 @@ def test_forward_speed_and_the_walk_criterion():
     assert not ha.walks_like_teacher(0.0, ha.MIN_SPEED - 0.01, fell=False)  # marching in place
 
 
-def test_style_measure_errors_name_the_argument(walk):
-    bare = walk.replace(motion=None)
-    with pytest.raises(TypeError, match="task_or_reference"):
-        ha.style_error(bare, np.zeros((20, 24)))
+def test_style_measure_errors_name_the_argument(walk, walk_ref):
+    with pytest.raises(TypeError, match="reference must be a motion.Reference"):
+        ha.style_error(walk, np.zeros((20, 24)))
     with pytest.raises(ValueError, match="qpos"):
-        ha.style_error(walk, np.zeros((20, 23)))
+        ha.style_error(walk_ref, np.zeros((20, 23)))
     with pytest.raises(ValueError, match="window"):
-        ha.style_error(walk, np.zeros((5, 24)))  # shorter than a window of 10
+        ha.style_error(walk_ref, np.zeros((5, 24)))  # shorter than a window of 10
     with pytest.raises(ValueError, match="qpos"):
         ha.forward_speed(np.zeros((1, 24)), 0.015)
     with pytest.raises(ValueError, match="dt"):

@@ -9,6 +9,7 @@ import numpy as np
 import pytest
 
 import mjzoo
+import mjzoo.envs
 from mjzoo import motion
 from mjzoo.envs import cartpole, teachers
 
@@ -16,6 +17,12 @@ from mjzoo.envs import cartpole, teachers
 @pytest.fixture(scope="module")
 def task():
     return teachers.cartpole_amp_swingup()
+
+
+@pytest.fixture(scope="module")
+def reference(task):
+    """AMP's reference, through the env's record, as `mjzoo train amp` finds it."""
+    return mjzoo.envs.reference("cartpole_amp_swingup", task)
 
 
 @pytest.fixture(scope="module")
@@ -37,18 +44,18 @@ def test_clip_is_a_swing_up_that_balances(clip):
     assert np.max(np.abs(np.diff(angle))) < 0.5  # a continuous angle: no wrapping jumps
 
 
-def test_task_carries_the_clip_at_its_control_step(task, clip):
-    ref = task.motion
+def test_the_reference_is_the_clip_at_the_tasks_control_step(task, reference, clip):
+    ref = motion.check_reference(task, reference)  # it measures the control step and the widths
     assert isinstance(ref, motion.Reference) and ref.names == ("cartpole_swingup_mppi",)
-    assert float(ref.dt) == pytest.approx(0.02)  # motion.with_reference checked it is the control step
+    assert float(ref.dt) == pytest.approx(0.02)
     assert not bool(ref.loop[0])
     np.testing.assert_allclose(ref.qpos, clip.qpos, atol=1e-6)  # 50 fps = one frame per 0.02 s step
 
 
-def test_resets_hang_or_start_at_a_clip_frame(task):
+def test_resets_hang_or_start_at_a_clip_frame(reference):
     half = teachers.cartpole_amp_swingup(reference_init=0.5)
     states = jax.jit(jax.vmap(lambda k: mjzoo.reset(half, k)))(jax.random.split(jax.random.key(0), 16))
-    ref, frames = np.asarray(task.motion.qpos), np.asarray(states.info["reference_frame"])
+    ref, frames = np.asarray(reference.qpos), np.asarray(states.info["reference_frame"])
     qpos, obs = np.asarray(states.data.qpos), np.asarray(states.obs)
     from_clip = frames >= 0
     assert 0 < from_clip.sum() < 16 and len(set(frames[from_clip].tolist())) > 1
@@ -59,7 +66,7 @@ def test_resets_hang_or_start_at_a_clip_frame(task):
         teachers.cartpole_amp_swingup(reference_init=1.5)
 
 
-def _with_reference_qpos(task, qpos):
+def _reference_of_qpos(qpos):
     qpos = jnp.asarray(qpos, jnp.float32)
     ref = motion.Reference(
         qpos=qpos,
@@ -71,35 +78,35 @@ def _with_reference_qpos(task, qpos):
         dt=jnp.float32(0.02),
         names=("tiny",),
     )
-    return task.replace(motion=ref)
+    return ref
 
 
 def test_style_error_by_hand(task):
-    tiny = _with_reference_qpos(task, [[0.0, 0.0], [1.0, 1.0], [2.0, 2.0]])
+    tiny = _reference_of_qpos([[0.0, 0.0], [1.0, 1.0], [2.0, 2.0]])
     sim = np.array([[1.0, 1.5], [2.0, 2.5]])
     # window 2, run -> reference: frames 1-2 are nearest, errors (0 + 0.5) per frame over 2 columns
-    assert teachers.style_error(tiny, sim, window=2, both_ways=False) == pytest.approx(0.25)
+    assert teachers.style_error(task, tiny, sim, window=2, both_ways=False) == pytest.approx(0.25)
     # reference -> run: window 0-1 is (1 + 1.5) x 2 / 4 = 1.25 off, window 1-2 0.25: mean 0.75
-    assert teachers.style_error(tiny, sim, window=2) == pytest.approx((0.25 + 0.75) / 2)
+    assert teachers.style_error(task, tiny, sim, window=2) == pytest.approx((0.25 + 0.75) / 2)
     # window 1: each run frame 0.25 from its nearest; reference frames 1.25, 0.25, 0.25 from theirs
-    assert teachers.style_error(tiny, sim, window=1) == pytest.approx((0.25 + 1.75 / 3) / 2)
+    assert teachers.style_error(task, tiny, sim, window=1) == pytest.approx((0.25 + 1.75 / 3) / 2)
     spun = sim + [0.0, 2 * np.pi - 0.5]  # frames (1, 1 + 2 pi), (2, 2 + 2 pi): a whole turn more
-    assert teachers.style_error(tiny, spun, window=2, both_ways=False) == pytest.approx(np.pi)
-    assert teachers.style_error(tiny, spun, window=2) == pytest.approx((np.pi + np.pi + 0.5) / 2)
+    assert teachers.style_error(task, tiny, spun, window=2, both_ways=False) == pytest.approx(np.pi)
+    assert teachers.style_error(task, tiny, spun, window=2) == pytest.approx((np.pi + np.pi + 0.5) / 2)
 
 
-def test_style_error_of_the_clip_and_of_hanging_still(task, clip):
-    assert teachers.style_error(task, clip.qpos) == pytest.approx(0.0, abs=1e-6)
+def test_style_error_of_the_clip_and_of_hanging_still(task, reference, clip):
+    assert teachers.style_error(task, reference, clip.qpos) == pytest.approx(0.0, abs=1e-6)
     hanging = np.tile([0.0, np.pi], (500, 1))  # near the clip's first second only
-    assert teachers.style_error(task, hanging, both_ways=False) < 0.2
-    assert teachers.style_error(task, hanging) > 0.8  # the clip's balancing, 3 rad away, is missing
+    assert teachers.style_error(task, reference, hanging, both_ways=False) < 0.2
+    assert teachers.style_error(task, reference, hanging) > 0.8  # the clip's balancing, 3 rad away, is missing
 
 
-def test_style_error_rejects_bad_input(task):
+def test_style_error_rejects_bad_input(task, reference):
     with pytest.raises(ValueError, match=r"qpos has shape \(10, 3\)"):
-        teachers.style_error(task, np.zeros((10, 3)))
-    with pytest.raises(TypeError, match="no motion reference"):
-        teachers.style_error(cartpole.swingup(), np.zeros((30, 2)))
+        teachers.style_error(task, reference, np.zeros((10, 3)))
+    with pytest.raises(TypeError, match="reference must be a motion.Reference"):
+        teachers.style_error(cartpole.swingup(), None, np.zeros((30, 2)))
 
 
 def test_amp_hyperparameters_make_a_style_only_config():

@@ -71,15 +71,20 @@ def block_task(impl: str = "jax") -> mjzoo.Task:
 
 
 def block_amp_task() -> mjzoo.Task:
-    """The block with a reference to imitate, sliding x = 0.3 sin(t). It takes no `impl`:
-    a resumed run builds it as it was first built."""
-    task = block_task()
+    """The block for AMP (its reference: `REFERENCE`). It takes no `impl`: a resumed run
+    builds it as it was first built."""
+    return block_task()
+
+
+def REFERENCE(task: mjzoo.Task, **overrides: object) -> mjzoo.motion.Reference:
+    """The block's motion to imitate, sliding x = 0.3 sin(t): a factory module's
+    reference, which `mjzoo train amp` finds beside the factory (`mjzoo.envs.reference`)."""
     dt = mjzoo.control_dt(task)
     t = np.arange(200) * dt
     clip = mjzoo.motion.Clip(
         name="slide", fps=1 / dt, qpos=0.3 * np.sin(t)[:, None], qvel=0.3 * np.cos(t)[:, None], joint_names=("x",)
     )
-    return mjzoo.motion.with_reference(task, mjzoo.motion.reference(clip, task.mj_model, dt))
+    return mjzoo.motion.reference(clip, task.mj_model, dt)
 
 
 Launched = list[tuple[subprocess.Popen, Path]]  # each process with the stem of its log files

@@ -104,7 +104,7 @@ def _nothing(model, *args):
     return {} if len(args) == 3 else (jnp.zeros((), bool), jnp.zeros((), bool))
 
 
-def test_with_reference_checks_the_control_step_and_the_widths(ref):
+def test_check_reference_checks_the_control_step_and_the_widths(ref):
     task = Task(
         model=BASE_AND_ARM.model,
         start=bind(_start),
@@ -114,10 +114,10 @@ def test_with_reference_checks_the_control_step_and_the_widths(ref):
         mj_model=ARM,
     )
     arm_ref = motion.reference(arm_clip(), ARM, dt=0.02)
-    assert motion.with_reference(task, arm_ref).motion is arm_ref
+    assert motion.check_reference(task, arm_ref) is arm_ref  # the task is only read
     with pytest.raises(ValueError, match=r"a frame every 0.01 s but the task's control step is 0.02 s"):
-        motion.with_reference(task, motion.reference(arm_clip(), ARM, dt=0.01))
+        motion.check_reference(task, motion.reference(arm_clip(), ARM, dt=0.01))
     with pytest.raises(ValueError, match="the reference has nq=9, nv=8 but the task's model nq=10, nv=9"):
-        motion.with_reference(task, ref)
+        motion.check_reference(task, ref)
     with pytest.raises(TypeError, match="ref must be a motion.Reference"):
-        motion.with_reference(task, arm_clip())
+        motion.check_reference(task, arm_clip())

@@ -7,6 +7,7 @@ import ast
 import contextlib
 import dataclasses
 import importlib
+import inspect
 import types
 import typing
 from collections.abc import Iterator
@@ -22,6 +23,7 @@ __all__ = [
     "parse_assignments",
     "algorithm_module",
     "build_algorithm",
+    "imitated",
     "build_planner",
     "episode_steps",
     "slug",
@@ -110,6 +112,16 @@ def build_algorithm(
             raise UsageError(f"{what}: {name}={value!r} must be {_describe(hints[name])}")
     with checking(ValueError):
         return module.configure(**values)
+
+
+def imitated(module: ModuleType, spec: str, task: mjzoo.Task, overrides: dict[str, Any]) -> tuple[Any, ...]:
+    """The data an algorithm module takes beside its config: (the env's motion reference,)
+    for one whose `make` takes a `reference` (AMP: `mjzoo.envs.reference`, from the
+    task and its overrides), else (). Splice it after the config: ``module.make(cfg,
+    *data)``, after the task: ``module.init(cfg, task, *data, hyperparams, key)``."""
+    if "reference" not in inspect.signature(module.make).parameters:
+        return ()
+    return (mjzoo.envs.reference(spec, task, **overrides),)
 
 
 def _number_hints(hyperparams: type) -> dict[str, Any]:

@@ -26,6 +26,7 @@ from mjzoo.harness.cli.arguments import (
     build_planner,
     checking,
     episode_steps,
+    imitated,
     parse_assignments,
     slug,
 )
@@ -193,6 +194,7 @@ def train(
         task = mjzoo.envs.make(env, **env_values)
         config_values.update(_lengths(task, total_steps, rollout_seconds))
         cfg, hyperparams = build_algorithm(module, env, config_values)
+        data = imitated(module, env, task, env_values)  # AMP: the env's reference, an error now if it has none
         devices.check_split(cfg.num_envs)
         if (
             task.time_limit is None
@@ -214,7 +216,7 @@ def train(
         (out / "task.json").write_text(json.dumps({"env": env, "overrides": env_values}, indent=2))
     # resuming: only damaged checkpoints, or another network's; Warp: capacities outgrown
     with checking(checkpoints.CheckpointError, training.PhysicsCapacityError):
-        _, last = training.run(module.make(cfg), task, settings, hyperparams)
+        _, last = training.run(module.make(cfg, *data), task, settings, hyperparams)
     if not distributed.is_primary():
         return
     print(f"final eval/return {last.get('eval/return', float('nan')):.2f}")

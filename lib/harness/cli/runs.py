@@ -12,7 +12,14 @@ import jax
 
 import mjzoo
 from mjzoo.harness import checkpoints, training
-from mjzoo.harness.cli.arguments import UsageError, algorithm_module, build_algorithm, checking, parse_assignments
+from mjzoo.harness.cli.arguments import (
+    UsageError,
+    algorithm_module,
+    build_algorithm,
+    checking,
+    imitated,
+    parse_assignments,
+)
 
 __all__ = ["Trained", "refuse_existing", "read_run", "load", "restore"]
 
@@ -66,6 +73,7 @@ class Trained(NamedTuple):
     spec: str
     overrides: dict[str, Any]
     task: mjzoo.Task
+    data: tuple[Any, ...] = ()  # what the module takes beside its config (`arguments.imitated`): AMP's reference
 
 
 def load(run: Path, task: str | None, env_overrides: tuple[str, ...]) -> Trained:
@@ -84,13 +92,14 @@ def load(run: Path, task: str | None, env_overrides: tuple[str, ...]) -> Trained
     module = algorithm_module(info["algorithm"])
     saved_values = {**info["config"], **info.get("hyperparams", {})}
     cfg, hyperparams = build_algorithm(module, spec, saved_values, str(run / "config.json"))
-    return Trained(module, cfg, hyperparams, spec, overrides, mjzoo.envs.make(spec, **overrides))
+    task = mjzoo.envs.make(spec, **overrides)
+    return Trained(module, cfg, hyperparams, spec, overrides, task, imitated(module, spec, task, overrides))
 
 
 def restore(run: Path, trained: Trained) -> Any:
     """The newest intact checkpoint's train state (a one-line warning for each damaged
     newer one; a `UsageError` if none is intact or they hold another network)."""
-    template = trained.module.init(trained.cfg, trained.task, trained.hyperparams, jax.random.key(0))
+    template = trained.module.init(trained.cfg, trained.task, *trained.data, trained.hyperparams, jax.random.key(0))
     with checking(checkpoints.CheckpointError):
         state, _, _ = checkpoints.restore_newest_intact(run / "checkpoints", like=template)
     return state
