@@ -103,6 +103,28 @@ def test_hyperparameters_and_planning_come_from_the_records():
         mjzoo.envs.planning("hopper")
 
 
+def test_amps_reference_comes_from_the_record_or_the_factorys_module():
+    """Every env with AMP hyperparameters names its reference; a user's factory module
+    its ``REFERENCE``; the CLI hands it to algorithms whose `make` takes one."""
+    from mjzoo.algorithms import amp, ppo
+    from mjzoo.harness.cli.arguments import imitated
+
+    with_amp = [name for name in mjzoo.envs.names() if mjzoo.envs.record(name).amp is not None]
+    assert with_amp and all(mjzoo.envs.record(name).reference is not None for name in with_amp)
+    task = mjzoo.envs.make("cartpole_amp_swingup")
+    ref = mjzoo.envs.reference("cartpole_amp_swingup", task, ctrl_dt=0.02)
+    assert isinstance(ref, mjzoo.motion.Reference) and ref.qpos.shape[1] == task.mj_model.nq
+    assert imitated(ppo, "cartpole_amp_swingup", task, {}) == ()
+    (given,) = imitated(amp, "cartpole_amp_swingup", task, {})
+    np.testing.assert_array_equal(given.qpos, ref.qpos)
+    user = "tests.harness.test_distributed:block_amp_task"
+    assert mjzoo.envs.reference(user, mjzoo.envs.make(user)).names == ("slide",)
+    with pytest.raises(ValueError, match="defines no REFERENCE, the function \\(task, \\*\\*overrides\\)"):
+        mjzoo.envs.reference("mjzoo.envs.cartpole:swingup", task)
+    with pytest.raises(KeyError, match="has no motion reference for AMP; envs with one: .*'humanoid_amp_walk'"):
+        mjzoo.envs.reference("cartpole_swingup", task)
+
+
 def test_register_takes_a_record_or_a_factory(monkeypatch):
     monkeypatch.setattr(mjzoo.envs, "_REGISTRY", dict(mjzoo.envs._REGISTRY))
     mjzoo.envs.register("my_pendulum", base.EnvSpec(make=pendulum.swingup, description="mine", ppo={"num_envs": 8}))
