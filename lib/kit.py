@@ -158,11 +158,9 @@ def task(
             if fn is not alive:
                 fn, p = _function(f"{kind} term {name!r}", fn, p)
             weighted.append((name, fn, weight, sign))
-    core_spec = Spec(
+    spec = Spec(
         observe=observe,
         observe_own=own,
-        terms={},
-        ends={name: fn for name, fn in fns.items() if name},
         start=items[0] if start is not None else None,
         resets=tuple(items[1:] if start is not None else items),
         actuator=act,
@@ -171,8 +169,8 @@ def task(
     )
     core = Task(
         model=physics.model,
-        start=bind(_start, core_spec, p),
-        step=bind(_step, core_spec, p),
+        start=bind(_start, spec, p),
+        step=bind(_step, spec, p),
         reward=bind(_no_terms),
         terminate=bind(_never),
         mj_model=physics.mj_model,
@@ -186,11 +184,11 @@ def task(
     for name, fn, weight, sign in weighted:
         fn = bind(_own_numbers, bind(_alive, ended)) if fn is alive else fn
         terms[name] = (fn, Static((weight, sign)))
-    spec = dataclasses.replace(core_spec, terms=terms)
+    ends = {name: fn for name, fn in fns.items() if name}  # the named ones, recorded in metrics
     built = core.replace(
-        start=bind(_start_ends, spec, core.start),
-        step=bind(_step_ends, spec, p, core.step),
-        reward=bind(_reward, spec, p, core.reward),
+        start=bind(_start_ends, Static(tuple(ends)), core.start),
+        step=bind(_step_ends, ends, p, core.step),
+        reward=bind(_reward, terms, p, core.reward),
         terminate=ended,
     )
     built = with_divergence_guard(built)
@@ -203,11 +201,9 @@ def task(
 @jax.tree_util.register_dataclass
 @dataclasses.dataclass(frozen=True)
 class Spec:
-    """The functions of a kit task (Partials taking `p` first); the numbers live in `p`."""
+    """How a kit task starts and steps (Partials taking `p` first); the numbers live in `p`."""
 
     observe: jax.tree_util.Partial  # a catalog item (observe_own) or a function of `p` first
-    terms: dict[str, tuple[jax.tree_util.Partial, Static]]  # Static: (weight's name, sign)
-    ends: dict[str, jax.tree_util.Partial]  # the named terminations, recorded in metrics
     start: jax.tree_util.Partial | None
     resets: tuple[jax.tree_util.Partial, ...]
     actuator: jax.tree_util.Partial | None
@@ -301,27 +297,28 @@ def _actuated(actuator, p: dict, model: mjx.Model, data: mjx.Data, action: Array
     return jax.lax.fori_loop(0, n_substeps, substep, worlds.clear_overflow(data))
 
 
-def _start_ends(spec: Spec, start_fn, model: mjx.Model, key: Array) -> State:
+def _start_ends(names: Static, start_fn, model: mjx.Model, key: Array) -> State:
     """The start, each named termination's metric at 0."""
     state = start_fn(model, key)
-    if not spec.ends:
+    if not names.value:
         return state
-    zeros = {f"termination/{name}": jnp.zeros((), jnp.float32) for name in spec.ends}
+    zeros = {f"termination/{name}": jnp.zeros((), jnp.float32) for name in names.value}
     return state.replace(metrics={**state.metrics, **zeros})
 
 
-def _step_ends(spec: Spec, p: dict, step_fn, model: mjx.Model, state: State, action: Array, key: Array) -> State:
+def _step_ends(ends: dict, p: dict, step_fn, model: mjx.Model, state: State, action: Array, key: Array) -> State:
     """The step, each named termination recorded on the state it returns (1.0 / 0.0)."""
     next_state = step_fn(model, state, action, key)
-    if not spec.ends:
+    if not ends:
         return next_state
-    flags = {f"termination/{name}": _flag(fn, p, model, next_state) for name, fn in spec.ends.items()}
+    flags = {f"termination/{name}": _flag(fn, p, model, next_state) for name, fn in ends.items()}
     return next_state.replace(metrics={**next_state.metrics, **flags})
 
 
-def _reward(spec: Spec, p: dict, reward_fn, model, state, action, next_state) -> dict[str, Array]:
+def _reward(weighted: dict, p: dict, reward_fn, model, state, action, next_state) -> dict[str, Array]:
+    """The inner task's terms, then each ``name: (fn, Static((weight's name, sign)))``."""
     terms = dict(reward_fn(model, state, action, next_state))
-    for name, (fn, weight) in spec.terms.items():
+    for name, (fn, weight) in weighted.items():
         weight_name, sign = weight.value
         value = p[weight_name] * fn(p, model, state, action, next_state)
         terms[name] = value if sign > 0 else -value
