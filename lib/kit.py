@@ -143,8 +143,8 @@ def task(
     act = None
     if actuator is not None:
         act, p = _function("actuator", actuator, p)
-    weighted = []  # (name, fn, weight's name, sign): the terms, bound once `p` is complete
-    for sign, kind, entries in ((1.0, "reward", rewards), (-1.0, "cost", costs)):
+    weighted = []  # (name, fn, weight's name, kind): the terms, bound once `p` is complete
+    for kind, entries in (("reward", rewards), ("cost", costs)):
         for name, entry in (entries or {}).items():
             fn, weight = entry if isinstance(entry, tuple) else (entry, 1.0)
             _identifier(f"{kind}s", name)
@@ -161,7 +161,7 @@ def task(
                 weight, p = f"{name}_weight", _add(p, f"{name}_weight", value)
             if fn is not alive:
                 fn, p = _function(f"{kind} term {name!r}", fn, p)
-            weighted.append((name, fn, weight, sign))
+            weighted.append((name, fn, weight, kind))
     spec = Spec(
         observe=observe,
         observe_own=own,
@@ -185,9 +185,9 @@ def task(
             raise TypeError(f"mjzoo.task: a combinator returned {type(core).__name__}, not a Task")
     ended = bind(_terminate, tuple(fns.values()), p, core.terminate)
     terms = {}
-    for name, fn, weight, sign in weighted:
+    for name, fn, weight, kind in weighted:
         fn = bind(_own_numbers, bind(_alive, ended)) if fn is alive else fn
-        terms[name] = (fn, Static((weight, sign)))
+        terms[name] = (fn, Static((weight, kind)))  # strings: no float is static
     ends = {name: fn for name, fn in fns.items() if name}  # the named ones, recorded in metrics
     built = core.replace(
         start=bind(_start_ends, Static(tuple(ends)), core.start),
@@ -321,12 +321,13 @@ def _step_ends(ends: dict, p: dict, step_fn, model: mjx.Model, state: State, act
 
 
 def _reward(weighted: dict, p: dict, reward_fn, model, state, action, next_state) -> dict[str, Array]:
-    """The inner task's terms, then each ``name: (fn, Static((weight's name, sign)))``."""
+    """The inner task's terms, then each ``name: (fn, Static((weight's name, kind)))``,
+    a "cost" charged."""
     terms = dict(reward_fn(model, state, action, next_state))
     for name, (fn, weight) in weighted.items():
-        weight_name, sign = weight.value
+        weight_name, kind = weight.value
         value = p[weight_name] * fn(p, model, state, action, next_state)
-        terms[name] = value if sign > 0 else -value
+        terms[name] = -value if kind == "cost" else value
     return terms
 
 
