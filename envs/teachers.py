@@ -111,7 +111,7 @@ def cartpole_amp_swingup(
 
 
 def _observe(model, state: State) -> jax.Array:
-    return cartpole.observe({}, model, state)
+    return cartpole.observe(state.data)
 
 
 def style_error(task: Task, qpos, window: int = STYLE_WINDOW, both_ways: bool = True) -> float:
