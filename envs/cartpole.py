@@ -78,10 +78,15 @@ SWINGUP_PLANNING = base.PlanningSetup(
 )
 
 
-def observe(p: dict, model: mjx.Model, state: State) -> Array:
+def observe(data: mjx.Data) -> Array:
     """[5] cart position, cos and sin of the pole angle, cart and pole velocities."""
-    qpos, qvel = state.data.qpos, state.data.qvel
+    qpos, qvel = data.qpos, data.qvel
     return jnp.stack([qpos[0], jnp.cos(qpos[1]), jnp.sin(qpos[1]), qvel[0], qvel[1]])
+
+
+def observation(p: dict, model: mjx.Model, state: State) -> Array:
+    """The task's observation, `observe` of the state's physics."""
+    return observe(state.data)
 
 
 def start(p: dict, model: mjx.Model, data: mjx.Data, key: Array) -> mjx.Data:
@@ -143,7 +148,7 @@ def _make(
         params["fall_angle"] = fall_angle
     return mjzoo.task(
         ASSETS / "cartpole.xml",
-        observe=observe,
+        observe=observation,
         start=start,
         rewards={"upright": (upright, upright_weight), "centered": (centered, centered_weight)},
         costs={"velocity": (swinging, velocity_weight), "effort": (effort, effort_weight)},

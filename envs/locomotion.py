@@ -105,7 +105,12 @@ def bare(physics: physics_lib.Physics, observe: Callable, actuator: Callable | N
     # Items of the catalog's form, (model, state) and (model, data, action, key): Partials.
     observe, actuator = (fn if fn is None or isinstance(fn, Partial) else Partial(fn) for fn in (observe, actuator))
     return mjzoo.task(
-        physics, observe=observe, start=at_pose, actuator=actuator, params={"qpos0": reset_pose(physics.mj_model)}
+        physics,
+        observe=observe,
+        start=at_pose,
+        actuator=actuator,
+        params={"qpos0": reset_pose(physics.mj_model)},
+        check=False,  # a part: the combinators wrapped around it may keep what `observe` reads
     )
 
 

@@ -86,10 +86,15 @@ PLANNING = base.PlanningSetup(
 )
 
 
-def observe(p: dict, model: mjx.Model, state: State) -> Array:
+def observe(data: mjx.Data) -> Array:
     """[3] cos and sin of the angle from upright, angular velocity (rad/s)."""
-    angle = state.data.qpos[0]
-    return jnp.stack([jnp.cos(angle), jnp.sin(angle), state.data.qvel[0]])
+    angle = data.qpos[0]
+    return jnp.stack([jnp.cos(angle), jnp.sin(angle), data.qvel[0]])
+
+
+def observation(p: dict, model: mjx.Model, state: State) -> Array:
+    """The task's observation, `observe` of the state's physics."""
+    return observe(state.data)
 
 
 def hanging(p: dict, model: mjx.Model, data: mjx.Data, key: Array) -> mjx.Data:
@@ -138,7 +143,7 @@ def swingup(
     """The pendulum swing-up task; keyword arguments override weights and physics."""
     return mjzoo.task(
         ASSETS / "pendulum.xml",
-        observe=observe,
+        observe=observation,
         start=hanging,
         rewards={"upright": (upright, upright_weight)},
         costs={"velocity": (too_fast, velocity_weight), "effort": (effort, effort_weight)},

@@ -130,7 +130,7 @@ def reference(task: Task, *, ctrl_dt: float = 0.02, **_: Any) -> motion.Referenc
 
 
 def _observe(model, state: State) -> jax.Array:
-    return cartpole.observe({}, model, state)
+    return cartpole.observe(state.data)
 
 
 def style_error(

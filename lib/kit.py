@@ -83,6 +83,7 @@ def task(
     combinators: Sequence[Callable[[Task], Task]] = (),
     time_limit: int | None = None,
     params: Mapping[str, Any] | None = None,
+    check: bool = True,
     **physics_options: Any,
 ) -> Task:
     """A `Task` from a model and plain functions (see the module docstring).
@@ -114,6 +115,9 @@ def task(
         states they make (``info["command"]``), and the guard and time limit wrap them.
       time_limit: steps after which an episode is truncated; None: no limit.
       params: named numbers (scalars or arrays) given to every function as `p`.
+      check: trace a reset and a transition abstractly at construction (below); False
+        for a part that combinators added later complete (an observation that reads
+        what a tracker wrapped around it keeps).
       **physics_options: `mjzoo.physics.load`'s (dt, ctrl_dt, solver, iterations, ...).
 
     Raises ValueError or TypeError at construction, naming the argument: a name that is
@@ -139,8 +143,8 @@ def task(
     act = None
     if actuator is not None:
         act, p = _function("actuator", actuator, p)
-    weighted = []  # (name, fn, weight's name, sign): the terms, bound once `p` is complete
-    for sign, kind, entries in ((1.0, "reward", rewards), (-1.0, "cost", costs)):
+    weighted = []  # (name, fn, weight's name, kind): the terms, bound once `p` is complete
+    for kind, entries in (("reward", rewards), ("cost", costs)):
         for name, entry in (entries or {}).items():
             fn, weight = entry if isinstance(entry, tuple) else (entry, 1.0)
             _identifier(f"{kind}s", name)
@@ -157,12 +161,10 @@ def task(
                 weight, p = f"{name}_weight", _add(p, f"{name}_weight", value)
             if fn is not alive:
                 fn, p = _function(f"{kind} term {name!r}", fn, p)
-            weighted.append((name, fn, weight, sign))
-    core_spec = Spec(
+            weighted.append((name, fn, weight, kind))
+    spec = Spec(
         observe=observe,
         observe_own=own,
-        terms={},
-        ends={name: fn for name, fn in fns.items() if name},
         start=items[0] if start is not None else None,
         resets=tuple(items[1:] if start is not None else items),
         actuator=act,
@@ -171,8 +173,8 @@ def task(
     )
     core = Task(
         model=physics.model,
-        start=bind(_start, core_spec, p),
-        step=bind(_step, core_spec, p),
+        start=bind(_start, spec, p),
+        step=bind(_step, spec, p),
         reward=bind(_no_terms),
         terminate=bind(_never),
         mj_model=physics.mj_model,
@@ -183,31 +185,30 @@ def task(
             raise TypeError(f"mjzoo.task: a combinator returned {type(core).__name__}, not a Task")
     ended = bind(_terminate, tuple(fns.values()), p, core.terminate)
     terms = {}
-    for name, fn, weight, sign in weighted:
+    for name, fn, weight, kind in weighted:
         fn = bind(_own_numbers, bind(_alive, ended)) if fn is alive else fn
-        terms[name] = (fn, Static((weight, sign)))
-    spec = dataclasses.replace(core_spec, terms=terms)
+        terms[name] = (fn, Static((weight, kind)))  # strings: no float is static
+    ends = {name: fn for name, fn in fns.items() if name}  # the named ones, recorded in metrics
     built = core.replace(
-        start=bind(_start_ends, spec, core.start),
-        step=bind(_step_ends, spec, p, core.step),
-        reward=bind(_reward, spec, p, core.reward),
+        start=bind(_start_ends, Static(tuple(ends)), core.start),
+        step=bind(_step_ends, ends, p, core.step),
+        reward=bind(_reward, terms, p, core.reward),
         terminate=ended,
     )
     built = with_divergence_guard(built)
     if time_limit is not None:
         built = with_time_limit(built, time_limit)
-    jax.eval_shape(lambda key: built.reset(built.model, key), jax.random.key(0))  # mistakes surface here
+    if check:
+        jax.eval_shape(lambda key: built.reset(built.model, key), jax.random.key(0))  # mistakes surface here
     return built
 
 
 @jax.tree_util.register_dataclass
 @dataclasses.dataclass(frozen=True)
 class Spec:
-    """The functions of a kit task (Partials taking `p` first); the numbers live in `p`."""
+    """How a kit task starts and steps (Partials taking `p` first); the numbers live in `p`."""
 
     observe: jax.tree_util.Partial  # a catalog item (observe_own) or a function of `p` first
-    terms: dict[str, tuple[jax.tree_util.Partial, Static]]  # Static: (weight's name, sign)
-    ends: dict[str, jax.tree_util.Partial]  # the named terminations, recorded in metrics
     start: jax.tree_util.Partial | None
     resets: tuple[jax.tree_util.Partial, ...]
     actuator: jax.tree_util.Partial | None
@@ -301,30 +302,32 @@ def _actuated(actuator, p: dict, model: mjx.Model, data: mjx.Data, action: Array
     return jax.lax.fori_loop(0, n_substeps, substep, worlds.clear_overflow(data))
 
 
-def _start_ends(spec: Spec, start_fn, model: mjx.Model, key: Array) -> State:
+def _start_ends(names: Static, start_fn, model: mjx.Model, key: Array) -> State:
     """The start, each named termination's metric at 0."""
     state = start_fn(model, key)
-    if not spec.ends:
+    if not names.value:
         return state
-    zeros = {f"termination/{name}": jnp.zeros((), jnp.float32) for name in spec.ends}
+    zeros = {f"termination/{name}": jnp.zeros((), jnp.float32) for name in names.value}
     return state.replace(metrics={**state.metrics, **zeros})
 
 
-def _step_ends(spec: Spec, p: dict, step_fn, model: mjx.Model, state: State, action: Array, key: Array) -> State:
+def _step_ends(ends: dict, p: dict, step_fn, model: mjx.Model, state: State, action: Array, key: Array) -> State:
     """The step, each named termination recorded on the state it returns (1.0 / 0.0)."""
     next_state = step_fn(model, state, action, key)
-    if not spec.ends:
+    if not ends:
         return next_state
-    flags = {f"termination/{name}": _flag(fn, p, model, next_state) for name, fn in spec.ends.items()}
+    flags = {f"termination/{name}": _flag(fn, p, model, next_state) for name, fn in ends.items()}
     return next_state.replace(metrics={**next_state.metrics, **flags})
 
 
-def _reward(spec: Spec, p: dict, reward_fn, model, state, action, next_state) -> dict[str, Array]:
+def _reward(weighted: dict, p: dict, reward_fn, model, state, action, next_state) -> dict[str, Array]:
+    """The inner task's terms, then each ``name: (fn, Static((weight's name, kind)))``,
+    a "cost" charged."""
     terms = dict(reward_fn(model, state, action, next_state))
-    for name, (fn, weight) in spec.terms.items():
-        weight_name, sign = weight.value
+    for name, (fn, weight) in weighted.items():
+        weight_name, kind = weight.value
         value = p[weight_name] * fn(p, model, state, action, next_state)
-        terms[name] = value if sign > 0 else -value
+        terms[name] = -value if kind == "cost" else value
     return terms
 
 

@@ -134,7 +134,7 @@ def _far_from_origin(body, radius, model, state) -> Array:
 def episode_length(max_steps: int) -> Partial:
     """True once the episode has taken `max_steps` steps, counted by the nearest
     `mjzoo.with_time_limit` inside it (its `TimeLimitState`; every env from
-    `envs.base.build` has one; wrap `with_terminations` outside it).
+    a shipped env, built by `mjzoo.task(..., time_limit=N)`, has one; wrap `with_terminations` outside it).
 
     `with_time_limit` truncates: the episode is cut short and the value is bootstrapped,
     right when time is not part of the task (the usual case in locomotion). This item

@@ -2,7 +2,8 @@
 
     env = brax.envs.get_environment("ant", backend="mjx")
     task = mjzoo.interop.brax.task(env)                       # episode_length=1000, Brax's usual
-    state, metrics = ppo.train(ppo.Config(...), task)
+    config, hyperparams = ppo.configure(num_envs=2048, ...)
+    state, metrics = jax.jit(ppo.train, static_argnums=0)(config, task, hyperparams, jax.random.key(0))
 
 One Brax transition becomes one mjzoo transition:
 

@@ -225,7 +225,7 @@ _OBSERVATIONS.update(
         f"{_CATALOG}:last_action": lambda m: [dict(name="last_action", size=-1, source="previous_action")],
     }
 )
-_STEPS["mjzoo.envs.cartpole:step"] = _cartpole
+_OBSERVATIONS["mjzoo.envs.cartpole:observation"] = lambda m: _cartpole(m, None)
 
 
 def describe_item(m: mujoco.MjModel, fn: Any) -> list[dict[str, Any]]:
