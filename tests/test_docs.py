@@ -49,7 +49,7 @@ _EXPORTED = (
 NOT_RUN = {
     "README.md": {
         "training.run(ppo.make": _PPO_TRAIN,
-        "run(config, task, hyperparams, jax.random.key(0))": _WHOLE_RUN,
+        "whole_run(config, task, hyperparams, jax.random.key(0))": _WHOLE_RUN,
         "training.run(amp.make": _PPO_TRAIN.replace("tests/algorithms/test_ppo.py", "tests/algorithms/test_amp.py"),
         **dict.fromkeys(
             ('export.load("runs/cb', "act(obs)", 'run_in_mujoco("runs/cb', "sim2sim.replay(task, start"), _EXPORTED
