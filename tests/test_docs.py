@@ -50,7 +50,9 @@ NOT_RUN = {
     "README.md": {
         "training.run(ppo.make": _PPO_TRAIN,
         "whole_run(config, task, hyperparams, jax.random.key(0))": _WHOLE_RUN,
-        "training.run(amp.make": _PPO_TRAIN.replace("tests/algorithms/test_ppo.py", "tests/algorithms/test_amp.py"),
+        "training.run(algorithm, pole": _PPO_TRAIN.replace(
+            "tests/algorithms/test_ppo.py", "tests/algorithms/test_amp.py"
+        ),
         **dict.fromkeys(
             ('export.load("runs/cb', "act(obs)", 'run_in_mujoco("runs/cb', "sim2sim.replay(task, start"), _EXPORTED
         ),
