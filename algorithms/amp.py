@@ -14,7 +14,7 @@ hyperparameters, so its arrays are ordinary leaves: `update` reads them from the
 another clip of the same shape compiles nothing new, and a checkpoint records what the
 run imitated. Each `update`, one jit:
 
-1. `ppo.rollout` on the task observed through `learning.with_feature_window`: each
+1. `ppo.collect` on the task observed through `learning.with_feature_window`: each
    state's observation is ``{"policy": the task's own, "motion": [num_frames, F]}``,
    the window of `learning.motion_features` of its last frames (the policy sees only
    "policy").
@@ -319,7 +319,7 @@ def update(
     ts, pcfg, windowed, hp = train_state, _ppo(config), style_task(config, task), train_state.hyperparams
     ts = ts.replace(ppo=ts.ppo.replace(hyperparams=hp.ppo))  # AMP's hold PPO's: one source of the numbers
     key, collect_key, learn_key, disc_key = jax.random.split(ts.ppo.key, 4)
-    collector, data, collect_metrics = ppo.rollout(pcfg, windowed, ts.ppo, collect_key, components)
+    collector, data, collect_metrics = ppo.collect(pcfg, windowed, ts.ppo, collect_key, components)
 
     windows = data.next_obs["motion"]  # [T, N, num_frames, F]: each transition's, ending at its next state
     normalized = normalization.normalize(ts.disc_stats, windows)
@@ -422,9 +422,9 @@ def evaluate(
     num_envs: int,
     num_steps: int | None = None,
     components: ppo.Components = ppo.NO_COMPONENTS,
-):
-    """Deterministic episodes scored by the task's own reward, as `ppo.evaluate`:
-    (mean return, per-env returns [num_envs], Trajectory of env 0 [num_steps])."""
+) -> learning.Evaluation:
+    """Deterministic episodes scored by the task's own reward: `ppo.evaluate`'s
+    `learning.Evaluation` (returns, lengths [num_envs], env 0's Trajectory)."""
     return ppo.evaluate(_ppo(config), style_task(config, task), train_state.ppo, key, num_envs, num_steps, components)
 
 

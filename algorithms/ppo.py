@@ -12,7 +12,7 @@
 (a pytree: `jax.vmap` of `train` over a batch of them is one program). `init` stores the
 hyperparameters in the `TrainState`, and `update` reads them there.
 
-`update` is one jit: `rollout` (`learning.collect`) runs `unroll_length` steps of
+`update` is one jit: `collect` (`learning.collect`) runs `unroll_length` steps of
 `num_envs` auto-resetting envs, then `improve` (`learning.learn`) makes `num_epochs` x
 `num_minibatches` clipped-surrogate steps; AMP runs the two with its own reward between
 them. A dict observation feeds each network its entry (`policy_obs_key`,
@@ -58,7 +58,7 @@ __all__ = [
     "make",
     "policy",
     "policy_params",
-    "rollout",
+    "collect",
     "train",
     "update",
 ]
@@ -367,7 +367,7 @@ def acting(
     params: dict[str, Any],
     deterministic: bool,
     components: Components = NO_COMPONENTS,
-) -> learning.Policy:
+) -> learning.Actor:
     """The policy of `policy_params` for one env, as `learning.collect` and
     `learning.evaluate` take it: ``act(carry, obs, start, key) -> (carry, ctrl, extras)``,
     the carry () for a feed-forward network, `start` restarting a recurrent one. A sample
@@ -453,7 +453,7 @@ def _loss(
     }
 
 
-def rollout(
+def collect(
     config: Config, task: Task, train_state: TrainState, key: jax.Array, components: Components = NO_COMPONENTS
 ):
     """Collects `unroll_length` steps of every env with the current sampling policy.
@@ -474,7 +474,7 @@ def improve(
     key: jax.Array,
     components: Components = NO_COMPONENTS,
 ) -> tuple[TrainState, dict[str, jax.Array]]:
-    """Learns from `data` (from `rollout`, rewards as given) with the state's
+    """Learns from `data` (from `collect`, rewards as given) with the state's
     hyperparameters: the observation statistics, GAE from the value function, then
     `num_epochs` x `num_minibatches` clipped-surrogate steps. Returns the state with new
     params, optimizer state and statistics (its collector and key as given) and the
@@ -527,11 +527,11 @@ def improve(
 def update(
     config: Config, task: Task, train_state: TrainState, components: Components = NO_COMPONENTS
 ) -> tuple[TrainState, dict[str, jax.Array]]:
-    """One PPO update, `rollout` then `improve`, with the state's hyperparameters. Jit it
+    """One PPO update, `collect` then `improve`, with the state's hyperparameters. Jit it
     with `config` (and `components`) static; `task` and `train_state` are ordinary
     arguments."""
     key, collect_key, learn_key = jax.random.split(train_state.key, 3)
-    collector, data, collect_metrics = rollout(config, task, train_state, collect_key, components)
+    collector, data, collect_metrics = collect(config, task, train_state, collect_key, components)
     ts = train_state.replace(collector=collector, key=key, updates=train_state.updates + 1)
     ts, learn_metrics = improve(config, task, ts, data, learn_key, components)
     return ts, {**collect_metrics, **learn_metrics}
@@ -548,17 +548,17 @@ def evaluate(
     num_envs: int,
     num_steps: int | None = None,
     components: Components = NO_COMPONENTS,
-):
-    """Deterministic episodes (`learning.evaluate` of the mean action): the mean return
-    of the first episode of `num_envs` envs over at most `num_steps` steps (static;
-    None: the task's own episode length, read on the host), and env 0's trajectory.
+) -> learning.Evaluation:
+    """Deterministic episodes: `learning.evaluate` of the mean action, scoring the first
+    episode of `num_envs` envs over at most `num_steps` steps (static; None: the task's
+    own episode length, read on the host).
 
-    Returns (mean return, per-env returns [num_envs], Trajectory of env 0 [num_steps]).
+    Returns `learning.Evaluation`: returns [num_envs], lengths [num_envs], env 0's
+    Trajectory [num_steps].
     """
     act = acting(config, task, policy_params(train_state), True, components)
     carry = _initial_carry(_networks(config, task, components)[0])
-    returns, _, trajectory = learning.evaluate(task, act, key, num_envs, num_steps, carry)
-    return jnp.mean(returns), returns, trajectory
+    return learning.evaluate(task, act, key, num_envs, num_steps, carry)
 
 
 def train(

@@ -87,10 +87,10 @@ def recording(algorithm: learning.Algorithm, episodes: list) -> learning.Algorit
         episodes.append((np.asarray(qpos), np.asarray(terminated), np.asarray(truncated)))
 
     def evaluate(task, state, key, num_envs, num_steps):
-        mean, returns, trajectory = algorithm.evaluate(task, state, key, num_envs, num_steps)
-        after = trajectory.next_state
+        evaluation = algorithm.evaluate(task, state, key, num_envs, num_steps)
+        after = evaluation.trajectory.next_state
         jax.debug.callback(keep, after.data.qpos, after.terminated, after.truncated)
-        return mean, returns, trajectory
+        return evaluation
 
     return algorithm._replace(evaluate=evaluate)
 

@@ -90,7 +90,7 @@ def train_brax_ppo(
 
     adapter.patch_brax_for_current_jax()
     # Warp: one contact pool for every world Brax vmaps (training envs, or eval envs).
-    env = adapter.to_brax_env(mjzoo.worlds.sized(task, max(num_envs, num_eval_envs)))
+    env = adapter.to_brax_env(mjzoo.batching.sized(task, max(num_envs, num_eval_envs)))
     reports: list[tuple[int, float, dict]] = []
     start = time.perf_counter()
 

@@ -100,7 +100,7 @@ def episode_measures(config: ppo.Config, task: mjzoo.Task, train_state, key, num
     (for the video). One compile per task structure."""
     act, params = ppo.policy(config, task), ppo.policy_params(train_state)
     velocity = observations.base_linear_velocity(task.mj_model)
-    task = mjzoo.worlds.sized(task, num_envs)  # Warp: a contact pool for every env
+    task = mjzoo.batching.sized(task, num_envs)  # Warp: a contact pool for every env
 
     def one(key):
         state = mjzoo.reset(task, key)

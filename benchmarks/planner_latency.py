@@ -40,7 +40,7 @@ import jax
 
 import mjzoo
 import mjzoo.envs
-from mjzoo import physics, worlds
+from mjzoo import batching, physics
 from mjzoo.algorithms import cem, mppi, predictive_sampling
 
 sys.path.insert(0, str(Path(__file__).parent))
@@ -69,7 +69,7 @@ def median_ms(fn, *args, repeats: int) -> float:
 def bare_rollouts(task: mjzoo.Task, n_substeps: int, unroll: int = 1):
     @jax.jit
     def run(data, controls):  # controls [N, H, nu]
-        data = worlds.sized(data, controls.shape[0])  # Warp: a contact pool for the N samples
+        data = batching.sized(data, controls.shape[0])  # Warp: a contact pool for the N samples
 
         def one(sample_controls):
             step = lambda d, u: (physics.step(task.model, d, u, n_substeps), None)  # noqa: E731
@@ -91,7 +91,7 @@ def measure(
     impl: str = "jax",
 ) -> list[dict]:
     task, n_substeps = make(env, {**physics_options, "impl": impl})
-    state = mjzoo.complete(task, mjzoo.reset(task, jax.random.key(0)))
+    state = mjzoo.fill_transition_entries(task, mjzoo.reset(task, jax.random.key(0)))
     rows = []
 
     def row(planner, n, h, unroll=1):

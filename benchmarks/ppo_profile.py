@@ -137,7 +137,7 @@ def profile(env: str, base: dict, fields: dict[str, str], repeats: int, devices:
         algorithm = ppo.make(config, optimizer=components.optimizer)
         state = shard_envs(algorithm.init(task, hyperparams, jax.random.key(0)), ppo.PER_ENV_FIELDS, placed)
         # Traced under the env mesh, as the harness's chunk is (`learning.learn` splits minibatches by it).
-        rollout = jax.jit(in_mesh(lambda t, s, k: ppo.rollout(config, t, s, k, components)[1], placed))
+        rollout = jax.jit(in_mesh(lambda t, s, k: ppo.collect(config, t, s, k, components)[1], placed))
         improve = jax.jit(in_mesh(lambda t, s, d, k: ppo.improve(config, t, s, d, k, components)[0], placed))
         update = jax.jit(in_mesh(lambda t, s: algorithm.update(t, s)[0], placed))
         key = jax.random.key(1)
@@ -156,7 +156,7 @@ def profile(env: str, base: dict, fields: dict[str, str], repeats: int, devices:
         t_chunk = per_update(lambda s: chunk(placed_task, s)[0], state, CHUNK, repeats)
         defaults = mjzoo.envs.defaults(env)
         steps = defaults.get("episode_steps") or defaults.get("episode_length", 1000)
-        evaluate = jax.jit(lambda s, k: algorithm.evaluate(task, s, k, 128, steps)[0])
+        evaluate = jax.jit(lambda s, k: algorithm.evaluate(task, s, k, 128, steps).returns.mean())
         t_evaluate = best_of(evaluate, state, key, repeats=1)
         # As the harness runs it: the task an argument, every result (env 0's trajectory too) returned.
         in_loop = training._evaluate_fn(algorithm.evaluate)

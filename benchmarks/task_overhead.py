@@ -90,7 +90,7 @@ def raw_steps_per_s(task: mjzoo.Task, name: str, reset_keys: jax.Array, controls
 
 def batch_reset(task: mjzoo.Task, reset_keys: jax.Array) -> mjzoo.State:
     """States [B] reset from `reset_keys` [B]; on Warp with a contact pool for all B worlds."""
-    task = mjzoo.worlds.sized(task, reset_keys.shape[0])
+    task = mjzoo.batching.sized(task, reset_keys.shape[0])
     return jax.jit(jax.vmap(mjzoo.reset, in_axes=(None, 0)))(task, reset_keys)
 
 
@@ -125,7 +125,7 @@ def measure(name: str, batch: int, steps: int, repeats: int, impl: str = "jax") 
     result["raw_steps_per_s"] = raw_steps_per_s(base, name, reset_keys, controls, repeats)
     key = jax.random.key(0)
     for label, task in (("transition", base), ("auto_reset", mjzoo.with_auto_reset(base))):
-        task = mjzoo.worlds.sized(task, batch)  # the task's reset template sits in the jitted args
+        task = mjzoo.batching.sized(task, batch)  # the task's reset template sits in the jitted args
         state = batch_reset(task, reset_keys)
         seconds = best_time(task_runner(), task, state, controls, key, repeats=repeats)
         result[f"{label}_steps_per_s"] = batch * steps / seconds

@@ -43,7 +43,7 @@ from test_conformance import STEPS, task_for
 
 import mjzoo
 import mjzoo.envs
-from mjzoo import physics, running, worlds
+from mjzoo import batching, physics, running
 from mjzoo.testing import PROPERTIES, TaskCheckError, check_task
 
 RTOL, ATOL = 1e-3, 1e-3  # per entry: |warp - jax| <= ATOL + RTOL |jax| (qpos: m, rad; qvel: m/s, rad/s)
@@ -64,7 +64,7 @@ COMPARED = (
 def _trajectories(task: mjzoo.Task, keys: jax.Array, num_steps: int) -> dict[str, jax.Array]:
     """Reset per key ([E]) and `num_steps` uniform random actions drawn from the key:
     qpos and qvel [E, T+1, ...] (the reset's first), reward [E, T]."""
-    task = worlds.sized(task, keys.shape[0])
+    task = batching.sized(task, keys.shape[0])
 
     def policy(obs: Any, key: jax.Array) -> jax.Array:
         return jax.random.uniform(key, (task.action_size,), minval=-1.0, maxval=1.0)

@@ -4,7 +4,7 @@ Each variant runs in a fresh process (a segfault ends only it), with faulthandle
 and prints one line: ok (with the max state difference against one device) or how it
 ended. Variants:
 
-    step        one jitted `worlds.vmap_transition` of the task's transition on 2 GPUs
+    step        one jitted `batching.vmap_transition` of the task's transition on 2 GPUs
     step_nopsum the same without summing the contact pool's counters over the devices
     ppo         a PPO update (the harness's chunk, in small)
 
@@ -37,11 +37,11 @@ def probe(variant: str, env: str, num_envs: int, graph_mode: str) -> None:
         mjx.put_model = functools.partial(mjx.put_model, graph_mode=getattr(warp_types.GraphMode, graph_mode.upper()))
     import mjzoo
     import mjzoo.envs
-    from mjzoo import worlds
+    from mjzoo import batching
     from mjzoo.harness import devices as placement
 
     if variant == "step_nopsum":
-        worlds._array_fields = lambda data, names: []  # noqa: SLF001 (a probe)
+        batching._array_fields = lambda data, names: []  # noqa: SLF001 (a probe)
     assert jax.device_count() >= 2, jax.devices()
     task = mjzoo.envs.make(env, impl="warp")
     if variant == "ppo":
@@ -60,10 +60,10 @@ def probe(variant: str, env: str, num_envs: int, graph_mode: str) -> None:
                 results.append(np.asarray(update(placement.replicate(task, devices), state)))
     else:
         keys = jax.random.split(jax.random.key(0), num_envs)
-        reset = jax.jit(lambda t, k: worlds.sized(jax.vmap(t.reset, in_axes=(None, 0))(t.model, k), num_envs))
+        reset = jax.jit(lambda t, k: batching.sized(jax.vmap(t.reset, in_axes=(None, 0))(t.model, k), num_envs))
         states = reset(task, keys)
         actions = np.zeros((num_envs, task.action_size), np.float32)
-        step = jax.jit(lambda t, s, a, k: worlds.vmap_transition(mjzoo.transition, t, s, a, k).data.qpos)
+        step = jax.jit(lambda t, s, a, k: batching.vmap_transition(mjzoo.transition, t, s, a, k).data.qpos)
         results = []
         for devices in (jax.devices()[:1], jax.devices()[:2]):
             print(f"{variant}: {len(devices)} device(s)", file=sys.stderr, flush=True)
@@ -80,11 +80,13 @@ def _split(states, devices):
     import jax
     from jax.sharding import NamedSharding
 
-    from mjzoo import worlds
+    from mjzoo import batching
     from mjzoo.harness import devices as placement
 
     mesh = placement.env_mesh(devices)
-    return jax.tree.map(lambda x, spec: jax.device_put(x, NamedSharding(mesh, spec)), states, worlds.partition(states))
+    return jax.tree.map(
+        lambda x, spec: jax.device_put(x, NamedSharding(mesh, spec)), states, batching.partition(states)
+    )
 
 
 def main() -> None:

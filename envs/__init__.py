@@ -38,6 +38,7 @@ import numpy as np
 
 from mjzoo import motion, physics
 from mjzoo.envs import base, cartpole, cylinder_push, humanoid_amp, joystick, locomotion, pendulum, point_mass, teachers
+from mjzoo.learning.evaluation import episode_steps
 from mjzoo.running import control_dt
 from mjzoo.types import Task
 
@@ -52,7 +53,7 @@ __all__ = [
     "names",
     "factory",
     "defaults",
-    "takes",
+    "accepts",
     "register",
     "record",
     "EnvSpec",
@@ -212,16 +213,13 @@ def closed_loop_problem(
     own_limit = _is_user(spec) or _is_playground(spec)  # a factory may not take episode_steps
     unlimited = {} if own_limit else {"episode_steps": 10**9}
     sim_task = build(**unlimited)
-    if not (seconds or setup.seconds) and sim_task.time_limit is None:
-        raise ValueError(
-            f"{spec}: the task has no time limit (mjzoo.with_time_limit) to set the run's length; give seconds"
-        )
+    seconds = seconds or setup.seconds or episode_steps(sim_task, spec, "seconds") * control_dt(sim_task)
     return Problem(
         planner=planner,
         config=config,
         sim_task=sim_task,
         plan_task=setup.plan_task(build, **unlimited),
-        seconds=seconds or setup.seconds or int(sim_task.time_limit) * control_dt(sim_task),
+        seconds=seconds,
         replan_every=setup.replan_every,
         hooks=setup.hooks,
         success=setup.success,
@@ -282,7 +280,7 @@ def defaults(spec: str) -> dict[str, Any]:
     return {p.name: p.default for p in parameters if p.kind in kinds and p.default is not p.empty}
 
 
-def takes(spec: str, name: str) -> bool:
+def accepts(spec: str, name: str) -> bool:
     """Whether `make(spec, **{name: ...})` accepts the override `name`: a registered env
     its keyword arguments and the physics options, a user's factory its own keyword
     arguments (any, with ``**kwargs``), a Playground env its config's entries."""

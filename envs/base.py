@@ -1,7 +1,7 @@
 """What every shipped env shares: where its model files live, and its record in the
 registry (`EnvSpec`: the factory, hyperparameters per algorithm, the planning setup).
 
-Every env is built the one public way, `mjzoo.task` (lib/kit.py); this module holds
+Every env is built the one public way, `mjzoo.task` (lib/builder.py); this module holds
 nothing a user's own task would need but the model files."""
 
 from __future__ import annotations
@@ -82,11 +82,6 @@ def held_near(
     time = np.asarray(states.data.time)
     worst = float(np.max(np.abs(value_fn(states)[time >= time[-1] - seconds + 1e-6])))
     return worst < tolerance, worst
-
-
-def wrap(angle: np.ndarray) -> np.ndarray:
-    """Angles in (-pi, pi]."""
-    return np.arctan2(np.sin(angle), np.cos(angle))
 
 
 @dataclasses.dataclass(frozen=True, kw_only=True)

@@ -25,6 +25,7 @@ from mujoco import mjx
 
 import mjzoo
 from mjzoo.catalog.rewards import tolerance
+from mjzoo.catalog.shaping import wrap_angle
 from mjzoo.envs import base
 from mjzoo.envs.base import ASSETS
 from mjzoo.types import State, Task
@@ -58,7 +59,7 @@ SWINGUP_PPO = dict(
 
 def _upright_at_end(states) -> tuple[bool, float]:
     """Balanced when |pole angle from upright| < 0.2 rad over the last second."""
-    return base.held_near(states, lambda s: base.wrap(s.data.qpos[..., 1]), 0.2)
+    return base.held_near(states, lambda s: np.asarray(wrap_angle(s.data.qpos[..., 1])), 0.2)
 
 
 # Sampling planners (`mjzoo plan mppi cartpole_swingup`): plan at the simulation's own
@@ -122,7 +123,7 @@ def effort(p: dict, model: mjx.Model, state: State, action: Array, next_state: S
 
 def fallen(p: dict, model: mjx.Model, state: State) -> Array:
     """Whether the pole leans more than `fall_angle` rad from upright."""
-    leaning = jnp.abs(jnp.arctan2(jnp.sin(state.data.qpos[1]), jnp.cos(state.data.qpos[1])))
+    leaning = jnp.abs(wrap_angle(state.data.qpos[1]))
     return leaning > p["fall_angle"]
 
 

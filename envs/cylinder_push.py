@@ -20,6 +20,7 @@ from __future__ import annotations
 import jax
 import jax.numpy as jnp
 import numpy as np
+from jax.tree_util import Partial
 from mujoco import mjx
 
 import mjzoo
@@ -28,7 +29,7 @@ from mjzoo.combinators import with_reward
 from mjzoo.envs import base
 from mjzoo.envs.base import ASSETS
 from mjzoo.planning.closed_loop import Hooks
-from mjzoo.types import State, Task, bind
+from mjzoo.types import State, Task
 
 __all__ = ["push", "PUSH", "PPO", "PLANNING"]
 
@@ -84,7 +85,7 @@ PLANNING = base.PlanningSetup(
     replan_every=2,
     plan_overrides=dict(ctrl_dt=0.05, approach_weight=0.0),
     success=_on_goal,
-    hooks=Hooks(pre_rollout=bind(phase_view, np.float32(0.05), np.float32(1.0))),
+    hooks=Hooks(pre_rollout=Partial(phase_view, np.float32(0.05), np.float32(1.0))),
     configs={
         "predictive_sampling": _SAMPLING,
         "mppi": dict(_SAMPLING, temperature=0.05),

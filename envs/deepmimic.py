@@ -6,7 +6,7 @@ pybullet at a quarter of its size) and its clips (``data/motions/humanoid3d_*.tx
 e.g. walk: 39 frames at 30 fps; run: 25). Nothing is copied here: `humanoid_model`
 builds the MJCF at run time from the installed URDF, as the locomotion tasks load
 Brax's bundled models, and `walk_clips` reads the clips with
-`mjzoo.motion.deepmimic.load`. Install the data with ``pip install pybullet`` (a
+`mjzoo.motion.deepmimic_format.load`. Install the data with ``pip install pybullet`` (a
 binary wheel, ~100 MB; nothing is compiled).
 
     clips = deepmimic.walk_clips()               # [walk, run] as mjzoo.motion.Clip
@@ -15,7 +15,7 @@ binary wheel, ~100 MB; nothing is compiled).
     task = deepmimic.walk_amp()                  # the walk with RSI from the walk clip: for `AMP`
     reference = deepmimic.walk_amp_reference(task)   # that clip, looping, at the control step
 
-The model is the URDF in MuJoCo's z-up basis (`mjzoo.motion.deepmimic.to_z_up`):
+The model is the URDF in MuJoCo's z-up basis (`mjzoo.motion.deepmimic_format.to_z_up`):
 x forward, y left, z up; the root a free joint, each spherical joint a ball joint,
 each revolute joint a hinge (knees and elbows, the URDF's limits), fixed links welded.
 Shapes (spheres, capsules, boxes) and masses (45 kg in all) are the URDF's; each link's
@@ -49,10 +49,10 @@ import numpy as np
 import mjzoo
 from mjzoo import motion
 from mjzoo import physics as physics_lib
+from mjzoo.builder import alive, named
 from mjzoo.catalog import resets, terminations
 from mjzoo.envs import base, locomotion
-from mjzoo.kit import alive, named
-from mjzoo.motion import deepmimic as deepmimic_format
+from mjzoo.motion import deepmimic_format
 from mjzoo.types import Task
 
 __all__ = [
@@ -179,7 +179,7 @@ def character_joints() -> tuple[str, ...]:
 
 def walk_clips(names: tuple[str, ...] = ("walk", "run")) -> list[motion.Clip]:
     """The installed DeepMimic clips `names` as checked clips of `humanoid_model` (z-up,
-    velocities from position differences per second; see `mjzoo.motion.deepmimic`)."""
+    velocities from position differences per second; see `mjzoo.motion.deepmimic_format`)."""
     m = humanoid_model()
     return [deepmimic_format.load(motion_path(n), m, character_joints(), name=n) for n in names]
 

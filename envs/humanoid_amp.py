@@ -60,15 +60,16 @@ from typing import Any
 
 import mujoco
 import numpy as np
+from jax.tree_util import Partial
 
 import mjzoo
 from mjzoo import checks, motion
 from mjzoo import physics as physics_lib
+from mjzoo.builder import alive, named
 from mjzoo.catalog import commands, resets, rewards, terminations
 from mjzoo.envs import base
 from mjzoo.envs.locomotion import MJX_OPTIONS, PPO, at_pose, free_base_observation, reset_pose
-from mjzoo.kit import alive, named
-from mjzoo.types import Task, bind
+from mjzoo.types import Task
 
 __all__ = [
     "AMP",
@@ -218,7 +219,7 @@ def _humanoid(
         combinators=combinators,
         terminate={"too_low": named(terminations.base_too_low(m, min_height, body="torso"), "min_height")},
         rewards={**(rewards_ or {}), "alive": (alive, alive_weight)},
-        costs={"effort": (bind(rewards.effort), effort_weight)},
+        costs={"effort": (Partial(rewards.effort), effort_weight)},
         time_limit=episode_steps,
         params={"qpos0": reset_pose(m)},
     )

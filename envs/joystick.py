@@ -36,7 +36,10 @@ from __future__ import annotations
 import functools
 from typing import Any, Callable
 
+from jax.tree_util import Partial
+
 import mjzoo
+from mjzoo.builder import named
 from mjzoo.catalog import (
     actuators,
     commands,
@@ -52,9 +55,8 @@ from mjzoo.catalog import (
 from mjzoo.combinators import with_auto_reset
 from mjzoo.envs import base
 from mjzoo.envs.locomotion import MJX_OPTIONS, actuated_pose, at_pose, reset_pose
-from mjzoo.kit import named
 from mjzoo.perturbations import with_domain_randomization, with_observation_noise
-from mjzoo.types import Task, bind
+from mjzoo.types import Task
 
 __all__ = ["joystick", "joystick_curriculum", "JOYSTICK", "PPO"]
 
@@ -154,8 +156,8 @@ def joystick(
         costs={
             "vertical": (rewards.vertical_velocity(m), vertical_weight),
             "roll_pitch": (rewards.roll_pitch_velocity(m), roll_pitch_weight),
-            "action_rate": (bind(rewards.action_rate), action_rate_weight),
-            "effort": (bind(rewards.effort), effort_weight),
+            "action_rate": (Partial(rewards.action_rate), action_rate_weight),
+            "effort": (Partial(rewards.effort), effort_weight),
         },
         terminate={
             "tilted": named(terminations.not_upright(m, 1.2), "max_tilt"),

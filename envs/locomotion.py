@@ -2,7 +2,7 @@
 
 Each task is one `mjzoo.task` call (`gym_task`) whose pieces are catalog items built
 from the loaded model, their numbers made the task's named parameters by
-`mjzoo.kit.named`, so `task.with_params(min_height=0.9)` reaches them:
+`mjzoo.builder.named`, so `task.with_params(min_height=0.9)` reaches them:
 
     physics = base.brax_asset("hopper.xml", ctrl_dt=0.008)
     m = physics.mj_model
@@ -13,7 +13,7 @@ from the loaded model, their numbers made the task's named parameters by
         resets=(named(resets.joint_position_noise(m, 5e-3), "reset_noise"), ...),
         terminate={"too_low": named(terminations.base_too_low(m, 0.7, body="torso"), "min_height")},
         rewards={"forward": (rewards.forward_velocity(m, "torso"), 1.0), "alive": (alive, 1.0)},
-        costs={"effort": (bind(rewards.effort), 1e-3)},
+        costs={"effort": (Partial(rewards.effort), 1e-3)},
         time_limit=1000,
         params={"qpos0": reset_pose(m)},
     )
@@ -51,10 +51,10 @@ from mujoco import mjx
 import mjzoo
 from mjzoo import names
 from mjzoo import physics as physics_lib
+from mjzoo.builder import alive, named
 from mjzoo.catalog import observations, resets, rewards, terminations
 from mjzoo.envs import base
-from mjzoo.kit import alive, named
-from mjzoo.types import Task, bind
+from mjzoo.types import Task
 
 __all__ = [
     "bare",
@@ -181,7 +181,7 @@ def gym_task(
         resets=noise,
         terminate=fallen or None,
         rewards=terms,
-        costs={"effort": (bind(rewards.effort), effort_weight)},
+        costs={"effort": (Partial(rewards.effort), effort_weight)},
         time_limit=episode_steps,
         params={"qpos0": reset_pose(m)},
     )

@@ -21,10 +21,12 @@ from __future__ import annotations
 
 import jax
 import jax.numpy as jnp
+import numpy as np
 from mujoco import mjx
 
 import mjzoo
 from mjzoo.catalog.rewards import tolerance
+from mjzoo.catalog.shaping import wrap_angle
 from mjzoo.combinators import with_reward
 from mjzoo.envs import base
 from mjzoo.envs.base import ASSETS
@@ -53,7 +55,7 @@ PPO = dict(
 
 def _angle_squared(model: mjx.Model, state: State, action: Array, next_state: State) -> Array:
     angle = next_state.data.qpos[0]
-    return jnp.square(jnp.arctan2(jnp.sin(angle), jnp.cos(angle)))
+    return jnp.square(wrap_angle(angle))
 
 
 def precise_upright(task: Task) -> Task:
@@ -65,7 +67,7 @@ def precise_upright(task: Task) -> Task:
 
 def _upright_at_end(states) -> tuple[bool, float]:
     """Solved when |angle from upright| < 0.2 rad over the last second."""
-    return base.held_near(states, lambda s: base.wrap(s.data.qpos[..., 0]), 0.2)
+    return base.held_near(states, lambda s: np.asarray(wrap_angle(s.data.qpos[..., 0])), 0.2)
 
 
 # Sampling planners (`mjzoo plan mppi pendulum_swingup`): plan at the simulation's own

@@ -15,6 +15,7 @@ from __future__ import annotations
 import jax
 import jax.numpy as jnp
 import numpy as np
+from jax.tree_util import Partial
 from mujoco import mjx
 
 import mjzoo
@@ -22,7 +23,7 @@ from mjzoo.catalog.rewards import tolerance
 from mjzoo.envs import base
 from mjzoo.envs.base import ASSETS
 from mjzoo.planning.closed_loop import Hooks
-from mjzoo.types import State, Task, bind
+from mjzoo.types import State, Task
 
 __all__ = ["reach", "REACH", "PPO", "PLANNING"]
 
@@ -100,8 +101,8 @@ PLANNING = base.PlanningSetup(
     success=_reaches_goals,
     hooks=Hooks(
         warm_start=warm_start,
-        post_sim_step=bind(new_goal_when_reached, np.float32(0.05), np.float32(0.3)),
-        pre_sim_step=bind(gusts, np.float32(0.05)),
+        post_sim_step=Partial(new_goal_when_reached, np.float32(0.05), np.float32(0.3)),
+        pre_sim_step=Partial(gusts, np.float32(0.05)),
         post_rollout=plan_cost,
     ),
     configs={

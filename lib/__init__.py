@@ -27,7 +27,8 @@ import io
 with contextlib.redirect_stdout(io.StringIO()):  # mjx prints a notice when its optional warp backend is absent
     from mujoco import mjx  # noqa: F401
 
-from mjzoo import checks, layers, lazy, names, physics, tree, worlds
+from mjzoo import batching, checks, layers, lazy, names, physics, tree
+from mjzoo.builder import task
 from mjzoo.checks import RetraceHazardWarning
 from mjzoo.combinators import (
     AutoResetState,
@@ -41,7 +42,6 @@ from mjzoo.combinators import (
     with_reward_clip,
     with_time_limit,
 )
-from mjzoo.kit import task
 from mjzoo.layers import find
 from mjzoo.parameters import params, with_params
 from mjzoo.perturbations import (
@@ -52,15 +52,15 @@ from mjzoo.perturbations import (
 )
 from mjzoo.running import (
     Policy,
-    complete,
     control_dt,
+    fill_transition_entries,
     reset,
     reward_terms,
     rollout,
     transition,
     transition_with_terms,
 )
-from mjzoo.types import Outcome, State, Task, Trajectory, bind
+from mjzoo.types import Outcome, State, Task, Trajectory
 
 __version__ = "0.1.0"
 
@@ -77,9 +77,8 @@ __all__ = [
     "TimeLimitState",
     "AutoResetState",
     "DomainRandomizationState",
-    "bind",
     "reset",
-    "complete",
+    "fill_transition_entries",
     "transition",
     "transition_with_terms",
     "rollout",
@@ -100,7 +99,7 @@ __all__ = [
     "with_action_noise",
     "with_domain_randomization",
     "physics",
-    "worlds",
+    "batching",
     "tree",
     "layers",
     "names",

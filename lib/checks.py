@@ -1,6 +1,6 @@
 """Checking the numbers a catalog constructor is given, once, at construction.
 
-Each function returns the value ready to bind as a pytree leaf (float32 arrays) or a
+Each function returns the value ready to close over as a pytree leaf (float32 arrays) or a
 static int, or raises a ValueError that says which argument of which constructor is
 wrong and what it must be: ``"{who}: {name}={value!r} must be ..."``.
 """
@@ -107,7 +107,7 @@ def retrace_hazard(who: str, what: str, fn) -> None:
     numbers = f", and the numbers it captures ({_preview(captured)}) are constants of the trace" if captured else ""
     warnings.warn(
         f"{who}: {what} is {why}: a rebuilt task holds a new function object, so jax.jit retraces it{numbers}. "
-        "Use a module-level function and pass its numbers as leaves (mjzoo.bind(fn, weight), or a named "
+        "Use a module-level function and pass its numbers as leaves (Partial(fn, weight), or a named "
         "parameter of mjzoo.task).",
         RetraceHazardWarning,
         stacklevel=_first_caller_outside(),

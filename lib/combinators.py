@@ -20,12 +20,13 @@ from typing import Any, Callable, Mapping, NamedTuple
 
 import jax
 import jax.numpy as jnp
+from jax.tree_util import Partial
 from mujoco import mjx
 
-from mjzoo import checks, tree, worlds
+from mjzoo import batching, checks, tree
 from mjzoo.layers import layered, peel, wrap
-from mjzoo.running import complete, reset, reward_terms, transition_with_terms
-from mjzoo.types import Outcome, State, Task, bind
+from mjzoo.running import fill_transition_entries, reset, reward_terms, transition_with_terms
+from mjzoo.types import Outcome, State, Task
 
 __all__ = [
     "with_observation",
@@ -71,7 +72,9 @@ def with_observation(task: Task, fn: Callable) -> Task:
     checks.retrace_hazard("with_observation", "fn", fn)
     if not isinstance(fn, jax.tree_util.Partial):
         fn = jax.tree_util.Partial(fn)
-    return layered(task, ObservationState, bind(_observed_reset, task.start, fn), bind(_observed_step, task.step, fn))
+    return layered(
+        task, ObservationState, Partial(_observed_reset, task.start, fn), Partial(_observed_step, task.step, fn)
+    )
 
 
 def _observed(state: State, fn) -> State:
@@ -108,9 +111,9 @@ def with_time_limit(task: Task, max_steps: int) -> Task:
     return layered(
         task,
         TimeLimitState,
-        start=bind(_time_limit_reset, task.start),
-        step=bind(_time_limit_step, task.step),
-        terminate=bind(_time_limit_terminate, task.terminate, jnp.int32(max_steps)),
+        start=Partial(_time_limit_reset, task.start),
+        step=Partial(_time_limit_step, task.step),
+        terminate=Partial(_time_limit_terminate, task.terminate, jnp.int32(max_steps)),
     ).replace(time_limit=jnp.int32(max_steps) if task.time_limit is None else jnp.minimum(task.time_limit, max_steps))
 
 
@@ -143,7 +146,7 @@ def _select(cond: Array, on_true: State, on_false: State) -> State:
     """`on_false` (the running state) with data, obs, info and the combinators' records
     taken from `on_true` where `cond` holds."""
     return on_false.replace(
-        data=worlds.where(cond, on_true.data, on_false.data),
+        data=batching.where(cond, on_true.data, on_false.data),
         obs=tree.where(cond, on_true.obs, on_false.obs),
         info=tree.where(cond, on_true.info, on_false.info),
         layers=tree.where(cond, on_true.layers, on_false.layers),
@@ -165,9 +168,9 @@ def runs_transitions(task: Task, step_fn: Callable, *params) -> Task:
     truncated)``; the task's reward and terminate then report that record."""
     inner = task.replace(model=None)  # the model comes from the call, so edits to it apply
     return task.replace(
-        step=bind(step_fn, *params, inner),
-        reward=bind(_recorded_reward),
-        terminate=bind(_recorded_terminate),
+        step=Partial(step_fn, *params, inner),
+        reward=Partial(_recorded_reward),
+        terminate=Partial(_recorded_terminate),
     )
 
 
@@ -200,7 +203,7 @@ def with_auto_reset(task: Task) -> Task:
     """
     if resets_itself(task):
         return task
-    return runs_transitions(task, _auto_reset_step).replace(start=bind(_auto_reset_start, task.start))
+    return runs_transitions(task, _auto_reset_step).replace(start=Partial(_auto_reset_start, task.start))
 
 
 def resets_itself(task: Task) -> bool:
@@ -255,7 +258,7 @@ def _restarted_batch(axis_size: int, in_batched: list, inner: Task, done: Array,
     task_batched = jax.tree.leaves(in_batched[0])
     ended_leaves, ended_def = jax.tree.flatten(ended)
     ended_batched = jax.tree.leaves(in_batched[3])
-    kept = [s and not b for s, b in zip(jax.tree.leaves(worlds.shared(ended)), ended_batched)]
+    kept = [s and not b for s, b in zip(jax.tree.leaves(batching.shared(ended)), ended_batched)]
     widen = lambda x, b: x if b else jnp.broadcast_to(x, (axis_size, *jnp.shape(x)))  # noqa: E731
     done, key = (widen(x, b) for x, b in zip((done, key), in_batched[1:3]))
     moving = [widen(x, b) for x, b, k in zip(ended_leaves, ended_batched, kept) if not k]
@@ -292,10 +295,10 @@ def with_action_repeat(task: Task, repeats: int) -> Task:
     """
     repeats = checks.integer("with_action_repeat", "repeats", repeats)
     limit = None if task.time_limit is None else (task.time_limit + repeats - 1) // repeats
-    return runs_transitions(task, _repeat_step, tree.Static(repeats)).replace(time_limit=limit)
+    return runs_transitions(task, _repeat_step, tree.StaticValue(repeats)).replace(time_limit=limit)
 
 
-def _repeat_step(repeats: tree.Static, inner: Task, model, state: State, action: Array, key: Array) -> State:
+def _repeat_step(repeats: tree.StaticValue, inner: Task, model, state: State, action: Array, key: Array) -> State:
     inner = inner.replace(model=model)
 
     def body(carry, key):
@@ -312,7 +315,7 @@ def _repeat_step(repeats: tree.Static, inner: Task, model, state: State, action:
             truncated | (~done & next_state.truncated),
         ), None
 
-    state = complete(inner, state)  # adds what only inner transitions write (while `reset` traces)
+    state = fill_transition_entries(inner, state)  # adds what only inner transitions write (while `reset` traces)
     shape = jax.eval_shape(lambda: transition_with_terms(inner, state, action, key))
     # The carry holds the metrics an inner transition writes, and only those.
     state = state.replace(metrics=tree.zeros_like_shape(shape[0].metrics))
@@ -349,7 +352,7 @@ def with_rewards(task: Task, terms: Mapping[str, tuple[Callable, float]]) -> Tas
             raise TypeError(f"with_reward: fn for term {name!r} must be callable, got {type(fn).__name__}")
         checks.retrace_hazard("with_reward", f"the function of term {name!r}", fn)
         fn = fn if isinstance(fn, jax.tree_util.Partial) else jax.tree_util.Partial(fn)
-        reward = bind(_extra_reward, reward, tree.Static(name), fn, jnp.float32(weight))
+        reward = Partial(_extra_reward, reward, tree.StaticValue(name), fn, jnp.float32(weight))
     _refuse_taken_names(task, terms, "with_reward")
     return task.replace(reward=reward)
 
@@ -362,7 +365,7 @@ def _refuse_taken_names(task: Task, names, who: str) -> None:
             raise ValueError(f"{who}: the task already has a reward term named {name!r}: {sorted(existing)}")
 
 
-def _extra_reward(reward_fn, name: tree.Static, fn, weight, model, state, action, next_state):
+def _extra_reward(reward_fn, name: tree.StaticValue, fn, weight, model, state, action, next_state):
     terms = reward_fn(model, state, action, next_state)
     return {**terms, name.value: weight * jnp.asarray(fn(model, state, action, next_state), jnp.float32)}
 
@@ -379,7 +382,7 @@ def with_reward_clip(task: Task, low: float, high: float) -> Task:
     if not (low <= high):  # also rejects NaN
         raise ValueError(f"with_reward_clip: the range low={low!r}, high={high!r} must have low <= high")
     _refuse_taken_names(task, ["clip"], "with_reward_clip")
-    return task.replace(reward=bind(_clipped_reward, task.reward, jnp.float32(low), jnp.float32(high)))
+    return task.replace(reward=Partial(_clipped_reward, task.reward, jnp.float32(low), jnp.float32(high)))
 
 
 def _clipped_reward(reward_fn, low, high, model, state, action, next_state) -> dict[str, Array]:
@@ -434,7 +437,7 @@ def _revert_physics(ok: Array, new: mjx.Data, old: mjx.Data) -> mjx.Data:
     Selecting the whole of `old` would keep every buffer of the previous step alive and
     force XLA to copy them all each step (measured: +25% per step on a cheap model).
     """
-    zeroed = worlds.where(~ok, jax.tree.map(jnp.zeros_like, new), new)
+    zeroed = batching.where(~ok, jax.tree.map(jnp.zeros_like, new), new)
     names = {f.name for f in dataclasses.fields(new)}
     restored = {k: tree.where(ok, getattr(new, k), getattr(old, k)) for k in INTEGRATION_STATE if k in names}
     return zeroed.replace(**restored)
@@ -454,7 +457,7 @@ def _guard_step(max_qvel, inner: Task, model, state: State, action: Array, key: 
         layers=tree.where(ok, next_state.layers, state.layers),
     )
     metrics = jax.tree.map(lambda v: jnp.where(jnp.isfinite(v), v, 0.0), next_state.metrics)
-    metrics = {**metrics, "diverged": (~ok).astype(jnp.float32), **worlds.overflow_metrics(data)}
+    metrics = {**metrics, "diverged": (~ok).astype(jnp.float32), **batching.overflow_metrics(data)}
     safe = safe.replace(metrics=metrics)
     terms = {k: jnp.where(ok, v, 0.0) for k, v in terms.items()}
     return record(safe, terms, next_state.terminated | ~ok, next_state.truncated & ok)

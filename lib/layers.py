@@ -26,7 +26,7 @@ from typing import Any, Protocol, TypeVar
 import jax
 
 from mjzoo import tree
-from mjzoo.types import State, Task, bind
+from mjzoo.types import State, Task
 
 __all__ = ["Layer", "find", "peel", "wrap", "layered"]
 
@@ -98,18 +98,18 @@ def layered(
     """`task` with this combinator's `start` and `step`, which keep a `record_type`
     record, and its `reward` and `terminate` (which peel the states they pass on);
     None: the wrapped task's own, handed the states with the record peeled off."""
-    kind = tree.Static(record_type)
+    kind = tree.StaticValue(record_type)
     return task.replace(
         start=start,
         step=step,
-        reward=bind(_peeled_reward, task.reward, kind) if reward is None else reward,
-        terminate=bind(_peeled_terminate, task.terminate, kind) if terminate is None else terminate,
+        reward=Partial(_peeled_reward, task.reward, kind) if reward is None else reward,
+        terminate=Partial(_peeled_terminate, task.terminate, kind) if terminate is None else terminate,
     )
 
 
-def _peeled_reward(reward_fn, kind: tree.Static, model, state: State, action, next_state: State):
+def _peeled_reward(reward_fn, kind: tree.StaticValue, model, state: State, action, next_state: State):
     return reward_fn(model, peel(state, kind.value)[1], action, peel(next_state, kind.value)[1])
 
 
-def _peeled_terminate(terminate_fn, kind: tree.Static, model, state: State):
+def _peeled_terminate(terminate_fn, kind: tree.StaticValue, model, state: State):
     return terminate_fn(model, peel(state, kind.value)[1])

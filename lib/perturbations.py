@@ -11,10 +11,11 @@ from typing import Any, Callable, NamedTuple
 
 import jax
 import jax.numpy as jnp
+from jax.tree_util import Partial
 from mujoco import mjx
 
 from mjzoo.layers import layered, peel, wrap
-from mjzoo.types import State, Task, bind
+from mjzoo.types import State, Task
 
 __all__ = [
     "with_observation_noise",
@@ -60,7 +61,7 @@ def with_observation_noise(task: Task, scale: float) -> Task:
     record; applied twice, the two noises add up.
     """
     scale = _check_scale("with_observation_noise", scale)
-    return task.replace(start=bind(_noisy_reset, task.start, scale), step=bind(_noisy_obs_step, task.step, scale))
+    return task.replace(start=Partial(_noisy_reset, task.start, scale), step=Partial(_noisy_obs_step, task.step, scale))
 
 
 def _noisy_reset(reset_fn, scale, model, key) -> State:
@@ -81,7 +82,7 @@ def with_action_noise(task: Task, scale: float) -> Task:
 
     The reward still sees the commanded action. Keeps no record.
     """
-    return task.replace(step=bind(_noisy_action_step, task.step, _check_scale("with_action_noise", scale)))
+    return task.replace(step=Partial(_noisy_action_step, task.step, _check_scale("with_action_noise", scale)))
 
 
 def _noisy_action_step(step_fn, scale, model, state, action, key) -> State:
@@ -118,10 +119,10 @@ def with_domain_randomization(task: Task, randomize: Randomizer) -> Task:
     return layered(
         task,
         DomainRandomizationState,
-        start=bind(_randomized_reset, task.start, randomize),
-        step=bind(_randomized_step, task.step),
-        reward=bind(_randomized_reward, task.reward),
-        terminate=bind(_randomized_terminate, task.terminate),
+        start=Partial(_randomized_reset, task.start, randomize),
+        step=Partial(_randomized_step, task.step),
+        reward=Partial(_randomized_reward, task.reward),
+        terminate=Partial(_randomized_terminate, task.terminate),
     )
 
 

@@ -14,7 +14,7 @@ pure-JAX one, and MuJoCo Warp (CUDA kernels; the default where it is installed a
 CUDA GPU is present). Warp keeps its contacts in one pool shared by every simulated
 world of a batch, sized ``max_contacts`` per world, and ``max_constraints`` constraint
 rows per world: both are measured by a probe rollout of C MuJoCo at load time unless
-given; `mjzoo.worlds` sizes the pool for a batch, and is the one reader of Warp's
+given; `mjzoo.batching` sizes the pool for a batch, and is the one reader of Warp's
 private fields.
 """
 
@@ -33,7 +33,7 @@ import jax
 import mujoco
 from mujoco import mjx
 
-from mjzoo.worlds import clear_overflow, probe_capacity
+from mjzoo.batching import clear_overflow, probe_capacity
 
 __all__ = [
     "Physics",
@@ -103,7 +103,7 @@ class Physics:
     @functools.cached_property
     def data0(self) -> mjx.Data:
         """The template every reset starts from: ``qpos = qpos0``, zero velocity, nothing
-        computed; on Warp, with a contact pool for one world (`mjzoo.worlds.sized` sizes it)."""
+        computed; on Warp, with a contact pool for one world (`mjzoo.batching.sized` sizes it)."""
         device = jax.local_devices()[0]  # this process's (MJX's default is process 0's in a multi-process run)
         if self.impl == "jax":
             return mjx.make_data(self.mj_model, device=device, impl="jax")
@@ -187,7 +187,7 @@ def load(
         CUDA kernels, several times faster on a GPU, no derivatives); default
         `default_impl()`.
       max_contacts: Warp only: contacts per simulated world the shared pool holds;
-        default: measured by a probe rollout (`mjzoo.worlds.probe_capacity`).
+        default: measured by a probe rollout (`mjzoo.batching.probe_capacity`).
       max_constraints: Warp only: constraint rows per world (MuJoCo Warp's njmax);
         default: measured by the same probe.
 
@@ -217,7 +217,7 @@ def load(
 def step(model: mjx.Model, data: mjx.Data, ctrl: jax.Array, n_substeps: int) -> mjx.Data:
     """Applies `ctrl` ([nu]) and advances `n_substeps` (static) physics steps.
 
-    On Warp, the overflow flags (`mjzoo.worlds.overflow`) are cleared first, so afterwards they
+    On Warp, the overflow flags (`mjzoo.batching.overflow`) are cleared first, so afterwards they
     report this control step's substeps.
     """
     data = clear_overflow(data).replace(ctrl=ctrl)
@@ -283,7 +283,7 @@ def _warp_step_jvp(primals, tangents):
 def quiet(model: mjx.Model) -> mjx.Model:
     """`model` with MuJoCo Warp's overflow prints off: a device printf per world and step
     that hits a solver or capacity limit, which slows a batch down; mjzoo counts them in
-    metrics instead (`mjzoo.worlds.overflow`). A JAX model is returned as it is."""
+    metrics instead (`mjzoo.batching.overflow`). A JAX model is returned as it is."""
     if model.impl != mjx.Impl.WARP:
         return model
     return model.replace(opt=model.opt.replace(_impl=model.opt._impl.replace(warn_overflow=0)))

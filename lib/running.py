@@ -15,11 +15,11 @@ import jax
 import jax.numpy as jnp
 
 from mjzoo import checks
-from mjzoo.types import State, Task, Trajectory, complete, transition, transition_with_terms
+from mjzoo.types import State, Task, Trajectory, fill_transition_entries, transition, transition_with_terms
 
 __all__ = [
     "reset",
-    "complete",
+    "fill_transition_entries",
     "transition",
     "transition_with_terms",
     "rollout",
@@ -40,7 +40,7 @@ def reward_terms(state: State) -> dict[str, Array]:
 
 
 def reset(task: Task, key: Array) -> State:
-    """Starts an episode of `task`: ``task.reset(task.model, key)``, a state `complete`
+    """Starts an episode of `task`: ``task.reset(task.model, key)``, a state `fill_transition_entries`
     for it."""
     return task.reset(task.model, key)
 

@@ -21,7 +21,7 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
-from mjzoo import running, worlds
+from mjzoo import batching, running
 from mjzoo.combinators import resets_itself, with_time_limit
 from mjzoo.types import State, Task
 
@@ -154,17 +154,17 @@ def _uniform(size: int, obs: PyTree, key: jax.Array) -> jax.Array:
 @functools.partial(jax.jit, static_argnums=(2, 3))
 def _episodes(task: Task, keys: jax.Array, policy, num_steps: int):
     """A reset per key ([E]) and the `Trajectory` of `num_steps` transitions from it ([E, T]),
-    with every leaf per env (`worlds.own`)."""
+    with every leaf per env (`batching.own`)."""
     _TRACES[0] += 1  # runs only while tracing
     policy = policy or functools.partial(_uniform, task.action_size)
-    task = worlds.sized(task, keys.shape[0])  # Warp: a contact pool for every env
+    task = batching.sized(task, keys.shape[0])  # Warp: a contact pool for every env
 
     def one(key):
         reset_key, run_key = jax.random.split(key)
         first = running.reset(task, reset_key)
         return first, running.rollout(task, policy, first, run_key, num_steps)[1]
 
-    return worlds.own(jax.vmap(one)(keys))  # Warp's shared contact pool is not one env's
+    return batching.own(jax.vmap(one)(keys))  # Warp's shared contact pool is not one env's
 
 
 # --- properties: each returns why it fails, or None ----------------------------------

@@ -12,7 +12,7 @@ import numpy as np
 
 __all__ = [
     "Packing",
-    "Static",
+    "StaticValue",
     "where",
     "all_finite",
     "fill_missing",
@@ -27,7 +27,7 @@ PyTree = Any
 
 @jax.tree_util.register_dataclass
 @dataclasses.dataclass(frozen=True)
-class Static:
+class StaticValue:
     """A hashable value carried as static pytree metadata, not as a leaf.
 
     For the few structural numbers a task needs at trace time (loop counts such as

@@ -12,7 +12,7 @@ Everything is written for ONE environment; algorithms batch with `jax.vmap`.
 from __future__ import annotations
 
 import dataclasses
-from typing import Any, Callable, NamedTuple, Protocol
+from typing import Any, NamedTuple, Protocol
 
 import jax
 import jax.numpy as jnp
@@ -162,9 +162,9 @@ class Task:
 
     def reset(self, model: mjx.Model, key: jax.Array) -> State:
         """A new episode: ``start(model, key)`` with every `info` and `metrics` entry a
-        transition of this task writes added as zeros (`mjzoo.complete`)."""
+        transition of this task writes added as zeros (`mjzoo.fill_transition_entries`)."""
         checks.key("mjzoo.reset", key)
-        return complete(self.replace(model=model), self.start(model, key))
+        return fill_transition_entries(self.replace(model=model), self.start(model, key))
 
     def with_params(self, **values: Any) -> "Task":
         """This task with its named numbers changed (`mjzoo.with_params`): same pytree
@@ -193,11 +193,6 @@ class Trajectory:
     obs: PyTree
     action: Array
     next_state: State
-
-
-def bind(fn: Callable, *params: PyTree) -> jax.tree_util.Partial:
-    """Binds a module-level function to its parameters so they become pytree leaves."""
-    return jax.tree_util.Partial(fn, *params)
 
 
 # --- one transition: what a Task's four functions mean together ----------------------
@@ -258,7 +253,7 @@ def _two_flags(flags) -> tuple[Array, Array]:
     return jnp.asarray(flags[0], bool), jnp.asarray(flags[1], bool)
 
 
-def complete(task: Task, state: State) -> State:
+def fill_transition_entries(task: Task, state: State) -> State:
     """`state` with every `info` and `metrics` entry a transition of `task` writes.
 
     Entries it lacks are added as zeros, so that the state has the same pytree

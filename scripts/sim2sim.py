@@ -59,7 +59,7 @@ def main() -> None:
     key = jax.random.key(args.seed)
     begin = time.perf_counter()
     evaluate = jax.jit(trained.module.evaluate, static_argnums=(0, 4, 5))
-    _, jax_returns, trajectory = evaluate(trained.cfg, task, state, key, args.episodes, steps)
+    jax_returns, _, trajectory = evaluate(trained.cfg, task, state, key, args.episodes, steps)
     jax_returns, jax_obs = np.asarray(jax_returns), np.asarray(trajectory.obs)  # obs: episode 0's, [steps, k]
     print(f"JAX evaluation: {time.perf_counter() - begin:.1f} s")
 

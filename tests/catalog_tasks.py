@@ -23,11 +23,12 @@ import dataclasses
 import jax
 import jax.numpy as jnp
 import numpy as np
+from jax.tree_util import Partial
 from mujoco import mjx
 
 import mjzoo
 from mjzoo import physics as physics_lib
-from mjzoo.types import State, Task, bind
+from mjzoo.types import State, Task
 
 BASE_AND_ARM = physics_lib.load("""
 <mujoco model="base-and-arm">
@@ -110,10 +111,10 @@ def make_task(qpos=QPOS0, qvel=QVEL0) -> Task:
     p = Params(jnp.asarray(qpos, jnp.float32), jnp.asarray(qvel, jnp.float32))
     return Task(
         model=BASE_AND_ARM.model,
-        start=bind(_reset, p),
-        step=bind(_step, p),
-        reward=bind(_reward, p),
-        terminate=bind(_terminate, p),
+        start=Partial(_reset, p),
+        step=Partial(_step, p),
+        reward=Partial(_reward, p),
+        terminate=Partial(_terminate, p),
         mj_model=MJ,
     )
 

@@ -26,13 +26,14 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 import pytest
+from jax.tree_util import Partial
 from mujoco import mjx
 
 import mjzoo
 from mjzoo import physics as physics_lib
 from mjzoo.combinators import AutoResetState, ObservationState, TimeLimitState
 from mjzoo.perturbations import DomainRandomizationState
-from mjzoo.types import State, Task, bind
+from mjzoo.types import State, Task
 
 DT = 0.1
 XML = f"""
@@ -96,10 +97,10 @@ def make_task(threshold=NEVER, nan_above=1e30, spawn=0.0) -> Task:
     p = Params(jnp.float32(threshold), jnp.float32(nan_above), jnp.float32(spawn))
     return Task(
         model=PHYSICS.model,
-        start=bind(_reset, p),
-        step=bind(_step, p),
-        reward=bind(_reward, p),
-        terminate=bind(_terminate, p),
+        start=Partial(_reset, p),
+        step=Partial(_step, p),
+        reward=Partial(_reward, p),
+        terminate=Partial(_terminate, p),
         mj_model=PHYSICS.mj_model,
     )
 
@@ -303,7 +304,7 @@ def test_a_batch_resets_only_on_steps_where_an_env_ended():
     """Under vmap the new episodes are computed only on steps where some env ended (one
     branch for the batch), and every env's states equal its own unbatched run."""
     inner = make_task(threshold=0.05)
-    task = mjzoo.with_auto_reset(inner.replace(start=bind(_counted_reset, inner.start.args[0])))
+    task = mjzoo.with_auto_reset(inner.replace(start=Partial(_counted_reset, inner.start.args[0])))
     keys = jax.random.split(KEY, 3)
     states = jax.vmap(reset, in_axes=(None, 0))(task, keys)
     calm = jnp.zeros((3, T, 1))  # no env ends

@@ -23,7 +23,7 @@ from mujoco import mjx
 
 import mjzoo
 import mjzoo.envs
-from mjzoo import physics, running, worlds
+from mjzoo import batching, physics, running
 from mjzoo.catalog import contacts as catalog_contacts
 from mjzoo.harness import cli, training
 from mjzoo.testing import check_task
@@ -137,10 +137,10 @@ def _two_states() -> tuple[mjx.Data, mjx.Data]:
 
 def test_sized_and_own_leave_jax_data_alone():
     data, _ = _two_states()
-    assert worlds.sized(data, 8) is data
-    assert worlds.own(data) is data
+    assert batching.sized(data, 8) is data
+    assert batching.own(data) is data
     task = mjzoo.envs.make("cartpole_balance")
-    for changed in (worlds.sized(task, 8), worlds.own(task)):
+    for changed in (batching.sized(task, 8), batching.own(task)):
         assert all(a is b for a, b in zip(jax.tree.leaves(changed), jax.tree.leaves(task), strict=True))
 
 
@@ -148,8 +148,8 @@ def test_partition_splits_each_worlds_leaves_and_keeps_scalars_whole():
     task = mjzoo.envs.make("cartpole_balance")
     states = jax.vmap(lambda k: running.reset(task, k))(jax.random.split(jax.random.key(0), 4))
     tree = {"states": states, "count": jnp.zeros(())}
-    specs = worlds.partition(tree)
-    split, whole = jax.sharding.PartitionSpec(worlds.AXIS), jax.sharding.PartitionSpec()
+    specs = batching.partition(tree)
+    split, whole = jax.sharding.PartitionSpec(batching.AXIS), jax.sharding.PartitionSpec()
     assert jax.tree.leaves(specs["count"]) == [whole]
     leaves, specs = jax.tree.leaves(states), jax.tree.leaves(specs["states"])
     assert len(leaves) == len(specs) and all(spec == split for spec in specs)
@@ -162,17 +162,17 @@ def test_vmap_transition_is_jax_vmap_on_jax_physics_under_a_mesh():
     states = jax.vmap(lambda k: running.reset(task, k))(keys)
     actions = jnp.linspace(-1.0, 1.0, 4)[:, None] * jnp.ones((4, task.action_size))
     plain = jax.vmap(running.transition, in_axes=(None, 0, 0, 0))(task, states, actions, keys)
-    with jax.sharding.use_abstract_mesh(jax.sharding.AbstractMesh((2,), (worlds.AXIS,))):  # traced only
-        jaxpr = jax.make_jaxpr(lambda s: worlds.vmap_transition(running.transition, task, s, actions, keys))(states)
+    with jax.sharding.use_abstract_mesh(jax.sharding.AbstractMesh((2,), (batching.AXIS,))):  # traced only
+        jaxpr = jax.make_jaxpr(lambda s: batching.vmap_transition(running.transition, task, s, actions, keys))(states)
     assert "shard_map" not in str(jaxpr) and "dot_general" in str(jaxpr)
-    mapped = worlds.vmap_transition(running.transition, task, states, actions, keys)
+    mapped = batching.vmap_transition(running.transition, task, states, actions, keys)
     jax.tree.map(np.testing.assert_array_equal, mapped, plain)
 
 
 @pytest.mark.parametrize("cond", [True, False])
 def test_where_is_leafwise_jnp_where_on_jax(cond):
     a, b = _two_states()
-    merged = worlds.where(jnp.asarray(cond), a, b)
+    merged = batching.where(jnp.asarray(cond), a, b)
     expected = jax.tree.map(lambda x, y: jnp.where(cond, x, y), a, b)
     assert jax.tree.structure(merged) == jax.tree.structure(expected)
     for x, y in zip(jax.tree.leaves(merged), jax.tree.leaves(expected), strict=True):
@@ -181,8 +181,8 @@ def test_where_is_leafwise_jnp_where_on_jax(cond):
 
 def test_no_overflow_on_jax():
     data, _ = _two_states()
-    assert worlds.overflow(data).shape == () and int(worlds.overflow(data)) == 0
-    assert worlds.clear_overflow(data) is data
+    assert batching.overflow(data).shape == () and int(batching.overflow(data)) == 0
+    assert batching.clear_overflow(data) is data
 
 
 def test_the_divergence_guard_adds_no_physics_metrics_on_jax():
@@ -210,7 +210,7 @@ def settled_box():
 
 def test_contacts_of_a_resting_box_carry_its_weight(settled_box):
     box, _, data = settled_box
-    found = worlds.contacts(data, box.model)
+    found = batching.contacts(data, box.model)
     floor, body = box.id("geom", "floor"), box.id("geom", "box")
     between = ((found.geom1 == floor) & (found.geom2 == body)) | ((found.geom1 == body) & (found.geom2 == floor))
     assert bool(jnp.any(found.active & between))
@@ -218,12 +218,12 @@ def test_contacts_of_a_resting_box_carry_its_weight(settled_box):
     assert float(jnp.sum(jnp.where(found.active, 0.0, jnp.abs(found.normal_force)))) == 0.0
     weight = BOX_MASS * -float(box.mj_model.opt.gravity[2])
     np.testing.assert_allclose(float(jnp.sum(found.normal_force)), weight, rtol=0.02)
-    assert worlds.contacts(data).normal_force is None  # no model: no forces
+    assert batching.contacts(data).normal_force is None  # no model: no forces
 
 
 def test_catalog_contacts_read_what_they_read_before(settled_box):
-    """touching / forces through worlds.contacts equal the direct read of MJX-JAX's
-    contact slots and constraint forces (the catalog's code before worlds.contacts)."""
+    """touching / forces through batching.contacts equal the direct read of MJX-JAX's
+    contact slots and constraint forces (the catalog's code before batching.contacts)."""
     box, _, data = settled_box
     geoms, others = catalog_contacts.geom_sets(box.mj_model, ["box"], ["floor"], "test")
     contact = data._impl.contact
@@ -244,7 +244,7 @@ def test_catalog_contacts_read_what_they_read_before(settled_box):
 def test_probe_capacity_leaves_room_for_twice_what_c_mujoco_sees(settled_box):
     box, mj_data, _ = settled_box
     assert mj_data.ncon >= 4  # the box's corners
-    most_contacts, most_rows = worlds.probe_capacity(box.mj_model)
+    most_contacts, most_rows = batching.probe_capacity(box.mj_model)
     assert most_contacts >= max(2 * mj_data.ncon, 8)
     assert most_rows >= 2 * mj_data.nefc
 
@@ -338,7 +338,9 @@ def test_a_warp_batch_resets_as_each_env_would(monkeypatch):
     from mjzoo import combinators
 
     def rollout() -> tuple:
-        task = worlds.sized(mjzoo.with_auto_reset(mjzoo.envs.make("cartpole_balance", impl="warp", episode_steps=6)), 4)
+        task = batching.sized(
+            mjzoo.with_auto_reset(mjzoo.envs.make("cartpole_balance", impl="warp", episode_steps=6)), 4
+        )
         states = jax.vmap(lambda k: running.reset(task, k))(jax.random.split(jax.random.key(0), 4))
         actions = jnp.linspace(-1.0, 1.0, 4)[:, None] * jnp.ones((4, task.action_size))
 
@@ -404,7 +406,7 @@ os._exit(0)  # Warp's CPU backend can keep the interpreter from exiting
 @needs_warp
 def test_warp_training_on_two_devices_matches_one_device():
     """Each device steps its own worlds with its share of Warp's contact pool
-    (`worlds.vmap_transition` under the mesh): two updates of PPO on the hopper give one
+    (`batching.vmap_transition` under the mesh): two updates of PPO on the hopper give one
     device's states, and the devices' contact counts add up to one device's."""
     env = {
         **os.environ,

@@ -2,17 +2,18 @@
 and an observation whose shape changes between reset and step, are named when the
 transition is first traced (the task's reset traces one), not found later as a
 `lax.scan` carry mismatch. The task is a hand-written one on a 1-DoF slide joint, its
-functions bound with `mjzoo.bind` so each test swaps one of them."""
+functions bound with `jax.tree_util.Partial` so each test swaps one of them."""
 
 from __future__ import annotations
 
 import jax
 import jax.numpy as jnp
 import pytest
+from jax.tree_util import Partial
 from mujoco import mjx
 
 import mjzoo
-from mjzoo.types import State, Task, bind
+from mjzoo.types import State, Task
 
 XML = """
 <mujoco><worldbody><body><joint name="x" type="slide" axis="1 0 0"/><geom type="box" size="0.1 0.1 0.1"/>
@@ -54,10 +55,10 @@ def make(obs_size=1, reward=scalar_reward, terminate=never) -> Task:
     physics = mjzoo.physics.load(XML)
     return Task(
         model=physics.model,
-        start=bind(start, mjzoo.tree.Static(obs_size)),
-        step=bind(step),
-        reward=bind(reward),
-        terminate=bind(terminate),
+        start=Partial(start, mjzoo.tree.StaticValue(obs_size)),
+        step=Partial(step),
+        reward=Partial(reward),
+        terminate=Partial(terminate),
         mj_model=physics.mj_model,
     )
 
@@ -97,7 +98,7 @@ def test_a_wrong_action_size_is_named():
 
 
 def test_a_transitions_shape_is_traced_once_whatever_the_tasks_sharding():
-    """`complete` (every reset) asks `jax.eval_shape` for a transition's structure,
+    """`fill_transition_entries` (every reset) asks `jax.eval_shape` for a transition's structure,
     memoized: the same task placed on a mesh, as the harness replicates it over several
     devices, must not trace its step again (a humanoid's step takes seconds to trace)."""
     import numpy as np
@@ -109,7 +110,7 @@ def test_a_transitions_shape_is_traced_once_whatever_the_tasks_sharding():
         traced.append(1)
         return step(model, state, action, key)
 
-    task = make().replace(step=bind(counted))
+    task = make().replace(step=Partial(counted))
     mjzoo.reset(task, jax.random.key(0))
     assert len(traced) == 1
     whole = NamedSharding(Mesh(np.array(jax.devices()[:1]), ("envs",)), PartitionSpec())

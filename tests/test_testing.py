@@ -11,13 +11,14 @@ import jax.numpy as jnp
 import numpy as np
 import pytest
 from catalog_tasks import BLOCK
+from jax.tree_util import Partial
 from mujoco import mjx
 
 import mjzoo
 from mjzoo import physics as physics_lib
 from mjzoo import tree
 from mjzoo.testing import PROPERTIES, TaskCheckError, check_task
-from mjzoo.types import State, Task, bind
+from mjzoo.types import State, Task
 
 STEPS = 6  # every limit below is reached within one check's rollout
 
@@ -52,13 +53,13 @@ def _terminate(p: Params, model, state):
 
 
 def make(step=_step, reward=_reward, limit: int | None = 4, weight=1.0, start=_start) -> Task:
-    p = Params(jnp.float32(0.5), weight if isinstance(weight, tree.Static) else jnp.float32(weight))
+    p = Params(jnp.float32(0.5), weight if isinstance(weight, tree.StaticValue) else jnp.float32(weight))
     task = Task(
         model=BLOCK.model,
-        start=bind(start, p),
-        step=bind(step, p),
-        reward=bind(reward, p),
-        terminate=bind(_terminate, p),
+        start=Partial(start, p),
+        step=Partial(step, p),
+        reward=Partial(reward, p),
+        terminate=Partial(_terminate, p),
         mj_model=BLOCK.mj_model,
     )
     return task if limit is None else mjzoo.with_time_limit(task, limit)
@@ -138,7 +139,7 @@ def _static_weight_reward(p, model, state, action, next_state):
 
 
 def test_a_static_float_retraces():
-    failures = failures_of(make(reward=_static_weight_reward, weight=tree.Static(0.5)))
+    failures = failures_of(make(reward=_static_weight_reward, weight=tree.StaticValue(0.5)))
     assert list(failures) == ["no_retrace"] and "_step" in failures["no_retrace"]
 
 

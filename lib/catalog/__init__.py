@@ -12,7 +12,7 @@ docs/catalog.md lists every item and how they nest.
     events         pushes during an episode    commands      velocity / joint targets
     curriculum     difficulty levels           randomizers   per-episode physics draws
     actuators      torque, PD, latency, drops  trackers      action history, feet
-    contacts       contact queries             shapes        bounded reward shapes
+    contacts       contact queries             shaping       `tolerance`, `wrap_angle`
 """
 
 from mjzoo.catalog import (
@@ -25,16 +25,16 @@ from mjzoo.catalog import (
     randomizers,
     resets,
     rewards,
-    shapes,
+    shaping,
     terminations,
     trackers,
 )
-from mjzoo.catalog.shapes import tolerance
+from mjzoo.catalog.shaping import tolerance, wrap_angle
 
 __all__ = [
     "observations",
     "rewards",
-    "shapes",
+    "shaping",
     "terminations",
     "resets",
     "events",
@@ -45,4 +45,5 @@ __all__ = [
     "trackers",
     "contacts",
     "tolerance",
+    "wrap_angle",
 ]

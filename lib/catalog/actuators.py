@@ -26,11 +26,12 @@ import jax
 import jax.numpy as jnp
 import mujoco
 import numpy as np
+from jax.tree_util import Partial
 from mujoco import mjx
 
-from mjzoo import checks, names, physics, tree, worlds
+from mjzoo import batching, checks, names, physics, tree
 from mjzoo.layers import layered, peel, wrap
-from mjzoo.types import State, Task, bind
+from mjzoo.types import State, Task
 
 __all__ = [
     "ActionLatencyState",
@@ -131,7 +132,7 @@ def torque(mj_model: mujoco.MjModel, torque_limit: Numbers | None = None) -> Act
     range inside the model's ctrlrange and forcerange, times the gear. MuJoCo still clamps
     ctrl to the model's ctrlrange. Uses no key.
     """
-    return bind(_torque, _motors(mj_model, torque_limit, "torque"))
+    return Partial(_torque, _motors(mj_model, torque_limit, "torque"))
 
 
 def _torque(motors: Motors, model, data, action, key) -> Array:
@@ -178,7 +179,7 @@ def pd(
     `default_pose` defaults to the joints' ``qpos0``; `torque_limit` as in `torque`. The
     model's actuators must be motors, so that MuJoCo adds no gains of its own.
     """
-    return bind(
+    return Partial(
         _pd, _pd_params(mj_model, "pd", kp, kd, action_scale, 0.0, default_pose, torque_limit, gain_noise, torque_noise)
     )
 
@@ -206,7 +207,7 @@ def position_velocity(
     ``task.replace(action_dim=2 * nu)`` so that `Task.action_size`, which algorithms and
     random policies size actions by, says so.
     """
-    return bind(
+    return Partial(
         _position_velocity,
         _pd_params(
             mj_model,
@@ -290,7 +291,7 @@ def step(model: mjx.Model, data: mjx.Data, actuator: Actuator, action: Array, n_
         ctrl = actuator(model, data, action, jax.random.fold_in(key, i))
         return physics.substep(model, data.replace(ctrl=jnp.asarray(ctrl, data.ctrl.dtype)))
 
-    return jax.lax.fori_loop(0, n_substeps, substep, worlds.clear_overflow(data))
+    return jax.lax.fori_loop(0, n_substeps, substep, batching.clear_overflow(data))
 
 
 # --- combinators on the action ------------------------------------------------------
@@ -332,11 +333,11 @@ def with_action_latency(task: Task, max_latency: int) -> Task:
     buffer's shape: changing it retraces.
     """
     max_latency = checks.integer("with_action_latency", "max_latency", max_latency, 0)
-    start = bind(_latency_reset, task.start, tree.Static(max_latency))
-    return layered(task, ActionLatencyState, start, bind(_latency_step, task.step))
+    start = Partial(_latency_reset, task.start, tree.StaticValue(max_latency))
+    return layered(task, ActionLatencyState, start, Partial(_latency_step, task.step))
 
 
-def _latency_reset(reset_fn, max_latency: tree.Static, model, key) -> State:
+def _latency_reset(reset_fn, max_latency: tree.StaticValue, model, key) -> State:
     state = reset_fn(model, key)
     delay = jax.random.randint(jax.random.fold_in(key, LATENCY_STREAM), (), 0, max_latency.value + 1)
     buffer = jnp.zeros((max_latency.value + 1, model.nu), jnp.float32)
@@ -359,11 +360,11 @@ def with_action_drop(task: Task, probability: float) -> Task:
     reset); logs ``metrics["action_drop/dropped"]`` (1.0 when this step's was dropped).
     """
     probability = checks.number("with_action_drop", "probability", probability, 0.0, 1.0)
-    start = bind(_previous_reset, task.start, tree.Static(ActionDropState))
-    return layered(task, ActionDropState, start, bind(_drop_step, task.step, probability))
+    start = Partial(_previous_reset, task.start, tree.StaticValue(ActionDropState))
+    return layered(task, ActionDropState, start, Partial(_drop_step, task.step, probability))
 
 
-def _previous_reset(reset_fn, record: tree.Static, model, key) -> State:
+def _previous_reset(reset_fn, record: tree.StaticValue, model, key) -> State:
     state = reset_fn(model, key)
     return _kept(state, record.value(previous=jnp.zeros((model.nu,), jnp.float32)))
 
@@ -383,8 +384,8 @@ def with_action_filter(task: Task, alpha: float) -> Task:
     Keeps an `ActionFilterState` (``previous``: [nu], a_{t-1}).
     """
     alpha = checks.number("with_action_filter", "alpha", alpha, 0.0, 1.0, open_low=True)  # 1: no filtering
-    start = bind(_previous_reset, task.start, tree.Static(ActionFilterState))
-    return layered(task, ActionFilterState, start, bind(_filter_step, task.step, alpha))
+    start = Partial(_previous_reset, task.start, tree.StaticValue(ActionFilterState))
+    return layered(task, ActionFilterState, start, Partial(_filter_step, task.step, alpha))
 
 
 def _filter_step(step_fn, alpha, model, state, action, key) -> State:

@@ -37,11 +37,13 @@ from typing import Any, NamedTuple, Sequence
 import jax
 import jax.numpy as jnp
 import numpy as np
+from jax.tree_util import Partial
 
 from mjzoo import checks, names, tree
 from mjzoo.catalog.events import countdown_interval, due, elapsed
+from mjzoo.catalog.shaping import wrap_angle
 from mjzoo.layers import layered, peel, wrap
-from mjzoo.types import State, Task, bind
+from mjzoo.types import State, Task
 
 __all__ = [
     "with_velocity_command",
@@ -103,8 +105,8 @@ def _with_command(task: Task, command: _Command) -> Task:
                 f"observes {jax.tree.map(lambda x: x.shape, obs)}; pass observe=False and read "
                 f"mjzoo.find(state, {command.record.__name__}).command"
             )
-    start = bind(_command_reset, task.start, command)
-    return layered(task, command.record, start, bind(_command_step, task.step, command))
+    start = Partial(_command_reset, task.start, command)
+    return layered(task, command.record, start, Partial(_command_step, task.step, command))
 
 
 def _draw(c: _Command, key: Array) -> dict[str, Array]:
@@ -175,7 +177,7 @@ def with_velocity_command(
         high=jnp.stack([r[1] for r in ranges]),
         **_probabilities(who, zero_probability=zero_probability, stand_probability=stand_probability),
         zeroable=jnp.ones(3, bool),
-        publish=bind(_identity),
+        publish=Partial(_identity),
         name="velocity_command",
         record=VelocityCommandState,
         observe=bool(observe),
@@ -218,7 +220,7 @@ def with_heading_command(
         high=jnp.stack([r[1] for r in ranges]),
         **_probabilities(who, zero_probability=zero_probability, stand_probability=stand_probability),
         zeroable=jnp.array([True, True, False]),
-        publish=bind(_steer, jnp.asarray(qpos_idx[3:]), gain, max_yaw_rate),
+        publish=Partial(_steer, jnp.asarray(qpos_idx[3:]), gain, max_yaw_rate),
         name="heading_command",
         record=VelocityCommandState,
         observe=bool(observe),
@@ -229,8 +231,7 @@ def with_heading_command(
 def _steer(quat_idx, gain, max_yaw_rate, model, data, target) -> Array:
     w, x, y, z = data.qpos[quat_idx]
     yaw = jnp.arctan2(2 * (w * z + x * y), 1 - 2 * (y * y + z * z))  # heading of the body's x axis
-    error = target[2] - yaw
-    error = jnp.arctan2(jnp.sin(error), jnp.cos(error))  # the short way round
+    error = wrap_angle(target[2] - yaw)
     return jnp.stack([target[0], target[1], jnp.clip(gain * error, -max_yaw_rate, max_yaw_rate)])
 
 
@@ -265,7 +266,7 @@ def with_joint_position_command(
         zero_probability=jnp.float32(0.0),
         stand_probability=jnp.float32(0.0),
         zeroable=jnp.zeros(len(ids), bool),
-        publish=bind(_identity),
+        publish=Partial(_identity),
         name="joint_position_command",
         record=JointCommandState,
         observe=bool(observe),

@@ -1,9 +1,9 @@
-"""Contacts between named geoms, read through `mjzoo.worlds.contacts`, for ONE environment.
+"""Contacts between named geoms, read through `mjzoo.batching.contacts`, for ONE environment.
 
 MJX's JAX implementation keeps a fixed set of contact slots, one per candidate geom
 pair, whether the geoms touch or not; MuJoCo Warp keeps the contacts of every world of a
 batch in one pool, which a world reaches through its contact constraint rows.
-`worlds.contacts` gives both as slots with geom ids, an ``active`` mask (MuJoCo's test
+`batching.contacts` gives both as slots with geom ids, an ``active`` mask (MuJoCo's test
 for adding a contact constraint: distance below ``includemargin``) and a normal force.
 
 Constructors check with `geom_sets` that the geoms they watch can collide at all
@@ -23,7 +23,7 @@ import mujoco
 import numpy as np
 from mujoco import mjx
 
-from mjzoo import names, worlds
+from mjzoo import batching, names
 
 __all__ = ["can_touch", "geom_sets", "pairs", "touching", "normal_forces", "forces", "point_velocity"]
 
@@ -61,10 +61,10 @@ def geom_sets(
 
 def pairs(data: mjx.Data, geoms: Array, others: Array) -> Array:
     """[G, C] bool: contact slot c is active and between geom ``geoms[g]`` and one of `others`."""
-    return _pairs(worlds.contacts(data), geoms, others)
+    return _pairs(batching.contacts(data), geoms, others)
 
 
-def _pairs(contact: worlds.Contacts, geoms: Array, others: Array) -> Array:
+def _pairs(contact: batching.Contacts, geoms: Array, others: Array) -> Array:
     other1 = jnp.any(contact.geom1[None, :] == others[:, None], axis=0)
     other2 = jnp.any(contact.geom2[None, :] == others[:, None], axis=0)
     between = ((contact.geom1 == geoms[:, None]) & other2) | ((contact.geom2 == geoms[:, None]) & other1)
@@ -78,12 +78,12 @@ def touching(data: mjx.Data, geoms: Array, others: Array) -> Array:
 
 def normal_forces(model: mjx.Model, data: mjx.Data) -> Array:
     """[C] float32 normal force of every contact slot, N (0 when inactive)."""
-    return worlds.contacts(data, model).normal_force
+    return batching.contacts(data, model).normal_force
 
 
 def forces(model: mjx.Model, data: mjx.Data, geoms: Array, others: Array) -> Array:
     """[G] float32 total normal force on geom ``geoms[g]`` from `others`, N (0 apart)."""
-    contact = worlds.contacts(data, model)
+    contact = batching.contacts(data, model)
     return jnp.sum(_pairs(contact, geoms, others) * contact.normal_force[None, :], axis=1)
 
 

@@ -34,13 +34,14 @@ import jax
 import jax.numpy as jnp
 import mujoco
 import numpy as np
+from jax.tree_util import Partial
 from mujoco import mjx
 
 from mjzoo import checks, names
 from mjzoo.combinators import record, runs_transitions
 from mjzoo.layers import peel, wrap
 from mjzoo.running import transition_with_terms
-from mjzoo.types import State, Task, bind
+from mjzoo.types import State, Task
 
 __all__ = ["with_curriculum", "CurriculumState", "Rule", "by_steps", "by_episode_length", "by_distance"]
 
@@ -145,7 +146,7 @@ def with_curriculum(make: Callable[[float], Task], rule: Rule) -> Task:
     model = _ramp([t.model for t in tasks], "model")
     easy = tasks[0]
     stepped = runs_transitions(easy, _curriculum_step, functions, model, rule)
-    return stepped.replace(start=bind(_curriculum_reset, easy.replace(model=None), functions, model, rule))
+    return stepped.replace(start=Partial(_curriculum_reset, easy.replace(model=None), functions, model, rule))
 
 
 def _at(inner: Task, functions: _Ramp, model_ramp: _Ramp, model: mjx.Model, level: Array) -> Task:
@@ -194,7 +195,7 @@ def by_steps(ramp_steps: int) -> Rule:
     """level = min(1, steps / ramp_steps), steps = transitions this environment took
     (its own count: multiply by the number of environments for the total)."""
     ramp_steps = checks.integer("curriculum.by_steps", "ramp_steps", ramp_steps)
-    return Rule(jnp.float32(0.0), bind(_count_start), bind(_by_steps, jnp.float32(ramp_steps)))
+    return Rule(jnp.float32(0.0), Partial(_count_start), Partial(_by_steps, jnp.float32(ramp_steps)))
 
 
 def _count_start(model, state) -> Array:
@@ -223,7 +224,7 @@ def by_episode_length(
     max_steps = checks.integer("curriculum.by_episode_length", "max_steps", max_steps)
     p = _check("by_episode_length", fraction=fraction, up=up, down=down, initial=initial)
     threshold = p["fraction"] * max_steps
-    return Rule(p["initial"], bind(_count_start), bind(_by_episode_length, threshold, p["up"], p["down"]))
+    return Rule(p["initial"], Partial(_count_start), Partial(_by_episode_length, threshold, p["up"], p["down"]))
 
 
 def _by_episode_length(threshold, up, down, steps, level, model, state, next_state):
@@ -249,7 +250,7 @@ def by_distance(
     """
     p = _check("by_distance", target=target, up=up, down=down, initial=initial)
     xy = jnp.asarray(names.free_joint_addresses(mj_model, body, "curriculum.by_distance")[0][:2])
-    return Rule(p["initial"], bind(_xy, xy), bind(_by_distance, xy, p["target"], p["up"], p["down"]))
+    return Rule(p["initial"], Partial(_xy, xy), Partial(_by_distance, xy, p["target"], p["up"], p["down"]))
 
 
 def _xy(xy, model, state) -> Array:

@@ -21,11 +21,12 @@ from typing import Any, NamedTuple, Sequence
 
 import jax
 import jax.numpy as jnp
+from jax.tree_util import Partial
 from mujoco import mjx
 
 from mjzoo import checks, names
 from mjzoo.layers import layered, peel, wrap
-from mjzoo.types import State, Task, bind
+from mjzoo.types import State, Task
 
 __all__ = [
     "with_velocity_pushes",
@@ -102,8 +103,8 @@ def with_velocity_pushes(
     _, qvel_idx = names.free_joint_addresses(task.mj_model, body, who)
     interval = countdown_interval(who, "interval", interval)
     limits = jnp.concatenate([checks.numbers(who, "linear", linear, 3), checks.numbers(who, "angular", angular, 3)])
-    start = bind(_velocity_reset, task.start, interval)
-    step = bind(_velocity_step, task.step, jnp.asarray(qvel_idx), interval, limits)
+    start = Partial(_velocity_reset, task.start, interval)
+    step = Partial(_velocity_step, task.step, jnp.asarray(qvel_idx), interval, limits)
     return layered(task, VelocityPushState, start, step)
 
 
@@ -156,8 +157,8 @@ def with_force_pushes(
     interval = countdown_interval(who, "interval", interval)
     duration = checks.number(who, "duration", duration, 0.0, open_low=True)
     params = (body_id, interval, checks.numbers(who, "force", force, 3), duration)
-    start = bind(_force_reset, task.start, interval)
-    return layered(task, ForcePushState, start, bind(_force_step, task.step, *params))
+    start = Partial(_force_reset, task.start, interval)
+    return layered(task, ForcePushState, start, Partial(_force_step, task.step, *params))
 
 
 def _force_reset(reset_fn, interval, model, key) -> State:

@@ -3,7 +3,7 @@
 An observation item is ``(model: mjx.Model, state: State) -> Array[k]`` float32, for ONE
 environment. Items that need names are built by a constructor taking the host
 `mujoco.MjModel` (``task.mj_model``); it resolves the names once (`mjzoo.names`; the
-base `body` defaults to the first free joint's body) and returns ``mjzoo.bind(fn,
+base `body` defaults to the first free joint's body) and returns ``Partial(fn,
 indices...)``, so indices are int32 pytree leaves. `concat` joins items:
 
     obs_fn = observations.concat(
@@ -41,7 +41,7 @@ from mjzoo.catalog.contacts import point_velocity
 from mjzoo.catalog.trackers import ActionHistoryState, FeetState
 from mjzoo.layers import find, layered, peel, wrap
 from mjzoo.perturbations import add_noise
-from mjzoo.types import State, Task, bind
+from mjzoo.types import State, Task
 
 __all__ = [
     "joint_positions",
@@ -83,10 +83,10 @@ _FREE = int(mujoco.mjtJoint.mjJNT_FREE)
 
 def _gather(field: str, index) -> Partial:
     """An item reading ``data.<field>[index]``, flattened; the index is an int32 leaf."""
-    return bind(_gathered, tree.Static(field), jnp.asarray(index, jnp.int32))
+    return Partial(_gathered, tree.StaticValue(field), jnp.asarray(index, jnp.int32))
 
 
-def _gathered(field: tree.Static, index, model, state) -> Array:
+def _gathered(field: tree.StaticValue, index, model, state) -> Array:
     return getattr(state.data, field.value)[index].ravel().astype(jnp.float32)
 
 
@@ -140,7 +140,7 @@ def base_position(mj_model: mujoco.MjModel, body: str | None = None) -> Partial:
 def base_height(mj_model: mujoco.MjModel, body: str | None = None) -> Partial:
     """World height of the base body's origin: [1] m (its x, y left out: a running
     policy should not depend on where it is)."""
-    return bind(_height, _base(mj_model, body, "base_height"))
+    return Partial(_height, _base(mj_model, body, "base_height"))
 
 
 def _height(body, model, state) -> Array:
@@ -154,21 +154,21 @@ def base_orientation(mj_model: mujoco.MjModel, body: str | None = None) -> Parti
 
 def base_linear_velocity(mj_model: mujoco.MjModel, body: str | None = None) -> Partial:
     """Linear velocity of the base body's origin in the base frame: [3] m/s."""
-    return bind(_in_base, tree.Static("linear"), _base(mj_model, body, "base_linear_velocity"))
+    return Partial(_in_base, tree.StaticValue("linear"), _base(mj_model, body, "base_linear_velocity"))
 
 
 def base_angular_velocity(mj_model: mujoco.MjModel, body: str | None = None) -> Partial:
     """Angular velocity of the base body in the base frame: [3] rad/s (a gyro)."""
-    return bind(_in_base, tree.Static("angular"), _base(mj_model, body, "base_angular_velocity"))
+    return Partial(_in_base, tree.StaticValue("angular"), _base(mj_model, body, "base_angular_velocity"))
 
 
 def projected_gravity(mj_model: mujoco.MjModel, body: str | None = None) -> Partial:
     """The gravity direction (unit vector of ``model.opt.gravity``; -z when gravity is
     off) in the base frame: [3], (0, 0, -1) when upright."""
-    return bind(_in_base, tree.Static("gravity"), _base(mj_model, body, "projected_gravity"))
+    return Partial(_in_base, tree.StaticValue("gravity"), _base(mj_model, body, "projected_gravity"))
 
 
-def _in_base(quantity: tree.Static, body, model, state) -> Array:
+def _in_base(quantity: tree.StaticValue, body, model, state) -> Array:
     """A world vector in the base frame, R^T v (xmat's columns are the base's axes)."""
     data = state.data
     if quantity.value == "linear":
@@ -193,7 +193,7 @@ def body_velocities(mj_model: mujoco.MjModel, bodies: Names) -> Partial:
     """World-frame velocities of the named bodies' origins: [6 B], per body linear
     (m/s) then angular (rad/s)."""
     ids = jnp.asarray(names.ids(mj_model, "body", bodies, "body_velocities"))
-    return bind(_point_velocities, tree.Static("xpos"), ids, ids)
+    return Partial(_point_velocities, tree.StaticValue("xpos"), ids, ids)
 
 
 def site_positions(mj_model: mujoco.MjModel, sites: Names) -> Partial:
@@ -206,10 +206,10 @@ def site_velocities(mj_model: mujoco.MjModel, sites: Names) -> Partial:
     the site point (m/s) then the angular velocity of its body (rad/s)."""
     ids = names.ids(mj_model, "site", sites, "site_velocities")
     bodies = jnp.asarray(mj_model.site_bodyid[ids], jnp.int32)
-    return bind(_point_velocities, tree.Static("site_xpos"), jnp.asarray(ids), bodies)
+    return Partial(_point_velocities, tree.StaticValue("site_xpos"), jnp.asarray(ids), bodies)
 
 
-def _point_velocities(field: tree.Static, points, bodies, model, state) -> Array:
+def _point_velocities(field: tree.StaticValue, points, bodies, model, state) -> Array:
     linear, angular = point_velocity(model, state.data, bodies, getattr(state.data, field.value)[points])
     return jnp.concatenate([linear, angular], axis=1).ravel().astype(jnp.float32)
 
@@ -235,7 +235,7 @@ def actuator_forces(model: mjx.Model, state: State) -> Array:
 def geom_contacts(mj_model: mujoco.MjModel, geoms: Names, others: Names | None = None) -> Partial:
     """1.0 where each named geom touches one of `others` (any geom if None), else 0.0:
     [G] float32. Touching: an active contact (distance < margin - gap)."""
-    return bind(_geom_contacts, *contacts.geom_sets(mj_model, geoms, others, "geom_contacts"))
+    return Partial(_geom_contacts, *contacts.geom_sets(mj_model, geoms, others, "geom_contacts"))
 
 
 def foot_forces(mj_model: mujoco.MjModel, feet: Names, floor: Names | None = None) -> Partial:
@@ -245,7 +245,7 @@ def foot_forces(mj_model: mujoco.MjModel, feet: Names, floor: Names | None = Non
     Decoded from the constraint solver's forces (``efc_force``) of the last physics
     step, as ``mj_contactForce`` does, for pyramidal and elliptic cones.
     """
-    return bind(_foot_forces, *contacts.geom_sets(mj_model, feet, floor, "foot_forces"))
+    return Partial(_foot_forces, *contacts.geom_sets(mj_model, feet, floor, "foot_forces"))
 
 
 def foot_contacts(model: mjx.Model, state: State) -> Array:
@@ -278,7 +278,7 @@ def concat(*fns: Observation) -> Partial:
     for i, fn in enumerate(fns):
         if not callable(fn):
             raise TypeError(f"concat: item {i} must be callable, got {type(fn).__name__}")
-    return bind(_concat, tuple(fn if isinstance(fn, Partial) else Partial(fn) for fn in fns))
+    return Partial(_concat, tuple(fn if isinstance(fn, Partial) else Partial(fn) for fn in fns))
 
 
 def _concat(fns, model, state) -> Array:
@@ -299,8 +299,8 @@ def with_observation_history(task: Task, length: int) -> Task:
     Applied twice, the outer one keeps a history of the inner one's stacked observations.
     """
     length = checks.integer("with_observation_history", "length", length)
-    start = bind(_history_reset, task.start, tree.Static(length))
-    return layered(task, ObservationHistoryState, start, bind(_history_step, task.step))
+    start = Partial(_history_reset, task.start, tree.StaticValue(length))
+    return layered(task, ObservationHistoryState, start, Partial(_history_step, task.step))
 
 
 class ObservationHistoryState(NamedTuple):
@@ -323,7 +323,7 @@ def _with_history(state: State, history) -> State:
     return wrap(state.replace(obs=flat), ObservationHistoryState(frames=history))
 
 
-def _history_reset(reset_fn, length: tree.Static, model, key) -> State:
+def _history_reset(reset_fn, length: tree.StaticValue, model, key) -> State:
     state = reset_fn(model, key)
     return _with_history(state, jax.tree.map(lambda o: jnp.repeat(jnp.asarray(o)[None], length.value, 0), state.obs))
 
@@ -349,7 +349,7 @@ def with_observation_bias(task: Task, scale: float) -> Task:
     `with_auto_reset`, every episode draws a new bias.
     """
     scale = checks.number("with_observation_bias", "scale", scale, 0.0)
-    return layered(task, ObservationBiasState, bind(_bias_reset, task.start, scale), bind(_bias_step, task.step))
+    return layered(task, ObservationBiasState, Partial(_bias_reset, task.start, scale), Partial(_bias_step, task.step))
 
 
 def _biased(state: State, bias) -> State:
@@ -371,7 +371,7 @@ def with_multiplicative_observation_noise(task: Task, scale: float) -> Task:
     floating leaf after reset and after every step: noise proportional to the signal.
     Keeps no record."""
     scale = checks.number("with_multiplicative_observation_noise", "scale", scale, 0.0)
-    return task.replace(start=bind(_scaled_reset, task.start, scale), step=bind(_scaled_step, task.step, scale))
+    return task.replace(start=Partial(_scaled_reset, task.start, scale), step=Partial(_scaled_step, task.step, scale))
 
 
 def _scaled(state: State, scale: Array, key: Array) -> State:

@@ -2,7 +2,7 @@
 
 Each constructor takes the host `mujoco.MjModel` (``task.mj_model``), the names of the
 elements to perturb (None: all of them) and a range ``[low, high]``, resolves the names
-to indices once and returns ``bind(fn, indices, low, high)``: indices and ranges are
+to indices once and returns ``Partial(fn, indices, low, high)``: indices and ranges are
 pytree leaves, so new ranges do not retrace. Every element gets its own uniform draw per
 episode, independent of the others. A randomizer always receives the task's nominal
 model (`with_domain_randomization` draws from ``task.model`` at every reset), so draws
@@ -29,11 +29,11 @@ import jax
 import jax.numpy as jnp
 import mujoco
 import numpy as np
+from jax.tree_util import Partial
 from mujoco import mjx
 
 from mjzoo import names
-from mjzoo.tree import Static
-from mjzoo.types import bind
+from mjzoo.tree import StaticValue
 
 __all__ = [
     "Randomizer",
@@ -79,7 +79,7 @@ def _dofs(mj_model: mujoco.MjModel, joints: Names, who: str) -> np.ndarray:
 # --- the draws -------------------------------------------------------------------------
 
 
-def _scale_field(field: Static, ids, low, high, model, key) -> dict[str, Array]:
+def _scale_field(field: StaticValue, ids, low, high, model, key) -> dict[str, Array]:
     """`field` with its rows `ids` multiplied by one U(low, high) factor each."""
     value = getattr(model, field.value)
     factor = jax.random.uniform(key, ids.shape, minval=low, maxval=high)
@@ -99,9 +99,9 @@ def scale_friction(mj_model: mujoco.MjModel, low: float = 0.5, high: float = 1.5
     alone (``geoms=["floor"]``) suffices only if it is the more frictional of the pair.
     """
     who = "scale_friction"
-    return bind(
+    return Partial(
         _scale_field,
-        Static("geom_friction"),
+        StaticValue("geom_friction"),
         jnp.asarray(names.ids(mj_model, "geom", geoms, who)),
         *_range(who, low, high, 0.0),
     )
@@ -114,8 +114,11 @@ def scale_armature(mj_model: mujoco.MjModel, low: float = 0.8, high: float = 1.2
     Edits ``dof_armature`` [nv]. One factor per dof.
     """
     who = "scale_armature"
-    return bind(
-        _scale_field, Static("dof_armature"), jnp.asarray(_dofs(mj_model, joints, who)), *_range(who, low, high, 0.0)
+    return Partial(
+        _scale_field,
+        StaticValue("dof_armature"),
+        jnp.asarray(_dofs(mj_model, joints, who)),
+        *_range(who, low, high, 0.0),
     )
 
 
@@ -127,8 +130,11 @@ def scale_damping(mj_model: mujoco.MjModel, low: float = 0.8, high: float = 1.2,
     undamped.
     """
     who = "scale_damping"
-    return bind(
-        _scale_field, Static("dof_damping"), jnp.asarray(_dofs(mj_model, joints, who)), *_range(who, low, high, 0.0)
+    return Partial(
+        _scale_field,
+        StaticValue("dof_damping"),
+        jnp.asarray(_dofs(mj_model, joints, who)),
+        *_range(who, low, high, 0.0),
     )
 
 
@@ -143,7 +149,7 @@ def scale_masses(mj_model: mujoco.MjModel, low: float = 0.9, high: float = 1.1, 
     Edits ``body_mass`` [nbody] (kg) and ``body_inertia`` [nbody, 3] (kg m^2).
     """
     who = "scale_masses"
-    return bind(
+    return Partial(
         _scale_masses,
         jnp.asarray(names.ids(mj_model, "body", bodies, who, world=False)),
         *_range(who, low, high, 0.0, strict=True),
@@ -175,7 +181,7 @@ def add_masses(mj_model: mujoco.MjModel, low: float = -0.5, high: float = 0.5, b
             f"{who}: low={float(low)} kg would leave body {name!r} "
             f"({mj_model.body_mass[lightest]:.4g} kg) without positive mass"
         )
-    return bind(_add_masses, jnp.asarray(ids), low, high)
+    return Partial(_add_masses, jnp.asarray(ids), low, high)
 
 
 def _add_masses(ids, low, high, model, key) -> dict[str, Array]:
@@ -191,7 +197,7 @@ def shift_com(mj_model: mujoco.MjModel, low=-0.02, high=0.02, bodies: Names = No
     [nbody, 3] (m); the inertia about the centre of mass is unchanged.
     """
     who = "shift_com"
-    return bind(
+    return Partial(
         _shift_com,
         jnp.asarray(names.ids(mj_model, "body", bodies, who, world=False)),
         *_range(who, low, high, -np.inf, shape=(3,)),
@@ -233,7 +239,7 @@ def scale_position_gains(
                 f"{who}: actuator {name!r} is not a position actuator (fixed gain kp > 0, "
                 f"affine bias with biasprm[1] = -kp); select position actuators by name"
             )
-    return bind(_scale_position_gains, jnp.asarray(ids), *_range(who, low, high, 0.0, strict=True))
+    return Partial(_scale_position_gains, jnp.asarray(ids), *_range(who, low, high, 0.0, strict=True))
 
 
 def _scale_position_gains(ids, low, high, model, key) -> dict[str, Array]:
@@ -261,7 +267,7 @@ def combine(*randomizers: Randomizer) -> Randomizer:
         if not callable(fn):
             raise TypeError(f"combine: randomizer {i} must be callable, got {type(fn).__name__}")
     wrapped = tuple(fn if isinstance(fn, jax.tree_util.Partial) else jax.tree_util.Partial(fn) for fn in randomizers)
-    return bind(_combined, wrapped)
+    return Partial(_combined, wrapped)
 
 
 def _combined(randomizers, model, key) -> dict[str, Array]:

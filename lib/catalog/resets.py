@@ -43,10 +43,11 @@ import jax
 import jax.numpy as jnp
 import mujoco
 import numpy as np
+from jax.tree_util import Partial
 from mujoco import mjx
 
 from mjzoo import checks, motion, names, physics
-from mjzoo.types import State, Task, bind
+from mjzoo.types import State, Task
 
 __all__ = [
     "with_resets",
@@ -89,7 +90,7 @@ def with_resets(task: Task, *items: ResetItem, observe: Callable[[mjx.Model, Sta
     if not isinstance(observe, jax.tree_util.Partial):
         observe = jax.tree_util.Partial(observe)
     _check(task, items, observe)
-    return task.replace(start=bind(_reset, task.start, items, observe))
+    return task.replace(start=Partial(_reset, task.start, items, observe))
 
 
 def _reset(reset_fn, items, observe, model: mjx.Model, key: Array) -> State:
@@ -171,7 +172,7 @@ def joint_positions(mj_model: mujoco.MjModel, fraction: float = 0.5, joints: Seq
     who = "resets.joint_positions"
     ids = names.joints(mj_model, joints, who, limited=True)
     fraction = checks.number(who, "fraction", fraction, 0.0, 1.0)
-    return bind(_joint_positions, jnp.asarray(ids), jnp.asarray(mj_model.jnt_qposadr[ids]), fraction)
+    return Partial(_joint_positions, jnp.asarray(ids), jnp.asarray(mj_model.jnt_qposadr[ids]), fraction)
 
 
 def _joint_positions(ids, qpos_idx, fraction, model, data, key):
@@ -188,7 +189,7 @@ def joint_position_noise(mj_model: mujoco.MjModel, scale, joints: Sequence[str] 
     ids = names.joints(mj_model, joints, who)
     scale = checks.numbers(who, "scale", scale, len(ids))
     limited = jnp.asarray(mj_model.jnt_limited[ids], bool)
-    return bind(_joint_position_noise, jnp.asarray(ids), jnp.asarray(mj_model.jnt_qposadr[ids]), limited, scale)
+    return Partial(_joint_position_noise, jnp.asarray(ids), jnp.asarray(mj_model.jnt_qposadr[ids]), limited, scale)
 
 
 def _joint_position_noise(ids, qpos_idx, limited, scale, model, data, key):
@@ -202,7 +203,9 @@ def joint_velocities(mj_model: mujoco.MjModel, scale, joints: Sequence[str] | No
     number >= 0 or one per joint. `joints`: hinge or slide joint names; None: all."""
     who = "resets.joint_velocities"
     ids = names.joints(mj_model, joints, who)
-    return bind(_joint_velocities, jnp.asarray(mj_model.jnt_dofadr[ids]), checks.numbers(who, "scale", scale, len(ids)))
+    return Partial(
+        _joint_velocities, jnp.asarray(mj_model.jnt_dofadr[ids]), checks.numbers(who, "scale", scale, len(ids))
+    )
 
 
 def _joint_velocities(dof_idx, scale, model, data, key):
@@ -218,7 +221,7 @@ def base_heading(mj_model: mujoco.MjModel, yaw=(-np.pi, np.pi), body: str | None
     its (world-frame) linear velocity rotate; position and body-frame angular velocity
     stay. Commutes with `base_tilt`."""
     who = "resets.base_heading"
-    return bind(_base_heading, *_free_joint(mj_model, body, who), checks.interval(who, "yaw", yaw))
+    return Partial(_base_heading, *_free_joint(mj_model, body, who), checks.interval(who, "yaw", yaw))
 
 
 def _base_heading(qpos_idx, qvel_idx, yaw, model, data, key):
@@ -234,7 +237,7 @@ def base_height(mj_model: mujoco.MjModel, height, body: str | None = None) -> Re
     """Sets the base's world z position to U(height) m; `height` = (low, high)."""
     who = "resets.base_height"
     qpos_idx, _ = _free_joint(mj_model, body, who)
-    return bind(_base_height, qpos_idx[2], checks.interval(who, "height", height))
+    return Partial(_base_height, qpos_idx[2], checks.interval(who, "height", height))
 
 
 def _base_height(z_idx, height, model, data, key):
@@ -248,7 +251,7 @@ def base_tilt(mj_model: mujoco.MjModel, roll: float = 0.1, pitch: float = 0.1, b
     Z-Y-X Euler order, so the heading is kept. Velocities are left as they are."""
     who = "resets.base_tilt"
     qpos_idx, _ = _free_joint(mj_model, body, who)
-    return bind(_base_tilt, qpos_idx, checks.numbers(who, "(roll, pitch)", (roll, pitch), 2))
+    return Partial(_base_tilt, qpos_idx, checks.numbers(who, "(roll, pitch)", (roll, pitch), 2))
 
 
 def _base_tilt(qpos_idx, limits, model, data, key):
@@ -266,7 +269,7 @@ def base_velocity(
     who = "resets.base_velocity"
     _, qvel_idx = _free_joint(mj_model, body, who)
     limits = jnp.concatenate([checks.numbers(who, "linear", linear, 3), checks.numbers(who, "angular", angular, 3)])
-    return bind(_base_velocity, qvel_idx, limits)
+    return Partial(_base_velocity, qvel_idx, limits)
 
 
 def _base_velocity(qvel_idx, limits, model, data, key):
@@ -293,7 +296,7 @@ def reference_state(reference: motion.Reference, probability: float = 1.0) -> Re
         raise TypeError(
             f"{who}: reference must be a motion.Reference (motion.reference(...)), got {type(reference).__name__}"
         )
-    return bind(_reference_state, reference, checks.number(who, "probability", probability, 0.0, 1.0))
+    return Partial(_reference_state, reference, checks.number(who, "probability", probability, 0.0, 1.0))
 
 
 def _reference_state(reference, probability, model, data, key):

@@ -1,4 +1,4 @@
-"""Reward terms, and the bounded shape `tolerance` (from `mjzoo.catalog.shapes`).
+"""Reward terms, and the bounded shape `tolerance` (from `mjzoo.catalog.shaping`).
 
 Every item but `tolerance` and `terms` is a reward term ``(model, state, action,
 next_state) -> float32 scalar``, UNWEIGHTED: the weight comes from
@@ -10,7 +10,7 @@ action), so add terms inside `with_auto_reset`; the command is
 m/s, yaw rad/s, in the base frame), the one in force when the action was chosen.
 
 Constructors resolve names once, from the host `mujoco.MjModel` (``task.mj_model``), and
-return ``mjzoo.bind(fn, ...)``: indices and numbers are pytree leaves. Base terms read
+return ``Partial(fn, ...)``: indices and numbers are pytree leaves. Base terms read
 the free joint of `body` (default: the model's first free joint, see `mjzoo.names`) from
 ``qpos`` / ``qvel``: the state after the step's integration.
 """
@@ -27,11 +27,11 @@ import numpy as np
 
 from mjzoo import checks, names
 from mjzoo.catalog.commands import VelocityCommandState
-from mjzoo.catalog.shapes import SIGMOIDS, tolerance
+from mjzoo.catalog.shaping import SIGMOIDS, tolerance
 from mjzoo.catalog.trackers import ActionHistoryState, FeetState
 from mjzoo.combinators import with_rewards
 from mjzoo.layers import find
-from mjzoo.types import State, Task, bind
+from mjzoo.types import State, Task
 
 __all__ = [
     "tolerance",
@@ -84,7 +84,7 @@ def alive(task: Task) -> Partial:
     """Reward: 1 per transition, 0 on one that `task` terminates (truncation is not a
     failure). Evaluates `task.terminate` on `next_state`, so add it to `task` itself or
     to a task with the same terminations."""
-    return bind(_alive, task.terminate)
+    return Partial(_alive, task.terminate)
 
 
 def _alive(terminate_fn, model, state, action, next_state) -> Array:
@@ -124,7 +124,7 @@ def linear_velocity_tracking(mj_model: mujoco.MjModel, sigma: float = 0.25, body
     """Reward in (0, 1]: exp(-|v_xy - command[:2]|^2 / sigma), v the base linear
     velocity in the base frame (m/s); sigma in (m/s)^2. Reads the velocity command of `state`."""
     who = "linear_velocity_tracking"
-    return bind(_linear_tracking, _base(mj_model, body, who), _sigma(who, sigma))
+    return Partial(_linear_tracking, _base(mj_model, body, who), _sigma(who, sigma))
 
 
 def _sigma(who: str, sigma: float) -> Array:
@@ -142,7 +142,7 @@ def command_progress(mj_model: mujoco.MjModel, body: str | None = None) -> Parti
     command. Unlike the exp kernel of `linear_velocity_tracking`, aimless motion earns
     nothing on average and every step toward the command pays, so policies that start
     by standing still still find the gait. Reads the velocity command of `state`."""
-    return bind(_command_progress, _base(mj_model, body, "command_progress"))
+    return Partial(_command_progress, _base(mj_model, body, "command_progress"))
 
 
 def _command_progress(base, model, state, action, next_state) -> Array:
@@ -155,7 +155,7 @@ def angular_velocity_tracking(mj_model: mujoco.MjModel, sigma: float = 0.25, bod
     """Reward in (0, 1]: exp(-(w_z - command[2])^2 / sigma), w_z the base yaw rate in the
     base frame (rad/s); sigma in (rad/s)^2. Reads the velocity command of `state`."""
     who = "angular_velocity_tracking"
-    return bind(_angular_tracking, _base(mj_model, body, who), _sigma(who, sigma))
+    return Partial(_angular_tracking, _base(mj_model, body, who), _sigma(who, sigma))
 
 
 def _angular_tracking(base, sigma, model, state, action, next_state) -> Array:
@@ -165,7 +165,7 @@ def _angular_tracking(base, sigma, model, state, action, next_state) -> Array:
 
 def vertical_velocity(mj_model: mujoco.MjModel, body: str | None = None) -> Partial:
     """Cost: v_z^2, the base's linear velocity along its own z axis, (m/s)^2."""
-    return bind(_vertical_velocity, _base(mj_model, body, "vertical_velocity"))
+    return Partial(_vertical_velocity, _base(mj_model, body, "vertical_velocity"))
 
 
 def _vertical_velocity(base, model, state, action, next_state) -> Array:
@@ -174,7 +174,7 @@ def _vertical_velocity(base, model, state, action, next_state) -> Array:
 
 def roll_pitch_velocity(mj_model: mujoco.MjModel, body: str | None = None) -> Partial:
     """Cost: w_x^2 + w_y^2, the base's roll and pitch rates in its own frame, (rad/s)^2."""
-    return bind(_roll_pitch_velocity, _base(mj_model, body, "roll_pitch_velocity"))
+    return Partial(_roll_pitch_velocity, _base(mj_model, body, "roll_pitch_velocity"))
 
 
 def _roll_pitch_velocity(base, model, state, action, next_state) -> Array:
@@ -187,7 +187,7 @@ def base_height(mj_model: mujoco.MjModel, lower: float, upper: float | None = No
     upper = lower if upper is None else upper
     if not (math.isfinite(lower) and math.isfinite(upper) and lower <= upper):
         raise ValueError(f"base_height: need finite lower <= upper, got lower={lower!r}, upper={upper!r}")
-    return bind(_base_height, _base(mj_model, body, "base_height"), jnp.float32(lower), jnp.float32(upper))
+    return Partial(_base_height, _base(mj_model, body, "base_height"), jnp.float32(lower), jnp.float32(upper))
 
 
 def _base_height(base, lower, upper, model, state, action, next_state) -> Array:
@@ -198,7 +198,7 @@ def _base_height(base, lower, upper, model, state, action, next_state) -> Array:
 def flat_orientation(mj_model: mujoco.MjModel, body: str | None = None) -> Partial:
     """Cost: g_x^2 + g_y^2 of the unit gravity direction in the base frame: sin^2 of the
     base's tilt from upright, 0 when level."""
-    return bind(_flat_orientation, _base(mj_model, body, "flat_orientation"))
+    return Partial(_flat_orientation, _base(mj_model, body, "flat_orientation"))
 
 
 def _flat_orientation(base, model, state, action, next_state) -> Array:
@@ -207,7 +207,7 @@ def _flat_orientation(base, model, state, action, next_state) -> Array:
 
 def upright(mj_model: mujoco.MjModel, body: str | None = None) -> Partial:
     """Reward in [-1, 1]: cos of the angle between the base's z axis and the world's."""
-    return bind(_upright, _base(mj_model, body, "upright"))
+    return Partial(_upright, _base(mj_model, body, "upright"))
 
 
 def _upright(base, model, state, action, next_state) -> Array:
@@ -228,7 +228,7 @@ def joint_deviation(
     pose = mj_model.qpos0[adr] if pose is None else np.asarray(pose, np.float32)
     if pose.shape != (len(ids),):
         raise ValueError(f"{who}: pose must have one value per joint ({len(ids)}), got shape {pose.shape}")
-    return bind(_joint_deviation, jnp.asarray(adr, jnp.int32), jnp.asarray(pose, jnp.float32))
+    return Partial(_joint_deviation, jnp.asarray(adr, jnp.int32), jnp.asarray(pose, jnp.float32))
 
 
 def _joint_deviation(adr, pose, model, state, action, next_state) -> Array:
@@ -245,7 +245,7 @@ def joint_limits(mj_model: mujoco.MjModel, soft: float = 0.9, joints: Sequence[s
     low, high = mj_model.jnt_range[ids].T
     middle, half = (low + high) / 2, soft * (high - low) / 2
     soft_range = jnp.asarray(np.stack([middle - half, middle + half]), jnp.float32)
-    return bind(_joint_limits, jnp.asarray(mj_model.jnt_qposadr[ids], jnp.int32), soft_range)
+    return Partial(_joint_limits, jnp.asarray(mj_model.jnt_qposadr[ids], jnp.int32), soft_range)
 
 
 def _joint_limits(adr, soft_range, model, state, action, next_state) -> Array:
@@ -266,7 +266,7 @@ def symmetry(
     signs = np.ones(len(pairs)) if signs is None else np.asarray(signs, np.float32)
     if signs.shape != (len(pairs),) or not np.all(np.abs(signs) == 1):
         raise ValueError(f"{who}: signs must be one +1 or -1 per pair ({len(pairs)}), got {signs.tolist()}")
-    return bind(_symmetry, jnp.asarray(mj_model.jnt_qposadr[ids], jnp.int32), jnp.asarray(signs, jnp.float32))
+    return Partial(_symmetry, jnp.asarray(mj_model.jnt_qposadr[ids], jnp.int32), jnp.asarray(signs, jnp.float32))
 
 
 def _symmetry(adr, signs, model, state, action, next_state) -> Array:
@@ -284,7 +284,7 @@ def forward_velocity(mj_model: mujoco.MjModel, body: str | None = None, max_spee
     `max_speed` (m/s, > 0) if given, so that moving faster earns nothing more."""
     who = "forward_velocity"
     cap = np.inf if max_speed is None else checks.number(who, "max_speed", max_speed, 0.0, open_low=True)
-    return bind(_forward_velocity, jnp.int32(names.base_body(mj_model, body, who)), jnp.float32(cap))
+    return Partial(_forward_velocity, jnp.int32(names.base_body(mj_model, body, who)), jnp.float32(cap))
 
 
 def _forward_velocity(body, cap, model, state, action, next_state) -> Array:
@@ -296,7 +296,7 @@ def _forward_velocity(body, cap, model, state, action, next_state) -> Array:
 def body_height(mj_model: mujoco.MjModel, body: str | None = None) -> Partial:
     """Reward: the world height z (m) of `body`'s origin (default: the first free
     joint's body), from ``xpos``."""
-    return bind(_body_height, jnp.int32(names.base_body(mj_model, body, "body_height")))
+    return Partial(_body_height, jnp.int32(names.base_body(mj_model, body, "body_height")))
 
 
 def _body_height(body, model, state, action, next_state) -> Array:
@@ -386,10 +386,10 @@ def feet_air_time(threshold: float = 0.5, min_command: float | None = None) -> P
     if not math.isfinite(threshold):
         raise ValueError(f"feet_air_time: threshold={threshold!r} must be finite")
     if min_command is None:
-        return bind(_feet_air_time, jnp.float32(threshold))
+        return Partial(_feet_air_time, jnp.float32(threshold))
     if not min_command >= 0:
         raise ValueError(f"feet_air_time: min_command={min_command!r} must be >= 0")
-    return bind(_gated_feet_air_time, jnp.float32(threshold), jnp.float32(min_command))
+    return Partial(_gated_feet_air_time, jnp.float32(threshold), jnp.float32(min_command))
 
 
 def _feet_air_time(threshold, model, state, action, next_state) -> Array:
@@ -414,7 +414,7 @@ def foot_clearance(target: float) -> Partial:
     (the geom centre's height, e.g. radius + lift)."""
     if not math.isfinite(target):
         raise ValueError(f"foot_clearance: target={target!r} must be finite")
-    return bind(_foot_clearance, jnp.float32(target))
+    return Partial(_foot_clearance, jnp.float32(target))
 
 
 def _foot_clearance(target, model, state, action, next_state) -> Array:

@@ -31,7 +31,7 @@ from mjzoo.catalog import contacts
 from mjzoo.combinators import TimeLimitState
 from mjzoo.layers import find
 from mjzoo.running import reset
-from mjzoo.types import State, Task, bind
+from mjzoo.types import State, Task
 
 __all__ = [
     "not_upright",
@@ -62,7 +62,7 @@ def not_upright(mj_model: mujoco.MjModel, max_angle: float, body: str | None = N
     `max_angle` (rad, in (0, pi]): ``xmat[2, 2] = cos(tilt) < cos(max_angle)``. The body
     defaults to the first body with a free joint (the floating base)."""
     max_angle = checks.number("not_upright", "max_angle", max_angle, 0.0, math.pi, open_low=True)
-    return bind(_not_upright, _base(mj_model, body, "not_upright"), max_angle)
+    return Partial(_not_upright, _base(mj_model, body, "not_upright"), max_angle)
 
 
 def _not_upright(body, max_angle, model, state) -> Array:
@@ -73,7 +73,7 @@ def base_too_low(mj_model: mujoco.MjModel, min_height: float, body: str | None =
     """True when the body's origin is below `min_height` (m, world z). The body defaults
     to the first body with a free joint."""
     min_height = checks.number("base_too_low", "min_height", min_height)
-    return bind(_base_too_low, _base(mj_model, body, "base_too_low"), min_height)
+    return Partial(_base_too_low, _base(mj_model, body, "base_too_low"), min_height)
 
 
 def _base_too_low(body, min_height, model, state) -> Array:
@@ -85,7 +85,7 @@ def base_too_high(mj_model: mujoco.MjModel, max_height: float, body: str | None 
     that leaves the ground by that much has found a contact exploit, not a gait. The
     body defaults to the first body with a free joint."""
     max_height = checks.number("base_too_high", "max_height", max_height)
-    return bind(_base_too_high, _base(mj_model, body, "base_too_high"), max_height)
+    return Partial(_base_too_high, _base(mj_model, body, "base_too_high"), max_height)
 
 
 def _base_too_high(body, max_height, model, state) -> Array:
@@ -96,7 +96,7 @@ def illegal_contact(mj_model: mujoco.MjModel, geoms: Names, others: Names | None
     """True when any of the named geoms touches one of `others` (any geom if None), e.g.
     the torso or the knees with the floor. Touching: an active contact (distance below
     margin - gap)."""
-    return bind(_illegal_contact, *contacts.geom_sets(mj_model, geoms, others, "illegal_contact"))
+    return Partial(_illegal_contact, *contacts.geom_sets(mj_model, geoms, others, "illegal_contact"))
 
 
 def _illegal_contact(geoms, others, model, state) -> Array:
@@ -110,7 +110,7 @@ def bad_velocity(max_qvel: float) -> Partial:
     For a task-specific limit counted in the metrics. `mjzoo.with_divergence_guard`
     stays the safety net: it also reverts the physics so NaN never reaches the batch.
     """
-    return bind(_bad_velocity, checks.number("bad_velocity", "max_qvel", max_qvel, 0.0, open_low=True))
+    return Partial(_bad_velocity, checks.number("bad_velocity", "max_qvel", max_qvel, 0.0, open_low=True))
 
 
 def _bad_velocity(max_qvel, model, state) -> Array:
@@ -124,7 +124,7 @@ def far_from_origin(mj_model: mujoco.MjModel, radius: float, body: str | None = 
     in the horizontal plane (x, y). The body defaults to the first body with a free
     joint."""
     radius = checks.number("far_from_origin", "radius", radius, 0.0, open_low=True)
-    return bind(_far_from_origin, _base(mj_model, body, "far_from_origin"), radius)
+    return Partial(_far_from_origin, _base(mj_model, body, "far_from_origin"), radius)
 
 
 def _far_from_origin(body, radius, model, state) -> Array:
@@ -141,7 +141,7 @@ def episode_length(max_steps: int) -> Partial:
     terminates: the episode really ends there and nothing comes after it, right for a
     task with a fixed horizon whose observation carries the time.
     """
-    return bind(_episode_length, jnp.int32(checks.integer("episode_length", "max_steps", max_steps)))
+    return Partial(_episode_length, jnp.int32(checks.integer("episode_length", "max_steps", max_steps)))
 
 
 def _episode_length(max_steps, model, state) -> Array:
@@ -170,13 +170,13 @@ def with_terminations(task: Task, items: Mapping[str, Termination]) -> Task:
             raise ValueError(f"with_terminations: every name must be a non-empty string, got {name!r}")
         if not callable(fn):
             raise TypeError(f"with_terminations: item {name!r} must be callable, got {type(fn).__name__}")
-    names = tree.Static(tuple(items))
+    names = tree.StaticValue(tuple(items))
     fns = tuple(fn if isinstance(fn, Partial) else Partial(fn) for fn in items.values())
     _check_items(task, names.value, fns)
     return task.replace(
-        start=bind(_terminations_reset, task.start, names),
-        step=bind(_terminations_step, task.step, names, fns),
-        terminate=bind(_terminations_terminate, task.terminate, fns),
+        start=Partial(_terminations_reset, task.start, names),
+        step=Partial(_terminations_step, task.step, names, fns),
+        terminate=Partial(_terminations_terminate, task.terminate, fns),
     )
 
 
@@ -204,13 +204,13 @@ def _flags(fns, model, state: State) -> list[Array]:
     return [jnp.asarray(fn(model, state), bool) for fn in fns]
 
 
-def _terminations_reset(reset_fn, names: tree.Static, model, key) -> State:
+def _terminations_reset(reset_fn, names: tree.StaticValue, model, key) -> State:
     state = reset_fn(model, key)
     zeros = {f"termination/{name}": jnp.zeros((), jnp.float32) for name in names.value}
     return state.replace(metrics={**state.metrics, **zeros})
 
 
-def _terminations_step(step_fn, names: tree.Static, fns, model, state, action, key) -> State:
+def _terminations_step(step_fn, names: tree.StaticValue, fns, model, state, action, key) -> State:
     next_state = step_fn(model, state, action, key)
     flags = _flags(fns, model, next_state)
     recorded = {f"termination/{name}": flag.astype(jnp.float32) for name, flag in zip(names.value, flags)}

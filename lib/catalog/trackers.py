@@ -14,13 +14,14 @@ from typing import Any, NamedTuple
 import jax
 import jax.numpy as jnp
 import numpy as np
+from jax.tree_util import Partial
 from mujoco import mjx
 
 from mjzoo import checks, names, tree
 from mjzoo.catalog import contacts
 from mjzoo.catalog.contacts import point_velocity
 from mjzoo.layers import layered, peel, wrap
-from mjzoo.types import State, Task, bind
+from mjzoo.types import State, Task
 
 __all__ = ["with_action_history", "with_feet", "ActionHistoryState", "FeetState"]
 
@@ -59,12 +60,12 @@ def with_action_history(task: Task, length: int = 3) -> Task:
     Records the action its step receives: wrap it outside action filters and noise to
     record the policy's action, inside them to record what the actuators got.
     """
-    shape = tree.Static((checks.integer("with_action_history", "length", length), task.action_size))
-    start = bind(_history_reset, task.start, shape)
-    return layered(task, ActionHistoryState, start, bind(_history_step, task.step))
+    shape = tree.StaticValue((checks.integer("with_action_history", "length", length), task.action_size))
+    start = Partial(_history_reset, task.start, shape)
+    return layered(task, ActionHistoryState, start, Partial(_history_step, task.step))
 
 
-def _history_reset(reset_fn, shape: tree.Static, model: mjx.Model, key: Array) -> State:
+def _history_reset(reset_fn, shape: tree.StaticValue, model: mjx.Model, key: Array) -> State:
     return wrap(reset_fn(model, key), ActionHistoryState(actions=jnp.zeros(shape.value, jnp.float32)))
 
 
@@ -100,7 +101,7 @@ def with_feet(task: Task, feet: names.Names, floor: names.Names) -> Task:
     geoms, floor = contacts.geom_sets(task.mj_model, feet, floor, "with_feet")
     bodies = jnp.asarray(task.mj_model.geom_bodyid[np.asarray(geoms)], jnp.int32)
     indices = {"geom": geoms, "body": bodies, "floor": floor}
-    return layered(task, FeetState, bind(_feet_reset, task.start, indices), bind(_feet_step, task.step, indices))
+    return layered(task, FeetState, Partial(_feet_reset, task.start, indices), Partial(_feet_step, task.step, indices))
 
 
 def _feet_now(indices: dict, model: mjx.Model, data: mjx.Data) -> dict[str, Array]:

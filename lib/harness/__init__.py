@@ -2,7 +2,6 @@
 
     training      the host loop over jitted chunks of an RL algorithm's updates:
                   progress, evaluation, metrics, checkpoints, curves, video
-    contract      what `training.run` needs of an algorithm value (`mjzoo.learning.Algorithm`)
     settings      how a run is driven: evaluation, logging and video schedules
     devices       the env batch split over the devices (of every process), the rest replicated
     distributed   several processes (hosts): jax.distributed set-up, process 0 writes
@@ -28,7 +27,6 @@ from mjzoo import lazy
 
 MODULES = (
     "training",
-    "contract",
     "settings",
     "devices",
     "distributed",

@@ -35,7 +35,7 @@ import jax.numpy as jnp
 import numpy as np
 from mujoco import mjx
 
-from mjzoo import motion, names, worlds
+from mjzoo import batching, motion, names
 from mjzoo.planning import closed_loop
 from mjzoo.planning.realtime import Problem
 from mjzoo.running import reset, reward_terms, rollout
@@ -257,7 +257,7 @@ def _policy_episodes(act: Act, steps: int, task: Task, params: Any, keys: jax.Ar
         _, trajectory = rollout(task, lambda obs, k: act(params, obs, k), first, run_key, steps)
         return _record(task, first, trajectory.next_state, trajectory.action, limited)
 
-    task = worlds.sized(task, keys.shape[0])  # Warp: a contact pool for every episode
+    task = batching.sized(task, keys.shape[0])  # Warp: a contact pool for every episode
     return jax.vmap(one)(keys)
 
 
@@ -310,7 +310,7 @@ def _record(task: Task, first: State, after: State, actions: jax.Array, limited:
     def stack(a, b):  # [] and [T] -> [T+1]
         return jnp.concatenate([a[None], b])
 
-    data = jax.tree.map(stack, worlds.own(first.data), worlds.own(after.data))
+    data = jax.tree.map(stack, batching.own(first.data), batching.own(after.data))
     # After mjx.step, a Data's poses belong to the qpos before the step's integration:
     # recompute them from each stored state.
     posed = _poses(task, data)

@@ -20,7 +20,7 @@ import numpy as np
 from jax.sharding import NamedSharding, PartitionSpec
 from mujoco import mjx
 
-from mjzoo import worlds
+from mjzoo import batching
 
 WARP_GPUS = "MJZOO_WARP_SEVERAL_GPUS"  # =1: let Warp physics train over several GPUs (it crashed XLA)
 
@@ -31,7 +31,7 @@ def shard_envs(train_state: Any, per_env_fields: Sequence[str], devices: list | 
     """Places the leaves of a train state's `per_env_fields` (an algorithm's
     `PER_ENV_FIELDS`) across devices (leading axis), the rest replicated, as
     `env_shardings` says. Under jit, XLA then splits the env batch
-    (and, on Warp, each device steps its own worlds: `mjzoo.worlds.partition`).
+    (and, on Warp, each device steps its own worlds: `mjzoo.batching.partition`).
 
     On one device this commits the state to it: jit compiles separately for
     uncommitted inputs and for its own (committed) outputs, which would cost a second
@@ -56,7 +56,7 @@ def env_shardings(train_state: Any, per_env_fields: Sequence[str], devices: list
 
     def place(node: Any, paths: list[list[str]]) -> Any:
         if [] in paths:  # this node is per-env
-            specs = worlds.partition(node)
+            specs = batching.partition(node)
             _check_even(node, specs, devices)
             return jax.tree.map(
                 lambda x, spec: NamedSharding(mesh, spec) if np.prod(np.shape(x)) else whole, node, specs
@@ -111,14 +111,14 @@ def _check_warp_gpus(train_state: Any, devices: list) -> None:
 
 
 def env_mesh(devices: list | None = None) -> jax.sharding.Mesh:
-    """The one-axis mesh (`mjzoo.worlds.AXIS`) that env batches are split along."""
+    """The one-axis mesh (`mjzoo.batching.AXIS`) that env batches are split along."""
     devices = devices or jax.devices()
-    return jax.sharding.Mesh(np.array(devices), (worlds.AXIS,), axis_types=(jax.sharding.AxisType.Auto,))
+    return jax.sharding.Mesh(np.array(devices), (batching.AXIS,), axis_types=(jax.sharding.AxisType.Auto,))
 
 
 def env_mesh_scope(devices: list | None = None) -> contextlib.AbstractContextManager:
     """While a jitted function traces, `env_mesh` as the abstract mesh (for
-    `mjzoo.worlds.vmap_transition`); nothing on one device. Outside jit,
+    `mjzoo.batching.vmap_transition`); nothing on one device. Outside jit,
     ``jax.set_mesh(env_mesh())`` does the same for your own calls."""
     devices = devices or jax.devices()
     if len(devices) == 1:

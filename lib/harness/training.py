@@ -38,10 +38,10 @@ from mujoco import mjx
 from mjzoo import tree
 from mjzoo.harness import checkpoints, compilation, distributed, plotting, rendering
 from mjzoo.harness import metrics as metrics_lib
-from mjzoo.harness.contract import Algorithm, check_algorithm, check_state
 from mjzoo.harness.devices import env_mesh_scope, env_shardings, replicate, shard_envs, template_data
 from mjzoo.harness.settings import EvalSchedule, Settings, checkpoint_due, config_dict, hyperparams_dict
-from mjzoo.learning.algorithm import TrainingWarning
+from mjzoo.learning.algorithm import Algorithm, TrainingWarning, check_algorithm, check_state
+from mjzoo.learning.evaluation import episode_steps
 from mjzoo.running import control_dt
 from mjzoo.types import Task
 
@@ -125,7 +125,7 @@ NO_HOOKS = Hooks()
 @functools.lru_cache(maxsize=8)  # runs in one process with one algorithm value share the compile
 def _chunk_fn(update: Callable, length: int):
     def chunk(task: Task, state):
-        with env_mesh_scope():  # Warp's physics splits over the devices by it (worlds.vmap_transition)
+        with env_mesh_scope():  # Warp's physics splits over the devices by it (batching.vmap_transition)
             state, metrics = jax.lax.scan(lambda s, _: update(task, s), state, None, length=length)
         return state, jax.tree.map(jnp.nanmean, metrics)  # NaN: nothing to report that update
 
@@ -166,12 +166,11 @@ def _eval_steps(task: Task, settings: Settings) -> int:
         return settings.eval_steps
     if settings.eval_seconds is not None:
         return seconds_to_steps(task, settings.eval_seconds)
-    if getattr(task, "time_limit", None) is None:
-        raise ValueError(
-            "training.Settings: eval_steps=None evaluates the task's own episode length, but the task "
-            "has no time limit (mjzoo.with_time_limit); give eval_steps or eval_seconds"
-        )
-    return int(task.time_limit)
+    return episode_steps(
+        task,
+        "training.Settings: eval_steps=None evaluates the task's own episode length, but",
+        "eval_steps or eval_seconds",
+    )
 
 
 @functools.lru_cache(maxsize=8)
@@ -331,8 +330,8 @@ class _Loop:
         self.ahead = None
         compiled = self.clock()  # the budget is for evaluating: waiting for the compile is a one-off
         key, s = jax.random.fold_in(self.key, int(state.updates)), self.settings
-        mean, _, trajectory = self.evaluate(self.task, state, key, s.eval_envs, self.eval_steps)
-        eval_return = float(distributed.fetch(mean))  # waits for it
+        returns, _, trajectory = self.evaluate(self.task, state, key, s.eval_envs, self.eval_steps)
+        eval_return = float(np.mean(distributed.fetch(returns)))  # waits for it
         if self.hooks.on_evaluation is not None:
             self.hooks.on_evaluation(step, eval_return)
         result = {"eval/return": eval_return, "perf/eval_s": self.clock() - start}
@@ -390,7 +389,7 @@ def _start(
     """The initial (or resumed: its hyperparameters too) train state, placed on the
     devices, config.json written."""
     state = _init_fn(algorithm.init)(task, hyperparams, key)
-    check_state(algorithm, state)
+    check_state(algorithm, state, "training.run")
     state = shard_envs(_owned(state), algorithm.per_env_fields)
     if out is not None:
         # Restore (each process its shards) before writing anything: a run that cannot resume is left as it was.
@@ -433,7 +432,7 @@ def run(
     launched = clock()
     if settings.compile_cache:
         compilation.enable_cache()
-    check_algorithm(algorithm)
+    check_algorithm(algorithm, "training.run")
     hyperparams = algorithm.hyperparams if hyperparams is None else hyperparams
     eval_steps = _eval_steps(task, settings)  # a wrong length fails here, before anything is written
     out = Path(settings.out_dir) if settings.out_dir else None

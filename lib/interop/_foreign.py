@@ -17,7 +17,7 @@ the rest for either:
 
 The env's reset is given ``jax.random.key_data(key)`` of mjzoo's reset key; its steps draw
 randomness from its own info, so mjzoo's step key is not used. The env object is bound as
-static pytree metadata (`tree.Static`, equal by identity: tasks from one env share a
+static pytree metadata (`tree.StaticValue`, equal by identity: tasks from one env share a
 trace); the physics model is `task.model`, a leaf, set on the env (``<model_attr>``) while
 its reset or step is traced, as both libraries' own domain-randomization wrappers do, so
 model edits apply without a recompile.
@@ -33,11 +33,12 @@ from typing import Any, Iterator
 import jax
 import jax.numpy as jnp
 import mujoco
+from jax.tree_util import Partial
 from mujoco import mjx
 
 from mjzoo import physics, tree
 from mjzoo.combinators import record, with_divergence_guard, with_time_limit
-from mjzoo.types import State, Task, bind
+from mjzoo.types import State, Task
 
 __all__ = ["Kind", "task", "env_model", "key_data"]
 
@@ -81,14 +82,14 @@ def task(kind: Kind, env: Any, model: mjx.Model, mj_model: mujoco.MjModel, episo
     one reward term, guarded against divergence and, unless `episode_length` is None,
     truncated after that many control steps. The caller has checked `env` and the length.
     On Warp, the model's overflow prints are off (`mjzoo.physics.quiet`)."""
-    static_kind, static_env = tree.Static(kind), tree.Static(env)
+    static_kind, static_env = tree.StaticValue(kind), tree.StaticValue(env)
     action_size = int(env.action_size)
     bare = Task(
         model=physics.quiet(model),
-        start=bind(_start, static_kind, static_env),
-        step=bind(_step, static_kind, static_env),
-        reward=bind(_recorded_reward),
-        terminate=bind(_recorded_terminate),
+        start=Partial(_start, static_kind, static_env),
+        step=Partial(_step, static_kind, static_env),
+        reward=Partial(_recorded_reward),
+        terminate=Partial(_recorded_terminate),
         mj_model=mj_model,
         action_dim=None if action_size == mj_model.nu else action_size,
     )
@@ -114,7 +115,7 @@ def key_data(key: Array) -> Array:
     return jax.random.key_data(key) if jnp.issubdtype(key.dtype, jax.dtypes.prng_key) else key
 
 
-def _start(kind: tree.Static, env: tree.Static, model: mjx.Model, key: Array) -> State:
+def _start(kind: tree.StaticValue, env: tree.StaticValue, model: mjx.Model, key: Array) -> State:
     kind = kind.value
     with _holding(kind, env.value, model) as held:
         first = held.reset(key_data(key))
@@ -124,7 +125,9 @@ def _start(kind: tree.Static, env: tree.Static, model: mjx.Model, key: Array) ->
     return tree.strongly_typed(state.replace(metrics=_prefixed(kind, first.metrics)))
 
 
-def _step(kind: tree.Static, env: tree.Static, model: mjx.Model, state: State, action: Array, key: Array) -> State:
+def _step(
+    kind: tree.StaticValue, env: tree.StaticValue, model: mjx.Model, state: State, action: Array, key: Array
+) -> State:
     kind = kind.value
     prefix = f"{kind.name}/"
     own = kind.state_type(

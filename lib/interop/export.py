@@ -1,7 +1,7 @@
 """A trained policy out of JAX: an ONNX model or a serialized `jax.export` artifact, each
-carrying its deployment contract (`mjzoo.interop.contract`).
+carrying its deployment contract (`mjzoo.interop.deployment`).
 
-    policy = export.Policy(apply, obs_size=45, action_size=17)     # apply(obs [k], carry) -> (action [A], carry)
+    policy = export.Deployable(apply, obs_size=45, action_size=17)     # apply(obs [k], carry) -> (action [A], carry)
     contract = export.describe(task, policy)                       # checked against the task's own observation
     export.write_onnx(policy, contract, "policy.onnx")             # or write_jax(..., "policy.jaxexport")
     act, contract = export.load("policy.onnx")                     # onnxruntime (or JAX) behind one callable
@@ -36,10 +36,10 @@ import jax.numpy as jnp
 import numpy as np
 from jax.extend.core import jaxpr_as_fun
 
-from mjzoo.interop import contract as contracts
+from mjzoo.interop import deployment
 from mjzoo.types import Task
 
-__all__ = ["Policy", "Loaded", "describe", "write_onnx", "write_jax", "load", "sidecar", "INPUTS", "OUTPUTS"]
+__all__ = ["Deployable", "Loaded", "describe", "write_onnx", "write_jax", "load", "sidecar", "INPUTS", "OUTPUTS"]
 
 Array = jax.Array
 INPUTS, OUTPUTS = ("obs", "carry"), ("action", "next_carry")  # tensor names; the carry only when recurrent
@@ -47,7 +47,7 @@ _PREFIX = "mjzoo."
 _OPSET = 23
 
 
-class Policy(NamedTuple):
+class Deployable(NamedTuple):
     """A deterministic policy for ONE observation, its parameters closed over; exported
     batched (vmapped over a dynamic batch size).
 
@@ -79,7 +79,12 @@ class Loaded(NamedTuple):
 
 
 def describe(
-    task: Task, policy: Policy, *, source: dict[str, Any] | None = None, key: Array | None = None, check_steps: int = 8
+    task: Task,
+    policy: Deployable,
+    *,
+    source: dict[str, Any] | None = None,
+    key: Array | None = None,
+    check_steps: int = 8,
 ) -> dict[str, Any]:
     """The deployment contract of `policy` on `task`: model names and ranges, physics
     timing, the observation layout, the action mapping, the policy's inputs and outputs.
@@ -96,9 +101,9 @@ def describe(
     """
     from mjzoo.interop import sim2sim  # runs MJX: imported when used
 
-    terms = contracts.observation_terms(task)
+    terms = deployment.observation_terms(task)
     check = sim2sim.check_observation(task, terms, jax.random.key(0) if key is None else key, check_steps)
-    size = check.history * contracts.frame_size(terms)
+    size = check.history * deployment.frame_size(terms)
     if (policy.obs_size, policy.action_size) != (size, task.action_size):
         raise ValueError(
             f"export.describe: the policy takes {policy.obs_size} observations and gives "
@@ -106,7 +111,7 @@ def describe(
         )
     observation = dict(
         size=size,
-        frame_size=contracts.frame_size(terms),
+        frame_size=deployment.frame_size(terms),
         history=check.history,
         history_order="newest first; every frame is the first one at an episode's start",
         normalization="inside the model",
@@ -118,12 +123,12 @@ def describe(
     if policy.recurrent:
         inputs.append(dict(name=INPUTS[1], shape=["B", policy.carry_size], initial="zeros"))
         outputs.append(dict(name=OUTPUTS[1], shape=["B", policy.carry_size]))
-    action = contracts.action_mapping(task)
+    action = deployment.action_mapping(task)
     action["policy_output"] = "deterministic action in [-1, 1]: tanh of the Gaussian policy's mean"
     return dict(
-        format=contracts.FORMAT,
-        model=contracts.model_section(task.mj_model),
-        physics=contracts.physics_section(task.mj_model, check.control_dt),
+        format=deployment.FORMAT,
+        model=deployment.model_section(task.mj_model),
+        physics=deployment.physics_section(task.mj_model, check.control_dt),
         observation=observation,
         action=action,
         policy=dict(recurrent=policy.recurrent, carry_size=policy.carry_size, inputs=inputs, outputs=outputs),
@@ -145,12 +150,12 @@ def _refuse(paths: list[Path], overwrite: bool) -> None:
         )
 
 
-def _specs(policy: Policy, *batch) -> list[jax.ShapeDtypeStruct]:
+def _specs(policy: Deployable, *batch) -> list[jax.ShapeDtypeStruct]:
     sizes = [policy.obs_size] + ([policy.carry_size] if policy.recurrent else [])
     return [jax.ShapeDtypeStruct((*batch, size), jnp.float32) for size in sizes]
 
 
-def _flat(policy: Policy) -> Callable:
+def _flat(policy: Deployable) -> Callable:
     """`policy.apply` as a function of its tensors only: (obs[, carry]) -> action[, next carry]."""
 
     def fn(obs, carry=None):
@@ -160,7 +165,9 @@ def _flat(policy: Policy) -> Callable:
     return fn
 
 
-def write_onnx(policy: Policy, contract: dict[str, Any], path: str | os.PathLike, *, overwrite: bool = False) -> Path:
+def write_onnx(
+    policy: Deployable, contract: dict[str, Any], path: str | os.PathLike, *, overwrite: bool = False
+) -> Path:
     """Converts `policy` to ONNX with jax2onnx (batch dim "B" dynamic), stores `contract`
     in its metadata_props (one JSON value per section, keys ``mjzoo.<section>``) and
     writes it atomically to `path`. Raises FileExistsError unless `overwrite`.
@@ -204,7 +211,7 @@ def write_onnx(policy: Policy, contract: dict[str, Any], path: str | os.PathLike
 
 
 def write_jax(
-    policy: Policy,
+    policy: Deployable,
     contract: dict[str, Any],
     path: str | os.PathLike,
     *,

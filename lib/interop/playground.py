@@ -23,7 +23,7 @@ Playground's reset is given ``jax.random.key_data(key)`` of mjzoo's reset key. T
 guarded against diverging physics (`mjzoo.with_divergence_guard`, ``metrics["diverged"]``).
 
 How the env object passes through `jax.jit`: it is a Python object holding Python numbers
-(its config, reward constants), so it is bound as static pytree metadata (`tree.Static`,
+(its config, reward constants), so it is bound as static pytree metadata (`tree.StaticValue`,
 equal by identity): tasks made from one env share a trace; a second env of the same name
 compiles again. The physics model is `task.model`, a leaf: while the env's reset or step
 is traced, its ``_mjx_model`` is set to the model the task is called with (Playground's own

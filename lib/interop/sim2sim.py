@@ -29,7 +29,7 @@ from mujoco import mjx
 
 from mjzoo import physics
 from mjzoo.catalog.observations import ObservationHistoryState
-from mjzoo.interop import contract as contracts
+from mjzoo.interop import deployment
 from mjzoo.layers import find
 from mjzoo.learning import to_controls
 from mjzoo.running import reset, transition
@@ -109,7 +109,7 @@ def without_observation_noise(task: Task) -> Task:
         if not isinstance(node, jax.tree_util.Partial):
             return node
         args = [clean(arg) for arg in node.args]
-        if contracts.function_key(node.func) in _NOISE:
+        if deployment.function_key(node.func) in _NOISE:
             args[1] = jnp.zeros_like(args[1])
         return jax.tree_util.Partial(node.func, *args, **node.keywords)
 
@@ -174,15 +174,15 @@ def check_observation(task: Task, terms: list[dict[str, Any]], key: Array, steps
     """
     first, (states, actions) = _random_run(without_observation_noise(task), key, steps)
     if not isinstance(first.obs, jax.Array) or first.obs.ndim != 1:
-        raise contracts.ContractError(
+        raise deployment.ContractError(
             f"the task's observation is {jax.tree.structure(first.obs)}; the contract "
             "describes one flat array (a dict observation is not supported)"
         )
-    size = contracts.frame_size(terms)
+    size = deployment.frame_size(terms)
     history = getattr(find(first, ObservationHistoryState, None), "frames", None)
     length = 1 if history is None else int(history.shape[0])
     if first.obs.shape[0] != length * size:
-        raise contracts.ContractError(
+        raise deployment.ContractError(
             f"the task observes {first.obs.shape[0]} numbers; the described terms make "
             f"{size} per frame x {length} frames: {[t['name'] for t in terms]}"
         )
@@ -192,7 +192,7 @@ def check_observation(task: Task, terms: list[dict[str, Any]], key: Array, steps
         state = first if t == 0 else jax.tree.map(lambda x, t=t: x[t - 1], states)
         if t > 0:
             previous = np.asarray(actions[t - 1], float)
-        frames.append(contracts.frame(terms, m, _c_data(m, state.data), previous))
+        frames.append(deployment.frame(terms, m, _c_data(m, state.data), previous))
         want = np.asarray(state.obs, np.float64)
         errors.append(np.abs(_history(frames, length) - want) / np.maximum(1.0, np.abs(want)))
         expected.append(want)
@@ -203,7 +203,7 @@ def check_observation(task: Task, terms: list[dict[str, Any]], key: Array, steps
             per_term.append((float(np.max(worst[:size].reshape(-1)[start : start + term["size"]])), term["name"]))
             start += term["size"]
         bad = ", ".join(f"{n} (error {e:.3g})" for e, n in sorted(per_term, reverse=True) if e > 1e-4)
-        raise contracts.ContractError(f"the described observation does not reproduce the task's: {bad or 'history'}")
+        raise deployment.ContractError(f"the described observation does not reproduce the task's: {bad or 'history'}")
     control_dt = float(states.data.time[0] - first.data.time)
     return Check(max_error=float(np.max(worst)), control_dt=control_dt, history=length)
 
@@ -240,7 +240,7 @@ def _to_task(action: dict[str, Any], a: np.ndarray) -> np.ndarray:
 def _check_model(contract: dict[str, Any], m: mujoco.MjModel) -> None:
     """The contract's model and physics step, or a ValueError naming what differs."""
     want = contract["model"]
-    have = contracts.model_section(m)
+    have = deployment.model_section(m)
     for field in ("nq", "nv", "nu", "joint_names", "actuator_names"):
         if have[field] != want[field]:
             raise ValueError(
@@ -295,7 +295,7 @@ def run_in_mujoco(
     for name in ("time", "qpos", "qvel", "act"):
         log[name].append(np.array(getattr(d, name)))
     for _ in range(steps):
-        frames = (frames + [contracts.frame(obs_spec["terms"], m, d, previous)])[-obs_spec["history"] :]
+        frames = (frames + [deployment.frame(obs_spec["terms"], m, d, previous)])[-obs_spec["history"] :]
         obs = _history(frames, obs_spec["history"])
         if recurrent:
             action, carry = loaded.act(obs, carry)

@@ -41,8 +41,8 @@ from mjzoo.learning.actions import to_controls
 from mjzoo.learning.advantages import gae
 from mjzoo.learning.algorithm import Algorithm, TrainingWarning
 from mjzoo.learning.collection import (
+    Actor,
     Collector,
-    Policy,
     Transitions,
     collect,
     feed_forward,
@@ -76,11 +76,11 @@ from mjzoo.learning.normalization import (
 from mjzoo.learning.replay import Replay
 
 __all__ = [
+    "Actor",
     "Algorithm",
     "Collector",
     "Evaluation",
     "Network",
-    "Policy",
     "RecurrentNetwork",
     "Replay",
     "RunningStats",

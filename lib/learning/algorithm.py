@@ -16,12 +16,13 @@ a batch of hyperparameters) sweeps them in one program.
 
 from __future__ import annotations
 
+import dataclasses
 from collections.abc import Callable, Sequence
 from typing import Any, NamedTuple
 
 import jax
 
-__all__ = ["Algorithm", "TrainingWarning"]
+__all__ = ["Algorithm", "TrainingWarning", "check_algorithm", "check_state"]
 
 Array = jax.Array
 PyTree = Any
@@ -43,8 +44,9 @@ class Algorithm(NamedTuple):
         pytree with an int32 scalar field `updates` and the hyperparameters inside it.
       update: ``(task, state) -> (state, metrics)``: one update (collect and learn);
         metrics a dict of scalars (NaN: nothing to report this update).
-      evaluate: ``(task, state, key, num_envs, num_steps) -> (mean return, returns
-        [num_envs], env 0's `mjzoo.Trajectory` or None)``; num_envs, num_steps static.
+      evaluate: ``(task, state, key, num_envs, num_steps) -> learning.Evaluation``
+        (returns [num_envs], lengths [num_envs], env 0's `mjzoo.Trajectory` or None),
+        as `mjzoo.learning.evaluate` gives it; num_envs, num_steps static.
       steps_per_update: env steps one update collects (the step axis of metrics).
       num_updates: updates in a whole run.
       per_env_fields: the state's fields whose leaves have a leading [num_envs] axis (a
@@ -61,10 +63,53 @@ class Algorithm(NamedTuple):
     hyperparams: PyTree
     init: Callable[[Any, PyTree, Array], PyTree]
     update: Callable[[Any, PyTree], tuple[PyTree, dict[str, Array]]]
-    evaluate: Callable[..., tuple]
+    evaluate: Callable[..., Any]
     steps_per_update: int
     num_updates: int
     per_env_fields: Sequence[str] = ()
     policy: Callable[..., Callable[[Any, Any, Array], Array]] | None = None
     policy_params: Callable[[PyTree], Any] | None = None
     diagnose: Callable[[Sequence[dict[str, float]]], str | None] | None = None
+
+
+def _is_count(value: Any) -> bool:
+    return isinstance(value, int) and not isinstance(value, bool) and value >= 1
+
+
+def check_algorithm(algorithm: Any, who: str = "check_algorithm") -> None:
+    """Raises one TypeError naming everything `algorithm` lacks of the `Algorithm`
+    contract (functions, counts, per-env field names)."""
+    missing = [f"{name}()" for name in ("init", "update", "evaluate") if not callable(getattr(algorithm, name, None))]
+    fields = getattr(algorithm, "per_env_fields", None)
+    if not (isinstance(fields, (tuple, list)) and all(isinstance(f, str) for f in fields)):
+        missing.append("per_env_fields (a tuple of the state's per-env field names; () if none)")
+    missing += [
+        f"{name} (an int >= 1)"
+        for name in ("num_updates", "steps_per_update")
+        if not _is_count(getattr(algorithm, name, None))
+    ]
+    if missing:
+        name = getattr(algorithm, "name", type(algorithm).__name__)
+        raise TypeError(
+            f"{who}: {name} is not an algorithm value of the mjzoo.learning.Algorithm contract "
+            f"(e.g. ppo.make(config)); it lacks {', '.join(missing)}"
+        )
+
+
+def check_state(algorithm: Algorithm, state: Any, who: str = "check_state") -> None:
+    """The state `init` made has the fields the harness and `per_env_fields` name."""
+
+    def has(path: str) -> bool:
+        node = state
+        for name in path.split("."):
+            if not dataclasses.is_dataclass(node) or not hasattr(node, name):
+                return False
+            node = getattr(node, name)
+        return True
+
+    wrong = [n for n in ("updates", *algorithm.per_env_fields) if not has(n)]
+    if wrong:
+        raise TypeError(
+            f"{who}: the state {algorithm.name}'s init returns ({type(state).__name__}) must be "
+            f"a dataclass with the fields {wrong} (updates, and each of per_env_fields)"
+        )

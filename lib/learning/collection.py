@@ -28,21 +28,23 @@ from typing import Any
 import jax
 import jax.numpy as jnp
 
-from mjzoo import checks, worlds
+from mjzoo import batching, checks
 from mjzoo.combinators import AutoResetState, with_auto_reset
 from mjzoo.layers import find
 from mjzoo.running import reset, transition
 from mjzoo.types import State, Task
 
-__all__ = ["Collector", "Policy", "Transitions", "collect", "feed_forward"]
+__all__ = ["Collector", "Actor", "Transitions", "collect", "feed_forward"]
 
 Array = jax.Array
 PyTree = Any
-Policy = Callable[[PyTree, PyTree, Array, Array], tuple[PyTree, Array, PyTree]]  # (carry, obs, start, key)
+# What a learner acts with: (carry, obs, start, key) -> (carry, action, extras), for one env. It
+# carries memory and returns what learning needs; `mjzoo.Policy` is the plain (obs, key) -> action.
+Actor = Callable[[PyTree, PyTree, Array, Array], tuple[PyTree, Array, PyTree]]
 
 
-def feed_forward(fn: Callable[[PyTree, Array], tuple[Array, PyTree]]) -> Policy:
-    """A `Policy` from ``fn(obs, key) -> (action, extras)``: its carry stays ``()``."""
+def feed_forward(fn: Callable[[PyTree, Array], tuple[Array, PyTree]]) -> Actor:
+    """An `Actor` from ``fn(obs, key) -> (action, extras)``: its carry stays ``()``."""
 
     def policy(carry, obs, start, key):
         action, extras = fn(obs, key)
@@ -75,7 +77,7 @@ class Collector:
         """`num_envs` freshly reset envs of `task` (auto-resetting) and each env's copy of
         the policy's initial `carry` (one env's carry, broadcast)."""
         num_envs = checks.integer("Collector.create", "num_envs", num_envs)
-        batch = worlds.sized(with_auto_reset(task), num_envs)  # Warp: a contact pool for them all
+        batch = batching.sized(with_auto_reset(task), num_envs)  # Warp: a contact pool for them all
         env_state = jax.vmap(reset, in_axes=(None, 0))(batch, jax.random.split(key, num_envs))
         zeros = jnp.zeros((num_envs,), jnp.float32)
         return cls(
@@ -115,7 +117,7 @@ class Transitions:
 
 
 def collect(
-    task: Task, policy: Policy, collector: Collector, key: Array, num_steps: int
+    task: Task, policy: Actor, collector: Collector, key: Array, num_steps: int
 ) -> tuple[Collector, Transitions, dict[str, Array]]:
     """Runs `policy` on every env of `collector` for `num_steps` (static) steps, with one
     `lax.scan`; an env whose episode ends starts a new one at once.
@@ -137,7 +139,9 @@ def collect(
         act_key, step_key = jax.random.split(key)
         num_envs = c.start.shape[0]
         carry, action, extras = act(c.carry, c.env_state.obs, c.start, jax.random.split(act_key, num_envs))
-        next_state = worlds.vmap_transition(transition, env, c.env_state, action, jax.random.split(step_key, num_envs))
+        next_state = batching.vmap_transition(
+            transition, env, c.env_state, action, jax.random.split(step_key, num_envs)
+        )
         done = next_state.terminated | next_state.truncated
         episode_return, episode_length = c.episode_return + next_state.reward, c.episode_length + 1.0
         ended = {

@@ -15,8 +15,8 @@ from typing import Any, NamedTuple
 import jax
 import jax.numpy as jnp
 
-from mjzoo import checks, worlds
-from mjzoo.learning.collection import Policy
+from mjzoo import batching, checks
+from mjzoo.learning.collection import Actor
 from mjzoo.running import reset, transition
 from mjzoo.tree import Packing
 from mjzoo.types import Task, Trajectory
@@ -41,14 +41,18 @@ class Evaluation(NamedTuple):
     trajectory: Trajectory
 
 
-def episode_steps(task: Task) -> int:
-    """The task's own episode length, ``int(task.time_limit)``, read on the host.
+def episode_steps(task: Task, who: str = "episode_steps", instead: str = "num_steps") -> int:
+    """The task's own episode length, ``int(task.time_limit)``, read on the host: the one
+    place every evaluation, CLI command and closed loop reads it.
 
-    Raises ValueError if the task has no time limit, TypeError if it is traced (under
-    jit the limit is not a number yet: read it outside, pass it as a static argument).
+    Raises ValueError (``"{who}: ...; give {instead}"``) if the task has no time limit,
+    TypeError if it is traced (under jit the limit is not a number yet: read it outside,
+    pass it as a static argument).
     """
     if task.time_limit is None:
-        raise ValueError("episode_steps: the task has no time limit (mjzoo.with_time_limit); give num_steps")
+        raise ValueError(
+            f"{who}: the task has no time limit (mjzoo.with_time_limit) to end its episodes; give {instead}"
+        )
     if isinstance(task.time_limit, jax.core.Tracer):
         raise TypeError(
             "episode_steps: the task's time limit is traced (inside jit); read it outside "
@@ -58,7 +62,7 @@ def episode_steps(task: Task) -> int:
 
 
 def evaluate(
-    task: Task, policy: Policy, key: Array, num_envs: int, num_steps: int | None = None, carry: Any = ()
+    task: Task, policy: Actor, key: Array, num_envs: int, num_steps: int | None = None, carry: Any = ()
 ) -> Evaluation:
     """Runs `policy` from `num_envs` resets of `task` for `num_steps` (static) steps and
     scores each env's first episode.
@@ -78,7 +82,7 @@ def evaluate(
     num_envs = checks.integer("evaluate", "num_envs", num_envs)
     num_steps = episode_steps(task) if num_steps is None else checks.integer("evaluate", "num_steps", num_steps)
 
-    task = worlds.sized(task, num_envs)  # Warp: a contact pool for every env
+    task = batching.sized(task, num_envs)  # Warp: a contact pool for every env
     # Each env's keys as a lone env's would be: a reset key, then one key per step.
     reset_keys, run_keys = jnp.moveaxis(jax.vmap(jax.random.split)(jax.random.split(key, num_envs)), 1, 0)
     step_keys = jnp.swapaxes(
@@ -101,7 +105,7 @@ def evaluate(
     def body(inputs, keys):
         states, carries, start = inputs
         next_states, carries, actions = jax.vmap(one, in_axes=(0, 0, None, 0))(states, carries, start, keys)
-        first = jax.tree.map(lambda x: x[0], worlds.own(Trajectory(states.obs, actions, next_states)))
+        first = jax.tree.map(lambda x: x[0], batching.own(Trajectory(states.obs, actions, next_states)))
         layout.append(Packing.of(first))
         done = next_states.terminated | next_states.truncated
         return (next_states, carries, jnp.zeros((), bool)), (next_states.reward, done, layout[-1].pack(first))

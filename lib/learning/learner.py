@@ -20,7 +20,7 @@ import jax
 import jax.numpy as jnp
 from jax.sharding import NamedSharding, PartitionSpec
 
-from mjzoo import checks, worlds
+from mjzoo import batching, checks
 
 __all__ = ["learn"]
 
@@ -53,7 +53,7 @@ def learn(
       sequences: False: each minibatch holds T * N / num_minibatches samples, leaves
         [T * N / m, ...]. True: N / num_minibatches whole env sequences, leaves
         [T, N / m, ...].
-      split_over_devices: under a mesh with axis `mjzoo.worlds.AXIS` (the training
+      split_over_devices: under a mesh with axis `mjzoo.batching.AXIS` (the training
         harness sets one while it traces), split each minibatch's samples over its
         devices, so that each computes its share of every step and XLA sums the
         gradients. Otherwise XLA gathers the shuffled batch onto every device, and each
@@ -97,11 +97,11 @@ def learn(
 
 def _split_over_devices(batches: PyTree, axis: int) -> PyTree:
     """Stacked minibatches with each minibatch's samples (`axis`) split over the devices of
-    the env mesh (`mjzoo.worlds.AXIS`); without such a mesh, or where the samples do not
+    the env mesh (`mjzoo.batching.AXIS`); without such a mesh, or where the samples do not
     split evenly, as given."""
-    devices = worlds.mesh_devices()
+    devices = batching.mesh_devices()
     if devices == 1 or any(jnp.shape(x)[axis] % devices for x in jax.tree.leaves(batches)):
         return batches
-    spec = PartitionSpec(*(None,) * axis, worlds.AXIS)
+    spec = PartitionSpec(*(None,) * axis, batching.AXIS)
     sharding = NamedSharding(jax.sharding.get_abstract_mesh(), spec)
     return jax.tree.map(lambda x: jax.lax.with_sharding_constraint(x, sharding), batches)

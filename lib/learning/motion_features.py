@@ -42,7 +42,7 @@ from mujoco import mjx
 
 from mjzoo import names, tree
 from mjzoo.combinators import resets_itself
-from mjzoo.types import State, Task, bind
+from mjzoo.types import State, Task
 
 __all__ = ["Layout", "feature_layout", "feature_size", "frames_features", "motion_features", "with_feature_window"]
 
@@ -121,7 +121,7 @@ def motion_features(mj_model: mujoco.MjModel, key_bodies: Sequence[str] = (), ro
         floating,
         (int(mj_model.nq), int(mj_model.nv), int(mj_model.nbody)),
     )
-    return bind(_features, tree.Static(layout), *(jnp.asarray(x, jnp.int32) for x in leaves))
+    return Partial(_features, tree.StaticValue(layout), *(jnp.asarray(x, jnp.int32) for x in leaves))
 
 
 def _entries(mj_model, floating: bool, scalars, balls, bodies) -> tuple[tuple[str, int], ...]:
@@ -171,7 +171,7 @@ def _layout(who: str, features) -> Layout:
 
 
 def _features(
-    layout: tree.Static,
+    layout: tree.StaticValue,
     root_qpos,
     root_qvel,
     scalar_qpos,
@@ -290,10 +290,10 @@ def with_feature_window(task: Task, features: Partial, num_frames: int) -> Task:
         )
     if WINDOW in jax.eval_shape(task.start, task.model, jax.random.key(0)).info:
         raise ValueError("with_feature_window: the task already keeps a motion window; raise its num_frames")
-    restarts = tree.Static(resets_itself(task))
+    restarts = tree.StaticValue(resets_itself(task))
     return task.replace(
-        start=bind(_window_start, task.start, features, tree.Static(num_frames)),
-        step=bind(_window_step, task.step, features, restarts),
+        start=Partial(_window_start, task.start, features, tree.StaticValue(num_frames)),
+        step=Partial(_window_step, task.step, features, restarts),
     )
 
 
@@ -302,12 +302,12 @@ def _windowed(state: State, window: Array) -> State:
     return state.replace(obs=obs, info={**state.info, WINDOW: window})
 
 
-def _window_start(start_fn, features, num_frames: tree.Static, model, key) -> State:
+def _window_start(start_fn, features, num_frames: tree.StaticValue, model, key) -> State:
     state = start_fn(model, key)
     return _windowed(state, jnp.repeat(features(model, state.data)[None], num_frames.value, axis=0))
 
 
-def _window_step(step_fn, features, restarts: tree.Static, model, state: State, action, key) -> State:
+def _window_step(step_fn, features, restarts: tree.StaticValue, model, state: State, action, key) -> State:
     window = state.info[WINDOW]
     next_state = step_fn(model, state.replace(obs=state.obs["policy"]), action, key)
     frame = features(model, next_state.data)

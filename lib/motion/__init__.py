@@ -10,11 +10,11 @@ is given (`amp.make(config, reference)`), not the task. AMP's discriminator, ref
     resampling   `resample` to another frame rate (linear, slerp for quaternions)
     references   the `Reference` pytree, `reference`, `sample_frame`, `frames`, `check_reference`
     formats      public formats: IsaacLab humanoid-AMP .npz (`isaaclab_npz`)
-    deepmimic    DeepMimic's motion text files (`deepmimic.load`), y-up to z-up
+    deepmimic_format    DeepMimic's motion text files (`deepmimic_format.load`), y-up to z-up
     measures     style measures: `nearest_window_error`
 """
 
-from mjzoo.motion import checking, clips, deepmimic, formats, measures, references, resampling
+from mjzoo.motion import checking, clips, deepmimic_format, formats, measures, references, resampling
 from mjzoo.motion.checking import check, load, velocities_from_positions
 from mjzoo.motion.clips import Clip, load_file, save
 from mjzoo.motion.formats import isaaclab_npz
@@ -29,7 +29,7 @@ __all__ = [
     "check_reference",
     "checking",
     "clips",
-    "deepmimic",
+    "deepmimic_format",
     "formats",
     "frame_index",
     "frames",

@@ -5,9 +5,9 @@
                   vmap), configure (both from one dict of fields), PlannerState,
                   sampling around a nominal plan, warm start, the MPPI weights and
                   the CEM update
-    rollouts      batched rollouts of a task's own `transition` and their costs, model
+    ensembles      batched ensembles of a task's own `transition` and their costs, model
                   ensembles and risk measures
-    native        the same rollouts in C MuJoCo (`mujoco.rollout`), costed by the task's
+    native        the same ensembles in C MuJoCo (`mujoco.rollout`), costed by the task's
                   own reward in JAX: the fast backend on a CPU
     learned       learned pieces planners call at run time (a terminal value), as
                   pytrees whose weights are leaves, and committed host-loop arguments
@@ -16,13 +16,13 @@
 
 `mjzoo.algorithms.mppi`, `cem` and `predictive_sampling` are a few lines each on top
 of `sample_around`; a new planner reuses every piece here. The functions of `sampling`,
-`rollouts` and `learned.as_terminal_value` are re-exported: ``mjzoo.planning.mppi_weights``.
+`ensembles` and `learned.as_terminal_value` are re-exported: ``mjzoo.planning.mppi_weights``.
 """
 
-from mjzoo.planning import closed_loop, learned, native, realtime, rollouts, sampling, splines
+from mjzoo.planning import closed_loop, ensembles, learned, native, realtime, sampling, splines
+from mjzoo.planning.ensembles import RISKS, Ensemble, aggregate, base_task, ensemble, rollout_costs
 from mjzoo.planning.learned import TerminalValue, as_terminal_value
 from mjzoo.planning.native import Native
-from mjzoo.planning.rollouts import RISKS, Ensemble, aggregate, base_task, ensemble, rollout_costs
 from mjzoo.planning.sampling import (
     PlannerState,
     SamplingConfig,
@@ -45,7 +45,7 @@ from mjzoo.planning.sampling import (
 __all__ = [
     "splines",
     "sampling",
-    "rollouts",
+    "ensembles",
     "learned",
     "closed_loop",
     "native",

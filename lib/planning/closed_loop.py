@@ -38,11 +38,11 @@ from typing import Any, Callable
 import jax
 
 from mjzoo.planning import sampling
+from mjzoo.planning.ensembles import Ensemble, base_task, with_base
 from mjzoo.planning.learned import TerminalValue
 from mjzoo.planning.native import Native, transition_native
-from mjzoo.planning.rollouts import Ensemble, base_task, with_base
 from mjzoo.planning.sampling import PlannerState, SamplingConfig
-from mjzoo.running import complete, transition
+from mjzoo.running import fill_transition_entries, transition
 from mjzoo.types import State, Task
 
 __all__ = ["Hooks", "Result", "run", "replan", "after_rollout", "first_plan", "sim_step"]
@@ -179,7 +179,7 @@ def run(
     (`mjzoo.planning.as_terminal_value`), whose weights are arguments, not constants.
     `hyperparams`: the planner's `Hyperparams` (None: its defaults), also an argument:
     vmap the run over a batch of them to sweep them in one program."""
-    sim_state = complete(base_task(sim_task), sim_state)
+    sim_state = fill_transition_entries(base_task(sim_task), sim_state)
     planner_state = first_plan(planner, config, plan_task, sim_state, hooks, hyperparams)
 
     def period(carry, key):

@@ -50,10 +50,10 @@ import numpy as np
 from mujoco import mjx
 
 from mjzoo import physics
+from mjzoo.planning.ensembles import Ensemble
 from mjzoo.planning.learned import TerminalValue, as_terminal_value
 from mjzoo.planning.native_engine import APPLIED, Engine, physical_cores
-from mjzoo.planning.rollouts import Ensemble
-from mjzoo.running import complete, transition
+from mjzoo.running import fill_transition_entries, transition
 from mjzoo.types import State, Task
 
 __all__ = ["Engine", "Native", "wrap", "physical_cores", "rollout_costs", "split", "transition_native"]
@@ -174,10 +174,10 @@ def _host_models(mj_model: mujoco.MjModel, model: mjx.Model, fields: dict[str, A
     return models
 
 
-def _complete(task: Task, state: State) -> State:
-    """`mjzoo.complete` for a native task: the structure of a transition, found without
+def _fill_transition_entries(task: Task, state: State) -> State:
+    """`mjzoo.fill_transition_entries` for a native task: the structure of a transition, found without
     tracing MJX's physics (the same structure: a stand-in returns the same `Data`)."""
-    return complete(task.replace(model=_Recorder(task.model)), state)
+    return fill_transition_entries(task.replace(model=_Recorder(task.model)), state)
 
 
 def _applied(task: Task, fields: list[str], start: State, actions: Array, keys: Array) -> Array:
@@ -333,7 +333,7 @@ def rollout_costs(
     terminal_value = as_terminal_value(terminal_value)
     variants = task.task if isinstance(task.task, Ensemble) else Ensemble(task.task, {})
     base, engine = variants.task, task.engine
-    start = _complete(base, state)
+    start = _fill_transition_entries(base, state)
     keys = jax.random.split(key, controls.shape[1])
     if variants.fields:
         models = jax.vmap(lambda f: base.model.replace(**f))(variants.fields)

@@ -15,18 +15,18 @@ import mujoco
 import numpy as np
 from mujoco import mjx
 
+from mjzoo.planning.ensembles import Ensemble
 from mjzoo.planning.native import (
     _HINTS,
     APPLIED,
     FROM_C,
     Native,
     _applied,
-    _complete,
+    _fill_transition_entries,
     _from_c,
     _Recorder,
     _replay,
 )
-from mjzoo.planning.rollouts import Ensemble
 from mjzoo.running import transition
 from mjzoo.types import State, Task
 
@@ -55,7 +55,7 @@ def start_state(task: Task) -> State:
         terminated=np.bool_(False),
         truncated=np.bool_(False),
     )
-    return jax.tree.map(np.asarray, _complete(task, state))
+    return jax.tree.map(np.asarray, _fill_transition_entries(task, state))
 
 
 @dataclasses.dataclass(frozen=True)

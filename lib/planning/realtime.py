@@ -31,11 +31,11 @@ import numpy as np
 
 from mjzoo.planning import closed_loop
 from mjzoo.planning.closed_loop import Hooks, Result
+from mjzoo.planning.ensembles import Ensemble
 from mjzoo.planning.learned import TerminalValue, as_terminal_value, committed
 from mjzoo.planning.native import Native
 from mjzoo.planning.native import split as native_split
 from mjzoo.planning.native import wrap as native_wrap
-from mjzoo.planning.rollouts import Ensemble
 from mjzoo.planning.sampling import SamplingConfig
 from mjzoo.running import control_dt, reset
 from mjzoo.tree import Packing

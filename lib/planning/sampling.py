@@ -6,7 +6,7 @@ control steps of the *planning* task (`mjzoo.planning.splines`). `PlannerState.t
 anchors the plan in the environment's clock (`data.time`, seconds) and `PlannerState.dt`
 is the planning task's control step, measured from its rollouts, so a simulation with a
 different timestep can ask for the control at any time (`control_at`). Samples are
-costed by `mjzoo.planning.rollouts`.
+costed by `mjzoo.planning.ensembles`.
 
 A planner's settings come in two parts. Its `Config` is structure (sizes, the spline
 kind, the risk measure): a static argument of `plan`, so a new value compiles again. Its
@@ -32,8 +32,8 @@ import jax.numpy as jnp
 import numpy as np
 
 from mjzoo.planning import native, splines
+from mjzoo.planning.ensembles import RISKS, Ensemble, aggregate, base_task, rollout_costs
 from mjzoo.planning.learned import TerminalValue, committed
-from mjzoo.planning.rollouts import RISKS, Ensemble, aggregate, base_task, rollout_costs
 from mjzoo.types import State, Task
 
 __all__ = [
@@ -285,7 +285,7 @@ def shift(config: SamplingConfig, state: PlannerState, now: Array) -> PlannerSta
     the old spline that far ahead (the last knot held past the old horizon)."""
     elapsed = jnp.where(state.dt > 0, (now - state.time) / jnp.maximum(state.dt, 1e-9), 0.0)
     positions = splines.knot_positions(config.num_knots, config.horizon_steps)
-    knots = splines.evaluate(state.knots, positions, positions + jnp.maximum(elapsed, 0.0), config.interpolation)
+    knots = splines.interpolate(state.knots, positions, positions + jnp.maximum(elapsed, 0.0), config.interpolation)
     return state.replace(knots=knots, time=jnp.asarray(now, jnp.float32))
 
 
@@ -305,7 +305,7 @@ def controls(config: SamplingConfig, knots: Array, low: Array = -np.inf, high: A
     [low, high] (a cubic spline overshoots between knots that sit at the limits)."""
     positions = splines.knot_positions(config.num_knots, config.horizon_steps)
     steps = jnp.arange(config.horizon_steps, dtype=jnp.float32)
-    evaluate = lambda k: splines.evaluate(k, positions, steps, config.interpolation)  # noqa: E731
+    evaluate = lambda k: splines.interpolate(k, positions, steps, config.interpolation)  # noqa: E731
     for _ in range(knots.ndim - 2):
         evaluate = jax.vmap(evaluate)
     return jnp.clip(evaluate(knots), low, high)
@@ -317,7 +317,7 @@ def control_at(
     """[nu] the plan's control at environment time `time` (s), clipped to [low, high]."""
     step = jnp.where(state.dt > 0, (time - state.time) / jnp.maximum(state.dt, 1e-9), 0.0)
     positions = splines.knot_positions(config.num_knots, config.horizon_steps)
-    control = splines.evaluate(state.knots, positions, jnp.reshape(step, (1,)), config.interpolation)[0]
+    control = splines.interpolate(state.knots, positions, jnp.reshape(step, (1,)), config.interpolation)[0]
     return jnp.clip(control, low, high)
 
 

@@ -17,7 +17,7 @@ from __future__ import annotations
 import jax
 import jax.numpy as jnp
 
-__all__ = ["METHODS", "knot_positions", "evaluate"]
+__all__ = ["METHODS", "knot_positions", "interpolate"]
 
 Array = jax.Array
 METHODS = ("zero", "linear", "cubic")
@@ -35,7 +35,7 @@ def knot_positions(num_knots: int, horizon_steps: int) -> Array:
     return jnp.linspace(0.0, horizon_steps - 1, num_knots, dtype=jnp.float32)
 
 
-def evaluate(knots: Array, positions: Array, queries: Array, method: str = "cubic") -> Array:
+def interpolate(knots: Array, positions: Array, queries: Array, method: str = "cubic") -> Array:
     """Interpolated controls at `queries`.
 
     Args:
@@ -48,11 +48,11 @@ def evaluate(knots: Array, positions: Array, queries: Array, method: str = "cubi
       [T, nu] controls.
     """
     if method not in METHODS:
-        raise ValueError(f"splines.evaluate: unknown method {method!r}; choose one of {METHODS}")
+        raise ValueError(f"splines.interpolate: unknown method {method!r}; choose one of {METHODS}")
     knots, positions, queries = jnp.asarray(knots), jnp.asarray(positions), jnp.asarray(queries)
     if knots.ndim != 2 or positions.shape != knots.shape[:1]:
         raise ValueError(
-            f"splines.evaluate: knots must be [K, nu] and positions [K], got {knots.shape} and {positions.shape}"
+            f"splines.interpolate: knots must be [K, nu] and positions [K], got {knots.shape} and {positions.shape}"
         )
     if knots.shape[0] == 1:
         return jnp.broadcast_to(knots[0], queries.shape + knots.shape[1:])

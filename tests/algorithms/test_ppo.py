@@ -292,7 +292,7 @@ TWO_DEVICES = textwrap.dedent(
 
     def loop_collectives(config_):  # all-reduces in the minibatch loop's body, the busiest computation
         state, task_ = results[1], training.replicate(task, jax.devices())
-        data = jax.jit(lambda t, s: ppo.rollout(config_, t, s, jax.random.key(1))[1])(task_, state)
+        data = jax.jit(lambda t, s: ppo.collect(config_, t, s, jax.random.key(1))[1])(task_, state)
         learn = jax.jit(lambda t, s, d: ppo.improve(config_, t, s, d, jax.random.key(2)))
         with devices.env_mesh_scope():
             hlo = learn.lower(task_, state, data).compile().as_text()

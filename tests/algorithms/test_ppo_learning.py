@@ -17,7 +17,9 @@ def test_learns_cartpole_balance():
     """From a random policy (return ~40 of ~550) to balancing for the whole episode."""
     task = mjzoo.envs.make("cartpole_balance")
     config, hp = ppo.configure(**{**mjzoo.envs.hyperparameters("cartpole_balance", "ppo"), "total_steps": 163_840})
-    before = ppo.evaluate(config, task, ppo.init(config, task, hp, jax.random.key(0)), jax.random.key(1), 16, 500)[0]
+    before = ppo.evaluate(
+        config, task, ppo.init(config, task, hp, jax.random.key(0)), jax.random.key(1), 16, 500
+    ).returns.mean()
     settings = training.Settings(updates_per_chunk=10, eval_envs=16, eval_steps=500, progress=False)
     state, last = training.run(ppo.make(config), task, settings, hp)
     assert float(before) < 150
@@ -61,6 +63,6 @@ def test_learns_pendulum_swingup():
     settings = training.Settings(updates_per_chunk=10, eval_envs=16, eval_steps=500, progress=False)
     state, last = training.run(ppo.make(config), task, settings, hp)
     assert last["eval/return"] >= 380
-    _, _, trajectory = ppo.evaluate(config, task, state, jax.random.key(7), 4, 500)
+    trajectory = ppo.evaluate(config, task, state, jax.random.key(7), 4, 500).trajectory
     angle = np.asarray(trajectory.next_state.data.qpos[-50:, 0])  # the last second
     assert np.max(np.abs(np.arctan2(np.sin(angle), np.cos(angle)))) < 0.2

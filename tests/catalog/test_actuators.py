@@ -20,12 +20,13 @@ import jax.numpy as jnp
 import mujoco
 import numpy as np
 import pytest
+from jax.tree_util import Partial
 from mujoco import mjx
 
 import mjzoo
 from mjzoo.catalog import actuators
 from mjzoo.layers import find
-from mjzoo.types import State, Task, bind
+from mjzoo.types import State, Task
 
 JOINTS_XML = """
 <mujoco model="joints">
@@ -194,7 +195,9 @@ def _terminate(actuator, model, state):
 
 def block_task() -> Task:
     act = actuators.torque(BLOCK)
-    return Task(BLOCK_MODEL, bind(_reset, act), bind(_step, act), bind(_reward, act), bind(_terminate, act), BLOCK)
+    return Task(
+        BLOCK_MODEL, Partial(_reset, act), Partial(_step, act), Partial(_reward, act), Partial(_terminate, act), BLOCK
+    )
 
 
 @jax.jit

@@ -23,6 +23,7 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 import pytest
+from jax.tree_util import Partial
 from mujoco import mjx
 
 import mjzoo
@@ -30,7 +31,7 @@ import mjzoo.envs
 from mjzoo import physics as physics_lib
 from mjzoo.catalog import curriculum, events
 from mjzoo.layers import find
-from mjzoo.types import State, Task, bind
+from mjzoo.types import State, Task
 
 XML = """
 <mujoco model="base">
@@ -84,10 +85,10 @@ def make(level: float, *, speed=0.0, spawn=0.0, threshold=np.inf, push=0.0, grav
     model = PHYSICS.model.replace(opt=PHYSICS.model.opt.replace(gravity=jnp.array([0.0, 0.0, -gravity * level])))
     task = Task(
         model=model,
-        start=bind(_reset, p),
-        step=bind(_step, p),
-        reward=bind(_reward, p),
-        terminate=bind(_terminate, p),
+        start=Partial(_reset, p),
+        step=Partial(_step, p),
+        reward=Partial(_reward, p),
+        terminate=Partial(_terminate, p),
         mj_model=MJ,
     )
     task = events.with_velocity_pushes(task, interval=(DT, DT), linear=(push * level, 0.0, 0.0))

@@ -20,6 +20,7 @@ import mujoco
 import numpy as np
 import pytest
 from catalog_tasks import BLOCK
+from jax.tree_util import Partial
 from mujoco import mjx
 
 import mjzoo
@@ -27,7 +28,7 @@ from mjzoo import physics as physics_lib
 from mjzoo.catalog import observations as obs
 from mjzoo.catalog import trackers
 from mjzoo.layers import find
-from mjzoo.types import State, Task, bind
+from mjzoo.types import State, Task
 
 XML = """
 <mujoco>
@@ -231,7 +232,9 @@ def _terminate(model, state):
 
 
 def block_task() -> Task:
-    fns = {name: bind(fn) for name, fn in dict(start=_reset, step=_step, reward=_reward, terminate=_terminate).items()}
+    fns = {
+        name: Partial(fn) for name, fn in dict(start=_reset, step=_step, reward=_reward, terminate=_terminate).items()
+    }
     return Task(model=BLOCK.model, mj_model=BLOCK.mj_model, **fns)
 
 

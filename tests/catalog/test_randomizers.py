@@ -22,11 +22,12 @@ import jax.numpy as jnp
 import mujoco
 import numpy as np
 import pytest
+from jax.tree_util import Partial
 from mujoco import mjx
 
 import mjzoo
 from mjzoo.catalog import randomizers
-from mjzoo.types import State, Task, bind
+from mjzoo.types import State, Task
 
 DT, G = 0.01, 9.81
 XML = """
@@ -238,7 +239,7 @@ def _terminate(model, state):
 
 
 def test_with_domain_randomization_draws_each_episode_and_steps_with_it():
-    task = Task(MODEL, bind(_reset), bind(_step), bind(_reward), bind(_terminate), MJ)
+    task = Task(MODEL, Partial(_reset), Partial(_step), Partial(_reward), Partial(_terminate), MJ)
     task = mjzoo.with_domain_randomization(
         task,
         randomizers.combine(

@@ -22,12 +22,13 @@ import jax.numpy as jnp
 import mujoco
 import numpy as np
 import pytest
+from jax.tree_util import Partial
 from mujoco import mjx
 
 import mjzoo
 from mjzoo.catalog import commands, rewards, trackers
 from mjzoo.catalog.rewards import SIGMOIDS, tolerance
-from mjzoo.types import State, Task, bind
+from mjzoo.types import State, Task
 
 # A band [1, 2] with margin 0.5 and value_at_margin 0.1 unless a test says otherwise.
 LOWER, UPPER, MARGIN, V = 1.0, 2.0, 0.5, 0.1
@@ -427,7 +428,12 @@ def _fall_terminate(p, model, state):
 def fall_task() -> Task:
     p = Fall(jnp.float32(0.2))
     return Task(
-        BIPED_MJX, bind(_fall_reset, p), bind(_fall_step, p), bind(lambda p, *a: {}, p), bind(_fall_terminate, p), BIPED
+        BIPED_MJX,
+        Partial(_fall_reset, p),
+        Partial(_fall_step, p),
+        Partial(lambda p, *a: {}, p),
+        Partial(_fall_terminate, p),
+        BIPED,
     )
 
 

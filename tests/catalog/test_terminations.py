@@ -18,12 +18,13 @@ import mujoco
 import numpy as np
 import pytest
 from catalog_tasks import BLOCK
+from jax.tree_util import Partial
 from mujoco import mjx
 
 import mjzoo
 from mjzoo import physics as physics_lib
 from mjzoo.catalog import terminations as term
-from mjzoo.types import State, Task, bind
+from mjzoo.types import State, Task
 
 XML = """
 <mujoco>
@@ -152,10 +153,10 @@ def block_task(threshold: float = 1e9, max_steps: int | None = 100) -> Task:
     t = jnp.float32(threshold)
     task = Task(
         model=BLOCK.model,
-        start=bind(_reset, t),
-        step=bind(_step, t),
-        reward=bind(_reward, t),
-        terminate=bind(_terminate, t),
+        start=Partial(_reset, t),
+        step=Partial(_step, t),
+        reward=Partial(_reward, t),
+        terminate=Partial(_terminate, t),
         mj_model=BLOCK.mj_model,
     )
     return task if max_steps is None else mjzoo.with_time_limit(task, max_steps)

@@ -22,13 +22,14 @@ import jax.numpy as jnp
 import mujoco
 import numpy as np
 import pytest
+from jax.tree_util import Partial
 from mujoco import mjx
 
 import mjzoo
 from mjzoo import physics as physics_lib
 from mjzoo.catalog import contacts, rewards, trackers
 from mjzoo.layers import find
-from mjzoo.types import State, Task, bind
+from mjzoo.types import State, Task
 
 DT = 0.02
 XML = """
@@ -93,7 +94,12 @@ def _no_reward(p: Params, model, state, action, next_state):
 def kinematic_task() -> Task:
     p = Params(jnp.asarray(INIT, jnp.float32), jnp.float32(DT))
     return Task(
-        PHYSICS.model, bind(_reset, p), bind(_step, p), bind(_no_reward, p), bind(_terminate, p), PHYSICS.mj_model
+        PHYSICS.model,
+        Partial(_reset, p),
+        Partial(_step, p),
+        Partial(_no_reward, p),
+        Partial(_terminate, p),
+        PHYSICS.mj_model,
     )
 
 

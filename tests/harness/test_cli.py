@@ -287,7 +287,7 @@ def _count_update(task, s):
 
 
 def _count_evaluate(task, s, key, n, steps):
-    return s.total, jnp.zeros(n), None
+    return learning.Evaluation(jnp.full(n, s.total), jnp.full(n, steps), None)
 
 
 def test_training_resumes_from_the_newest_intact_checkpoint(tmp_path):

@@ -15,6 +15,7 @@ import pytest
 from test_cli import TINY, assert_usage_error, snapshot  # the command's shared test helpers
 
 import mjzoo.envs
+from mjzoo import learning
 from mjzoo.algorithms import ppo, predictive_sampling
 from mjzoo.harness import cli, datasets, training
 
@@ -78,10 +79,10 @@ def test_a_factory_spec_builds_from_python(user_dir, monkeypatch):
     assert mjzoo.envs.hyperparameters(SPEC, "ppo") == {}  # ppo.configure's own defaults
     with pytest.raises(TypeError, match=r"unknown override\(s\) \['mass'\]; make_pendulum takes"):
         mjzoo.envs.make(SPEC, mass=2.0)
-    assert mjzoo.envs.takes(SPEC, "episode_steps") and not mjzoo.envs.takes(SPEC, "mass")
-    assert not mjzoo.envs.takes(SPEC, "impl")  # its own physics: a resumed run does not pass one
-    assert mjzoo.envs.takes("cartpole_balance", "impl") and mjzoo.envs.takes("cartpole_balance", "episode_steps")
-    assert not mjzoo.envs.takes("cartpole_balance", "mass")
+    assert mjzoo.envs.accepts(SPEC, "episode_steps") and not mjzoo.envs.accepts(SPEC, "mass")
+    assert not mjzoo.envs.accepts(SPEC, "impl")  # its own physics: a resumed run does not pass one
+    assert mjzoo.envs.accepts("cartpole_balance", "impl") and mjzoo.envs.accepts("cartpole_balance", "episode_steps")
+    assert not mjzoo.envs.accepts("cartpole_balance", "mass")
 
 
 def test_a_factory_without_planning_plans_one_episode(user_dir, monkeypatch):
@@ -187,7 +188,11 @@ def test_train_writes_the_spec_and_eval_runs_its_episode_length(capsys, cli_run,
     assert capsys.readouterr().out.startswith(f"{SPEC}: mean return ")
     assert built[0] == (SPEC, {"upright_weight": 2.0})  # the saved overrides (then the factory's own make)
     assert lengths == [(2, 20)]  # the task's episode length, under jit a static argument
-    monkeypatch.setattr(ppo, "evaluate", lambda *args: (lengths.append(args[4:]), (0.0, np.zeros(2), None))[1])
+    monkeypatch.setattr(
+        ppo,
+        "evaluate",
+        lambda *args: (lengths.append(args[4:]), learning.Evaluation(np.zeros(2), np.zeros(2), None))[1],
+    )
     cli.main(["eval", str(cli_run), "--episodes", "2", "--env-overrides", "episode_steps=5"])  # on top of the saved
     assert built[2] == (SPEC, {"upright_weight": 2.0, "episode_steps": 5}) and lengths[-1] == (2, 5)
 

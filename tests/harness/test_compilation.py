@@ -17,6 +17,7 @@ import numpy as np
 import pytest
 from jax import monitoring
 
+from mjzoo import learning
 from mjzoo.harness import compilation
 
 _compiles: list[str] = []
@@ -262,7 +263,11 @@ def test_the_evaluation_compiled_ahead_serves_the_first_evaluation():
     from mjzoo.harness import training
     from tests.harness.test_training import TASK, counter
 
-    algorithm = counter(evaluate=lambda task, s, key, n, steps: (s.per_env.sum() * steps, jnp.zeros(n), None))
+    algorithm = counter(
+        evaluate=lambda task, s, key, n, steps: learning.Evaluation(
+            jnp.full(n, s.per_env.sum() * steps), jnp.zeros(n), None
+        )
+    )
     during, hooks = _main_thread_compiles_per_evaluation()
     settings = training.Settings(updates_per_chunk=1, eval_every=1, eval_steps=3, video=False, progress=False)
     _, last = training.run(algorithm, TASK, settings, hooks=hooks)
@@ -292,7 +297,11 @@ def test_beside_warp_on_a_gpu_the_evaluation_compiles_alone_before_the_first_chu
     from mjzoo.harness import training
     from tests.harness.test_training import TASK, counter
 
-    algorithm = counter(evaluate=lambda task, s, key, n, steps: (s.per_env.sum() * steps, jnp.zeros(n), None))
+    algorithm = counter(
+        evaluate=lambda task, s, key, n, steps: learning.Evaluation(
+            jnp.full(n, s.per_env.sum() * steps), jnp.zeros(n), None
+        )
+    )
     monkeypatch.setattr(compilation, "overlaps_safely", lambda model: False)
     events = []
 
@@ -318,7 +327,11 @@ def test_the_evaluation_compiles_beside_a_cold_chunk_and_after_a_cached_one(monk
     from mjzoo.harness import training
     from tests.harness.test_training import TASK, counter
 
-    algorithm = counter(evaluate=lambda task, s, key, n, steps: (s.per_env.sum() * steps, jnp.zeros(n), None))
+    algorithm = counter(
+        evaluate=lambda task, s, key, n, steps: learning.Evaluation(
+            jnp.full(n, s.per_env.sum() * steps), jnp.zeros(n), None
+        )
+    )
     events = []
     compile_for_real, chunk_fn, ahead_for_real = (
         training._Loop.compile_evaluation_ahead,

@@ -55,7 +55,9 @@ def counter(num_updates: int = 2, **overrides) -> learning.Algorithm:
         hyperparams=None,
         init=lambda task, hyperparams, key: Count(jnp.zeros((), jnp.int32), jnp.zeros(4)),
         update=lambda task, s: (Count(s.updates + 1, s.per_env + 1.0), {}),
-        evaluate=lambda task, s, key, n, steps: (jnp.float32(steps), jnp.zeros(n), None),
+        evaluate=lambda task, s, key, n, steps: learning.Evaluation(
+            jnp.full(n, steps, jnp.float32), jnp.full(n, steps), None
+        ),
         policy=lambda task, deterministic=True: lambda params, obs, key: obs,
         policy_params=lambda s: s,
         steps_per_update=10,
@@ -347,6 +349,7 @@ import dataclasses, json, sys
 from pathlib import Path
 from typing import Any, NamedTuple
 import jax.numpy as jnp
+from mjzoo import learning
 from mjzoo.harness import rendering, training
 sys.path.insert(0, sys.argv[2])
 import test_training as t
@@ -366,7 +369,7 @@ class Trajectory(NamedTuple):
 def evaluate(task, s, key, n, steps):
     qpos = jnp.full((4, 1), 0.02) * s.updates  # each evaluation's video differs (the box in view)
     data = Data(jnp.arange(4) * 0.02, qpos, jnp.zeros((4, 0, 3)), jnp.zeros((4, 0, 4)))
-    return jnp.float32(steps), jnp.zeros(n), Trajectory(State(data))
+    return learning.Evaluation(jnp.full(n, steps, jnp.float32), jnp.full(n, steps), Trajectory(State(data)))
 
 algorithm = t.counter(evaluate=evaluate)
 out = Path(sys.argv[1])

@@ -30,7 +30,7 @@ from mjzoo.catalog import observations
 from mjzoo.envs import base, locomotion
 from mjzoo.harness import checkpoints, cli, training
 from mjzoo.harness.cli import exporting
-from mjzoo.interop import contract, export, sim2sim
+from mjzoo.interop import deployment, export, sim2sim
 from mjzoo.learning import networks, normalization
 from mjzoo.running import reset
 
@@ -144,7 +144,7 @@ def test_recurrent_carry_round_trips(task, tmp_path):
 
 
 def test_contract_of_cartpole(task):
-    c = export.describe(task, export.Policy(lambda o, c: (o, c), 5, 1))
+    c = export.describe(task, export.Deployable(lambda o, c: (o, c), 5, 1))
     terms = c["observation"]["terms"]
     assert [(t["source"], t["index"]) for t in terms] == [
         ("qpos", [0]),
@@ -170,7 +170,7 @@ def test_humanoid_terms_by_hand():
     physics = base.brax_asset("humanoid.xml", **locomotion.MJX_OPTIONS)  # humanoid_walk's, without its checks' cost
     m = physics.mj_model
     walk = locomotion.bare(physics, locomotion.free_base_observation(m))
-    terms = contract.observation_terms(walk)
+    terms = deployment.observation_terms(walk)
     assert [t["source"] for t in terms] == [
         "body_position",
         "body_orientation",
@@ -179,14 +179,14 @@ def test_humanoid_terms_by_hand():
         "body_angular_velocity_local",
         "qvel",
     ]
-    assert contract.frame_size(terms) == 45 and terms[0]["bodies"] == ["torso"] and terms[0]["components"] == [2]
+    assert deployment.frame_size(terms) == 45 and terms[0]["bodies"] == ["torso"] and terms[0]["components"] == [2]
     assert terms[2]["index"] == list(range(7, m.nq)) and terms[5]["index"] == list(range(6, m.nv))
     d = mujoco.MjData(m)
     d.qpos[2] = 1.3
     d.qpos[3:7] = [np.cos(np.pi / 4), 0, 0, np.sin(np.pi / 4)]  # yaw +90 degrees
     d.qvel[:6] = [1.0, 0.0, 0.0, 0.1, 0.2, 0.3]  # world linear, local angular
     mujoco.mj_forward(m, d)
-    obs = contract.frame(terms, m, d, np.zeros(m.nu))
+    obs = deployment.frame(terms, m, d, np.zeros(m.nu))
     np.testing.assert_allclose(obs[0], 1.3, atol=1e-6)
     np.testing.assert_allclose(obs[1:5], d.qpos[3:7], atol=1e-6)
     np.testing.assert_allclose(obs[22:25], [0.0, -1.0, 0.0], atol=1e-6)  # +x seen from a frame yawed by 90 degrees
@@ -212,17 +212,17 @@ def first_three(obs):
 def test_export_names_what_it_cannot_describe(task):
     physics = base.load("cartpole.xml", ctrl_dt=0.02)
     touching = locomotion.bare(physics, observations.concat(observations.joint_positions, observations.foot_contacts))
-    with pytest.raises(contract.ContractError, match="foot_contacts"):
-        contract.observation_terms(touching)
+    with pytest.raises(deployment.ContractError, match="foot_contacts"):
+        deployment.observation_terms(touching)
 
     def own(model, state):
         return state.data.qpos
 
-    with pytest.raises(contract.ContractError, match="own"):
-        contract.observation_terms(locomotion.bare(physics, own))
+    with pytest.raises(deployment.ContractError, match="own"):
+        deployment.observation_terms(locomotion.bare(physics, own))
     hidden = mjzoo.with_observation(task, first_three)
-    with pytest.raises(contract.ContractError, match="with_observation"):
-        contract.observation_terms(hidden)
+    with pytest.raises(deployment.ContractError, match="with_observation"):
+        deployment.observation_terms(hidden)
 
 
 def test_cartpole_policy_drives_c_mujoco_to_the_jax_return(task, tmp_path):

@@ -14,6 +14,7 @@ import numpy as np
 import pytest
 
 import mjzoo.envs
+from mjzoo import learning
 from mjzoo.harness import training
 
 DOC = Path(__file__).resolve().parents[2] / "docs" / "own-algorithm.md"
@@ -40,7 +41,7 @@ def test_the_code_is_about_60_lines():
 
 
 def test_it_makes_an_algorithm_value(a2c):
-    training.check_algorithm(a2c.make(a2c.Config()))
+    learning.check_algorithm(a2c.make(a2c.Config()))
 
 
 def test_it_learns_cartpole_balance(a2c):

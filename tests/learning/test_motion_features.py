@@ -15,6 +15,7 @@ import jax.numpy as jnp
 import mujoco
 import numpy as np
 import pytest
+from jax.tree_util import Partial
 from mujoco import mjx
 
 import mjzoo
@@ -25,7 +26,7 @@ from mjzoo.learning.motion_features import (  # the module: mjzoo.learning may e
     motion_features,
     with_feature_window,
 )
-from mjzoo.types import State, Task, bind
+from mjzoo.types import State, Task
 
 TOY = """
 <mujoco model="toy">
@@ -316,10 +317,10 @@ def replay(recorded) -> Task:
     qpos, qvel = (jnp.asarray(x, jnp.float32) for x in recorded[:2])
     return Task(
         model=TOY_MODEL,
-        start=bind(replay_start, qpos, qvel, TOY_DATA),
-        step=bind(replay_step, qpos, qvel),
-        reward=bind(no_reward),
-        terminate=bind(never),
+        start=Partial(replay_start, qpos, qvel, TOY_DATA),
+        step=Partial(replay_step, qpos, qvel),
+        reward=Partial(no_reward),
+        terminate=Partial(never),
         mj_model=TOY_MJ,
     )
 

@@ -10,11 +10,12 @@ import numpy as np
 import pytest
 from catalog_tasks import BASE_AND_ARM
 from catalog_tasks import MJ as ARM
+from jax.tree_util import Partial
 from motion_models import TORSO, analytic
 from mujoco import mjx
 
 from mjzoo import motion
-from mjzoo.types import State, Task, bind
+from mjzoo.types import State, Task
 
 LONG, SHORT = analytic(50.0, 50, name="long"), analytic(50.0, 20, name="short")
 
@@ -107,10 +108,10 @@ def _nothing(model, *args):
 def test_check_reference_checks_the_control_step_and_the_widths(ref):
     task = Task(
         model=BASE_AND_ARM.model,
-        start=bind(_start),
-        step=bind(_tick, jnp.float32(0.02)),
-        reward=bind(_nothing),
-        terminate=bind(_nothing),
+        start=Partial(_start),
+        step=Partial(_tick, jnp.float32(0.02)),
+        reward=Partial(_nothing),
+        terminate=Partial(_nothing),
         mj_model=ARM,
     )
     arm_ref = motion.reference(arm_clip(), ARM, dt=0.02)

@@ -13,6 +13,7 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 import pytest
+from jax.tree_util import Partial
 
 import mjzoo
 import mjzoo.envs
@@ -20,7 +21,7 @@ from mjzoo import physics, planning
 from mjzoo.algorithms import mppi
 from mjzoo.catalog import actuators
 from mjzoo.planning import closed_loop, native
-from mjzoo.types import State, Task, bind
+from mjzoo.types import State, Task
 
 PLANNING_ENVS = ["pendulum_swingup", "cartpole_swingup", "cylinder_push", "point_mass"]
 SAMPLES, HORIZON = 8, 25
@@ -37,7 +38,7 @@ def _both(task: Task, nat: native.Native, state: State, controls: jax.Array):
             s = step(t, s, a, key)
             return s, (s.data.qpos, s.reward, s.data.sensordata, s.data.site_xpos, s.data.xpos, s.data.subtree_com)
 
-        return jax.lax.scan(body, mjzoo.complete(task, state), actions)[1]
+        return jax.lax.scan(body, mjzoo.fill_transition_entries(task, state), actions)[1]
 
     paths = jax.jit(jax.vmap(lambda a: path(mjzoo.transition, task, a)))(controls)
     mjx_side = (-np.sum(np.asarray(paths[1]), axis=1), jax.tree.map(lambda x: x[0], paths))
@@ -119,7 +120,7 @@ def test_sensors_poses_and_mocap_are_what_mjx_gives():
     the state before the last physics step; a step that moves a mocap body sends it to
     C as a control at every physics step (the weld then pulls the box in both)."""
     task = _arm()
-    task = task.replace(step=bind(_mocap_step, task.step))
+    task = task.replace(step=Partial(_mocap_step, task.step))
     nat = native.wrap(task)
     assert "mocap_pos" in nat.engine.fields and not nat.engine.direct
     state = jax.jit(mjzoo.reset)(task, jax.random.key(0))
@@ -148,10 +149,10 @@ def _pd_arm() -> Task:
     pd = actuators.pd(arm.mj_model, kp=20.0, kd=1.0)
     return Task(
         model=arm.model,
-        start=bind(_rest, arm.data0),
-        step=bind(_pd_step, pd),
-        reward=bind(_tip_reward),
-        terminate=bind(_never),
+        start=Partial(_rest, arm.data0),
+        step=Partial(_pd_step, pd),
+        reward=Partial(_tip_reward),
+        terminate=Partial(_never),
         mj_model=arm.mj_model,
     )
 
@@ -178,7 +179,7 @@ def test_a_diverging_rollout_is_nan_in_c_and_caught_by_the_guard():
     keeps the last good state, as it does for MJX's NaN."""
     task = mjzoo.task(ARM.replace('gear="5"', 'gear="1e13"'), rewards={"tip": (_tip_height, 1.0)}, ctrl_dt=0.02)
     nat = native.wrap(task)
-    state = mjzoo.complete(task, jax.jit(mjzoo.reset)(task, jax.random.key(0)))
+    state = mjzoo.fill_transition_entries(task, jax.jit(mjzoo.reset)(task, jax.random.key(0)))
     actions = jnp.array([[0.0, 0.0], [1.0, 0.0], [0.0, 0.0]])  # the middle one explodes
 
     def run(s):
@@ -221,7 +222,7 @@ def test_split_replan_equals_the_one_jit_replan():
     task = mjzoo.envs.make("cartpole_swingup", episode_steps=10**9)
     nat = native.wrap(task)
     config = mppi.Config(num_samples=16, horizon_steps=20, num_knots=4)
-    state = mjzoo.complete(task, jax.jit(mjzoo.reset)(task, jax.random.key(0)))
+    state = mjzoo.fill_transition_entries(task, jax.jit(mjzoo.reset)(task, jax.random.key(0)))
     plan = mppi.init(config, nat)
     replan = lambda p, s, k: closed_loop.replan(mppi, config, nat, p, s, k)  # noqa: E731
     key = jax.random.key(1)

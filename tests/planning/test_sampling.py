@@ -266,7 +266,7 @@ def test_controls_shape_and_values():
     chex.assert_shape(out, (4, H, NU))
     positions, steps = splines.knot_positions(K, H), jnp.arange(H, dtype=jnp.float32)
     for n in range(4):
-        np.testing.assert_allclose(out[n], splines.evaluate(knots[n], positions, steps, "cubic"), rtol=1e-6)
+        np.testing.assert_allclose(out[n], splines.interpolate(knots[n], positions, steps, "cubic"), rtol=1e-6)
     chex.assert_shape(planning.controls(LINEAR, knots[0]), (H, NU))  # one plan [K, nu]
     chex.assert_shape(planning.controls(LINEAR, jnp.stack([knots, knots])), (2, 4, H, NU))  # [B, N, K, nu]
     # The line y = s at knot steps [0, 2, 4]: the controls are the steps themselves.

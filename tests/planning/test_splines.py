@@ -21,7 +21,7 @@ LINE_POSITIONS = np.array([0.0, 2.0, 4.0], np.float32)
 
 def _eval(knots, positions, queries, method):
     knots, positions, queries = jnp.asarray(knots), jnp.asarray(positions), jnp.asarray(queries, jnp.float32)
-    return np.asarray(splines.evaluate(knots, positions, queries, method))
+    return np.asarray(splines.interpolate(knots, positions, queries, method))
 
 
 # --- zero-order hold ---------------------------------------------------------------------
@@ -96,7 +96,7 @@ def test_cubic_is_c1_at_interior_knots():
         np.testing.assert_allclose([slope_left, slope_right], [1 / 3, 1 / 3], atol=0.05)
         np.testing.assert_allclose(slope_left, slope_right, atol=0.05)
     # Exact one-sided derivatives (autodiff just inside each segment) agree to O(eps).
-    deriv = jax.vmap(jax.grad(lambda s: splines.evaluate(knots, positions, s[None], "cubic")[0, 0]))
+    deriv = jax.vmap(jax.grad(lambda s: splines.interpolate(knots, positions, s[None], "cubic")[0, 0]))
     np.testing.assert_allclose(deriv(jnp.array([1 - 1e-4, 1 + 1e-4, 3 - 1e-4, 3 + 1e-4])), 1 / 3, atol=1e-3)
 
 
@@ -148,7 +148,7 @@ def test_knot_positions_rejects_several_knots_on_a_one_step_horizon():
     # segment fraction) instead of a clear error at construction.
     with pytest.raises(ValueError, match="knot_positions"):
         positions = splines.knot_positions(2, 1)
-        out = splines.evaluate(jnp.array([[0.0], [1.0]]), positions, jnp.array([0.0]), "linear")
+        out = splines.interpolate(jnp.array([[0.0], [1.0]]), positions, jnp.array([0.0]), "linear")
         assert np.all(np.isfinite(out)), f"positions {positions} give {out}"
 
 
@@ -157,7 +157,7 @@ def test_knot_positions_rejects_several_knots_on_a_one_step_horizon():
 
 def test_rejects_an_unknown_method_naming_the_choices():
     with pytest.raises(ValueError, match=r"unknown method 'quadratic'.*zero.*linear.*cubic"):
-        splines.evaluate(LINE_KNOTS, LINE_POSITIONS, jnp.zeros(2), "quadratic")
+        splines.interpolate(LINE_KNOTS, LINE_POSITIONS, jnp.zeros(2), "quadratic")
 
 
 @pytest.mark.parametrize(
@@ -171,7 +171,7 @@ def test_rejects_an_unknown_method_naming_the_choices():
 )
 def test_rejects_mismatched_shapes(knots, positions):
     with pytest.raises(ValueError, match=r"knots must be \[K, nu\] and positions \[K\]"):
-        splines.evaluate(knots, positions, jnp.zeros(2), "linear")
+        splines.interpolate(knots, positions, jnp.zeros(2), "linear")
 
 
 # --- jit and vmap -------------------------------------------------------------------------
@@ -183,7 +183,7 @@ def test_jit_and_vmap_agree_with_direct_calls(method):
     knots = jnp.asarray(rng.normal(size=(5, 4, 2)), jnp.float32)  # a batch of 5 plans
     positions = splines.knot_positions(4, 10)
     queries = jnp.linspace(-1.0, 10.0, 23)
-    evaluate = functools.partial(splines.evaluate, method=method)
+    evaluate = functools.partial(splines.interpolate, method=method)
     direct = jnp.stack([evaluate(k, positions, queries) for k in knots])
     jitted = jnp.stack([jax.jit(evaluate)(k, positions, queries) for k in knots])
     vmapped = jax.vmap(evaluate, in_axes=(0, None, None))(knots, positions, queries)
@@ -196,10 +196,10 @@ def test_vmap_over_queries_and_positions_matches_hand_values():
     # A batch of query sets and a batch of knot placements, each against its hand value:
     # on the line y = s (knots at their own positions) linear interpolation returns s.
     queries = jnp.array([[1.0, 3.0], [0.5, 2.5]])
-    per_query_set = jax.vmap(splines.evaluate, in_axes=(None, None, 0, None))
+    per_query_set = jax.vmap(splines.interpolate, in_axes=(None, None, 0, None))
     np.testing.assert_allclose(per_query_set(LINE_KNOTS, LINE_POSITIONS, queries, "linear")[..., 0], queries, rtol=1e-6)
     positions = jnp.array([[0.0, 2.0, 4.0], [0.0, 1.0, 2.0]])  # the second squeezes the line to y = 2 s
-    out = jax.jit(jax.vmap(functools.partial(splines.evaluate, method="linear"), in_axes=(None, 0, None)))(
+    out = jax.jit(jax.vmap(functools.partial(splines.interpolate, method="linear"), in_axes=(None, 0, None)))(
         LINE_KNOTS, positions, jnp.array([0.5, 1.0])
     )
     np.testing.assert_allclose(out[..., 0], [[0.5, 1.0], [1.0, 2.0]], rtol=1e-6)

@@ -18,7 +18,7 @@ import mjzoo
 
 __all__ = [
     "UsageError",
-    "checking",
+    "as_usage_errors",
     "at_least_one",
     "parse_assignments",
     "algorithm_module",
@@ -42,7 +42,7 @@ class UsageError(Exception):
 
 
 @contextlib.contextmanager
-def checking(*errors: type[Exception]) -> Iterator[None]:
+def as_usage_errors(*errors: type[Exception]) -> Iterator[None]:
     """Marks a block that only checks the user's input and builds from it (configs, the
     task): the ValueError, TypeError, KeyError and missing-file errors the library raises
     there (or just `errors`) are the user's mistakes, and become a `UsageError`. Outside
@@ -110,7 +110,7 @@ def build_algorithm(
         values[name] = _as_type(value, hints[name])
         if values[name] is _MISMATCH:
             raise UsageError(f"{what}: {name}={value!r} must be {_describe(hints[name])}")
-    with checking(ValueError):
+    with as_usage_errors(ValueError):
         return module.configure(**values)
 
 
@@ -175,11 +175,8 @@ def episode_steps(task: mjzoo.Task, spec: str, steps: int | None) -> int:
     if steps is not None:
         at_least_one(steps=steps)
         return steps
-    if task.time_limit is None:
-        raise UsageError(
-            f"{spec}: the task has no time limit (mjzoo.with_time_limit) to end its episodes; give --steps"
-        )
-    return int(task.time_limit)
+    with as_usage_errors(ValueError):
+        return mjzoo.learning.episode_steps(task, spec, "--steps")
 
 
 def slug(spec: str) -> str:

@@ -21,10 +21,10 @@ from mjzoo.harness.cli.arguments import (
     PLANNERS,
     UsageError,
     algorithm_module,
+    as_usage_errors,
     at_least_one,
     build_algorithm,
     build_planner,
-    checking,
     episode_steps,
     imitated,
     parse_assignments,
@@ -85,7 +85,7 @@ def demo(env: tuple[str, ...] = (), num_envs: int = 32, steps: int = 250, seed: 
     in a vmapped batch of --num-envs envs and print the return of each first episode,
     up to --steps steps."""
     names = env or tuple(mjzoo.envs.names())
-    with checking():
+    with as_usage_errors():
         at_least_one(num_envs=num_envs, steps=steps)
         for name in names:
             mjzoo.envs.factory(name)
@@ -121,7 +121,7 @@ def _random_returns(task: mjzoo.Task, keys: jax.Array, steps: int, nu: int):
         obs_size = jnp.size(jax.tree.leaves(state.obs)[0])
         return jnp.sum(trajectory.next_state.reward * alive), obs_size
 
-    task = mjzoo.worlds.sized(task, keys.shape[0])  # Warp: a contact pool for every env
+    task = mjzoo.batching.sized(task, keys.shape[0])  # Warp: a contact pool for every env
     return jax.vmap(one)(keys)
 
 
@@ -173,7 +173,7 @@ def train(
     """
     from mjzoo.harness import checkpoints, devices, distributed, training
 
-    with checking():
+    with as_usage_errors():
         distributed.initialize(coordinator, num_processes, process_id)  # before anything touches JAX's devices
         module = algorithm_module(algorithm)
         if resume is not None:
@@ -196,15 +196,8 @@ def train(
         cfg, hyperparams = build_algorithm(module, env, config_values)
         data = imitated(module, env, task, env_values)  # AMP: the env's reference, an error now if it has none
         devices.check_split(cfg.num_envs)
-        if (
-            task.time_limit is None
-            and run_settings.get("eval_steps") is None
-            and run_settings.get("eval_seconds") is None
-        ):
-            raise UsageError(
-                f"{env}: the task has no time limit (mjzoo.with_time_limit) to end its evaluation "
-                "episodes; give --eval-steps or --eval-seconds"
-            )
+        if run_settings.get("eval_steps") is None and run_settings.get("eval_seconds") is None:
+            mjzoo.learning.episode_steps(task, env, "--eval-steps or --eval-seconds")  # its evaluation's length
         if resume is None:
             out = out or Path("runs") / f"{slug(env)}-{algorithm}"
             hint = f"continue it with --resume {out}, or choose a new --out"
@@ -215,7 +208,7 @@ def train(
         out.mkdir(parents=True, exist_ok=True)
         (out / "task.json").write_text(json.dumps({"env": env, "overrides": env_values}, indent=2))
     # resuming: only damaged checkpoints, or another network's; Warp: capacities outgrown
-    with checking(checkpoints.CheckpointError, training.PhysicsCapacityError):
+    with as_usage_errors(checkpoints.CheckpointError, training.PhysicsCapacityError):
         _, last = training.run(module.make(cfg, *data), task, settings, hyperparams)
     if not distributed.is_primary():
         return
@@ -276,7 +269,7 @@ def _resumed(
     kept = {f.name for f in dataclasses.fields(training.Settings)} - set(_NOT_KEPT)
     run_settings = {**RUN_DEFAULTS, **{k: v for k, v in info.get("settings", {}).items() if k in kept}}
     # The physics it ran on, where the env lets it be chosen (a factory without `impl` chose its own).
-    physics_impl = impl or (info.get("physics", {}).get("impl") if mjzoo.envs.takes(env, "impl") else None)
+    physics_impl = impl or (info.get("physics", {}).get("impl") if mjzoo.envs.accepts(env, "impl") else None)
     return (
         resume,
         {**saved["overrides"], **({"impl": physics_impl} if physics_impl else {})},
@@ -306,15 +299,17 @@ def evaluate(
     """
     from mjzoo.harness import training
 
-    with checking():
+    with as_usage_errors():
         at_least_one(episodes=episodes)
         trained = runs.load(run, task, env_overrides)
         steps = episode_steps(trained.task, trained.spec, steps)
     state = runs.restore(run, trained)
-    mean, returns, trajectory = jax.jit(trained.module.evaluate, static_argnums=(0, 4, 5))(
+    returns, _, trajectory = jax.jit(trained.module.evaluate, static_argnums=(0, 4, 5))(
         trained.cfg, trained.task, state, jax.random.key(seed), episodes, steps
     )
-    print(f"{trained.spec}: mean return {float(mean):.2f} ± {float(jnp.std(returns)):.2f} over {episodes} episodes")
+    print(
+        f"{trained.spec}: mean return {float(jnp.mean(returns)):.2f} ± {float(jnp.std(returns)):.2f} over {episodes} episodes"
+    )
     path = training.write_video(trained.task, trajectory, video or run / "eval.mp4", render)
     if path is not None:
         print(f"video: {path}")
@@ -354,7 +349,7 @@ def plan(
     from mjzoo.harness import plan_report
     from mjzoo.planning import realtime
 
-    with checking():
+    with as_usage_errors():
         for flag, value in (("--seconds", seconds), ("--plan-hz", plan_hz)):
             if value is not None and not value > 0:
                 raise UsageError(f"{flag} must be > 0, got {value}")

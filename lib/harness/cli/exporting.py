@@ -14,7 +14,7 @@ import tyro
 
 import mjzoo
 from mjzoo.harness.cli import runs
-from mjzoo.harness.cli.arguments import UsageError, checking
+from mjzoo.harness.cli.arguments import UsageError, as_usage_errors
 
 if TYPE_CHECKING:
     from mjzoo.interop import export
@@ -24,9 +24,9 @@ __all__ = ["export", "policy", "load_run", "SUFFIXES"]
 SUFFIXES = {"onnx": ".onnx", "jax": ".jaxexport"}
 
 
-def policy(module: ModuleType, cfg: Any, task: mjzoo.Task, params: dict[str, Any]) -> export.Policy:
+def policy(module: ModuleType, cfg: Any, task: mjzoo.Task, params: dict[str, Any]) -> export.Deployable:
     """The deterministic policy of PPO or AMP `params` (``module.policy_params(state)``:
-    {"policy": network params, "obs_stats": `RunningStats`}) as an `export.Policy` for one
+    {"policy": network params, "obs_stats": `RunningStats`}) as an `export.Deployable` for one
     observation: `ppo.acting` (the normalization, the network, tanh of the mean, so
     [-1, 1]), the carry explicit. AMP's policy sees the task's own observation; a dict
     observation (PPO's ``policy_obs_key``) is refused with a `UsageError`.
@@ -50,12 +50,12 @@ def policy(module: ModuleType, cfg: Any, task: mjzoo.Task, params: dict[str, Any
         next_carry, action, _ = act(carry if cfg.recurrent else (), obs, jnp.zeros((), bool), None)
         return action, (next_carry if cfg.recurrent else None)
 
-    return export.Policy(apply, obs_size, task.action_size, cfg.gru_hidden_size if cfg.recurrent else 0)
+    return export.Deployable(apply, obs_size, task.action_size, cfg.gru_hidden_size if cfg.recurrent else 0)
 
 
 def load_run(run: Path, task: str | None = None, env_overrides: tuple[str, ...] = ()) -> tuple[runs.Trained, Any]:
     """(run read back on MJX's JAX physics, its newest train state). Raises `UsageError`."""
-    with checking():
+    with as_usage_errors():
         saved, _ = runs.read_run(run)
         spec = task or (saved or {}).get("env")
         jax_physics = ("impl=jax",) if spec and ":" not in spec else ()  # C and the check replay MJX-JAX states
@@ -83,7 +83,7 @@ def export(
     eval`. An existing file is replaced only with --overwrite. Needs `pip install
     'mjzoo[export]'` for ONNX.
     """
-    from mjzoo.interop import contract
+    from mjzoo.interop import deployment
     from mjzoo.interop import export as exporting
 
     out = out or run / f"policy{SUFFIXES[format]}"
@@ -104,7 +104,7 @@ def export(
         algorithm=trained.module.__name__,
         step=int(state.updates),
     )
-    with checking(contract.ContractError):
+    with as_usage_errors(deployment.ContractError):
         described = exporting.describe(trained.task, fn, source=source)
     write = exporting.write_onnx if format == "onnx" else exporting.write_jax
     path = write(fn, described, out, overwrite=overwrite)

@@ -15,8 +15,8 @@ from mjzoo.harness import checkpoints, training
 from mjzoo.harness.cli.arguments import (
     UsageError,
     algorithm_module,
+    as_usage_errors,
     build_algorithm,
-    checking,
     imitated,
     parse_assignments,
 )
@@ -100,6 +100,6 @@ def restore(run: Path, trained: Trained) -> Any:
     """The newest intact checkpoint's train state (a one-line warning for each damaged
     newer one; a `UsageError` if none is intact or they hold another network)."""
     template = trained.module.init(trained.cfg, trained.task, *trained.data, trained.hyperparams, jax.random.key(0))
-    with checking(checkpoints.CheckpointError):
+    with as_usage_errors(checkpoints.CheckpointError):
         state, _, _ = checkpoints.restore_newest_intact(run / "checkpoints", like=template)
     return state

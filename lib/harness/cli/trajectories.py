@@ -18,9 +18,9 @@ from mjzoo.harness.cli.arguments import (
     PLANNERS,
     UsageError,
     algorithm_module,
+    as_usage_errors,
     at_least_one,
     build_planner,
-    checking,
     episode_steps,
     parse_assignments,
 )
@@ -62,7 +62,7 @@ def collect(
     truncated [N, T]; length [N]), meta.json (names, shapes, dt, the source, the seed)
     and motions/episode_NNN.npz, one mjzoo.motion clip per episode, cut at its length.
     """
-    with checking():
+    with as_usage_errors():
         at_least_one(episodes=episodes)
         _check_out(out, overwrite)
         if source in PLANNERS:

@@ -19,9 +19,9 @@ from mjzoo.harness.cli.arguments import (
     PLANNERS,
     UsageError,
     algorithm_module,
+    as_usage_errors,
     at_least_one,
     build_planner,
-    checking,
     parse_assignments,
 )
 from mjzoo.harness.rendering import RenderConfig
@@ -77,7 +77,7 @@ def view(
     """
     from mjzoo.harness import viewer
 
-    with checking():
+    with as_usage_errors():
         kind = _check_flags(target, controls, planner, config, sampled, num_envs, seconds, speed, port)
         _check_outputs(save_frames, save_video, overwrite)
         source = _source(kind, target, task, env_overrides, controls, planner, config, sampled, num_envs, seed, trace)

@@ -27,9 +27,9 @@ import numpy as np
 
 from mjzoo.harness.viewer.sources import Frame, float_parameters, host_poses
 from mjzoo.planning import closed_loop, sampling
+from mjzoo.planning.ensembles import base_task
 from mjzoo.planning.realtime import Problem
-from mjzoo.planning.rollouts import base_task
-from mjzoo.running import complete, reset, transition
+from mjzoo.running import fill_transition_entries, reset, transition
 from mjzoo.types import State, Task
 
 __all__ = ["Planning", "trace_point", "config_floats"]
@@ -82,7 +82,7 @@ class Planning:
     def reset(self, seed: int = 0) -> None:
         self.key = jax.random.key(seed)
         reset_key, self.key = jax.random.split(self.key)
-        self.sim_state = complete(self.problem.sim_task, reset(self.problem.sim_task, reset_key))
+        self.sim_state = fill_transition_entries(self.problem.sim_task, reset(self.problem.sim_task, reset_key))
         self.planner_state = closed_loop.first_plan(
             self.problem.planner,
             self.config,
@@ -186,7 +186,7 @@ class Planning:
         samples = sampling.sample_knots(sample_key, shifted.knots, shifted.std, config.num_samples, low, high)
         knots = jnp.concatenate([samples[1 : 1 + self.num_traces], new.knots[None]])
         sequences = sampling.controls(config, knots, low, high)  # [S + 1, H, nu]
-        return jax.vmap(lambda c: self._follow(task, complete(task, start), c))(sequences)
+        return jax.vmap(lambda c: self._follow(task, fill_transition_entries(task, start), c))(sequences)
 
     def _follow(self, task: Task, start: State, sequence: jax.Array) -> jax.Array:
         kind, index = self.point

@@ -25,10 +25,10 @@ import jax.numpy as jnp
 import mujoco
 import numpy as np
 
-from mjzoo import worlds
+from mjzoo import batching
 from mjzoo.combinators import with_auto_reset
 from mjzoo.parameters import params as task_params
-from mjzoo.running import complete, control_dt, reset, transition
+from mjzoo.running import control_dt, fill_transition_entries, reset, transition
 from mjzoo.types import State, Task
 
 __all__ = ["Frame", "Simulation", "controls", "host_poses", "float_parameters", "CONTROLS"]
@@ -166,12 +166,12 @@ class Simulation:
         return Frame(qpos, mocap_pos, mocap_quat, xpos, xquat, float(time[0]), terms)
 
     def _reset_all(self, task: Task, keys: jax.Array) -> State:
-        sized = with_auto_reset(worlds.sized(task, keys.shape[0]))  # Warp: a contact pool for every env
-        return jax.vmap(lambda k: complete(sized, reset(sized, k)))(keys)
+        sized = with_auto_reset(batching.sized(task, keys.shape[0]))  # Warp: a contact pool for every env
+        return jax.vmap(lambda k: fill_transition_entries(sized, reset(sized, k)))(keys)
 
     def _advance_all(self, task: Task, act_params: Any, states: State, key: jax.Array) -> State:
         self.traces += 1  # Python runs only while tracing: counts compiles
-        sized = with_auto_reset(worlds.sized(task, self.num_envs))  # Warp: a contact pool for every env
+        sized = with_auto_reset(batching.sized(task, self.num_envs))  # Warp: a contact pool for every env
 
         def one(state: State, key: jax.Array) -> State:
             act_key, step_key = jax.random.split(key)

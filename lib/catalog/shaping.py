@@ -1,4 +1,5 @@
-"""Bounded reward shapes: `tolerance`, the DeepMind Control Suite's smooth tolerance.
+"""Reward shaping: `tolerance`, the DeepMind Control Suite's smooth tolerance, and
+`wrap_angle`, the one angle wrap that costs and errors of angles go through.
 
 `tolerance(x, lower, upper, margin)` is 1 inside ``[lower, upper]`` and falls off with
 the distance outside, to `value_at_margin` at distance `margin`, along one of SIGMOIDS.
@@ -10,7 +11,7 @@ from __future__ import annotations
 import jax
 import jax.numpy as jnp
 
-__all__ = ["tolerance", "SIGMOIDS"]
+__all__ = ["tolerance", "wrap_angle", "SIGMOIDS"]
 
 Array = jax.Array
 SIGMOIDS = ("gaussian", "long_tail", "linear", "quadratic")
@@ -56,3 +57,9 @@ def tolerance(
     smooth = _sigmoid(distance / safe_margin, jnp.asarray(value_at_margin, jnp.float32), sigmoid)
     outside = jnp.where(jnp.asarray(margin) > 0, smooth, 0.0)
     return jnp.where(inside, 1.0, outside).astype(jnp.float32)
+
+
+def wrap_angle(angle: Array) -> Array:
+    """`angle` (rad, any shape) in [-pi, pi]: the same direction, the short way round from
+    zero, so a cost of a hinge that has turned twice costs as little as an upright one."""
+    return jnp.arctan2(jnp.sin(angle), jnp.cos(angle))

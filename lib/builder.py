@@ -19,7 +19,7 @@ example, `envs/locomotion.py` the one made of catalog items.
 
 Every plain function gets the task's named parameters first: `p`, a dict of float32
 leaves holding `params` and each term's weight (``"<term>_weight"``, or the parameter
-named in its place). A `jax.tree_util.Partial` (a catalog item, or ``mjzoo.bind(fn,
+named in its place). A `jax.tree_util.Partial` (a catalog item, or ``Partial(fn,
 ...)``) carries its own numbers and is called without `p`; `named(item, "name", ...)`
 moves a catalog item's numbers into `p` under those names. Since every number is a
 leaf with a name, `mjzoo.with_params` changes any of them on the built task.
@@ -54,13 +54,14 @@ import jax
 import jax.numpy as jnp
 import mujoco
 import numpy as np
+from jax.tree_util import Partial
 from mujoco import mjx
 
-from mjzoo import checks, worlds
+from mjzoo import batching, checks
 from mjzoo import physics as physics_lib
 from mjzoo.combinators import with_divergence_guard, with_time_limit
-from mjzoo.tree import Static
-from mjzoo.types import State, Task, bind
+from mjzoo.tree import StaticValue
+from mjzoo.types import State, Task
 
 __all__ = ["task", "named", "alive", "joint_state"]
 
@@ -134,7 +135,7 @@ def task(
             _identifier("terminate", name)
         fns[name], p = _function(f"termination {name!r}" if name else "terminate", fn, p)
     observe, p = _function("observe", observe or joint_state, p)
-    # A catalog observation is kept as it is, so `mjzoo.interop.contract` can read it.
+    # A catalog observation is kept as it is, so `mjzoo.interop.deployment` can read it.
     observe, own = (observe.args[0], True) if observe.func is _own_numbers else (observe, False)
     items = []
     for i, fn in enumerate(((start,) if start is not None else ()) + tuple(resets)):
@@ -173,26 +174,26 @@ def task(
     )
     core = Task(
         model=physics.model,
-        start=bind(_start, spec, p),
-        step=bind(_step, spec, p),
-        reward=bind(_no_terms),
-        terminate=bind(_never),
+        start=Partial(_start, spec, p),
+        step=Partial(_step, spec, p),
+        reward=Partial(_no_terms),
+        terminate=Partial(_never),
         mj_model=physics.mj_model,
     )
     for layer in combinators:
         core = layer(core)
         if not isinstance(core, Task):
             raise TypeError(f"mjzoo.task: a combinator returned {type(core).__name__}, not a Task")
-    ended = bind(_terminate, tuple(fns.values()), p, core.terminate)
+    ended = Partial(_terminate, tuple(fns.values()), p, core.terminate)
     terms = {}
     for name, fn, weight, kind in weighted:
-        fn = bind(_own_numbers, bind(_alive, ended)) if fn is alive else fn
-        terms[name] = (fn, Static((weight, kind)))  # strings: no float is static
+        fn = Partial(_own_numbers, Partial(_alive, ended)) if fn is alive else fn
+        terms[name] = (fn, StaticValue((weight, kind)))  # strings: no float is static
     ends = {name: fn for name, fn in fns.items() if name}  # the named ones, recorded in metrics
     built = core.replace(
-        start=bind(_start_ends, Static(tuple(ends)), core.start),
-        step=bind(_step_ends, ends, p, core.step),
-        reward=bind(_reward, terms, p, core.reward),
+        start=Partial(_start_ends, StaticValue(tuple(ends)), core.start),
+        step=Partial(_step_ends, ends, p, core.step),
+        reward=Partial(_reward, terms, p, core.reward),
         terminate=ended,
     )
     built = with_divergence_guard(built)
@@ -206,7 +207,7 @@ def task(
 @jax.tree_util.register_dataclass
 @dataclasses.dataclass(frozen=True)
 class Spec:
-    """How a kit task starts and steps (Partials taking `p` first); the numbers live in `p`."""
+    """How a built task starts and steps (Partials taking `p` first); the numbers live in `p`."""
 
     observe: jax.tree_util.Partial  # a catalog item (observe_own) or a function of `p` first
     start: jax.tree_util.Partial | None
@@ -229,7 +230,7 @@ def joint_state(p: dict, model: mjx.Model, state: State) -> Array:
 def alive(p: dict, model: mjx.Model, state: State, action: Array, next_state: State) -> Array:
     """Reward term: 1 per transition that the task's `terminate` does not end, else 0.
     A marker: `task` puts its own terminations in its place."""
-    raise TypeError("mjzoo.kit.alive is a reward term of mjzoo.task, which binds it to the task's terminations")
+    raise TypeError("mjzoo.builder.alive is a reward term of mjzoo.task, which binds it to the task's terminations")
 
 
 def named(item: jax.tree_util.Partial, *names: str) -> jax.tree_util.Partial:
@@ -299,10 +300,10 @@ def _actuated(actuator, p: dict, model: mjx.Model, data: mjx.Data, action: Array
         ctrl = actuator(p, model, data, action, jax.random.fold_in(key, i))
         return physics_lib.substep(model, data.replace(ctrl=jnp.asarray(ctrl, data.ctrl.dtype)))
 
-    return jax.lax.fori_loop(0, n_substeps, substep, worlds.clear_overflow(data))
+    return jax.lax.fori_loop(0, n_substeps, substep, batching.clear_overflow(data))
 
 
-def _start_ends(names: Static, start_fn, model: mjx.Model, key: Array) -> State:
+def _start_ends(names: StaticValue, start_fn, model: mjx.Model, key: Array) -> State:
     """The start, each named termination's metric at 0."""
     state = start_fn(model, key)
     if not names.value:
@@ -321,7 +322,7 @@ def _step_ends(ends: dict, p: dict, step_fn, model: mjx.Model, state: State, act
 
 
 def _reward(weighted: dict, p: dict, reward_fn, model, state, action, next_state) -> dict[str, Array]:
-    """The inner task's terms, then each ``name: (fn, Static((weight's name, kind)))``,
+    """The inner task's terms, then each ``name: (fn, StaticValue((weight's name, kind)))``,
     a "cost" charged."""
     terms = dict(reward_fn(model, state, action, next_state))
     for name, (fn, weight) in weighted.items():
@@ -361,7 +362,7 @@ def _own_numbers(item: jax.tree_util.Partial, p: dict, *args):
     return item(*args)
 
 
-def _with_named(func, leaves: tuple, treedef: Static, slots: Static, p: dict, *args):
+def _with_named(func, leaves: tuple, treedef: StaticValue, slots: StaticValue, p: dict, *args):
     """A catalog item called with its numbered leaves taken from `p` (`named`)."""
     leaves = list(leaves)
     for index, name in slots.value:
@@ -385,12 +386,12 @@ def _function(what: str, fn, p: dict) -> tuple[jax.tree_util.Partial, dict]:
                 raise ValueError(f"mjzoo.task: {what} gives {name}={given}, but the task already has {name}={have}")
             p = {**p, name: p[name] if name in p else jnp.asarray(value, jnp.float32)}
         func = jax.tree_util.Partial(fn.item.func)  # the function in the treedef, not a leaf
-        return bind(_with_named, func, tuple(leaves), Static(treedef), Static(fn.slots)), p
+        return Partial(_with_named, func, tuple(leaves), StaticValue(treedef), StaticValue(fn.slots)), p
     if not callable(fn):
         raise TypeError(f"mjzoo.task: {what} must be callable, got {type(fn).__name__}")
     checks.retrace_hazard("mjzoo.task", what, fn)
     if isinstance(fn, jax.tree_util.Partial):
-        return bind(_own_numbers, fn), p
+        return Partial(_own_numbers, fn), p
     return jax.tree_util.Partial(fn), p
 
 

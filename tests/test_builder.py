@@ -17,6 +17,7 @@ import jax.numpy as jnp
 import mujoco
 import numpy as np
 import pytest
+from jax.tree_util import Partial
 
 import mjzoo
 from mjzoo.catalog import resets
@@ -131,7 +132,7 @@ def test_default_observation_no_reward_and_time_limit():
 
 def test_an_mjmodel_and_a_partial_that_carries_its_own_numbers():
     task = mjzoo.task(
-        mujoco.MjModel.from_xml_string(XML), ctrl_dt=0.2, rewards={"push": mjzoo.bind(_scaled_push, jnp.float32(3.0))}
+        mujoco.MjModel.from_xml_string(XML), ctrl_dt=0.2, rewards={"push": Partial(_scaled_push, jnp.float32(3.0))}
     )
     _, after = step(task, jax.random.key(0))
     np.testing.assert_allclose(after.data.qpos, [0.03], rtol=1e-5)  # two 0.1 s steps of 1 N
@@ -175,7 +176,7 @@ def test_a_lambda_or_nested_function_warns_of_retracing_and_a_module_function_do
         mjzoo.with_reward(make(), "nested", nested)
     with warnings.catch_warnings():
         warnings.simplefilter("error", mjzoo.RetraceHazardWarning)
-        mjzoo.with_reward(make(), "push2", mjzoo.bind(_scaled_push, jnp.float32(1.0)))
+        mjzoo.with_reward(make(), "push2", Partial(_scaled_push, jnp.float32(1.0)))
 
 
 def test_catalog_reset_items_may_write_info():
@@ -186,7 +187,7 @@ def test_catalog_reset_items_may_write_info():
 
 
 def _joint_state(model, state):
-    return mjzoo.kit.joint_state({}, model, state)
+    return mjzoo.builder.joint_state({}, model, state)
 
 
 def _marked(model, data, key):
@@ -212,9 +213,9 @@ def test_costs_named_terminations_alive_and_a_catalog_number_made_a_parameter():
     task = mjzoo.task(
         XML,
         start=_still,
-        rewards={"alive": (mjzoo.kit.alive, 2.0)},
-        costs={"effort": (mjzoo.bind(_effort), 0.25)},
-        terminate={"far": mjzoo.kit.named(mjzoo.bind(_far, 0.005), "limit")},
+        rewards={"alive": (mjzoo.builder.alive, 2.0)},
+        costs={"effort": (Partial(_effort), 0.25)},
+        terminate={"far": mjzoo.builder.named(Partial(_far, 0.005), "limit")},
     )
     assert {k: float(v) for k, v in mjzoo.params(task).items()} == pytest.approx(
         {"alive_weight": 2.0, "effort_weight": 0.25, "limit": 0.005}
@@ -233,9 +234,9 @@ def test_costs_named_terminations_alive_and_a_catalog_number_made_a_parameter():
 
 def test_named_needs_one_name_per_number_and_agreeing_shared_names():
     with pytest.raises(ValueError, match="binds 1 number"):
-        mjzoo.kit.named(mjzoo.bind(_far, 0.005), "a", "b")
-    item = mjzoo.kit.named(mjzoo.bind(_far, 0.005), "limit")
-    other = mjzoo.kit.named(mjzoo.bind(_far, 0.5), "limit")
+        mjzoo.builder.named(Partial(_far, 0.005), "a", "b")
+    item = mjzoo.builder.named(Partial(_far, 0.005), "limit")
+    other = mjzoo.builder.named(Partial(_far, 0.5), "limit")
     with pytest.raises(ValueError, match="limit=0.5.*already has limit"):
         mjzoo.task(XML, terminate={"a": item, "b": other})
     with pytest.raises(ValueError, match="'effort' is both a reward and a cost"):
@@ -254,7 +255,7 @@ def test_combinators_run_inside_the_terms_and_a_loaded_physics_is_taken():
 
 
 def _double_action(task):
-    return task.replace(step=mjzoo.bind(_doubled_step, task.step))
+    return task.replace(step=Partial(_doubled_step, task.step))
 
 
 def _doubled_step(step_fn, model, state, action, key):

@@ -29,10 +29,10 @@ between frames 18 and 19) that they would spread over two frames, out of step wi
 the positions. Frames of unequal duration are first interpolated onto a uniform grid
 (linear for positions and angles, slerp for quaternions): a `Clip` has one frame rate.
 
-    from mjzoo.motion import deepmimic
+    from mjzoo.motion import deepmimic_format
     from mjzoo.envs import deepmimic as humanoid  # the model, built from pybullet_data
     m = humanoid.humanoid_model()
-    clip = deepmimic.load(humanoid.motion_path("walk"), m, humanoid.character_joints())
+    clip = deepmimic_format.load(humanoid.motion_path("walk"), m, humanoid.character_joints())
     clip.qpos.shape, clip.qvel.shape, clip.fps  # (39, 43), (39, 34), 30.0
 """
 
@@ -65,7 +65,7 @@ _UNIFORM = 1e-3  # relative spread of frame durations still taken as one frame r
 def read(path: str | Path) -> tuple[np.ndarray, str]:
     """float64 frames [T, 1 + D] (column 0: durations, s) and the "Loop" mode of the
     DeepMimic motion file `path`; ValueError naming the file if it is not one."""
-    who = f"motion.deepmimic.read({str(path)!r})"
+    who = f"motion.deepmimic_format.read({str(path)!r})"
     path = Path(path)
     if not path.is_file():
         raise ValueError(f"{who}: no such file")
@@ -110,7 +110,7 @@ def load(
       a `Clip` with qpos [T', nq], qvel [T', nv] (per second), fps = 1 / the frame
       duration; T' = T unless unequal durations were interpolated onto a uniform grid.
     """
-    who = f"motion.deepmimic.load({str(path)!r})"
+    who = f"motion.deepmimic_format.load({str(path)!r})"
     if up not in ("y", "z"):
         raise ValueError(f"{who}: up={up!r}; expected 'y' (DeepMimic's files) or 'z'")
     if not (np.isfinite(scale) and scale > 0):

@@ -16,9 +16,9 @@ from typing import Any, Callable
 import jax
 import jax.numpy as jnp
 
-from mjzoo import worlds
+from mjzoo import batching
 from mjzoo.planning.learned import TerminalValue, as_terminal_value
-from mjzoo.running import complete, transition
+from mjzoo.running import fill_transition_entries, transition
 from mjzoo.types import State, Task
 
 __all__ = ["Ensemble", "ensemble", "base_task", "with_base", "rollout_costs", "aggregate", "RISKS"]
@@ -73,7 +73,7 @@ def rollout_costs(
     variants = task if isinstance(task, Ensemble) else Ensemble(task, {})
     base = variants.task
     num_models = max(1, *(len(v) for v in variants.fields.values())) if variants.fields else 1
-    start = worlds.sized(complete(base, state), num_models * controls.shape[0])  # Warp: a pool for all
+    start = batching.sized(fill_transition_entries(base, state), num_models * controls.shape[0])  # Warp: a pool for all
     step_keys = jax.random.split(key, controls.shape[1])
 
     def cost(model, sample_controls: Array) -> tuple[Array, Array]:

@@ -1,4 +1,4 @@
-"""mjzoo.motion.deepmimic: DeepMimic motion files read onto a MuJoCo character.
+"""mjzoo.motion.deepmimic_format: DeepMimic motion files read onto a MuJoCo character.
 
 The character is the smallest with both joint kinds: a free root, a spherical
 "shoulder" and a revolute "elbow" (DeepMimic's revolute axis is z of the y-up link
@@ -16,7 +16,7 @@ import numpy as np
 import pytest
 
 from mjzoo import motion
-from mjzoo.motion import deepmimic
+from mjzoo.motion import deepmimic_format
 
 C, S = np.cos(np.pi / 4), np.sin(np.pi / 4)
 SHOULDER = '<body name="upper" pos="0 0 -0.1"><joint name="shoulder" type="ball"/><geom size="0.05"/>'
@@ -53,7 +53,7 @@ def _write(tmp_path, frames, name="clip.txt", **extra) -> str:
 
 
 def test_positions_are_turned_to_z_up_and_quaternions_conjugated(tmp_path):
-    clip = deepmimic.load(_write(tmp_path, FRAMES), _model())
+    clip = deepmimic_format.load(_write(tmp_path, FRAMES), _model())
     assert clip.name == "clip" and clip.fps == pytest.approx(10.0) and clip.qpos.shape == (3, 12)
     # (x, y, z) y-up -> (x, -z, y); a turn about y-up's up axis is a turn about z.
     np.testing.assert_allclose(clip.qpos[0], [1, -3, 2, 1, 0, 0, 0, C, 0, 0, S, 0.3], atol=1e-12)
@@ -66,7 +66,7 @@ def test_positions_are_turned_to_z_up_and_quaternions_conjugated(tmp_path):
 
 
 def test_velocities_are_backward_differences_per_second(tmp_path):
-    clip = deepmimic.load(_write(tmp_path, FRAMES), _model())
+    clip = deepmimic_format.load(_write(tmp_path, FRAMES), _model())
     # frame 0 -> 1 in 0.1 s: root +0.5 m in x, yaw +0.2 rad (body frame z), shoulder +0.1
     # rad about its local z, elbow +0.2 rad. Frame 1 -> 2: root (+0.5, 0, -1) m y-up,
     # (+0.5, +1, 0) m z-up; nothing turns (the -q frame is the same rotation).
@@ -82,21 +82,21 @@ def test_velocities_are_backward_differences_per_second(tmp_path):
 def test_joints_map_the_file_order_onto_the_model_order(tmp_path):
     m = _model(nested=False)
     assert [m.joint(j).name for j in range(m.njnt)] == ["root", "elbow", "shoulder"]
-    clip = deepmimic.load(_write(tmp_path, FRAMES), m, joints=["shoulder", "elbow"])
+    clip = deepmimic_format.load(_write(tmp_path, FRAMES), m, joints=["shoulder", "elbow"])
     np.testing.assert_allclose(clip.qpos[0], [1, -3, 2, 1, 0, 0, 0, 0.3, C, 0, 0, S], atol=1e-12)
     with pytest.raises(ValueError, match="joints=.*must name each"):
-        deepmimic.load(_write(tmp_path, FRAMES), m, joints=["shoulder", "knee"])
+        deepmimic_format.load(_write(tmp_path, FRAMES), m, joints=["shoulder", "knee"])
 
 
 def test_up_z_keeps_the_file_basis_and_scale_the_root_position(tmp_path):
-    clip = deepmimic.load(_write(tmp_path, FRAMES), _model(), up="z", scale=2.0)
+    clip = deepmimic_format.load(_write(tmp_path, FRAMES), _model(), up="z", scale=2.0)
     np.testing.assert_allclose(clip.qpos[0], [2, 4, 6, 1, 0, 0, 0, C, 0, S, 0, 0.3], atol=1e-12)
     np.testing.assert_allclose(clip.qvel[1, :3], [10, 0, 0], atol=1e-9)
 
 
 def test_unequal_durations_are_interpolated_onto_the_common_step(tmp_path):
     frames = [[d, 0, 1, 0, 1, 0, 0, 0, 1, 0, 0, 0, a] for d, a in ((0.1, 0.0), (0.2, 0.1), (0.1, 0.3), (0.0, 0.4))]
-    clip = deepmimic.load(_write(tmp_path, frames), _model())
+    clip = deepmimic_format.load(_write(tmp_path, frames), _model())
     assert clip.fps == pytest.approx(10.0)
     np.testing.assert_allclose(clip.qpos[:, -1], [0.0, 0.1, 0.2, 0.3, 0.4], atol=1e-12)
     np.testing.assert_allclose(clip.qvel[:, -1], [1.0, 1.0, 1.0, 1.0, 1.0], atol=1e-9)
@@ -104,7 +104,7 @@ def test_unequal_durations_are_interpolated_onto_the_common_step(tmp_path):
 
 def test_the_clip_passes_the_motion_checks_and_saves(tmp_path):
     m = _model()
-    clip = deepmimic.load(_write(tmp_path, FRAMES), m, name="wave")
+    clip = deepmimic_format.load(_write(tmp_path, FRAMES), m, name="wave")
     assert motion.check(clip, m) is clip and clip.name == "wave"
     again = motion.load(motion.save(tmp_path / "wave.npz", clip), m)
     np.testing.assert_array_equal(again.qpos, clip.qpos)
@@ -120,20 +120,20 @@ def test_the_clip_passes_the_motion_checks_and_saves(tmp_path):
 )
 def test_malformed_files_name_the_problem(tmp_path, frames, match):
     with pytest.raises(ValueError, match=match):
-        deepmimic.load(_write(tmp_path, frames), _model())
+        deepmimic_format.load(_write(tmp_path, frames), _model())
 
 
 def test_not_a_motion_file_and_bad_arguments(tmp_path):
     bad = tmp_path / "bad.txt"
     bad.write_text('{"Loop": "none"}')
     with pytest.raises(ValueError, match="not a DeepMimic motion"):
-        deepmimic.load(str(bad), _model())
+        deepmimic_format.load(str(bad), _model())
     with pytest.raises(ValueError, match="no such file"):
-        deepmimic.load(str(tmp_path / "absent.txt"), _model())
+        deepmimic_format.load(str(tmp_path / "absent.txt"), _model())
     with pytest.raises(ValueError, match="up='x'"):
-        deepmimic.load(_write(tmp_path, FRAMES), _model(), up="x")
+        deepmimic_format.load(_write(tmp_path, FRAMES), _model(), up="x")
     slide = mujoco.MjModel.from_xml_string(
         '<mujoco><worldbody><body><joint type="slide"/><geom size="1"/></body></worldbody></mujoco>'
     )
     with pytest.raises(ValueError, match="first joint must be its only free joint"):
-        deepmimic.load(_write(tmp_path, FRAMES), slide)
+        deepmimic_format.load(_write(tmp_path, FRAMES), slide)

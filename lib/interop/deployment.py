@@ -1,8 +1,8 @@
 """The deployment contract of an exported policy: what a robot (or plain C MuJoCo) must
 feed it and do with its output, as JSON-ready data.
 
-    terms = contract.observation_terms(task)        # how the task observes, in the vocabulary below
-    obs = contract.frame(terms, mj_model, mj_data, previous_action)   # the same, from C MuJoCo
+    terms = deployment.observation_terms(task)        # how the task observes, in the vocabulary below
+    obs = deployment.frame(terms, mj_model, mj_data, previous_action)   # the same, from C MuJoCo
 
 An exported policy is only usable if its observation can be rebuilt outside JAX. So the
 contract describes each observation term by a *source* from a small vocabulary, every
@@ -237,7 +237,7 @@ def describe_item(m: mujoco.MjModel, fn: Any) -> list[dict[str, Any]]:
             f"cannot describe the observation term {function_key(func)}: the contract's vocabulary "
             f"covers {', '.join(SOURCES)} (the catalog's joint, base, body, site, sensor, "
             "actuator-force and last-action items); describe it with "
-            "mjzoo.interop.contract.register_observation"
+            "mjzoo.interop.deployment.register_observation"
         )
     return describe(m, *args)
 
@@ -280,7 +280,7 @@ def observation_terms(task: Task) -> list[dict[str, Any]]:
         raise ContractError(
             f"cannot find how the task observes: its step ({function_key(task.step.func)}) is not a "
             "known task step, and none of the steps it wraps holds a catalog observation (`observe`); "
-            "describe it with mjzoo.interop.contract.register_observation(..., step=True)"
+            "describe it with mjzoo.interop.deployment.register_observation(..., step=True)"
         )
     size = task.action_size
     return [{**t, "size": size} if t["source"] == "previous_action" else t for t in terms]
