@@ -36,35 +36,39 @@ from __future__ import annotations
 
 import dataclasses
 import functools
-from collections.abc import Callable, Sequence
-from typing import Any, Literal
+from collections.abc import Callable
+from collections.abc import Sequence
+from typing import Any
+from typing import Literal
 
 import jax
 import jax.numpy as jnp
-import numpy as np
 import optax
 
-from mjzoo import learning, motion
+from mjzoo import checks
+from mjzoo import learning
+from mjzoo import motion
 from mjzoo.algorithms import ppo
-from mjzoo.learning import discriminators, motion_features, networks, normalization, replay
+from mjzoo.learning import discriminators
 from mjzoo.learning import hyperparams as hyperparams_lib
+from mjzoo.learning import motion_features
+from mjzoo.learning import networks
+from mjzoo.learning import normalization
+from mjzoo.learning import replay
 from mjzoo.learning.algorithm import Algorithm
 from mjzoo.learning.hyperparams import INF
 from mjzoo.types import Task
 
 __all__ = [
-    "PER_ENV_FIELDS",
     "Config",
     "Hyperparams",
     "TrainState",
     "configure",
-    "diagnose",
     "evaluate",
     "init",
     "make",
     "policy",
     "policy_params",
-    "reference_windows",
     "style_task",
     "train",
     "update",
@@ -91,24 +95,25 @@ class Config(ppo.Config):
     def __post_init__(self):
         super().__post_init__()
 
-        def need(ok: bool, field: str, allowed: str):
-            if not ok:
-                raise ValueError(f"amp.Config: {field}={getattr(self, field)!r} is invalid; expected {allowed}")
-
-        for field in ("num_frames", "disc_epochs", "disc_minibatches", "replay_size"):
-            value = getattr(self, field)
-            need(isinstance(value, int) and not isinstance(value, bool) and value >= 1, field, "an integer >= 1")
-        need(self.num_frames >= 2, "num_frames", ">= 2 (a window holds a transition)")
-        need(
-            self.steps_per_update % self.disc_minibatches == 0,
-            "disc_minibatches",
-            f"a divisor of num_envs * unroll_length = {self.steps_per_update}",
-        )
-        need(self.disc_loss in ("least_squares", "logistic"), "disc_loss", "least_squares or logistic")
-        need(isinstance(self.key_bodies, tuple), "key_bodies", "a tuple of body names")
+        counts = ("num_frames", "disc_epochs", "disc_minibatches", "replay_size")
+        checks.fields("amp.Config", self, {f: (ppo._is_count(getattr(self, f)), "an integer >= 1") for f in counts})
         # AMP feeds PPO a dict observation {"policy", "motion"}; the keys are its own.
-        for field in ("policy_obs_key", "value_obs_key"):  # "policy": the task's own entry of AMP's observation
-            need(getattr(self, field) in (None, "policy"), field, "None: AMP's networks see the task's observation")
+        own_keys = "None: AMP's networks see the task's observation"
+        checks.fields(
+            "amp.Config",
+            self,
+            {
+                "num_frames": (self.num_frames >= 2, ">= 2 (a window holds a transition)"),
+                "disc_minibatches": (
+                    self.steps_per_update % self.disc_minibatches == 0,
+                    f"a divisor of num_envs * unroll_length = {self.steps_per_update}",
+                ),
+                "disc_loss": (self.disc_loss in ("least_squares", "logistic"), "least_squares or logistic"),
+                "key_bodies": (isinstance(self.key_bodies, tuple), "a tuple of body names"),
+                "policy_obs_key": (self.policy_obs_key in (None, "policy"), own_keys),
+                "value_obs_key": (self.value_obs_key in (None, "policy"), own_keys),
+            },
+        )
 
 
 @jax.tree_util.register_dataclass
@@ -129,12 +134,10 @@ class Hyperparams:
     replay_keep_probability: float | Array = 0.05
 
     def __post_init__(self):
-        hyperparams_lib.check_ranges(self, "amp.Hyperparams", HYPERPARAM_RANGES)
-        task, style = hyperparams_lib.host_value(self.task_weight), hyperparams_lib.host_value(self.style_weight)
-        if task is not None and style is not None and not np.all(task + style > 0):
-            raise ValueError(
-                f"amp.Hyperparams: style_weight={self.style_weight!r} is invalid; expected > 0 where task_weight is 0"
-            )
+        checks.ranges("amp.Hyperparams", self, HYPERPARAM_RANGES)
+        task, style = checks.host_value(self.task_weight), checks.host_value(self.style_weight)
+        if task is not None and style is not None:
+            checks.fields("amp.Hyperparams", self, {"style_weight": (task + style > 0, "> 0 where task_weight is 0")})
 
     def replace(self, **changes) -> Hyperparams:
         return dataclasses.replace(self, **changes)

@@ -27,9 +27,13 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
+from mjzoo import checks
 from mjzoo import planning
-from mjzoo.planning import Ensemble, PlannerState, TerminalValue
-from mjzoo.types import State, Task
+from mjzoo.planning import Ensemble
+from mjzoo.planning import PlannerState
+from mjzoo.planning import TerminalValue
+from mjzoo.types import State
+from mjzoo.types import Task
 
 __all__ = ["Config", "Hyperparams", "init", "plan"]
 
@@ -42,8 +46,8 @@ class Config(planning.SamplingConfig):
 
     def __post_init__(self) -> None:
         super().__post_init__()
-        if not 1 <= self.num_elites <= self.num_samples:
-            raise ValueError(f"cem.Config: invalid num_elites={self.num_elites!r}")
+        elites = (1 <= self.num_elites <= self.num_samples, f"in [1, num_samples = {self.num_samples}]")
+        checks.fields("cem.Config", self, {"num_elites": elites})
 
 
 @jax.tree_util.register_dataclass
@@ -56,14 +60,13 @@ class Hyperparams(planning.SamplingHyperparams):
     sigma_max: float | jax.Array = 1.0
     explore_fraction: float | jax.Array = 0.0
 
-    def _checks(self) -> dict[str, np.ndarray]:
+    def _checks(self) -> dict[str, tuple[np.ndarray, str]]:
+        explore = np.logical_and(np.greater_equal(self.explore_fraction, 0), np.less(self.explore_fraction, 1))
         return {
             **super()._checks(),
-            "sigma_min": np.greater_equal(self.sigma_min, 0),
-            "sigma_max": np.less_equal(self.sigma_min, self.sigma_max),
-            "explore_fraction": np.logical_and(
-                np.greater_equal(self.explore_fraction, 0), np.less(self.explore_fraction, 1)
-            ),
+            "sigma_min": (np.greater_equal(self.sigma_min, 0), ">= 0"),
+            "sigma_max": (np.less_equal(self.sigma_min, self.sigma_max), ">= sigma_min"),
+            "explore_fraction": (explore, "in [0, 1)"),
         }
 
 

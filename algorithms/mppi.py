@@ -27,8 +27,11 @@ import jax.numpy as jnp
 import numpy as np
 
 from mjzoo import planning
-from mjzoo.planning import Ensemble, PlannerState, TerminalValue
-from mjzoo.types import State, Task
+from mjzoo.planning import Ensemble
+from mjzoo.planning import PlannerState
+from mjzoo.planning import TerminalValue
+from mjzoo.types import State
+from mjzoo.types import Task
 
 __all__ = ["Config", "Hyperparams", "init", "plan"]
 
@@ -45,8 +48,8 @@ class Hyperparams(planning.SamplingHyperparams):
 
     temperature: float | jax.Array = 0.1
 
-    def _checks(self) -> dict[str, np.ndarray]:
-        return {**super()._checks(), "temperature": np.greater(self.temperature, 0)}
+    def _checks(self) -> dict[str, tuple[np.ndarray, str]]:
+        return {**super()._checks(), "temperature": (np.greater(self.temperature, 0), "> 0")}
 
 
 def init(

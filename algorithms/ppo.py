@@ -29,21 +29,27 @@ import dataclasses
 import functools
 import warnings
 from collections.abc import Callable
-from typing import Any, Literal, NamedTuple
+from typing import Any
+from typing import Literal
+from typing import NamedTuple
 
 import jax
 import jax.numpy as jnp
 import optax
 
+from mjzoo import checks
 from mjzoo import learning
-from mjzoo.learning import distributions, losses, networks, normalization
+from mjzoo.learning import distributions
 from mjzoo.learning import hyperparams as hyperparams_lib
-from mjzoo.learning.algorithm import Algorithm, TrainingWarning
+from mjzoo.learning import losses
+from mjzoo.learning import networks
+from mjzoo.learning import normalization
+from mjzoo.learning.algorithm import Algorithm
+from mjzoo.learning.algorithm import TrainingWarning
 from mjzoo.learning.hyperparams import INF
 from mjzoo.types import Task
 
 __all__ = [
-    "PER_ENV_FIELDS",
     "Batch",
     "Components",
     "Config",
@@ -98,23 +104,26 @@ class Config:
     total_steps: int = 1_000_000
 
     def __post_init__(self):
-        need = functools.partial(_need, self, "ppo.Config")
-        for field in ("num_envs", "unroll_length", "num_minibatches", "num_epochs", "total_steps", "gru_hidden_size"):
-            value = getattr(self, field)
-            need(isinstance(value, int) and not isinstance(value, bool) and value >= 1, field, "an integer >= 1")
-        need(
-            (self.num_envs * self.unroll_length) % self.num_minibatches == 0,
-            "num_minibatches",
-            f"a divisor of num_envs * unroll_length = {self.num_envs * self.unroll_length}",
+        counts = ("num_envs", "unroll_length", "num_minibatches", "num_epochs", "total_steps", "gru_hidden_size")
+        checks.fields("ppo.Config", self, {f: (_is_count(getattr(self, f)), "an integer >= 1") for f in counts})
+        steps = self.num_envs * self.unroll_length
+        divides = steps % self.num_minibatches == 0 and (
+            not self.recurrent or self.num_envs % self.num_minibatches == 0
         )
-        need(
-            not self.recurrent or self.num_envs % self.num_minibatches == 0,
-            "num_minibatches",
-            "a divisor of num_envs (recurrent minibatches split whole sequences)",
+        checks.fields(
+            "ppo.Config",
+            self,
+            {
+                "num_minibatches": (
+                    divides,
+                    f"a divisor of num_envs * unroll_length = {steps}"
+                    + (" and of num_envs (recurrent minibatches split whole sequences)" if self.recurrent else ""),
+                ),
+                "lr_schedule": (self.lr_schedule in ("constant", "linear", "cosine"), "constant, linear or cosine"),
+                "activation": (self.activation in ACTIVATIONS, f"one of {sorted(ACTIVATIONS)}"),
+                "compute_dtype": (self.compute_dtype in ("float32", "bfloat16"), "float32 or bfloat16"),
+            },
         )
-        need(self.lr_schedule in ("constant", "linear", "cosine"), "lr_schedule", "constant, linear or cosine")
-        need(self.activation in ACTIVATIONS, "activation", f"one of {sorted(ACTIVATIONS)}")
-        need(self.compute_dtype in ("float32", "bfloat16"), "compute_dtype", "float32 or bfloat16")
         if self.total_steps < self.steps_per_update:  # a run is whole updates: this one is one, larger
             warnings.warn(
                 f"ppo.Config: total_steps={self.total_steps} is less than one update (num_envs x "
@@ -132,9 +141,8 @@ class Config:
         return max(1, self.total_steps // self.steps_per_update)
 
 
-def _need(obj: Any, where: str, ok: bool, field: str, allowed: str) -> None:
-    if not ok:
-        raise ValueError(f"{where}: {field}={getattr(obj, field)!r} is invalid; expected {allowed}")
+def _is_count(value: Any) -> bool:
+    return isinstance(value, int) and not isinstance(value, bool) and value >= 1
 
 
 @jax.tree_util.register_dataclass
@@ -158,7 +166,7 @@ class Hyperparams:
     max_grad_norm: float | Array = 1.0  # inf: gradients unclipped
 
     def __post_init__(self):
-        hyperparams_lib.check_ranges(self, "ppo.Hyperparams", HYPERPARAM_RANGES)
+        checks.ranges("ppo.Hyperparams", self, HYPERPARAM_RANGES)
 
     def replace(self, **changes) -> Hyperparams:
         return dataclasses.replace(self, **changes)

@@ -22,8 +22,11 @@ import jax
 import jax.numpy as jnp
 
 from mjzoo import planning
-from mjzoo.planning import Ensemble, PlannerState, TerminalValue
-from mjzoo.types import State, Task
+from mjzoo.planning import Ensemble
+from mjzoo.planning import PlannerState
+from mjzoo.planning import TerminalValue
+from mjzoo.types import State
+from mjzoo.types import Task
 
 __all__ = ["Config", "Hyperparams", "init", "plan"]
 

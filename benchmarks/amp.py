@@ -54,14 +54,18 @@ import numpy as np  # noqa: E402
 
 sys.path.insert(0, str(Path(__file__).parent))
 from ppo_vs_brax import training_curve  # noqa: E402
-from task_overhead import inputs, raw_steps_per_s  # noqa: E402
+from task_overhead import inputs  # noqa: E402
+from task_overhead import raw_steps_per_s  # noqa: E402
 
 import mjzoo  # noqa: E402
 import mjzoo.envs  # noqa: E402
-from mjzoo import learning, motion  # noqa: E402
-from mjzoo.algorithms import amp, ppo  # noqa: E402
+from mjzoo import learning  # noqa: E402
+from mjzoo import motion  # noqa: E402
+from mjzoo.algorithms import amp  # noqa: E402
+from mjzoo.algorithms import ppo  # noqa: E402
 from mjzoo.envs import humanoid_amp  # noqa: E402
-from mjzoo.harness import rendering, training  # noqa: E402
+from mjzoo.harness import rendering  # noqa: E402
+from mjzoo.harness import training  # noqa: E402
 
 STYLE_FROM = 200  # steps: the style is that of the steady walk (the reference starts there too)
 # The teacher's 7 episodes other than the reference's, measured as above (steps 200-1000).

@@ -16,7 +16,8 @@ import jax
 import jax.numpy as jnp
 
 import mjzoo.envs
-from mjzoo import combinators, running
+from mjzoo import combinators
+from mjzoo import running
 
 
 def measure(name: str, num_envs: int, steps: int, batched_rule: bool) -> tuple[float, object]:

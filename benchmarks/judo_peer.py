@@ -37,7 +37,8 @@ import judo.tasks.base
 import mujoco
 import numpy as np
 from judo.app.structs import SplineData
-from judo.controller import Controller, ControllerConfig
+from judo.controller import Controller
+from judo.controller import ControllerConfig
 from judo.optimizers import get_registered_optimizers
 from judo.simulation import MJSimulation
 from judo.utils.mj_rollout_backend import MJRolloutBackend

@@ -59,15 +59,22 @@ import jax.numpy as jnp
 import numpy as np
 
 sys.path.insert(0, str(Path(__file__).parent))
-from ppo_vs_brax import time_to, training_curve  # noqa: E402
-from task_overhead import add_impl_argument, impls, inputs, ratio, raw_steps_per_s  # noqa: E402
+from ppo_vs_brax import time_to  # noqa: E402
+from ppo_vs_brax import training_curve  # noqa: E402
+from task_overhead import add_impl_argument  # noqa: E402
+from task_overhead import impls  # noqa: E402
+from task_overhead import inputs  # noqa: E402
+from task_overhead import ratio  # noqa: E402
+from task_overhead import raw_steps_per_s  # noqa: E402
 
 import mjzoo  # noqa: E402
 import mjzoo.envs  # noqa: E402
 from mjzoo.algorithms import ppo  # noqa: E402
-from mjzoo.catalog import commands, observations  # noqa: E402
+from mjzoo.catalog import commands  # noqa: E402
+from mjzoo.catalog import observations  # noqa: E402
 from mjzoo.envs import joystick  # noqa: E402
-from mjzoo.harness import rendering, training  # noqa: E402
+from mjzoo.harness import rendering  # noqa: E402
+from mjzoo.harness import training  # noqa: E402
 
 
 @dataclasses.dataclass(frozen=True)

@@ -38,8 +38,11 @@ import numpy as np
 
 import mjzoo
 import mjzoo.envs
-from mjzoo.algorithms import cem, mppi, predictive_sampling
-from mjzoo.planning import native, realtime
+from mjzoo.algorithms import cem
+from mjzoo.algorithms import mppi
+from mjzoo.algorithms import predictive_sampling
+from mjzoo.planning import native
+from mjzoo.planning import realtime
 
 ROOT = Path(__file__).resolve().parent.parent
 PLANNERS = {"ps": predictive_sampling, "cem": cem, "mppi": mppi}

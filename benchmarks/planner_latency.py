@@ -40,11 +40,16 @@ import jax
 
 import mjzoo
 import mjzoo.envs
-from mjzoo import batching, physics
-from mjzoo.algorithms import cem, mppi, predictive_sampling
+from mjzoo import batching
+from mjzoo import physics
+from mjzoo.algorithms import cem
+from mjzoo.algorithms import mppi
+from mjzoo.algorithms import predictive_sampling
 
 sys.path.insert(0, str(Path(__file__).parent))
-from task_overhead import add_impl_argument, impls, ratio  # noqa: E402
+from task_overhead import add_impl_argument  # noqa: E402
+from task_overhead import impls  # noqa: E402
+from task_overhead import ratio  # noqa: E402
 
 
 def make(env: str, physics_options: dict) -> tuple[mjzoo.Task, int]:

@@ -37,7 +37,9 @@ import numpy as np
 
 sys.path.insert(0, str(Path(__file__).parent))
 from brax_peer import wall_steps_per_s  # noqa: E402
-from ppo_vs_brax import merged, time_to, training_curve  # noqa: E402
+from ppo_vs_brax import merged  # noqa: E402
+from ppo_vs_brax import time_to  # noqa: E402
+from ppo_vs_brax import training_curve  # noqa: E402
 
 from mjzoo.algorithms import ppo  # noqa: E402
 from mjzoo.harness import training  # noqa: E402

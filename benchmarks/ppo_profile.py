@@ -55,7 +55,9 @@ import mjzoo.envs  # noqa: E402
 from mjzoo.algorithms import ppo  # noqa: E402
 from mjzoo.harness import training  # noqa: E402
 from mjzoo.harness.cli import arguments  # noqa: E402
-from mjzoo.harness.devices import env_mesh_scope, replicate, shard_envs  # noqa: E402
+from mjzoo.harness.devices import env_mesh_scope  # noqa: E402
+from mjzoo.harness.devices import replicate  # noqa: E402
+from mjzoo.harness.devices import shard_envs  # noqa: E402
 
 CHUNK = 5  # updates per harness chunk timed (`training.run` scans its chunks the same way)
 SMOKE = dict(num_envs=16, unroll_length=8, num_minibatches=4, num_epochs=2)

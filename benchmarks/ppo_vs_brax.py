@@ -44,13 +44,19 @@ import jax
 import numpy as np
 
 sys.path.insert(0, str(Path(__file__).parent))
-from brax_peer import train_brax_ppo, wall_steps_per_s  # noqa: E402
-from task_overhead import add_impl_argument, impls, inputs, ratio, raw_steps_per_s  # noqa: E402
+from brax_peer import train_brax_ppo  # noqa: E402
+from brax_peer import wall_steps_per_s  # noqa: E402
+from task_overhead import add_impl_argument  # noqa: E402
+from task_overhead import impls  # noqa: E402
+from task_overhead import inputs  # noqa: E402
+from task_overhead import ratio  # noqa: E402
+from task_overhead import raw_steps_per_s  # noqa: E402
 
 import mjzoo  # noqa: E402
 import mjzoo.envs  # noqa: E402
 from mjzoo.algorithms import ppo  # noqa: E402
-from mjzoo.harness import metrics, training  # noqa: E402
+from mjzoo.harness import metrics  # noqa: E402
+from mjzoo.harness import training  # noqa: E402
 from mjzoo.harness.cli import arguments  # noqa: E402
 
 HYPER = dict(

@@ -91,8 +91,11 @@ def worker(
     from ppo_vs_brax import training_curve
 
     import mjzoo.envs
-    from mjzoo.algorithms import amp, ppo
-    from mjzoo.harness import distributed, metrics, training
+    from mjzoo.algorithms import amp
+    from mjzoo.algorithms import ppo
+    from mjzoo.harness import distributed
+    from mjzoo.harness import metrics
+    from mjzoo.harness import training
     from mjzoo.harness.cli.arguments import parse_assignments
 
     algorithm = {"ppo": ppo, "amp": amp}[algorithm_name]

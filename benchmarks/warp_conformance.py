@@ -39,12 +39,17 @@ import jax.numpy as jnp
 import numpy as np
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "tests" / "conformance"))
-from test_conformance import STEPS, task_for
+from test_conformance import STEPS
+from test_conformance import task_for
 
 import mjzoo
 import mjzoo.envs
-from mjzoo import batching, physics, running
-from mjzoo.testing import PROPERTIES, TaskCheckError, check_task
+from mjzoo import batching
+from mjzoo import physics
+from mjzoo import running
+from mjzoo.testing import PROPERTIES
+from mjzoo.testing import TaskCheckError
+from mjzoo.testing import check_task
 
 RTOL, ATOL = 1e-3, 1e-3  # per entry: |warp - jax| <= ATOL + RTOL |jax| (qpos: m, rad; qvel: m/s, rad/s)
 # Compared with MJX-JAX: contact-free models first, then contact-rich ones.

@@ -32,12 +32,23 @@ import inspect
 import numbers
 import warnings
 from types import ModuleType
-from typing import TYPE_CHECKING, Any, Callable
+from typing import TYPE_CHECKING
+from typing import Any
+from typing import Callable
 
 import numpy as np
 
-from mjzoo import motion, physics
-from mjzoo.envs import base, cartpole, cylinder_push, humanoid_amp, joystick, locomotion, pendulum, point_mass, teachers
+from mjzoo import motion
+from mjzoo import physics
+from mjzoo.envs import base
+from mjzoo.envs import cartpole
+from mjzoo.envs import cylinder_push
+from mjzoo.envs import humanoid_amp
+from mjzoo.envs import joystick
+from mjzoo.envs import locomotion
+from mjzoo.envs import pendulum
+from mjzoo.envs import point_mass
+from mjzoo.envs import teachers
 from mjzoo.learning.evaluation import episode_steps
 from mjzoo.running import control_dt
 from mjzoo.types import Task
@@ -193,7 +204,8 @@ def closed_loop_problem(
     the planner's numbers (None: its defaults; `mjzoo.planning.configure`)."""
     # Imported here, not at the top: the registry is data (records of envs) and loads
     # nothing of the real-time machinery until a problem is asked for.
-    from mjzoo.planning.realtime import Problem, default_backend
+    from mjzoo.planning.realtime import Problem
+    from mjzoo.planning.realtime import default_backend
 
     setup = planning(spec)
     build = functools.partial(make, spec, **overrides)

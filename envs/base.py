@@ -8,7 +8,8 @@ from __future__ import annotations
 
 import dataclasses
 from pathlib import Path
-from typing import Any, Callable
+from typing import Any
+from typing import Callable
 
 import numpy as np
 

@@ -28,7 +28,8 @@ from mjzoo.catalog.rewards import tolerance
 from mjzoo.catalog.shaping import wrap_angle
 from mjzoo.envs import base
 from mjzoo.envs.base import ASSETS
-from mjzoo.types import State, Task
+from mjzoo.types import State
+from mjzoo.types import Task
 
 __all__ = ["balance", "swingup", "BALANCE", "SWINGUP"]
 

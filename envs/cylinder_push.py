@@ -29,7 +29,8 @@ from mjzoo.combinators import with_reward
 from mjzoo.envs import base
 from mjzoo.envs.base import ASSETS
 from mjzoo.planning.closed_loop import Hooks
-from mjzoo.types import State, Task
+from mjzoo.types import State
+from mjzoo.types import Task
 
 __all__ = ["push", "PUSH", "PPO", "PLANNING"]
 

@@ -49,31 +49,16 @@ import numpy as np
 import mjzoo
 from mjzoo import motion
 from mjzoo import physics as physics_lib
-from mjzoo.builder import alive, named
-from mjzoo.catalog import resets, terminations
-from mjzoo.envs import base, locomotion
+from mjzoo.builder import alive
+from mjzoo.builder import named
+from mjzoo.catalog import resets
+from mjzoo.catalog import terminations
+from mjzoo.envs import base
+from mjzoo.envs import locomotion
 from mjzoo.motion import deepmimic_format
 from mjzoo.types import Task
 
-__all__ = [
-    "AMP",
-    "KEY_BODIES",
-    "MAX_TORQUE",
-    "OPTIONS",
-    "SCALE",
-    "STYLE_JOINTS",
-    "character_joints",
-    "data_path",
-    "humanoid_model",
-    "humanoid_xml",
-    "motion_path",
-    "style_error",
-    "walk",
-    "walk_amp",
-    "walk_amp_reference",
-    "walk_clips",
-    "WALK_AMP",
-]
+__all__ = ["character_joints", "humanoid_model", "motion_path", "walk", "walk_amp", "walk_clips", "WALK_AMP"]
 
 SCALE = 0.25  # pybullet loads the URDF with globalScaling=0.25; the clips are in those metres
 # Per-joint torque limits (N m) of pybullet's DeepMimic humanoid environment.

@@ -63,33 +63,24 @@ import numpy as np
 from jax.tree_util import Partial
 
 import mjzoo
-from mjzoo import checks, motion
+from mjzoo import checks
+from mjzoo import motion
 from mjzoo import physics as physics_lib
-from mjzoo.builder import alive, named
-from mjzoo.catalog import commands, resets, rewards, terminations
+from mjzoo.builder import alive
+from mjzoo.builder import named
+from mjzoo.catalog import commands
+from mjzoo.catalog import resets
+from mjzoo.catalog import rewards
+from mjzoo.catalog import terminations
 from mjzoo.envs import base
-from mjzoo.envs.locomotion import MJX_OPTIONS, PPO, at_pose, free_base_observation, reset_pose
+from mjzoo.envs.locomotion import MJX_OPTIONS
+from mjzoo.envs.locomotion import PPO
+from mjzoo.envs.locomotion import at_pose
+from mjzoo.envs.locomotion import free_base_observation
+from mjzoo.envs.locomotion import reset_pose
 from mjzoo.types import Task
 
-__all__ = [
-    "AMP",
-    "JOYSTICK_AMP",
-    "KEY_BODIES",
-    "MIN_SPEED",
-    "REFERENCE_PATH",
-    "STYLE_THRESHOLD",
-    "STYLE_WINDOW",
-    "forward_speed",
-    "hinge_columns",
-    "humanoid_amp_joystick",
-    "humanoid_amp_walk",
-    "reference",
-    "WALK",
-    "JOYSTICK",
-    "style_error",
-    "walk_reference",
-    "walks_like_teacher",
-]
+__all__ = ["humanoid_amp_joystick", "humanoid_amp_walk", "WALK", "JOYSTICK", "walk_reference"]
 
 REFERENCE_PATH = Path(__file__).parent / "assets" / "humanoid_walk_ppo.npz"
 STYLE_WINDOW = 10  # frames (0.15 s): about a third of a step

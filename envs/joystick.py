@@ -34,28 +34,31 @@ otherwise (`curriculum.by_episode_length`).
 from __future__ import annotations
 
 import functools
-from typing import Any, Callable
+from typing import Any
+from typing import Callable
 
 from jax.tree_util import Partial
 
 import mjzoo
 from mjzoo.builder import named
-from mjzoo.catalog import (
-    actuators,
-    commands,
-    curriculum,
-    events,
-    observations,
-    randomizers,
-    resets,
-    rewards,
-    terminations,
-    trackers,
-)
+from mjzoo.catalog import actuators
+from mjzoo.catalog import commands
+from mjzoo.catalog import curriculum
+from mjzoo.catalog import events
+from mjzoo.catalog import observations
+from mjzoo.catalog import randomizers
+from mjzoo.catalog import resets
+from mjzoo.catalog import rewards
+from mjzoo.catalog import terminations
+from mjzoo.catalog import trackers
 from mjzoo.combinators import with_auto_reset
 from mjzoo.envs import base
-from mjzoo.envs.locomotion import MJX_OPTIONS, actuated_pose, at_pose, reset_pose
-from mjzoo.perturbations import with_domain_randomization, with_observation_noise
+from mjzoo.envs.locomotion import MJX_OPTIONS
+from mjzoo.envs.locomotion import actuated_pose
+from mjzoo.envs.locomotion import at_pose
+from mjzoo.envs.locomotion import reset_pose
+from mjzoo.perturbations import with_domain_randomization
+from mjzoo.perturbations import with_observation_noise
 from mjzoo.types import Task
 
 __all__ = ["joystick", "joystick_curriculum", "JOYSTICK", "PPO"]

@@ -41,7 +41,9 @@ hinge joint's position and velocity.
 
 from __future__ import annotations
 
-from typing import Any, Callable, Mapping
+from typing import Any
+from typing import Callable
+from typing import Mapping
 
 import jax
 import mujoco
@@ -51,17 +53,16 @@ from mujoco import mjx
 import mjzoo
 from mjzoo import names
 from mjzoo import physics as physics_lib
-from mjzoo.builder import alive, named
-from mjzoo.catalog import observations, resets, rewards, terminations
+from mjzoo.builder import alive
+from mjzoo.builder import named
+from mjzoo.catalog import observations
+from mjzoo.catalog import resets
+from mjzoo.catalog import rewards
+from mjzoo.catalog import terminations
 from mjzoo.envs import base
 from mjzoo.types import Task
 
 __all__ = [
-    "bare",
-    "at_pose",
-    "reset_pose",
-    "actuated_pose",
-    "gym_task",
     "hopper",
     "walker",
     "cheetah",
@@ -69,9 +70,6 @@ __all__ = [
     "humanoid_walk",
     "humanoid_run",
     "humanoid_standup",
-    "free_base_observation",
-    "MJX_OPTIONS",
-    "PPO",
     "HOPPER",
     "WALKER",
     "CHEETAH",

@@ -30,7 +30,8 @@ from mjzoo.catalog.shaping import wrap_angle
 from mjzoo.combinators import with_reward
 from mjzoo.envs import base
 from mjzoo.envs.base import ASSETS
-from mjzoo.types import State, Task
+from mjzoo.types import State
+from mjzoo.types import Task
 
 __all__ = ["swingup", "SWINGUP", "PPO", "PLANNING"]
 

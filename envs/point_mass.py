@@ -23,7 +23,8 @@ from mjzoo.catalog.rewards import tolerance
 from mjzoo.envs import base
 from mjzoo.envs.base import ASSETS
 from mjzoo.planning.closed_loop import Hooks
-from mjzoo.types import State, Task
+from mjzoo.types import State
+from mjzoo.types import Task
 
 __all__ = ["reach", "REACH", "PPO", "PLANNING"]
 

@@ -49,18 +49,12 @@ import numpy as np
 
 from mjzoo import motion
 from mjzoo.catalog import resets
-from mjzoo.envs import base, cartpole
-from mjzoo.types import State, Task
+from mjzoo.envs import base
+from mjzoo.envs import cartpole
+from mjzoo.types import State
+from mjzoo.types import Task
 
-__all__ = [
-    "AMP",
-    "CARTPOLE_CLIP",
-    "STYLE_WINDOW",
-    "cartpole_amp_swingup",
-    "cartpole_clip",
-    "reference",
-    "style_error",
-]
+__all__ = ["CARTPOLE_CLIP", "cartpole_amp_swingup", "cartpole_clip"]
 
 CARTPOLE_CLIP: Path = base.ASSETS / "cartpole_swingup_mppi.npz"
 STYLE_WINDOW = 25  # frames (0.5 s) per compared window: about one pump of the swing-up

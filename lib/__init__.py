@@ -27,40 +27,44 @@ import io
 with contextlib.redirect_stdout(io.StringIO()):  # mjx prints a notice when its optional warp backend is absent
     from mujoco import mjx  # noqa: F401
 
-from mjzoo import batching, checks, layers, lazy, names, physics, tree
+from mjzoo import batching
+from mjzoo import checks
+from mjzoo import layers
+from mjzoo import lazy
+from mjzoo import names
+from mjzoo import physics
+from mjzoo import tree
 from mjzoo.builder import task
 from mjzoo.checks import RetraceHazardWarning
-from mjzoo.combinators import (
-    AutoResetState,
-    ObservationState,
-    TimeLimitState,
-    with_action_repeat,
-    with_auto_reset,
-    with_divergence_guard,
-    with_observation,
-    with_reward,
-    with_reward_clip,
-    with_time_limit,
-)
+from mjzoo.combinators import AutoResetState
+from mjzoo.combinators import ObservationState
+from mjzoo.combinators import TimeLimitState
+from mjzoo.combinators import with_action_repeat
+from mjzoo.combinators import with_auto_reset
+from mjzoo.combinators import with_divergence_guard
+from mjzoo.combinators import with_observation
+from mjzoo.combinators import with_reward
+from mjzoo.combinators import with_reward_clip
+from mjzoo.combinators import with_time_limit
 from mjzoo.layers import find
-from mjzoo.parameters import params, with_params
-from mjzoo.perturbations import (
-    DomainRandomizationState,
-    with_action_noise,
-    with_domain_randomization,
-    with_observation_noise,
-)
-from mjzoo.running import (
-    Policy,
-    control_dt,
-    fill_transition_entries,
-    reset,
-    reward_terms,
-    rollout,
-    transition,
-    transition_with_terms,
-)
-from mjzoo.types import Outcome, State, Task, Trajectory
+from mjzoo.parameters import params
+from mjzoo.parameters import with_params
+from mjzoo.perturbations import DomainRandomizationState
+from mjzoo.perturbations import with_action_noise
+from mjzoo.perturbations import with_domain_randomization
+from mjzoo.perturbations import with_observation_noise
+from mjzoo.running import Policy
+from mjzoo.running import control_dt
+from mjzoo.running import fill_transition_entries
+from mjzoo.running import reset
+from mjzoo.running import reward_terms
+from mjzoo.running import rollout
+from mjzoo.running import transition
+from mjzoo.running import transition_with_terms
+from mjzoo.types import Outcome
+from mjzoo.types import State
+from mjzoo.types import Task
+from mjzoo.types import Trajectory
 
 __version__ = "0.1.0"
 

@@ -12,7 +12,8 @@ MJX's JAX implementation every batch function here is the plain operation (or th
 from __future__ import annotations
 
 import dataclasses
-from typing import Any, NamedTuple
+from typing import Any
+from typing import NamedTuple
 
 import jax
 import jax.numpy as jnp
@@ -23,24 +24,7 @@ from mujoco import mjx
 
 from mjzoo.tree import where as leafwise_where
 
-__all__ = [
-    "AXIS",
-    "sized",
-    "own",
-    "shared",
-    "where",
-    "partition",
-    "mesh_devices",
-    "vmap_transition",
-    "Contacts",
-    "contacts",
-    "overflow",
-    "overflow_metrics",
-    "clear_overflow",
-    "probe_capacity",
-    "OVERFLOW_CAPACITY",
-    "OVERFLOW_SOLVER",
-]
+__all__ = ["AXIS", "sized", "own", "where", "Contacts", "contacts", "overflow"]
 
 # MuJoCo Warp's overflow bits (mujoco_warp OverflowType): capacities a run outgrew (its
 # physics then drops contacts or constraints) and solver iteration limits (it stops early).

@@ -48,7 +48,10 @@ import dataclasses
 import keyword
 import math
 import os
-from typing import Any, Callable, Mapping, Sequence
+from typing import Any
+from typing import Callable
+from typing import Mapping
+from typing import Sequence
 
 import jax
 import jax.numpy as jnp
@@ -57,11 +60,14 @@ import numpy as np
 from jax.tree_util import Partial
 from mujoco import mjx
 
-from mjzoo import batching, checks
+from mjzoo import batching
+from mjzoo import checks
 from mjzoo import physics as physics_lib
-from mjzoo.combinators import with_divergence_guard, with_time_limit
+from mjzoo.combinators import with_divergence_guard
+from mjzoo.combinators import with_time_limit
 from mjzoo.tree import StaticValue
-from mjzoo.types import State, Task
+from mjzoo.types import State
+from mjzoo.types import Task
 
 __all__ = ["task", "named", "alive", "joint_state"]
 

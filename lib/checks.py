@@ -1,8 +1,15 @@
-"""Checking the numbers a catalog constructor is given, once, at construction.
+"""Checking what users give, once, at construction.
 
-Each function returns the value ready to close over as a pytree leaf (float32 arrays) or a
-static int, or raises a ValueError that says which argument of which constructor is
-wrong and what it must be: ``"{who}: {name}={value!r} must be ..."``.
+A catalog constructor's arguments: each function returns the value ready to close over
+as a pytree leaf (float32 arrays) or a static int, or raises a ValueError that says
+which argument of which constructor is wrong and what it must be:
+``"{who}: {name}={value!r} must be ..."``.
+
+A config's fields (an algorithm's or a planner's Config and Hyperparams, the harness's
+Settings and RenderConfig): `fields` and `ranges`, the one way they are checked, raise
+one ValueError naming every wrong field: ``"{where}: {field}={value!r} is invalid;
+expected ..."``. Hyperparameters may be traced (under jit or vmap): `ranges` checks the
+values it can see on the host and leaves the rest.
 """
 
 from __future__ import annotations
@@ -13,12 +20,25 @@ import numbers as _numbers
 import os
 import sys
 import warnings
+from collections.abc import Mapping
+from typing import Any
 
 import jax
 import jax.numpy as jnp
 import numpy as np
 
-__all__ = ["number", "integer", "interval", "numbers", "key", "RetraceHazardWarning", "retrace_hazard"]
+__all__ = [
+    "number",
+    "integer",
+    "interval",
+    "numbers",
+    "key",
+    "fields",
+    "ranges",
+    "host_value",
+    "RetraceHazardWarning",
+    "retrace_hazard",
+]
 
 Array = jax.Array
 
@@ -70,6 +90,55 @@ def numbers(who: str, name: str, value, n: int, low: float = 0.0) -> Array:
     if array.ndim > 1 or (array.ndim == 1 and array.shape[0] != n) or not np.all(np.isfinite(array) & (array >= low)):
         raise ValueError(f"{who}: {name}={value!r} must be a finite number >= {low:.6g} or {n} of them")
     return jnp.broadcast_to(jnp.asarray(array, jnp.float32), (n,))
+
+
+def fields(where: str, config: Any, expectations: Mapping[str, tuple[Any, str]]) -> None:
+    """Raises one ValueError naming every field of `config` whose check fails.
+
+    `expectations`: ``{field: (ok, what it must be)}``, `ok` a bool or a bool array (every
+    element must hold, for a batch of values).
+    """
+    wrong = [
+        f"{field}={_shown(getattr(config, field))!r} is invalid; expected {expected}"
+        for field, (ok, expected) in expectations.items()
+        if not np.all(ok)
+    ]
+    if wrong:
+        raise ValueError(f"{where}: " + "; ".join(wrong))
+
+
+def ranges(where: str, config: Any, bounds: Mapping[str, tuple[float, float, str]]) -> None:
+    """`fields` for numeric fields: each host value (every element, for a batch) within
+    ``(low, high, ends)``, `ends` one of "[]", "[)", "(]", "()" saying which ends are
+    allowed. A traced value is not a number yet, and is left unchecked."""
+    expectations = {}
+    for field, (low, high, ends) in bounds.items():
+        try:
+            value = host_value(getattr(config, field))
+        except TypeError:
+            expectations[field] = (False, "a number")
+            continue
+        if value is not None:
+            above = value >= low if ends[0] == "[" else value > low
+            below = value <= high if ends[1] == "]" else value < high
+            expectations[field] = (above & below, f"in {ends[0]}{low}, {high}{ends[1]}")
+    fields(where, config, expectations)
+
+
+def host_value(value: Any) -> np.ndarray | None:
+    """A numeric field's value on the host, or None where it is not a number yet (traced,
+    or a placeholder JAX puts in a pytree while it rebuilds one: None, object(), a shape).
+    Raises TypeError for a string or a bool."""
+    if isinstance(value, (str, bytes, bool, np.bool_)):
+        raise TypeError(f"a hyperparameter must be a number, not {value!r}")
+    if not isinstance(value, (int, float, np.ndarray, np.number, jax.Array)) or isinstance(value, jax.core.Tracer):
+        return None
+    return np.asarray(value, dtype=np.float64)
+
+
+def _shown(value: Any) -> Any:
+    """A field's value as an error shows it: a batch as a list."""
+    return np.asarray(value).tolist() if isinstance(value, (np.ndarray, jax.Array)) and np.ndim(value) else value
 
 
 def key(who: str, value) -> None:

@@ -16,17 +16,29 @@ called them clears it (states never keep it).
 from __future__ import annotations
 
 import dataclasses
-from typing import Any, Callable, Mapping, NamedTuple
+from typing import Any
+from typing import Callable
+from typing import Mapping
+from typing import NamedTuple
 
 import jax
 import jax.numpy as jnp
 from jax.tree_util import Partial
 from mujoco import mjx
 
-from mjzoo import batching, checks, tree
-from mjzoo.layers import layered, peel, wrap
-from mjzoo.running import fill_transition_entries, reset, reward_terms, transition_with_terms
-from mjzoo.types import Outcome, State, Task
+from mjzoo import batching
+from mjzoo import checks
+from mjzoo import tree
+from mjzoo.layers import layered
+from mjzoo.layers import peel
+from mjzoo.layers import wrap
+from mjzoo.running import fill_transition_entries
+from mjzoo.running import reset
+from mjzoo.running import reward_terms
+from mjzoo.running import transition_with_terms
+from mjzoo.types import Outcome
+from mjzoo.types import State
+from mjzoo.types import Task
 
 __all__ = [
     "with_observation",

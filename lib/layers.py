@@ -21,12 +21,15 @@ which returns the outermost record of that type the state holds.
 
 from __future__ import annotations
 
-from typing import Any, Protocol, TypeVar
+from typing import Any
+from typing import Protocol
+from typing import TypeVar
 
 import jax
 
 from mjzoo import tree
-from mjzoo.types import State, Task
+from mjzoo.types import State
+from mjzoo.types import Task
 
 __all__ = ["Layer", "find", "peel", "wrap", "layered"]
 

@@ -10,7 +10,8 @@ from __future__ import annotations
 import importlib
 import sys
 from types import ModuleType
-from typing import Callable, Sequence
+from typing import Callable
+from typing import Sequence
 
 __all__ = ["submodules"]
 

@@ -20,18 +20,7 @@ from typing import Sequence
 import mujoco
 import numpy as np
 
-__all__ = [
-    "KINDS",
-    "Names",
-    "all_names",
-    "ids",
-    "index",
-    "base_body",
-    "free_joint",
-    "free_joint_addresses",
-    "joints",
-    "joint_addresses",
-]
+__all__ = ["Names", "ids", "index", "base_body", "free_joint", "free_joint_addresses", "joints", "joint_addresses"]
 
 Names = str | Sequence[str]
 # kind -> (MuJoCo object type, attribute of MjModel counting them)

@@ -19,7 +19,10 @@ from __future__ import annotations
 import jax
 
 from mjzoo import tree
-from mjzoo.types import FUNCTIONS, PHYSICS, UNNAMED, Task
+from mjzoo.types import FUNCTIONS
+from mjzoo.types import PHYSICS
+from mjzoo.types import UNNAMED
+from mjzoo.types import Task
 
 __all__ = ["params", "with_params"]
 

@@ -7,15 +7,20 @@ Noise scales are pytree leaves, so a sweep over them runs under one trace.
 from __future__ import annotations
 
 import dataclasses
-from typing import Any, Callable, NamedTuple
+from typing import Any
+from typing import Callable
+from typing import NamedTuple
 
 import jax
 import jax.numpy as jnp
 from jax.tree_util import Partial
 from mujoco import mjx
 
-from mjzoo.layers import layered, peel, wrap
-from mjzoo.types import State, Task
+from mjzoo.layers import layered
+from mjzoo.layers import peel
+from mjzoo.layers import wrap
+from mjzoo.types import State
+from mjzoo.types import Task
 
 __all__ = [
     "with_observation_noise",

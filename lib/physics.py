@@ -33,22 +33,10 @@ import jax
 import mujoco
 from mujoco import mjx
 
-from mjzoo.batching import clear_overflow, probe_capacity
+from mjzoo.batching import clear_overflow
+from mjzoo.batching import probe_capacity
 
-__all__ = [
-    "Physics",
-    "load",
-    "of_model",
-    "step",
-    "substep",
-    "forward",
-    "StandIn",
-    "OPTIONS",
-    "IMPLS",
-    "default_impl",
-    "check_differentiable",
-    "quiet",
-]
+__all__ = ["Physics", "load", "of_model", "step", "forward", "OPTIONS", "IMPLS", "default_impl"]
 
 SOLVERS = {"cg": mujoco.mjtSolver.mjSOL_CG, "newton": mujoco.mjtSolver.mjSOL_NEWTON}
 INTEGRATORS = {

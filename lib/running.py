@@ -9,13 +9,19 @@ both go through it, so one reward serves learning and planning. Batch with
 
 from __future__ import annotations
 
-from typing import Any, Callable
+from typing import Any
+from typing import Callable
 
 import jax
 import jax.numpy as jnp
 
 from mjzoo import checks
-from mjzoo.types import State, Task, Trajectory, fill_transition_entries, transition, transition_with_terms
+from mjzoo.types import State
+from mjzoo.types import Task
+from mjzoo.types import Trajectory
+from mjzoo.types import fill_transition_entries
+from mjzoo.types import transition
+from mjzoo.types import transition_with_terms
 
 __all__ = [
     "reset",

@@ -15,15 +15,19 @@ from __future__ import annotations
 
 import dataclasses
 import functools
-from typing import Any, Callable
+from typing import Any
+from typing import Callable
 
 import jax
 import jax.numpy as jnp
 import numpy as np
 
-from mjzoo import batching, running
-from mjzoo.combinators import resets_itself, with_time_limit
-from mjzoo.types import State, Task
+from mjzoo import batching
+from mjzoo import running
+from mjzoo.combinators import resets_itself
+from mjzoo.combinators import with_time_limit
+from mjzoo.types import State
+from mjzoo.types import Task
 
 __all__ = ["check_task", "TaskReport", "TaskCheckError", "PROPERTIES"]
 

@@ -4,23 +4,14 @@ from __future__ import annotations
 
 import dataclasses
 import math
-from typing import Any, Mapping
+from typing import Any
+from typing import Mapping
 
 import jax
 import jax.numpy as jnp
 import numpy as np
 
-__all__ = [
-    "Packing",
-    "StaticValue",
-    "where",
-    "all_finite",
-    "fill_missing",
-    "strongly_typed",
-    "zeros_like_shape",
-    "named",
-    "with_named",
-]
+__all__ = ["StaticValue", "where", "all_finite", "named", "with_named"]
 
 PyTree = Any
 

@@ -12,14 +12,17 @@ Everything is written for ONE environment; algorithms batch with `jax.vmap`.
 from __future__ import annotations
 
 import dataclasses
-from typing import Any, NamedTuple, Protocol
+from typing import Any
+from typing import NamedTuple
+from typing import Protocol
 
 import jax
 import jax.numpy as jnp
 import mujoco
 from mujoco import mjx
 
-from mjzoo import checks, tree
+from mjzoo import checks
+from mjzoo import tree
 
 __all__ = ["Task", "State", "Outcome", "Trajectory", "StartFn", "StepFn", "RewardFn", "TerminateFn"]
 

@@ -27,7 +27,8 @@ DEFAULT_OUT = Path(__file__).resolve().parents[1] / "benchmarks" / "results" / "
 
 
 def suite(name: str) -> str:
-    from mujoco_playground._src import dm_control_suite, locomotion
+    from mujoco_playground._src import dm_control_suite
+    from mujoco_playground._src import locomotion
 
     if name in dm_control_suite.ALL_ENVS:
         return "dm_control_suite"

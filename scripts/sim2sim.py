@@ -39,7 +39,8 @@ def main() -> None:
     args = parser.parse_args()
 
     from mjzoo.harness.cli import exporting
-    from mjzoo.interop import export, sim2sim
+    from mjzoo.interop import export
+    from mjzoo.interop import sim2sim
 
     trained, state = exporting.load_run(args.run)
     task = sim2sim.without_observation_noise(trained.task)

@@ -28,7 +28,8 @@ from mujoco import mjx
 
 import mjzoo
 from mjzoo import physics as physics_lib
-from mjzoo.types import State, Task
+from mjzoo.types import State
+from mjzoo.types import Task
 
 BASE_AND_ARM = physics_lib.load("""
 <mujoco model="base-and-arm">

@@ -1,4 +1,4 @@
-"""`mjzoo.task` (the kit for one's own task) and named parameters (`mjzoo.params`,
+"""`mjzoo.task` (the builder of one's own task) and named parameters (`mjzoo.params`,
 `mjzoo.with_params`, `Task.with_params`).
 
 The model: a 1 kg block on a frictionless slide joint along x, no gravity, a motor

@@ -31,9 +31,12 @@ from mujoco import mjx
 
 import mjzoo
 from mjzoo import physics as physics_lib
-from mjzoo.combinators import AutoResetState, ObservationState, TimeLimitState
+from mjzoo.combinators import AutoResetState
+from mjzoo.combinators import ObservationState
+from mjzoo.combinators import TimeLimitState
 from mjzoo.perturbations import DomainRandomizationState
-from mjzoo.types import State, Task
+from mjzoo.types import State
+from mjzoo.types import Task
 
 DT = 0.1
 XML = f"""

@@ -23,9 +23,12 @@ from mujoco import mjx
 
 import mjzoo
 import mjzoo.envs
-from mjzoo import batching, physics, running
+from mjzoo import batching
+from mjzoo import physics
+from mjzoo import running
 from mjzoo.catalog import contacts as catalog_contacts
-from mjzoo.harness import cli, training
+from mjzoo.harness import cli
+from mjzoo.harness import training
 from mjzoo.testing import check_task
 
 # A 2 kg box resting on the floor: four corner contacts carrying m g between them.

@@ -13,7 +13,8 @@ from jax.tree_util import Partial
 from mujoco import mjx
 
 import mjzoo
-from mjzoo.types import State, Task
+from mjzoo.types import State
+from mjzoo.types import Task
 
 XML = """
 <mujoco><worldbody><body><joint name="x" type="slide" axis="1 0 0"/><geom type="box" size="0.1 0.1 0.1"/>
@@ -102,7 +103,9 @@ def test_a_transitions_shape_is_traced_once_whatever_the_tasks_sharding():
     memoized: the same task placed on a mesh, as the harness replicates it over several
     devices, must not trace its step again (a humanoid's step takes seconds to trace)."""
     import numpy as np
-    from jax.sharding import Mesh, NamedSharding, PartitionSpec
+    from jax.sharding import Mesh
+    from jax.sharding import NamedSharding
+    from jax.sharding import PartitionSpec
 
     traced = []
 

@@ -17,8 +17,11 @@ from mujoco import mjx
 import mjzoo
 from mjzoo import physics as physics_lib
 from mjzoo import tree
-from mjzoo.testing import PROPERTIES, TaskCheckError, check_task
-from mjzoo.types import State, Task
+from mjzoo.testing import PROPERTIES
+from mjzoo.testing import TaskCheckError
+from mjzoo.testing import check_task
+from mjzoo.types import State
+from mjzoo.types import Task
 
 STEPS = 6  # every limit below is reached within one check's rollout
 

@@ -7,7 +7,8 @@ import jax.numpy as jnp
 import numpy as np
 import pytest
 
-from mjzoo.tree import Packing, strongly_typed
+from mjzoo.tree import Packing
+from mjzoo.tree import strongly_typed
 
 
 def _tree():

@@ -15,21 +15,20 @@ docs/catalog.md lists every item and how they nest.
     contacts       contact queries             shaping       `tolerance`, `wrap_angle`
 """
 
-from mjzoo.catalog import (
-    actuators,
-    commands,
-    contacts,
-    curriculum,
-    events,
-    observations,
-    randomizers,
-    resets,
-    rewards,
-    shaping,
-    terminations,
-    trackers,
-)
-from mjzoo.catalog.shaping import tolerance, wrap_angle
+from mjzoo.catalog import actuators
+from mjzoo.catalog import commands
+from mjzoo.catalog import contacts
+from mjzoo.catalog import curriculum
+from mjzoo.catalog import events
+from mjzoo.catalog import observations
+from mjzoo.catalog import randomizers
+from mjzoo.catalog import resets
+from mjzoo.catalog import rewards
+from mjzoo.catalog import shaping
+from mjzoo.catalog import terminations
+from mjzoo.catalog import trackers
+from mjzoo.catalog.shaping import tolerance
+from mjzoo.catalog.shaping import wrap_angle
 
 __all__ = [
     "observations",

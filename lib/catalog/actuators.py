@@ -20,7 +20,10 @@ summed reward is `mjzoo.with_reward_clip`.
 from __future__ import annotations
 
 import dataclasses
-from typing import Any, Callable, NamedTuple, Sequence
+from typing import Any
+from typing import Callable
+from typing import NamedTuple
+from typing import Sequence
 
 import jax
 import jax.numpy as jnp
@@ -29,9 +32,16 @@ import numpy as np
 from jax.tree_util import Partial
 from mujoco import mjx
 
-from mjzoo import batching, checks, names, physics, tree
-from mjzoo.layers import layered, peel, wrap
-from mjzoo.types import State, Task
+from mjzoo import batching
+from mjzoo import checks
+from mjzoo import names
+from mjzoo import physics
+from mjzoo import tree
+from mjzoo.layers import layered
+from mjzoo.layers import peel
+from mjzoo.layers import wrap
+from mjzoo.types import State
+from mjzoo.types import Task
 
 __all__ = [
     "ActionLatencyState",

@@ -32,18 +32,27 @@ Where they sit: inside `with_auto_reset` (a new command each episode), outside
 from __future__ import annotations
 
 import dataclasses
-from typing import Any, NamedTuple, Sequence
+from typing import Any
+from typing import NamedTuple
+from typing import Sequence
 
 import jax
 import jax.numpy as jnp
 import numpy as np
 from jax.tree_util import Partial
 
-from mjzoo import checks, names, tree
-from mjzoo.catalog.events import countdown_interval, due, elapsed
+from mjzoo import checks
+from mjzoo import names
+from mjzoo import tree
+from mjzoo.catalog.events import countdown_interval
+from mjzoo.catalog.events import due
+from mjzoo.catalog.events import elapsed
 from mjzoo.catalog.shaping import wrap_angle
-from mjzoo.layers import layered, peel, wrap
-from mjzoo.types import State, Task
+from mjzoo.layers import layered
+from mjzoo.layers import peel
+from mjzoo.layers import wrap
+from mjzoo.types import State
+from mjzoo.types import Task
 
 __all__ = [
     "with_velocity_command",

@@ -23,7 +23,8 @@ import mujoco
 import numpy as np
 from mujoco import mjx
 
-from mjzoo import batching, names
+from mjzoo import batching
+from mjzoo import names
 
 __all__ = ["can_touch", "geom_sets", "pairs", "touching", "normal_forces", "forces", "point_velocity"]
 

@@ -28,7 +28,9 @@ Rules say how the level moves after each transition (`by_steps`, `by_episode_len
 from __future__ import annotations
 
 import dataclasses
-from typing import Any, Callable, NamedTuple
+from typing import Any
+from typing import Callable
+from typing import NamedTuple
 
 import jax
 import jax.numpy as jnp
@@ -37,11 +39,15 @@ import numpy as np
 from jax.tree_util import Partial
 from mujoco import mjx
 
-from mjzoo import checks, names
-from mjzoo.combinators import record, runs_transitions
-from mjzoo.layers import peel, wrap
+from mjzoo import checks
+from mjzoo import names
+from mjzoo.combinators import record
+from mjzoo.combinators import runs_transitions
+from mjzoo.layers import peel
+from mjzoo.layers import wrap
 from mjzoo.running import transition_with_terms
-from mjzoo.types import State, Task
+from mjzoo.types import State
+from mjzoo.types import Task
 
 __all__ = ["with_curriculum", "CurriculumState", "Rule", "by_steps", "by_episode_length", "by_distance"]
 

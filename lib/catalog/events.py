@@ -17,16 +17,22 @@ step sees their effect.
 
 from __future__ import annotations
 
-from typing import Any, NamedTuple, Sequence
+from typing import Any
+from typing import NamedTuple
+from typing import Sequence
 
 import jax
 import jax.numpy as jnp
 from jax.tree_util import Partial
 from mujoco import mjx
 
-from mjzoo import checks, names
-from mjzoo.layers import layered, peel, wrap
-from mjzoo.types import State, Task
+from mjzoo import checks
+from mjzoo import names
+from mjzoo.layers import layered
+from mjzoo.layers import peel
+from mjzoo.layers import wrap
+from mjzoo.types import State
+from mjzoo.types import Task
 
 __all__ = [
     "with_velocity_pushes",

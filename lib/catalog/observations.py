@@ -27,7 +27,9 @@ Combinators: history, per-episode bias, multiplicative noise (additive noise is
 
 from __future__ import annotations
 
-from typing import Any, Callable, NamedTuple
+from typing import Any
+from typing import Callable
+from typing import NamedTuple
 
 import jax
 import jax.numpy as jnp
@@ -35,13 +37,20 @@ import mujoco
 import numpy as np
 from mujoco import mjx
 
-from mjzoo import checks, names, tree
+from mjzoo import checks
+from mjzoo import names
+from mjzoo import tree
 from mjzoo.catalog import contacts
 from mjzoo.catalog.contacts import point_velocity
-from mjzoo.catalog.trackers import ActionHistoryState, FeetState
-from mjzoo.layers import find, layered, peel, wrap
+from mjzoo.catalog.trackers import ActionHistoryState
+from mjzoo.catalog.trackers import FeetState
+from mjzoo.layers import find
+from mjzoo.layers import layered
+from mjzoo.layers import peel
+from mjzoo.layers import wrap
 from mjzoo.perturbations import add_noise
-from mjzoo.types import State, Task
+from mjzoo.types import State
+from mjzoo.types import Task
 
 __all__ = [
     "joint_positions",

@@ -37,7 +37,8 @@ velocity in the world frame, angular velocity in the body frame.
 
 from __future__ import annotations
 
-from typing import Callable, Sequence
+from typing import Callable
+from typing import Sequence
 
 import jax
 import jax.numpy as jnp
@@ -46,8 +47,12 @@ import numpy as np
 from jax.tree_util import Partial
 from mujoco import mjx
 
-from mjzoo import checks, motion, names, physics
-from mjzoo.types import State, Task
+from mjzoo import checks
+from mjzoo import motion
+from mjzoo import names
+from mjzoo import physics
+from mjzoo.types import State
+from mjzoo.types import Task
 
 __all__ = [
     "with_resets",

@@ -18,20 +18,26 @@ the free joint of `body` (default: the model's first free joint, see `mjzoo.name
 from __future__ import annotations
 
 import math
-from typing import Callable, Mapping, Sequence
+from typing import Callable
+from typing import Mapping
+from typing import Sequence
 
 import jax
 import jax.numpy as jnp
 import mujoco
 import numpy as np
 
-from mjzoo import checks, names
+from mjzoo import checks
+from mjzoo import names
 from mjzoo.catalog.commands import VelocityCommandState
-from mjzoo.catalog.shaping import SIGMOIDS, tolerance
-from mjzoo.catalog.trackers import ActionHistoryState, FeetState
+from mjzoo.catalog.shaping import SIGMOIDS
+from mjzoo.catalog.shaping import tolerance
+from mjzoo.catalog.trackers import ActionHistoryState
+from mjzoo.catalog.trackers import FeetState
 from mjzoo.combinators import with_rewards
 from mjzoo.layers import find
-from mjzoo.types import State, Task
+from mjzoo.types import State
+from mjzoo.types import Task
 
 __all__ = [
     "tolerance",

@@ -19,19 +19,23 @@ Body poses and contacts are read from ``state.data`` as the last `mjx.step` left
 from __future__ import annotations
 
 import math
-from typing import Callable, Mapping
+from typing import Callable
+from typing import Mapping
 
 import jax
 import jax.numpy as jnp
 import mujoco
 from mujoco import mjx
 
-from mjzoo import checks, names, tree
+from mjzoo import checks
+from mjzoo import names
+from mjzoo import tree
 from mjzoo.catalog import contacts
 from mjzoo.combinators import TimeLimitState
 from mjzoo.layers import find
 from mjzoo.running import reset
-from mjzoo.types import State, Task
+from mjzoo.types import State
+from mjzoo.types import Task
 
 __all__ = [
     "not_upright",

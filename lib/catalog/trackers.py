@@ -9,7 +9,8 @@ that read them must be added at the same level of any `with_action_repeat`.
 
 from __future__ import annotations
 
-from typing import Any, NamedTuple
+from typing import Any
+from typing import NamedTuple
 
 import jax
 import jax.numpy as jnp
@@ -17,11 +18,16 @@ import numpy as np
 from jax.tree_util import Partial
 from mujoco import mjx
 
-from mjzoo import checks, names, tree
+from mjzoo import checks
+from mjzoo import names
+from mjzoo import tree
 from mjzoo.catalog import contacts
 from mjzoo.catalog.contacts import point_velocity
-from mjzoo.layers import layered, peel, wrap
-from mjzoo.types import State, Task
+from mjzoo.layers import layered
+from mjzoo.layers import peel
+from mjzoo.layers import wrap
+from mjzoo.types import State
+from mjzoo.types import Task
 
 __all__ = ["with_action_history", "with_feet", "ActionHistoryState", "FeetState"]
 

@@ -40,7 +40,6 @@ __all__ = [
     "save",
     "restore",
     "restore_newest_intact",
-    "set_aside",
     "latest_step",
     "all_steps",
     "CheckpointError",

@@ -26,15 +26,7 @@ from typing import Any
 import jax
 from jax.experimental.compilation_cache import compilation_cache
 
-__all__ = [
-    "cache_directory",
-    "compile_ahead",
-    "described",
-    "enable_cache",
-    "overlaps_safely",
-    "still_compiling",
-    "wait",
-]
+__all__ = ["cache_directory", "compile_ahead", "enable_cache"]
 
 _OFF = ("0", "off", "false", "no", "")
 

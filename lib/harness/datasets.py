@@ -28,20 +28,26 @@ import math
 import os
 from pathlib import Path
 from types import ModuleType
-from typing import Any, Callable
+from typing import Any
+from typing import Callable
 
 import jax
 import jax.numpy as jnp
 import numpy as np
 from mujoco import mjx
 
-from mjzoo import batching, motion, names
+from mjzoo import batching
+from mjzoo import motion
+from mjzoo import names
 from mjzoo.planning import closed_loop
 from mjzoo.planning.realtime import Problem
-from mjzoo.running import reset, reward_terms, rollout
-from mjzoo.types import State, Task
+from mjzoo.running import reset
+from mjzoo.running import reward_terms
+from mjzoo.running import rollout
+from mjzoo.types import State
+from mjzoo.types import Task
 
-__all__ = ["Dataset", "record_policy", "record_planner", "save", "load", "clip", "existing", "episode_lengths"]
+__all__ = ["Dataset", "record_policy", "record_planner", "save", "load", "clip"]
 
 FORMAT = "mjzoo.dataset/1"
 ARRAYS, META, MOTIONS = "dataset.npz", "meta.json", "motions"

@@ -17,14 +17,15 @@ from typing import Any
 import jax
 import jax.numpy as jnp
 import numpy as np
-from jax.sharding import NamedSharding, PartitionSpec
+from jax.sharding import NamedSharding
+from jax.sharding import PartitionSpec
 from mujoco import mjx
 
 from mjzoo import batching
 
 WARP_GPUS = "MJZOO_WARP_SEVERAL_GPUS"  # =1: let Warp physics train over several GPUs (it crashed XLA)
 
-__all__ = ["shard_envs", "env_shardings", "check_split", "replicate", "env_mesh", "env_mesh_scope", "template_data"]
+__all__ = ["shard_envs", "check_split", "replicate", "env_mesh"]
 
 
 def shard_envs(train_state: Any, per_env_fields: Sequence[str], devices: list | None = None) -> Any:

@@ -8,6 +8,8 @@ import dataclasses
 import math
 from typing import Any
 
+from mjzoo import checks
+
 __all__ = ["RenderConfig"]
 
 _FREE_CAMERA = ("distance", "azimuth", "elevation", "lookat", "track_body")
@@ -67,24 +69,25 @@ class RenderConfig:
         for name in ("lookat", "plot_figsize"):  # JSON gives lists back
             if isinstance(getattr(self, name), list):
                 object.__setattr__(self, name, tuple(getattr(self, name)))
-        for name in ("width", "height", "small_width", "small_height", "max_series_per_plot"):
-            value = getattr(self, name)
-            _require(
-                name, value, isinstance(value, int) and not isinstance(value, bool) and value >= 1, "an integer >= 1"
-            )
-        for name in ("length_seconds", "fps", "distance"):
-            value = getattr(self, name)
-            _require(name, value, value is None or _finite(value) and value > 0, "> 0 or None")
-        _require("slowdown", self.slowdown, _finite(self.slowdown) and self.slowdown > 0, "> 0")
-        _require("lookat", self.lookat, self.lookat is None or _vector(self.lookat, 3), "3 finite numbers or None")
-        figsize_ok = _vector(self.plot_figsize, 2) and min(self.plot_figsize) > 0
-        _require("plot_figsize", self.plot_figsize, figsize_ok, "2 numbers > 0")
+        counts = ("width", "height", "small_width", "small_height", "max_series_per_plot")
+        lengths = ("length_seconds", "fps", "distance")
+        checks.fields(
+            "RenderConfig",
+            self,
+            {
+                **{n: (_count(getattr(self, n)), "an integer >= 1") for n in counts},
+                **{n: (getattr(self, n) is None or _positive(getattr(self, n)), "> 0 or None") for n in lengths},
+                "slowdown": (_positive(self.slowdown), "> 0"),
+                "lookat": (self.lookat is None or _vector(self.lookat, 3), "3 finite numbers or None"),
+                "plot_figsize": (_vector(self.plot_figsize, 2) and min(self.plot_figsize) > 0, "2 numbers > 0"),
+            },
+        )
         if self.lookat is not None and self.track_body is not None:
-            raise ValueError("render config: lookat and track_body both choose the point looked at - give one")
+            raise ValueError("RenderConfig: lookat and track_body both choose the point looked at - give one")
         free = ", ".join(f for f in _FREE_CAMERA if getattr(self, f) is not None)
         if self.camera not in (None, -1) and free:
             message = f"camera={self.camera!r} is a model camera; {free} set a free camera - give one or the other"
-            raise ValueError(f"render config: {message}")
+            raise ValueError(f"RenderConfig: {message}")
 
     @property
     def free_camera(self) -> bool:
@@ -96,10 +99,13 @@ def _finite(value: Any) -> bool:
     return isinstance(value, (int, float)) and not isinstance(value, bool) and math.isfinite(value)
 
 
+def _positive(value: Any) -> bool:
+    return _finite(value) and value > 0
+
+
+def _count(value: Any) -> bool:
+    return isinstance(value, int) and not isinstance(value, bool) and value >= 1
+
+
 def _vector(value: Any, size: int) -> bool:
     return isinstance(value, tuple) and len(value) == size and all(map(_finite, value))
-
-
-def _require(name: str, value: Any, ok: bool, allowed: str) -> None:
-    if not ok:
-        raise ValueError(f"render config: {name} must be {allowed}, got {value!r}")

@@ -45,7 +45,8 @@ import sys
 import warnings
 from collections.abc import Iterator
 from pathlib import Path
-from typing import TYPE_CHECKING, Any
+from typing import TYPE_CHECKING
+from typing import Any
 
 import imageio.v2 as imageio
 import mujoco
@@ -283,7 +284,7 @@ def _timing(length: int, dt: float | None, fps: float | None, seconds: float | N
     skipped below real time and repeated above it, so playback at `fps` is real time."""
     if dt is None and fps is None:
         if seconds is not None:
-            raise ValueError("render config: length_seconds needs the trajectory's time step: pass dt= (or an fps)")
+            raise ValueError("RenderConfig: length_seconds needs the trajectory's time step: pass dt= (or an fps)")
         return np.arange(length), None
     dt = 1.0 / fps if dt is None else dt  # without dt, each row is one frame
     fps = 1.0 / dt if fps is None else fps
@@ -381,10 +382,10 @@ def _body_id(mj_model: mujoco.MjModel, body: str | int) -> int:
     names = [mujoco.mj_id2name(mj_model, mujoco.mjtObj.mjOBJ_BODY, i) for i in range(mj_model.nbody)]
     if isinstance(body, str):
         if body not in names:
-            raise ValueError(f"render config: track_body: no body named {body!r} in the model; it has {names}")
+            raise ValueError(f"RenderConfig: track_body: no body named {body!r} in the model; it has {names}")
         return names.index(body)
     if not 0 <= body < mj_model.nbody:
         raise ValueError(
-            f"render config: track_body: body id {body} out of range [0, {mj_model.nbody}); the bodies are {names}"
+            f"RenderConfig: track_body: body id {body} out of range [0, {mj_model.nbody}); the bodies are {names}"
         )
     return int(body)

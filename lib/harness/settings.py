@@ -12,6 +12,7 @@ from typing import Any
 
 import numpy as np
 
+from mjzoo import checks
 from mjzoo.harness import rendering
 
 __all__ = ["Settings", "EvalSchedule", "checkpoint_due", "config_dict", "hyperparams_dict"]
@@ -67,21 +68,30 @@ class Settings:
     compile_cache: bool = True  # JAX's persistent compilation cache (`compilation.enable_cache`: a CPU by default)
 
     def __post_init__(self):
-        problems = [_problem(name, getattr(self, name)) for name in _LOWEST]
-        if self.eval_steps is not None and self.eval_seconds is not None:
-            problems.append(
-                f"eval_steps={self.eval_steps!r} and eval_seconds={self.eval_seconds!r} both give the "
-                "evaluation's length; give one"
-            )
         budget = self.eval_budget
-        if isinstance(budget, bool) or not isinstance(budget, numbers.Real) or not 0 < budget <= 1:
-            problems.append(f"eval_budget={self.eval_budget!r} must be a share of the time, in (0, 1]")
-        if self.video_every and not self.video:
-            problems.append(f"video_every={self.video_every!r} needs video=True")
-        if not isinstance(self.render, rendering.RenderConfig):
-            problems.append(f"render={self.render!r} must be a mjzoo.harness.rendering.RenderConfig")
-        if problem := next((p for p in problems if p), None):
-            raise ValueError(f"training.Settings: {problem}")
+        checks.fields(
+            "training.Settings",
+            self,
+            {
+                **{name: _in_range(name, getattr(self, name)) for name in _LOWEST},
+                "eval_budget": (
+                    not isinstance(budget, bool) and isinstance(budget, numbers.Real) and 0 < budget <= 1,
+                    "a share of the time, in (0, 1]",
+                ),
+                "render": (isinstance(self.render, rendering.RenderConfig), "a mjzoo.harness.rendering.RenderConfig"),
+            },
+        )
+        checks.fields(  # between fields
+            "training.Settings",
+            self,
+            {
+                "eval_seconds": (
+                    self.eval_steps is None or self.eval_seconds is None,
+                    "None with eval_steps: both give the evaluation's length",
+                ),
+                "video_every": (not (self.video_every and not self.video), "0 with video=False"),
+            },
+        )
         for name in _LOWEST:  # NumPy scalars as Python's: config.json is written with `json`
             value = getattr(self, name)
             if isinstance(value, numbers.Number) and type(value) not in (int, float):
@@ -113,17 +123,17 @@ _OPTIONAL = (
 )  # None allowed
 
 
-def _problem(name: str, value: Any) -> str | None:
-    """What is wrong with Settings' numeric field `name` (seconds may be floats), or None."""
-    if value is None and name in _OPTIONAL:
-        return None
+def _in_range(name: str, value: Any) -> tuple[bool, str]:
+    """(whether Settings' numeric field `name` is valid, what it must be): seconds may be floats."""
     kind = numbers.Real if name.endswith("seconds") else numbers.Integral  # NumPy's too
-    if isinstance(value, bool) or not isinstance(value, kind) or not math.isfinite(value):
-        return f"{name}={value!r} must be {'a finite number' if kind is numbers.Real else 'an int'}"
     low = _LOWEST[name]
-    if value <= 0 if low == "> 0" else value < low:
-        return f"{name}={value!r} must be {low if low == '> 0' else f'>= {low}'}"
-    return None
+    expected = ("a finite number" if kind is numbers.Real else "an int") + (f" {low}" if low == "> 0" else f" >= {low}")
+    expected += " or None" if name in _OPTIONAL else ""
+    if value is None:
+        return name in _OPTIONAL, expected
+    if isinstance(value, bool) or not isinstance(value, kind) or not math.isfinite(value):
+        return False, expected
+    return bool(value > 0 if low == "> 0" else value >= low), expected
 
 
 def checkpoint_due(settings: Settings, chunk: int, final: bool, since: float) -> bool:

@@ -28,7 +28,8 @@ import time
 import warnings
 from collections.abc import Callable
 from pathlib import Path
-from typing import Any, NamedTuple
+from typing import Any
+from typing import NamedTuple
 
 import jax
 import jax.numpy as jnp
@@ -36,31 +37,41 @@ import numpy as np
 from mujoco import mjx
 
 from mjzoo import tree
-from mjzoo.harness import checkpoints, compilation, distributed, plotting, rendering
+from mjzoo.harness import checkpoints
+from mjzoo.harness import compilation
+from mjzoo.harness import distributed
 from mjzoo.harness import metrics as metrics_lib
-from mjzoo.harness.devices import env_mesh_scope, env_shardings, replicate, shard_envs, template_data
-from mjzoo.harness.settings import EvalSchedule, Settings, checkpoint_due, config_dict, hyperparams_dict
-from mjzoo.learning.algorithm import Algorithm, TrainingWarning, check_algorithm, check_state
+from mjzoo.harness import plotting
+from mjzoo.harness import rendering
+from mjzoo.harness.devices import env_mesh_scope
+from mjzoo.harness.devices import env_shardings
+from mjzoo.harness.devices import replicate
+from mjzoo.harness.devices import shard_envs
+from mjzoo.harness.devices import template_data
+from mjzoo.harness.settings import EvalSchedule
+from mjzoo.harness.settings import Settings
+from mjzoo.harness.settings import checkpoint_due
+from mjzoo.harness.settings import config_dict
+from mjzoo.harness.settings import hyperparams_dict
+from mjzoo.learning.algorithm import Algorithm
+from mjzoo.learning.algorithm import TrainingWarning
+from mjzoo.learning.algorithm import check_algorithm
+from mjzoo.learning.algorithm import check_state
 from mjzoo.learning.evaluation import episode_steps
 from mjzoo.running import control_dt
 from mjzoo.types import Task
 
 __all__ = [
     "RUN_FILES",
-    "Algorithm",
+    "config_dict",
+    "hyperparams_dict",
+    "existing",
     "Hooks",
     "PhysicsCapacityError",
     "Settings",
-    "TrainingWarning",
-    "check_algorithm",
-    "config_dict",
-    "existing",
-    "hyperparams_dict",
     "physics_info",
-    "replicate",
     "run",
     "seconds_to_steps",
-    "shard_envs",
 ]
 
 

@@ -8,7 +8,7 @@
     export       a trained policy out of JAX: ONNX (``write_onnx``; needs ``pip install
                  'mjzoo[export]'``) or a serialized jax.export artifact (``write_jax``),
                  each carrying its deployment contract, and ``load`` to run either
-    contract     the deployment contract: names, control ranges, the action mapping and the
+    deployment   the deployment contract: names, control ranges, the action mapping and the
                  observation as terms computable from ``mujoco.MjData``
     sim2sim      an exported policy driving plain C MuJoCo from its contract
                  (``run_in_mujoco``), scored by the task's own reward (``replay``)
@@ -19,6 +19,6 @@ needs it.
 
 from mjzoo import lazy
 
-__all__ = ["brax", "playground", "export", "contract", "sim2sim"]
+__all__ = ["brax", "playground", "export", "deployment", "sim2sim"]
 
 __getattr__, __dir__ = lazy.submodules(__name__, __all__)

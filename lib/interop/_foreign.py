@@ -28,7 +28,8 @@ from __future__ import annotations
 import contextlib
 import dataclasses
 import threading
-from typing import Any, Iterator
+from typing import Any
+from typing import Iterator
 
 import jax
 import jax.numpy as jnp
@@ -36,9 +37,13 @@ import mujoco
 from jax.tree_util import Partial
 from mujoco import mjx
 
-from mjzoo import physics, tree
-from mjzoo.combinators import record, with_divergence_guard, with_time_limit
-from mjzoo.types import State, Task
+from mjzoo import physics
+from mjzoo import tree
+from mjzoo.combinators import record
+from mjzoo.combinators import with_divergence_guard
+from mjzoo.combinators import with_time_limit
+from mjzoo.types import State
+from mjzoo.types import Task
 
 __all__ = ["Kind", "task", "env_model", "key_data"]
 

@@ -36,7 +36,9 @@ flag only, and counts an episode that our `done` ended at its limit as terminal.
 from __future__ import annotations
 
 import math
-from typing import Any, Callable, Sequence
+from typing import Any
+from typing import Callable
+from typing import Sequence
 
 import jax
 import jax.numpy as jnp
@@ -49,7 +51,8 @@ from mjzoo.interop import _foreign
 from mjzoo.interop.brax_envs import task
 from mjzoo.running import reset as mjzoo_reset
 from mjzoo.running import transition
-from mjzoo.types import State, Task
+from mjzoo.types import State
+from mjzoo.types import Task
 
 __all__ = ["to_brax_env", "task", "MjzooBraxEnv", "wrap_for_training", "patch_brax_for_current_jax"]
 

@@ -35,7 +35,8 @@ from __future__ import annotations
 from brax.envs import base as brax_base
 from brax.envs.wrappers import training as brax_training
 
-from mjzoo import checks, tree
+from mjzoo import checks
+from mjzoo import tree
 from mjzoo.interop import _foreign
 from mjzoo.types import Task
 

@@ -43,14 +43,18 @@ import difflib
 import subprocess
 from typing import Any
 
-from mujoco_playground import MjxEnv, registry
-from mujoco_playground._src import dm_control_suite, locomotion, manipulation, mjx_env
+from mujoco_playground import MjxEnv
+from mujoco_playground import registry
+from mujoco_playground._src import dm_control_suite
+from mujoco_playground._src import locomotion
+from mujoco_playground._src import manipulation
+from mujoco_playground._src import mjx_env
 
 from mjzoo import physics
 from mjzoo.interop import _foreign
 from mjzoo.types import Task
 
-__all__ = ["task", "load", "names", "offline_names", "needs_network", "config_defaults", "ppo_hyperparameters", "NAME"]
+__all__ = ["task", "load", "names", "NAME"]
 
 NAME = "playground"  # the reward term's name, the info key and the metrics prefix
 DEFAULT_IMPL = "jax"  # runs on any device; Playground's DM Control configs default to Warp
@@ -180,7 +184,9 @@ def ppo_hyperparameters(name: str) -> dict[str, Any]:
     5x256, swish); dict observations keep Playground's `policy_obs_key` / `value_obs_key`.
     """
     _checked_name(name)
-    from mujoco_playground.config import dm_control_suite_params, locomotion_params, manipulation_params
+    from mujoco_playground.config import dm_control_suite_params
+    from mujoco_playground.config import locomotion_params
+    from mujoco_playground.config import manipulation_params
 
     params = dm_control_suite_params
     if name in locomotion.ALL_ENVS:

@@ -19,7 +19,8 @@ from __future__ import annotations
 import dataclasses
 import functools
 import os
-from typing import Any, NamedTuple
+from typing import Any
+from typing import NamedTuple
 
 import jax
 import jax.numpy as jnp
@@ -32,20 +33,12 @@ from mjzoo.catalog.observations import ObservationHistoryState
 from mjzoo.interop import deployment
 from mjzoo.layers import find
 from mjzoo.learning import to_controls
-from mjzoo.running import reset, transition
-from mjzoo.types import State, Task
+from mjzoo.running import reset
+from mjzoo.running import transition
+from mjzoo.types import State
+from mjzoo.types import Task
 
-__all__ = [
-    "Check",
-    "Rollout",
-    "Replayed",
-    "check_observation",
-    "without_observation_noise",
-    "run_in_mujoco",
-    "to_ctrl",
-    "replay",
-    "starts",
-]
+__all__ = ["Check", "Rollout", "Replayed", "check_observation", "run_in_mujoco", "replay"]
 
 Array = jax.Array
 

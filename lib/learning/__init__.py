@@ -21,58 +21,57 @@ writes an A2C from them).
     motion_features AMP's features of a frame, one function for simulation and reference
 """
 
-from mjzoo.learning import (
-    actions,
-    advantages,
-    algorithm,
-    collection,
-    discriminators,
-    distributions,
-    evaluation,
-    hyperparams,
-    learner,
-    losses,
-    motion_features,
-    networks,
-    normalization,
-    replay,
-)
+from mjzoo.learning import actions
+from mjzoo.learning import advantages
+from mjzoo.learning import algorithm
+from mjzoo.learning import collection
+from mjzoo.learning import discriminators
+from mjzoo.learning import distributions
+from mjzoo.learning import evaluation
+from mjzoo.learning import hyperparams
+from mjzoo.learning import learner
+from mjzoo.learning import losses
+from mjzoo.learning import motion_features
+from mjzoo.learning import networks
+from mjzoo.learning import normalization
+from mjzoo.learning import replay
 from mjzoo.learning.actions import to_controls
 from mjzoo.learning.advantages import gae
-from mjzoo.learning.algorithm import Algorithm, TrainingWarning
-from mjzoo.learning.collection import (
-    Actor,
-    Collector,
-    Transitions,
-    collect,
-    feed_forward,
-)
-from mjzoo.learning.discriminators import (
-    discriminator_loss,
-    gradient_penalty,
-    least_squares_loss,
-    least_squares_reward,
-    logistic_loss,
-    logistic_reward,
-    style_reward,
-)
-from mjzoo.learning.evaluation import Evaluation, episode_steps, evaluate
+from mjzoo.learning.algorithm import Algorithm
+from mjzoo.learning.algorithm import TrainingWarning
+from mjzoo.learning.collection import Actor
+from mjzoo.learning.collection import Collector
+from mjzoo.learning.collection import Transitions
+from mjzoo.learning.collection import collect
+from mjzoo.learning.collection import feed_forward
+from mjzoo.learning.discriminators import discriminator_loss
+from mjzoo.learning.discriminators import gradient_penalty
+from mjzoo.learning.discriminators import least_squares_loss
+from mjzoo.learning.discriminators import least_squares_reward
+from mjzoo.learning.discriminators import logistic_loss
+from mjzoo.learning.discriminators import logistic_reward
+from mjzoo.learning.discriminators import style_reward
+from mjzoo.learning.evaluation import Evaluation
+from mjzoo.learning.evaluation import episode_steps
+from mjzoo.learning.evaluation import evaluate
 from mjzoo.learning.learner import learn
-from mjzoo.learning.losses import (
-    clipped_surrogate_loss,
-    kl_penalty_loss,
-    normalize_advantages,
-    policy_gradient_loss,
-    value_loss,
-)
-from mjzoo.learning.motion_features import feature_layout, feature_size, frames_features, with_feature_window
-from mjzoo.learning.networks import Network, RecurrentNetwork, gru_mlp, mlp
-from mjzoo.learning.normalization import (
-    RunningStats,
-    init_stats,
-    normalize,
-    update_stats,
-)
+from mjzoo.learning.losses import clipped_surrogate_loss
+from mjzoo.learning.losses import kl_penalty_loss
+from mjzoo.learning.losses import normalize_advantages
+from mjzoo.learning.losses import policy_gradient_loss
+from mjzoo.learning.losses import value_loss
+from mjzoo.learning.motion_features import feature_layout
+from mjzoo.learning.motion_features import feature_size
+from mjzoo.learning.motion_features import frames_features
+from mjzoo.learning.motion_features import with_feature_window
+from mjzoo.learning.networks import Network
+from mjzoo.learning.networks import RecurrentNetwork
+from mjzoo.learning.networks import gru_mlp
+from mjzoo.learning.networks import mlp
+from mjzoo.learning.normalization import RunningStats
+from mjzoo.learning.normalization import init_stats
+from mjzoo.learning.normalization import normalize
+from mjzoo.learning.normalization import update_stats
 from mjzoo.learning.replay import Replay
 
 __all__ = [

@@ -28,11 +28,15 @@ from typing import Any
 import jax
 import jax.numpy as jnp
 
-from mjzoo import batching, checks
-from mjzoo.combinators import AutoResetState, with_auto_reset
+from mjzoo import batching
+from mjzoo import checks
+from mjzoo.combinators import AutoResetState
+from mjzoo.combinators import with_auto_reset
 from mjzoo.layers import find
-from mjzoo.running import reset, transition
-from mjzoo.types import State, Task
+from mjzoo.running import reset
+from mjzoo.running import transition
+from mjzoo.types import State
+from mjzoo.types import Task
 
 __all__ = ["Collector", "Actor", "Transitions", "collect", "feed_forward"]
 

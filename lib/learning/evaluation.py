@@ -10,16 +10,20 @@ built from the policy's parameters alone, so evaluation needs nothing of trainin
 
 from __future__ import annotations
 
-from typing import Any, NamedTuple
+from typing import Any
+from typing import NamedTuple
 
 import jax
 import jax.numpy as jnp
 
-from mjzoo import batching, checks
+from mjzoo import batching
+from mjzoo import checks
 from mjzoo.learning.collection import Actor
-from mjzoo.running import reset, transition
+from mjzoo.running import reset
+from mjzoo.running import transition
 from mjzoo.tree import Packing
-from mjzoo.types import Task, Trajectory
+from mjzoo.types import Task
+from mjzoo.types import Trajectory
 
 __all__ = ["Evaluation", "episode_steps", "evaluate"]
 

@@ -3,7 +3,7 @@
 
 A Hyperparams class is a frozen dataclass registered as a pytree, every field a number
 (or a batch of numbers, to sweep under `jax.vmap`). It checks its ranges where values
-are host numbers (`check_ranges`, in `__post_init__`); traced values, and the
+are host numbers (`mjzoo.checks.ranges`, in `__post_init__`); traced values, and the
 placeholders JAX rebuilds a pytree with, pass unchecked.
 """
 
@@ -14,43 +14,10 @@ from typing import Any
 
 import jax
 import jax.numpy as jnp
-import numpy as np
 
-__all__ = ["INF", "as_leaves", "check_ranges", "host_value", "split_fields"]
+__all__ = ["INF", "as_leaves", "split_fields"]
 
 INF = float("inf")  # a number that switches a clip off, so the switch can be swept too
-
-
-def host_value(value: Any) -> np.ndarray | None:
-    """A hyperparameter's value on the host, or None where it is not a number yet (traced,
-    or a placeholder JAX puts in a pytree while it rebuilds one: None, object(), a shape).
-    Raises TypeError for a string."""
-    if isinstance(value, (str, bytes)):
-        raise TypeError(f"a hyperparameter must be a number, not {value!r}")
-    if isinstance(value, (bool, np.bool_)) or not isinstance(value, (int, float, np.ndarray, np.number, jax.Array)):
-        return None
-    if isinstance(value, jax.core.Tracer):
-        return None
-    return np.asarray(value, dtype=np.float64)
-
-
-def check_ranges(obj: Any, where: str, ranges: dict[str, tuple[float, float, str]]) -> None:
-    """Raises a ValueError naming the first field of `obj` whose host value (every
-    element, for a batch) is outside its range. `ranges`: {field: (low, high, ends)},
-    `ends` one of "[]", "[)", "(]", "()" saying which ends are allowed."""
-    for field, (low, high, ends) in ranges.items():
-        try:
-            value = host_value(getattr(obj, field))
-        except TypeError:
-            raise ValueError(f"{where}: {field}={getattr(obj, field)!r} is invalid; expected a number") from None
-        if value is None:
-            continue
-        above = value >= low if ends[0] == "[" else value > low
-        below = value <= high if ends[1] == "]" else value < high
-        if not np.all(above & below):
-            shown = getattr(obj, field)
-            shown = shown if np.ndim(shown) == 0 else np.asarray(shown).tolist()
-            raise ValueError(f"{where}: {field}={shown!r} is invalid; expected in {ends[0]}{low}, {high}{ends[1]}")
 
 
 def split_fields(

@@ -18,9 +18,11 @@ from typing import Any
 
 import jax
 import jax.numpy as jnp
-from jax.sharding import NamedSharding, PartitionSpec
+from jax.sharding import NamedSharding
+from jax.sharding import PartitionSpec
 
-from mjzoo import batching, checks
+from mjzoo import batching
+from mjzoo import checks
 
 __all__ = ["learn"]
 

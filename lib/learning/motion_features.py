@@ -40,9 +40,11 @@ import jax.numpy as jnp
 import mujoco
 from mujoco import mjx
 
-from mjzoo import names, tree
+from mjzoo import names
+from mjzoo import tree
 from mjzoo.combinators import resets_itself
-from mjzoo.types import State, Task
+from mjzoo.types import State
+from mjzoo.types import Task
 
 __all__ = ["Layout", "feature_layout", "feature_size", "frames_features", "motion_features", "with_feature_window"]
 

@@ -14,13 +14,29 @@ is given (`amp.make(config, reference)`), not the task. AMP's discriminator, ref
     measures     style measures: `nearest_window_error`
 """
 
-from mjzoo.motion import checking, clips, deepmimic_format, formats, measures, references, resampling
-from mjzoo.motion.checking import check, load, velocities_from_positions
-from mjzoo.motion.clips import Clip, load_file, save
+from mjzoo.motion import checking
+from mjzoo.motion import clips
+from mjzoo.motion import deepmimic_format
+from mjzoo.motion import formats
+from mjzoo.motion import measures
+from mjzoo.motion import references
+from mjzoo.motion import resampling
+from mjzoo.motion.checking import check
+from mjzoo.motion.checking import load
+from mjzoo.motion.checking import velocities_from_positions
+from mjzoo.motion.clips import Clip
+from mjzoo.motion.clips import load_file
+from mjzoo.motion.clips import save
 from mjzoo.motion.formats import isaaclab_npz
 from mjzoo.motion.measures import nearest_window_error
-from mjzoo.motion.references import Reference, check_reference, frame_index, frames, reference, sample_frame
-from mjzoo.motion.resampling import resample, slerp
+from mjzoo.motion.references import Reference
+from mjzoo.motion.references import check_reference
+from mjzoo.motion.references import frame_index
+from mjzoo.motion.references import frames
+from mjzoo.motion.references import reference
+from mjzoo.motion.references import sample_frame
+from mjzoo.motion.resampling import resample
+from mjzoo.motion.resampling import slerp
 
 __all__ = [
     "Clip",

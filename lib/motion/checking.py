@@ -27,7 +27,8 @@ import mujoco
 import numpy as np
 
 from mjzoo import names
-from mjzoo.motion.clips import Clip, load_file
+from mjzoo.motion.clips import Clip
+from mjzoo.motion.clips import load_file
 
 __all__ = ["check", "load", "velocities_from_positions", "differences", "quaternion_addresses", "VELOCITY_TOLERANCE"]
 

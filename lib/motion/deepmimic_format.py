@@ -46,7 +46,8 @@ import mujoco
 import numpy as np
 
 from mjzoo import names
-from mjzoo.motion.checking import check, differences
+from mjzoo.motion.checking import check
+from mjzoo.motion.checking import differences
 from mjzoo.motion.clips import Clip
 from mjzoo.motion.resampling import slerp
 

@@ -19,28 +19,38 @@ of `sample_around`; a new planner reuses every piece here. The functions of `sam
 `ensembles` and `learned.as_terminal_value` are re-exported: ``mjzoo.planning.mppi_weights``.
 """
 
-from mjzoo.planning import closed_loop, ensembles, learned, native, realtime, sampling, splines
-from mjzoo.planning.ensembles import RISKS, Ensemble, aggregate, base_task, ensemble, rollout_costs
-from mjzoo.planning.learned import TerminalValue, as_terminal_value
+from mjzoo.planning import closed_loop
+from mjzoo.planning import ensembles
+from mjzoo.planning import learned
+from mjzoo.planning import native
+from mjzoo.planning import realtime
+from mjzoo.planning import sampling
+from mjzoo.planning import splines
+from mjzoo.planning.ensembles import RISKS
+from mjzoo.planning.ensembles import Ensemble
+from mjzoo.planning.ensembles import aggregate
+from mjzoo.planning.ensembles import base_task
+from mjzoo.planning.ensembles import ensemble
+from mjzoo.planning.ensembles import rollout_costs
+from mjzoo.planning.learned import TerminalValue
+from mjzoo.planning.learned import as_terminal_value
 from mjzoo.planning.native import Native
-from mjzoo.planning.sampling import (
-    PlannerState,
-    SamplingConfig,
-    SamplingHyperparams,
-    cem_update,
-    configure,
-    control_at,
-    control_limits,
-    controls,
-    half_range,
-    initial_state,
-    mppi_weights,
-    noise_std,
-    sample_around,
-    sample_costs,
-    sample_knots,
-    shift,
-)
+from mjzoo.planning.sampling import PlannerState
+from mjzoo.planning.sampling import SamplingConfig
+from mjzoo.planning.sampling import SamplingHyperparams
+from mjzoo.planning.sampling import cem_update
+from mjzoo.planning.sampling import configure
+from mjzoo.planning.sampling import control_at
+from mjzoo.planning.sampling import control_limits
+from mjzoo.planning.sampling import controls
+from mjzoo.planning.sampling import half_range
+from mjzoo.planning.sampling import initial_state
+from mjzoo.planning.sampling import mppi_weights
+from mjzoo.planning.sampling import noise_std
+from mjzoo.planning.sampling import sample_around
+from mjzoo.planning.sampling import sample_costs
+from mjzoo.planning.sampling import sample_knots
+from mjzoo.planning.sampling import shift
 
 __all__ = [
     "splines",

@@ -33,19 +33,26 @@ from __future__ import annotations
 import dataclasses
 import functools
 from types import ModuleType
-from typing import Any, Callable
+from typing import Any
+from typing import Callable
 
 import jax
 
 from mjzoo.planning import sampling
-from mjzoo.planning.ensembles import Ensemble, base_task, with_base
+from mjzoo.planning.ensembles import Ensemble
+from mjzoo.planning.ensembles import base_task
+from mjzoo.planning.ensembles import with_base
 from mjzoo.planning.learned import TerminalValue
-from mjzoo.planning.native import Native, transition_native
-from mjzoo.planning.sampling import PlannerState, SamplingConfig
-from mjzoo.running import fill_transition_entries, transition
-from mjzoo.types import State, Task
+from mjzoo.planning.native import Native
+from mjzoo.planning.native import transition_native
+from mjzoo.planning.sampling import PlannerState
+from mjzoo.planning.sampling import SamplingConfig
+from mjzoo.running import fill_transition_entries
+from mjzoo.running import transition
+from mjzoo.types import State
+from mjzoo.types import Task
 
-__all__ = ["Hooks", "Result", "run", "replan", "after_rollout", "first_plan", "sim_step"]
+__all__ = ["Hooks", "Result", "run", "replan"]
 
 Array = jax.Array
 

@@ -11,15 +11,19 @@ from __future__ import annotations
 import dataclasses
 import math
 import numbers
-from typing import Any, Callable
+from typing import Any
+from typing import Callable
 
 import jax
 import jax.numpy as jnp
 
 from mjzoo import batching
-from mjzoo.planning.learned import TerminalValue, as_terminal_value
-from mjzoo.running import fill_transition_entries, transition
-from mjzoo.types import State, Task
+from mjzoo.planning.learned import TerminalValue
+from mjzoo.planning.learned import as_terminal_value
+from mjzoo.running import fill_transition_entries
+from mjzoo.running import transition
+from mjzoo.types import State
+from mjzoo.types import Task
 
 __all__ = ["Ensemble", "ensemble", "base_task", "with_base", "rollout_costs", "aggregate", "RISKS"]
 

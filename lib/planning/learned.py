@@ -14,7 +14,8 @@ committed. `committed` places a tree where its arrays already are, committing th
 
 from __future__ import annotations
 
-from typing import Callable, TypeVar
+from typing import Callable
+from typing import TypeVar
 
 import jax
 import jax.numpy as jnp

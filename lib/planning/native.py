@@ -51,12 +51,17 @@ from mujoco import mjx
 
 from mjzoo import physics
 from mjzoo.planning.ensembles import Ensemble
-from mjzoo.planning.learned import TerminalValue, as_terminal_value
-from mjzoo.planning.native_engine import APPLIED, Engine, physical_cores
-from mjzoo.running import fill_transition_entries, transition
-from mjzoo.types import State, Task
+from mjzoo.planning.learned import TerminalValue
+from mjzoo.planning.learned import as_terminal_value
+from mjzoo.planning.native_engine import APPLIED
+from mjzoo.planning.native_engine import Engine
+from mjzoo.planning.native_engine import physical_cores
+from mjzoo.running import fill_transition_entries
+from mjzoo.running import transition
+from mjzoo.types import State
+from mjzoo.types import Task
 
-__all__ = ["Engine", "Native", "wrap", "physical_cores", "rollout_costs", "split", "transition_native"]
+__all__ = ["Native", "wrap", "rollout_costs"]
 
 Array = jax.Array
 FROM_C = ("time", "qpos", "qvel", "act", "sensordata")  # what C returns after each step

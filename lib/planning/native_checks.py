@@ -16,19 +16,18 @@ import numpy as np
 from mujoco import mjx
 
 from mjzoo.planning.ensembles import Ensemble
-from mjzoo.planning.native import (
-    _HINTS,
-    APPLIED,
-    FROM_C,
-    Native,
-    _applied,
-    _fill_transition_entries,
-    _from_c,
-    _Recorder,
-    _replay,
-)
+from mjzoo.planning.native import _HINTS
+from mjzoo.planning.native import APPLIED
+from mjzoo.planning.native import FROM_C
+from mjzoo.planning.native import Native
+from mjzoo.planning.native import _applied
+from mjzoo.planning.native import _fill_transition_entries
+from mjzoo.planning.native import _from_c
+from mjzoo.planning.native import _Recorder
+from mjzoo.planning.native import _replay
 from mjzoo.running import transition
-from mjzoo.types import State, Task
+from mjzoo.types import State
+from mjzoo.types import Task
 
 __all__ = ["Probe", "probe", "reads", "start_state"]
 

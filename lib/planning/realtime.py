@@ -23,21 +23,26 @@ import dataclasses
 import functools
 import time
 from types import ModuleType
-from typing import Any, Callable
+from typing import Any
+from typing import Callable
 
 import jax
 import jax.numpy as jnp
 import numpy as np
 
 from mjzoo.planning import closed_loop
-from mjzoo.planning.closed_loop import Hooks, Result
+from mjzoo.planning.closed_loop import Hooks
+from mjzoo.planning.closed_loop import Result
 from mjzoo.planning.ensembles import Ensemble
-from mjzoo.planning.learned import TerminalValue, as_terminal_value, committed
+from mjzoo.planning.learned import TerminalValue
+from mjzoo.planning.learned import as_terminal_value
+from mjzoo.planning.learned import committed
 from mjzoo.planning.native import Native
 from mjzoo.planning.native import split as native_split
 from mjzoo.planning.native import wrap as native_wrap
 from mjzoo.planning.sampling import SamplingConfig
-from mjzoo.running import control_dt, reset
+from mjzoo.running import control_dt
+from mjzoo.running import reset
 from mjzoo.tree import Packing
 from mjzoo.types import Task
 

@@ -25,16 +25,25 @@ import dataclasses
 import numbers
 import typing
 from types import ModuleType
-from typing import Any, Mapping
+from typing import Any
+from typing import Mapping
 
 import jax
 import jax.numpy as jnp
 import numpy as np
 
-from mjzoo.planning import native, splines
-from mjzoo.planning.ensembles import RISKS, Ensemble, aggregate, base_task, rollout_costs
-from mjzoo.planning.learned import TerminalValue, committed
-from mjzoo.types import State, Task
+from mjzoo import checks
+from mjzoo.planning import native
+from mjzoo.planning import splines
+from mjzoo.planning.ensembles import RISKS
+from mjzoo.planning.ensembles import Ensemble
+from mjzoo.planning.ensembles import aggregate
+from mjzoo.planning.ensembles import base_task
+from mjzoo.planning.ensembles import rollout_costs
+from mjzoo.planning.learned import TerminalValue
+from mjzoo.planning.learned import committed
+from mjzoo.types import State
+from mjzoo.types import Task
 
 __all__ = [
     "SamplingConfig",
@@ -80,15 +89,21 @@ class SamplingConfig:
     unroll: int = 1
 
     def __post_init__(self) -> None:
-        checks = {
-            "num_samples": self.num_samples >= 2,
-            "horizon_steps": self.horizon_steps >= 1,
-            "num_knots": 1 <= self.num_knots <= self.horizon_steps,
-            "interpolation": self.interpolation in splines.METHODS,
-            "risk": self.risk in RISKS,
-            "unroll": self.unroll >= 1,
-        }
-        _refuse(self, checks)
+        checks.fields(
+            _name(self),
+            self,
+            {
+                "num_samples": (self.num_samples >= 2, ">= 2"),
+                "horizon_steps": (self.horizon_steps >= 1, ">= 1"),
+                "num_knots": (
+                    1 <= self.num_knots <= self.horizon_steps,
+                    f"in [1, horizon_steps = {self.horizon_steps}]",
+                ),
+                "interpolation": (self.interpolation in splines.METHODS, f"one of {splines.METHODS}"),
+                "risk": (self.risk in RISKS, f"one of {RISKS}"),
+                "unroll": (self.unroll >= 1, ">= 1"),
+            },
+        )
 
 
 @jax.tree_util.register_dataclass
@@ -111,21 +126,22 @@ class SamplingHyperparams:
     cvar_alpha: float | Array = 0.25
 
     def __post_init__(self) -> None:
-        for field in dataclasses.fields(self):
-            value = getattr(self, field.name)
-            if isinstance(value, (str, bool)):
-                raise ValueError(f"{_name(self)}: {field.name}={value!r} must be a number")
+        names = [f.name for f in dataclasses.fields(self)]
+        checks.fields(
+            _name(self), self, {n: (not isinstance(getattr(self, n), (str, bool)), "a number") for n in names}
+        )
         if _concrete(self):
-            _refuse(self, self._checks())
+            checks.fields(_name(self), self, self._checks())
 
-    def _checks(self) -> dict[str, Any]:
-        """Field -> whether its value is in range (elementwise for arrays)."""
-        return {"noise_scale": np.greater_equal(self.noise_scale, 0), "cvar_alpha": _within(self.cvar_alpha, 0, 1)}
-
-
-def _within(value: Any, low: float, high: float) -> np.ndarray:
-    """low < value <= high, elementwise."""
-    return np.logical_and(np.greater(value, low), np.less_equal(value, high))
+    def _checks(self) -> dict[str, tuple[Any, str]]:
+        """Field -> (whether its value is in range, elementwise for arrays; the range)."""
+        return {
+            "noise_scale": (np.greater_equal(self.noise_scale, 0), ">= 0"),
+            "cvar_alpha": (
+                np.logical_and(np.greater(self.cvar_alpha, 0), np.less_equal(self.cvar_alpha, 1)),
+                "in (0, 1]",
+            ),
+        }
 
 
 def _concrete(hyperparams: SamplingHyperparams) -> bool:
@@ -141,13 +157,6 @@ def _concrete(hyperparams: SamplingHyperparams) -> bool:
 def _name(settings: Any) -> str:
     """ "mppi.Config", "cem.Hyperparams", ...: the name users write."""
     return f"{type(settings).__module__.rsplit('.', 1)[-1]}.{type(settings).__name__}"
-
-
-def _refuse(settings: Any, checks: dict[str, Any]) -> None:
-    """ValueError naming the first field whose check fails (`mppi.Config: invalid ...`)."""
-    for field, ok in checks.items():
-        if not np.all(ok):
-            raise ValueError(f"{_name(settings)}: invalid {field}={getattr(settings, field)!r}")
 
 
 @jax.tree_util.register_dataclass
@@ -267,17 +276,17 @@ def _as_field(planner: str, field: str, value: Any, hint: Any) -> Any:
             return int(value)
         if isinstance(value, float) and value.is_integer():
             return int(value)
-        raise ValueError(f"{planner}: {field}={value!r} must be an int")
+        raise ValueError(f"{planner}: {field}={value!r} is invalid; expected an int")
     if hint is str:
         if isinstance(value, str):
             return value
-        raise ValueError(f"{planner}: {field}={value!r} must be a string")
+        raise ValueError(f"{planner}: {field}={value!r} is invalid; expected a string")
     # A hyperparameter: a number, or an array of them for a sweep.
     if isinstance(value, numbers.Real) and not isinstance(value, bool):
         return float(value)
     if isinstance(value, (np.ndarray, jax.Array)) and jnp.issubdtype(value.dtype, jnp.number):
         return value
-    raise ValueError(f"{planner}: {field}={value!r} must be a number")
+    raise ValueError(f"{planner}: {field}={value!r} is invalid; expected a number")
 
 
 def shift(config: SamplingConfig, state: PlannerState, now: Array) -> PlannerState:

@@ -22,7 +22,9 @@ import pytest
 
 import mjzoo
 import mjzoo.envs
-from mjzoo import motion, names
+from mjzoo import learning
+from mjzoo import motion
+from mjzoo import names
 from mjzoo.algorithms import amp
 from mjzoo.harness import training
 from mjzoo.learning import motion_features
@@ -238,9 +240,9 @@ def test_train_writes_the_discriminators_diagnostics_and_warns_once(swing, sway,
     settings = training.Settings(
         out_dir=tmp_path / "run", updates_per_chunk=2, eval_envs=2, eval_steps=20, video=False, progress=False
     )
-    with pytest.warns(training.TrainingWarning, match="the discriminator has won") as caught:
+    with pytest.warns(learning.TrainingWarning, match="the discriminator has won") as caught:
         training.run(algorithm, swing, settings, HP.replace(disc_learning_rate=3e-4))
-    assert len([w for w in caught if issubclass(w.category, training.TrainingWarning)]) == 1  # not once per chunk
+    assert len([w for w in caught if issubclass(w.category, learning.TrainingWarning)]) == 1  # not once per chunk
     lines = [json.loads(line) for line in (tmp_path / "run" / "metrics.jsonl").read_text().splitlines()]
     assert [line["step"] for line in lines] == [128, 256]
     for name in (
@@ -278,15 +280,15 @@ def test_two_devices_give_one_devices_result():
         ref = motion.reference(sway_clip(task), task.mj_model, mjzoo.control_dt(task))
         state = amp.init(SMALL, task, ref, HP, jax.random.key(0))
         one = jax.jit(amp.update, static_argnums=0)(SMALL, task, jax.device_put(state, jax.devices()[0]))[0]
-        sharded = training.shard_envs(state, amp.PER_ENV_FIELDS)
+        sharded = devices.shard_envs(state, amp.make(SMALL).per_env_fields)
         assert len(sharded.ppo.collector.start.sharding.device_set) == 2
         assert len(sharded.disc_params[0]["kernel"].sharding.device_set) == 2  # replicated
         whole = dataclasses.replace(SMALL, split_minibatches=False)  # each device every minibatch step whole
-        two = jax.jit(amp.update, static_argnums=0)(whole, training.replicate(task), sharded)[0]
+        two = jax.jit(amp.update, static_argnums=0)(whole, devices.replicate(task), sharded)[0]
         def split_update(config, task, state):  # each device its share of every step, under the env mesh
             with devices.env_mesh_scope():
                 return amp.update(config, task, state)
-        three = jax.jit(split_update, static_argnums=0)(SMALL, training.replicate(task), sharded)[0]
+        three = jax.jit(split_update, static_argnums=0)(SMALL, devices.replicate(task), sharded)[0]
         for other in (two, three):
             for a, b in zip(jax.tree.leaves((one.ppo.params, one.disc_params)), jax.tree.leaves((other.ppo.params, other.disc_params))):
                 np.testing.assert_allclose(np.asarray(a), np.asarray(b), rtol=2e-4, atol=2e-5)

@@ -21,7 +21,8 @@ import pytest
 import mjzoo
 import mjzoo.envs
 from mjzoo import motion
-from mjzoo.algorithms import amp, ppo
+from mjzoo.algorithms import amp
+from mjzoo.algorithms import ppo
 from mjzoo.harness import training
 from tests.algorithms.test_amp import sway_clip
 

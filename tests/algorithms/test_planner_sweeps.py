@@ -15,8 +15,11 @@ import numpy as np
 import pytest
 
 import mjzoo
-from mjzoo import envs, planning
-from mjzoo.algorithms import cem, mppi, predictive_sampling
+from mjzoo import envs
+from mjzoo import planning
+from mjzoo.algorithms import cem
+from mjzoo.algorithms import mppi
+from mjzoo.algorithms import predictive_sampling
 
 H, K = 5, 3
 CONFIGS = {

@@ -17,9 +17,13 @@ import pytest
 import mjzoo
 import mjzoo.envs
 from mjzoo import planning
-from mjzoo.algorithms import cem, mppi, predictive_sampling
-from mjzoo.envs import cylinder_push, point_mass
-from mjzoo.planning import closed_loop, realtime
+from mjzoo.algorithms import cem
+from mjzoo.algorithms import mppi
+from mjzoo.algorithms import predictive_sampling
+from mjzoo.envs import cylinder_push
+from mjzoo.envs import point_mass
+from mjzoo.planning import closed_loop
+from mjzoo.planning import realtime
 
 # The suite compiles at XLA -O0 (conftest) for short tests; a closed-loop run is long,
 # and at -O3 it runs about 6x faster for the same compile time.

@@ -21,7 +21,8 @@ import pytest
 import mjzoo
 import mjzoo.envs
 from mjzoo.algorithms import ppo
-from mjzoo.harness import checkpoints, training
+from mjzoo.harness import checkpoints
+from mjzoo.harness import training
 from mjzoo.learning import networks
 
 SMALL = ppo.Config(num_envs=8, unroll_length=8, num_minibatches=2, num_epochs=1, total_steps=8 * 8 * 4)
@@ -277,8 +278,8 @@ TWO_DEVICES = textwrap.dedent(
     update = jax.jit(update, static_argnums=0)
     results = []
     for config_, placed in ((config, jax.devices()[:1]), (whole, jax.devices()), (config, jax.devices())):
-        state = training.shard_envs(ppo.init(config_, task, ppo.Hyperparams(), jax.random.key(0)), ppo.PER_ENV_FIELDS, placed)
-        task_ = training.replicate(task, placed)
+        state = devices.shard_envs(ppo.init(config_, task, ppo.Hyperparams(), jax.random.key(0)), ppo.PER_ENV_FIELDS, placed)
+        task_ = devices.replicate(task, placed)
         for _ in range(3):
             state, _ = update(config_, task_, state)
         results.append(state)
@@ -291,7 +292,7 @@ TWO_DEVICES = textwrap.dedent(
         assert diff < 1e-4
 
     def loop_collectives(config_):  # all-reduces in the minibatch loop's body, the busiest computation
-        state, task_ = results[1], training.replicate(task, jax.devices())
+        state, task_ = results[1], devices.replicate(task, jax.devices())
         data = jax.jit(lambda t, s: ppo.collect(config_, t, s, jax.random.key(1))[1])(task_, state)
         learn = jax.jit(lambda t, s, d: ppo.improve(config_, t, s, d, jax.random.key(2)))
         with devices.env_mesh_scope():
@@ -304,7 +305,7 @@ TWO_DEVICES = textwrap.dedent(
     assert loop_collectives(config) >= 1  # each its share, the gradients summed every step
     odd = ppo.init(dataclasses.replace(config, num_envs=5, num_minibatches=1), task, ppo.Hyperparams(), jax.random.key(0))
     try:  # an uneven split is refused, naming the fix
-        training.shard_envs(odd, ppo.PER_ENV_FIELDS)
+        devices.shard_envs(odd, ppo.PER_ENV_FIELDS)
         raise AssertionError("5 envs were split over 2 devices")
     except ValueError as error:
         assert "5 envs do not split evenly over 2 devices; make num_envs a multiple of 2" in str(error), error

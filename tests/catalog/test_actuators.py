@@ -26,7 +26,8 @@ from mujoco import mjx
 import mjzoo
 from mjzoo.catalog import actuators
 from mjzoo.layers import find
-from mjzoo.types import State, Task
+from mjzoo.types import State
+from mjzoo.types import Task
 
 JOINTS_XML = """
 <mujoco model="joints">

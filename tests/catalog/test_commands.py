@@ -11,7 +11,13 @@ from __future__ import annotations
 import jax
 import numpy as np
 import pytest
-from catalog_tasks import DT, QPOS0, B, T, make_task, resets_of, run
+from catalog_tasks import DT
+from catalog_tasks import QPOS0
+from catalog_tasks import B
+from catalog_tasks import T
+from catalog_tasks import make_task
+from catalog_tasks import resets_of
+from catalog_tasks import run
 
 import mjzoo
 import mjzoo.envs

@@ -29,9 +29,11 @@ from mujoco import mjx
 import mjzoo
 import mjzoo.envs
 from mjzoo import physics as physics_lib
-from mjzoo.catalog import curriculum, events
+from mjzoo.catalog import curriculum
+from mjzoo.catalog import events
 from mjzoo.layers import find
-from mjzoo.types import State, Task
+from mjzoo.types import State
+from mjzoo.types import Task
 
 XML = """
 <mujoco model="base">

@@ -12,7 +12,12 @@ from __future__ import annotations
 import jax
 import numpy as np
 import pytest
-from catalog_tasks import DT, MASS, B, T, make_task, run
+from catalog_tasks import DT
+from catalog_tasks import MASS
+from catalog_tasks import B
+from catalog_tasks import T
+from catalog_tasks import make_task
+from catalog_tasks import run
 
 import mjzoo
 import mjzoo.envs

@@ -28,7 +28,8 @@ from mjzoo import physics as physics_lib
 from mjzoo.catalog import observations as obs
 from mjzoo.catalog import trackers
 from mjzoo.layers import find
-from mjzoo.types import State, Task
+from mjzoo.types import State
+from mjzoo.types import Task
 
 XML = """
 <mujoco>

@@ -27,7 +27,8 @@ from mujoco import mjx
 
 import mjzoo
 from mjzoo.catalog import randomizers
-from mjzoo.types import State, Task
+from mjzoo.types import State
+from mjzoo.types import Task
 
 DT, G = 0.01, 9.81
 XML = """

@@ -13,7 +13,11 @@ import mujoco
 import numpy as np
 import pytest
 from catalog_tasks import BASE_AND_ARM as PHYSICS
-from catalog_tasks import MJ, QPOS0, QVEL0, make_task, observe
+from catalog_tasks import MJ
+from catalog_tasks import QPOS0
+from catalog_tasks import QVEL0
+from catalog_tasks import make_task
+from catalog_tasks import observe
 from mujoco import mjx
 
 import mjzoo
@@ -21,7 +25,8 @@ import mjzoo.envs
 from mjzoo import motion
 from mjzoo import physics as physics_lib
 from mjzoo.catalog import resets
-from mjzoo.types import State, Task
+from mjzoo.types import State
+from mjzoo.types import Task
 
 N = 512  # resets per vmapped batch
 

@@ -26,9 +26,13 @@ from jax.tree_util import Partial
 from mujoco import mjx
 
 import mjzoo
-from mjzoo.catalog import commands, rewards, trackers
-from mjzoo.catalog.rewards import SIGMOIDS, tolerance
-from mjzoo.types import State, Task
+from mjzoo.catalog import commands
+from mjzoo.catalog import rewards
+from mjzoo.catalog import trackers
+from mjzoo.catalog.rewards import SIGMOIDS
+from mjzoo.catalog.rewards import tolerance
+from mjzoo.types import State
+from mjzoo.types import Task
 
 # A band [1, 2] with margin 0.5 and value_at_margin 0.1 unless a test says otherwise.
 LOWER, UPPER, MARGIN, V = 1.0, 2.0, 0.5, 0.1

@@ -24,7 +24,8 @@ from mujoco import mjx
 import mjzoo
 from mjzoo import physics as physics_lib
 from mjzoo.catalog import terminations as term
-from mjzoo.types import State, Task
+from mjzoo.types import State
+from mjzoo.types import Task
 
 XML = """
 <mujoco>

@@ -27,9 +27,12 @@ from mujoco import mjx
 
 import mjzoo
 from mjzoo import physics as physics_lib
-from mjzoo.catalog import contacts, rewards, trackers
+from mjzoo.catalog import contacts
+from mjzoo.catalog import rewards
+from mjzoo.catalog import trackers
 from mjzoo.layers import find
-from mjzoo.types import State, Task
+from mjzoo.types import State
+from mjzoo.types import Task
 
 DT = 0.02
 XML = """

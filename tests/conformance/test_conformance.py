@@ -27,20 +27,19 @@ import pytest
 import mjzoo
 import mjzoo.envs
 from mjzoo import names
-from mjzoo.catalog import (
-    actuators,
-    commands,
-    curriculum,
-    events,
-    observations,
-    randomizers,
-    resets,
-    rewards,
-    terminations,
-    trackers,
-)
+from mjzoo.catalog import actuators
+from mjzoo.catalog import commands
+from mjzoo.catalog import curriculum
+from mjzoo.catalog import events
+from mjzoo.catalog import observations
+from mjzoo.catalog import randomizers
+from mjzoo.catalog import resets
+from mjzoo.catalog import rewards
+from mjzoo.catalog import terminations
+from mjzoo.catalog import trackers
 from mjzoo.envs import pendulum
-from mjzoo.testing import TaskReport, check_task
+from mjzoo.testing import TaskReport
+from mjzoo.testing import check_task
 
 # Every env is made with episodes of LIMIT steps, so that check_task sees its time limit
 # within its rollout of STEPS (a longer limit costs it a second compile).

@@ -5,7 +5,9 @@ are in test_conformance_locomotion_stacked.py, so that xdist runs the two side b
 from __future__ import annotations
 
 import pytest
-from test_conformance import LOCOMOTION, check_conformance, check_new_numbers_do_not_retrace
+from test_conformance import LOCOMOTION
+from test_conformance import check_conformance
+from test_conformance import check_new_numbers_do_not_retrace
 
 
 @pytest.mark.parametrize("env", LOCOMOTION)

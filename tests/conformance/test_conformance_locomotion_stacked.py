@@ -7,7 +7,9 @@ env passes the bare conformance in test_conformance_locomotion.py."""
 from __future__ import annotations
 
 import pytest
-from test_conformance import LOCOMOTION, check_conformance, check_new_numbers_do_not_retrace
+from test_conformance import LOCOMOTION
+from test_conformance import check_conformance
+from test_conformance import check_new_numbers_do_not_retrace
 
 STACKED = ("hopper", "ant_joystick")
 assert set(STACKED) <= set(LOCOMOTION)

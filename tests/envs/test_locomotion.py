@@ -19,8 +19,13 @@ from mujoco import mjx
 
 import mjzoo
 import mjzoo.envs
-from mjzoo.catalog import actuators, curriculum, observations, rewards
-from mjzoo.envs import joystick, locomotion, pendulum
+from mjzoo.catalog import actuators
+from mjzoo.catalog import curriculum
+from mjzoo.catalog import observations
+from mjzoo.catalog import rewards
+from mjzoo.envs import joystick
+from mjzoo.envs import locomotion
+from mjzoo.envs import pendulum
 from mjzoo.types import State
 
 

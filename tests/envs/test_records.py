@@ -13,7 +13,12 @@ import pytest
 
 import mjzoo
 import mjzoo.envs
-from mjzoo.envs import base, cartpole, humanoid_amp, locomotion, pendulum, point_mass
+from mjzoo.envs import base
+from mjzoo.envs import cartpole
+from mjzoo.envs import humanoid_amp
+from mjzoo.envs import locomotion
+from mjzoo.envs import pendulum
+from mjzoo.envs import point_mass
 
 # The reward weights and limits each registered env must expose by name (mjzoo.params).
 NAMED = {
@@ -78,7 +83,7 @@ def test_with_params_changes_the_reward_without_recompiling(name, change, term):
 
 
 def test_with_params_moves_a_catalog_item_s_limit():
-    """`kit.named` makes a catalog termination's number a parameter: a hopper one step
+    """`builder.named` makes a catalog termination's number a parameter: a hopper one step
     from its start pose ends when min_height is raised above its torso, and the metric
     names the termination."""
     task, key = mjzoo.envs.make("hopper"), jax.random.key(1)
@@ -106,7 +111,8 @@ def test_hyperparameters_and_planning_come_from_the_records():
 def test_amps_reference_comes_from_the_record_or_the_factorys_module():
     """Every env with AMP hyperparameters names its reference; a user's factory module
     its ``REFERENCE``; the CLI hands it to algorithms whose `make` takes one."""
-    from mjzoo.algorithms import amp, ppo
+    from mjzoo.algorithms import amp
+    from mjzoo.algorithms import ppo
     from mjzoo.harness.cli.arguments import imitated
 
     with_amp = [name for name in mjzoo.envs.names() if mjzoo.envs.record(name).amp is not None]

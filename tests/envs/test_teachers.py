@@ -11,7 +11,8 @@ import pytest
 import mjzoo
 import mjzoo.envs
 from mjzoo import motion
-from mjzoo.envs import cartpole, teachers
+from mjzoo.envs import cartpole
+from mjzoo.envs import teachers
 
 
 @pytest.fixture(scope="module")

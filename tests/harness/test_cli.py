@@ -19,7 +19,10 @@ import pytest
 import mjzoo.envs
 from mjzoo import learning
 from mjzoo.algorithms import ppo
-from mjzoo.harness import checkpoints, cli, rendering, training
+from mjzoo.harness import checkpoints
+from mjzoo.harness import cli
+from mjzoo.harness import rendering
+from mjzoo.harness import training
 
 ENV = "pendulum_swingup"
 TINY = dict(num_envs=8, unroll_length=8, num_minibatches=2, num_epochs=1, total_steps=128)
@@ -85,7 +88,7 @@ def damage(directory: Path, step: int) -> None:
             ["policy_hidden_sizes=64 must be a tuple of int"],
         ),
         (["train", "ppo", ENV, "--config", "activation=gelu"], ["activation='gelu' must be one of 'swish'"]),
-        (["plan", "mppi", ENV, "--config", "num_samples=many"], ["num_samples='many' must be an int"]),
+        (["plan", "mppi", ENV, "--config", "num_samples=many"], ["num_samples='many' is invalid; expected an int"]),
         (["train", "ppo", ENV, "--env-overrides", "nope=1"], ["unknown override(s) ['nope']", "upright_weight"]),
         (
             ["train", "ppo", ENV, "--env-overrides", "episode_steps=abc"],

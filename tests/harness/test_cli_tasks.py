@@ -12,12 +12,17 @@ from pathlib import Path
 
 import numpy as np
 import pytest
-from test_cli import TINY, assert_usage_error, snapshot  # the command's shared test helpers
+from test_cli import TINY  # the command's shared test helpers
+from test_cli import assert_usage_error  # the command's shared test helpers
+from test_cli import snapshot  # the command's shared test helpers
 
 import mjzoo.envs
 from mjzoo import learning
-from mjzoo.algorithms import ppo, predictive_sampling
-from mjzoo.harness import cli, datasets, training
+from mjzoo.algorithms import ppo
+from mjzoo.algorithms import predictive_sampling
+from mjzoo.harness import cli
+from mjzoo.harness import datasets
+from mjzoo.harness import training
 
 MODULE = "mjzoo_cli_user_tasks"  # unique: imported modules stay in sys.modules
 SPEC = f"{MODULE}:make_pendulum"

@@ -169,7 +169,8 @@ def test_the_chunk_compiled_ahead_from_inits_shapes_serves_every_chunk(monkeypat
     (`scale`) is made strong, as the chunk returns it, or the second chunk compiles again
     (Playground's CheetahRun: 49 s of an H100 run)."""
 
-    from mjzoo.harness import devices, training
+    from mjzoo.harness import devices
+    from mjzoo.harness import training
     from tests.harness.test_training import counter
 
     algorithm = counter(
@@ -261,7 +262,8 @@ def test_the_evaluation_compiled_ahead_serves_the_first_evaluation():
     """`training.run` traces and compiles the evaluation on a thread while the first chunk
     runs: the first evaluation's call compiles nothing more on the main thread."""
     from mjzoo.harness import training
-    from tests.harness.test_training import TASK, counter
+    from tests.harness.test_training import TASK
+    from tests.harness.test_training import counter
 
     algorithm = counter(
         evaluate=lambda task, s, key, n, steps: learning.Evaluation(
@@ -295,7 +297,8 @@ def test_beside_warp_on_a_gpu_the_evaluation_compiles_alone_before_the_first_chu
     evaluation then compiles on the main thread, after init has run and before the chunk
     runs, and the chunk is not compiled ahead; the first evaluation still finds it."""
     from mjzoo.harness import training
-    from tests.harness.test_training import TASK, counter
+    from tests.harness.test_training import TASK
+    from tests.harness.test_training import counter
 
     algorithm = counter(
         evaluate=lambda task, s, key, n, steps: learning.Evaluation(
@@ -325,7 +328,8 @@ def test_the_evaluation_compiles_beside_a_cold_chunk_and_after_a_cached_one(monk
     evaluation's compile starts then, beside it, not once the chunk runs. A chunk done
     by then (loaded from the cache) runs first, and the evaluation compiles while it does."""
     from mjzoo.harness import training
-    from tests.harness.test_training import TASK, counter
+    from tests.harness.test_training import TASK
+    from tests.harness.test_training import counter
 
     algorithm = counter(
         evaluate=lambda task, s, key, n, steps: learning.Evaluation(

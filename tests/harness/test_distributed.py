@@ -25,7 +25,8 @@ import orbax.checkpoint as ocp
 import pytest
 
 import mjzoo
-from mjzoo.harness import cli, distributed
+from mjzoo.harness import cli
+from mjzoo.harness import distributed
 
 ROOT = Path(__file__).resolve().parents[2]
 XML = """

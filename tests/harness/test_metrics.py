@@ -16,7 +16,9 @@ import pytest
 from tensorboardX.proto import event_pb2
 
 from mjzoo.harness import metrics
-from mjzoo.harness.metrics import MetricsWriter, Progress, read_metrics
+from mjzoo.harness.metrics import MetricsWriter
+from mjzoo.harness.metrics import Progress
+from mjzoo.harness.metrics import read_metrics
 
 
 def tensorboard_events(directory) -> list[list[event_pb2.Event]]:

@@ -8,8 +8,10 @@ import sys
 import imageio.v3 as iio
 import numpy as np
 
-from mjzoo.harness.metrics import MetricsWriter, read_metrics
-from mjzoo.harness.plotting import _panels, plot_curves
+from mjzoo.harness.metrics import MetricsWriter
+from mjzoo.harness.metrics import read_metrics
+from mjzoo.harness.plotting import _panels
+from mjzoo.harness.plotting import plot_curves
 from mjzoo.harness.rendering import RenderConfig
 
 PNG_SIGNATURE = b"\x89PNG\r\n\x1a\n"

@@ -362,21 +362,21 @@ def test_bad_arguments_are_errors_before_any_opengl(model, no_opengl, tmp_path):
 @pytest.mark.parametrize(
     ("fields", "message"),
     [
-        ({"width": 0}, "width must be an integer >= 1, got 0"),
-        ({"small_height": 2.5}, "small_height must be an integer >= 1"),
-        ({"fps": 0.0}, "fps must be > 0 or None"),
-        ({"length_seconds": -1.0}, "length_seconds must be > 0 or None"),
-        ({"slowdown": 0.0}, "slowdown must be > 0"),
-        ({"distance": float("nan")}, "distance must be > 0 or None"),
-        ({"lookat": (0.0, 1.0)}, "lookat must be 3 finite numbers"),
-        ({"max_series_per_plot": 0}, "max_series_per_plot must be an integer >= 1"),
-        ({"plot_figsize": (4.0, 0.0)}, "plot_figsize must be 2 numbers > 0"),
+        ({"width": 0}, "width=0 is invalid; expected an integer >= 1"),
+        ({"small_height": 2.5}, "small_height=2.5 is invalid; expected an integer >= 1"),
+        ({"fps": 0.0}, "fps=0.0 is invalid; expected > 0 or None"),
+        ({"length_seconds": -1.0}, "length_seconds=-1.0 is invalid; expected > 0 or None"),
+        ({"slowdown": 0.0}, "slowdown=0.0 is invalid; expected > 0"),
+        ({"distance": float("nan")}, "distance=nan is invalid; expected > 0 or None"),
+        ({"lookat": (0.0, 1.0)}, "lookat=\\(0.0, 1.0\\) is invalid; expected 3 finite numbers"),
+        ({"max_series_per_plot": 0}, "max_series_per_plot=0 is invalid; expected an integer >= 1"),
+        ({"plot_figsize": (4.0, 0.0)}, "plot_figsize=\\(4.0, 0.0\\) is invalid; expected 2 numbers > 0"),
         ({"camera": "side", "distance": 2.0}, "camera='side' is a model camera; distance set a free camera"),
         ({"lookat": (0.0, 0.0, 0.0), "track_body": "box"}, "lookat and track_body"),
     ],
 )
 def test_config_values_are_checked(fields, message):
-    with pytest.raises(ValueError, match=f"render config: {message}"):
+    with pytest.raises(ValueError, match=f"^RenderConfig: {message}"):
         RenderConfig(**fields)
 
 

@@ -22,7 +22,10 @@ import pytest
 
 import mjzoo
 from mjzoo import learning
-from mjzoo.harness import metrics, rendering, training
+from mjzoo.harness import devices
+from mjzoo.harness import metrics
+from mjzoo.harness import rendering
+from mjzoo.harness import training
 from mjzoo.harness.cli import runs
 from tests.harness.test_rendering import egl_installed
 
@@ -99,7 +102,7 @@ def test_what_an_algorithm_value_lacks_is_named_at_once():
 
 def test_per_env_fields_are_sharded_the_rest_replicated():
     """On one device: everything placed on it (the state is committed, see shard_envs)."""
-    state = training.shard_envs(Count(jnp.zeros((), jnp.int32), jnp.zeros(4)), ("per_env",))
+    state = devices.shard_envs(Count(jnp.zeros((), jnp.int32), jnp.zeros(4)), ("per_env",))
     assert state.per_env.committed and state.updates.committed
 
 
@@ -290,7 +293,7 @@ def test_progress_shows_the_first_update_and_the_training_rate(capsys):
 
 def test_profile_memory_on_the_cpu_records_nothing_and_says_so_once(tmp_path):
     settings = dataclasses.replace(SETTINGS, out_dir=tmp_path, profile_memory=True, checkpoint_every=0)
-    with pytest.warns(training.TrainingWarning, match=r"profile_memory: cpu0 report no memory statistics") as caught:
+    with pytest.warns(learning.TrainingWarning, match=r"profile_memory: cpu0 report no memory statistics") as caught:
         _, last = training.run(logging(), TASK, settings)
     assert len(caught) == 1 and not [k for k in last if k.startswith("memory/")]
 
@@ -305,20 +308,23 @@ def test_eval_seconds_is_converted_at_the_task_s_control_rate(monkeypatch):
 @pytest.mark.parametrize(
     "fields, message",
     [
-        ({"eval_every": -1}, "eval_every=-1 must be >= 0"),
-        ({"eval_every": 1.5}, "eval_every=1.5 must be an int"),
-        ({"eval_every_seconds": 0}, "eval_every_seconds=0 must be > 0"),
-        ({"eval_first_seconds": -1.0}, "eval_first_seconds=-1.0 must be >= 0"),
-        ({"eval_first_seconds": "1"}, "eval_first_seconds='1' must be a finite number"),
-        ({"eval_every_seconds": float("inf")}, "eval_every_seconds=inf must be a finite number"),
-        ({"video_every": -2}, "video_every=-2 must be >= 0"),
-        ({"video_every": 2, "video": False}, "video_every=2 needs video=True"),
-        ({"log_every": 0}, "log_every=0 must be >= 1"),
-        ({"log_every": True}, "log_every=True must be an int"),
-        ({"eval_seconds": -0.5}, "eval_seconds=-0.5 must be > 0"),
-        ({"eval_steps": 10, "eval_seconds": 1.0}, "eval_steps=10 and eval_seconds=1.0 both give the evaluation's"),
-        ({"updates_per_chunk": 0}, "updates_per_chunk=0 must be >= 1"),
-        ({"render": {"width": 64}}, "render={'width': 64} must be a mjzoo.harness.rendering.RenderConfig"),
+        ({"eval_every": -1}, "eval_every=-1 is invalid; expected an int >= 0 or None"),
+        ({"eval_every": 1.5}, "eval_every=1.5 is invalid; expected an int"),
+        ({"eval_every_seconds": 0}, "eval_every_seconds=0 is invalid; expected a finite number > 0"),
+        ({"eval_first_seconds": -1.0}, "eval_first_seconds=-1.0 is invalid; expected a finite number >= 0"),
+        ({"eval_first_seconds": "1"}, "eval_first_seconds='1' is invalid; expected a finite number"),
+        ({"eval_every_seconds": float("inf")}, "eval_every_seconds=inf is invalid; expected a finite number"),
+        ({"video_every": -2}, "video_every=-2 is invalid; expected an int >= 0"),
+        ({"video_every": 2, "video": False}, "video_every=2 is invalid; expected 0 with video=False"),
+        ({"log_every": 0}, "log_every=0 is invalid; expected an int >= 1"),
+        ({"log_every": True}, "log_every=True is invalid; expected an int"),
+        ({"eval_seconds": -0.5}, "eval_seconds=-0.5 is invalid; expected a finite number > 0"),
+        ({"eval_steps": 10, "eval_seconds": 1.0}, "eval_seconds=1.0 is invalid; expected None with eval_steps: both"),
+        ({"updates_per_chunk": 0}, "updates_per_chunk=0 is invalid; expected an int >= 1"),
+        (
+            {"render": {"width": 64}},
+            "render={'width': 64} is invalid; expected a mjzoo.harness.rendering.RenderConfig",
+        ),
     ],
 )
 def test_each_invalid_setting_is_named(fields, message):

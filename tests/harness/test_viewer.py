@@ -23,9 +23,11 @@ import pytest
 
 import mjzoo
 from mjzoo.algorithms import mppi
-from mjzoo.harness import datasets, viewer
+from mjzoo.harness import datasets
+from mjzoo.harness import viewer
 from mjzoo.harness.cli import viewing
 from mjzoo.harness.cli.arguments import UsageError
+from mjzoo.harness.viewer import scene
 
 ROOT = Path(__file__).resolve().parents[2]
 ENV = "pendulum_swingup"
@@ -90,7 +92,7 @@ def sim():
 
 
 def test_scene_has_one_handle_per_body_group(sim):
-    groups = viewer.body_groups(sim.source.mj_model)
+    groups = scene.body_groups(sim.source.mj_model)
     assert [g.name for g in groups] == ["world", "pole"]
     assert [g.name for g in groups[1].geoms] == ["pole", "bob"]
     assert set(sim.scene.handles) == {(e, g.name) for e in (0, 1) for g in groups}

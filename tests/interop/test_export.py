@@ -27,11 +27,17 @@ import mjzoo.envs
 from mjzoo import learning
 from mjzoo.algorithms import ppo
 from mjzoo.catalog import observations
-from mjzoo.envs import base, locomotion
-from mjzoo.harness import checkpoints, cli, training
+from mjzoo.envs import base
+from mjzoo.envs import locomotion
+from mjzoo.harness import checkpoints
+from mjzoo.harness import cli
+from mjzoo.harness import training
 from mjzoo.harness.cli import exporting
-from mjzoo.interop import deployment, export, sim2sim
-from mjzoo.learning import networks, normalization
+from mjzoo.interop import deployment
+from mjzoo.interop import export
+from mjzoo.interop import sim2sim
+from mjzoo.learning import networks
+from mjzoo.learning import normalization
 from mjzoo.running import reset
 
 ONNX_ATOL = 1e-5

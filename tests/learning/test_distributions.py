@@ -14,7 +14,11 @@ import numpy as np
 import optax
 import pytest
 
-from mjzoo.learning.distributions import entropy, log_prob, mode, sample, split_params
+from mjzoo.learning.distributions import entropy
+from mjzoo.learning.distributions import log_prob
+from mjzoo.learning.distributions import mode
+from mjzoo.learning.distributions import sample
+from mjzoo.learning.distributions import split_params
 
 HALF_LOG_2PI = 0.5 * math.log(2.0 * math.pi)
 

@@ -12,13 +12,11 @@ import jax.numpy as jnp
 import numpy as np
 import pytest
 
-from mjzoo.learning.losses import (
-    clipped_surrogate_loss,
-    kl_penalty_loss,
-    normalize_advantages,
-    policy_gradient_loss,
-    value_loss,
-)
+from mjzoo.learning.losses import clipped_surrogate_loss
+from mjzoo.learning.losses import kl_penalty_loss
+from mjzoo.learning.losses import normalize_advantages
+from mjzoo.learning.losses import policy_gradient_loss
+from mjzoo.learning.losses import value_loss
 
 EPS = 0.2
 # ratios r = [0.5, 0.9, 1.1, 1.5], advantages A = [1, -1, 2, -2], eps = 0.2:

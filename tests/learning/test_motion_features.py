@@ -19,14 +19,13 @@ from jax.tree_util import Partial
 from mujoco import mjx
 
 import mjzoo
-from mjzoo.learning.motion_features import (  # the module: mjzoo.learning may export the function
-    feature_layout,
-    feature_size,
-    frames_features,
-    motion_features,
-    with_feature_window,
-)
-from mjzoo.types import State, Task
+from mjzoo.learning.motion_features import feature_layout  # the module: mjzoo.learning may export the function
+from mjzoo.learning.motion_features import feature_size  # the module: mjzoo.learning may export the function
+from mjzoo.learning.motion_features import frames_features  # the module: mjzoo.learning may export the function
+from mjzoo.learning.motion_features import motion_features  # the module: mjzoo.learning may export the function
+from mjzoo.learning.motion_features import with_feature_window  # the module: mjzoo.learning may export the function
+from mjzoo.types import State
+from mjzoo.types import Task
 
 TOY = """
 <mujoco model="toy">

@@ -9,7 +9,10 @@ import jax.numpy as jnp
 import numpy as np
 import pytest
 
-from mjzoo.learning.networks import Network, RecurrentNetwork, gru_mlp, mlp
+from mjzoo.learning.networks import Network
+from mjzoo.learning.networks import RecurrentNetwork
+from mjzoo.learning.networks import gru_mlp
+from mjzoo.learning.networks import mlp
 
 KEY = jax.random.key(0)
 

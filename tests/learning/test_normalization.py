@@ -9,7 +9,10 @@ import jax.numpy as jnp
 import numpy as np
 import pytest
 
-from mjzoo.learning.normalization import RunningStats, init_stats, normalize, update_stats
+from mjzoo.learning.normalization import RunningStats
+from mjzoo.learning.normalization import init_stats
+from mjzoo.learning.normalization import normalize
+from mjzoo.learning.normalization import update_stats
 
 EXAMPLE = {"joints": jnp.zeros(3), "image": jnp.zeros((2, 2))}
 

@@ -8,7 +8,10 @@ import re
 import mujoco
 import numpy as np
 import pytest
-from motion_models import JOINTS, TORSO, TORSO_XML, analytic
+from motion_models import JOINTS
+from motion_models import TORSO
+from motion_models import TORSO_XML
+from motion_models import analytic
 
 from mjzoo import motion
 

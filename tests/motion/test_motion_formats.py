@@ -5,7 +5,10 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
-from motion_models import JOINTS, TORSO, analytic, world_angular_velocity
+from motion_models import JOINTS
+from motion_models import TORSO
+from motion_models import analytic
+from motion_models import world_angular_velocity
 
 from mjzoo import motion
 

@@ -11,11 +11,13 @@ import pytest
 from catalog_tasks import BASE_AND_ARM
 from catalog_tasks import MJ as ARM
 from jax.tree_util import Partial
-from motion_models import TORSO, analytic
+from motion_models import TORSO
+from motion_models import analytic
 from mujoco import mjx
 
 from mjzoo import motion
-from mjzoo.types import State, Task
+from mjzoo.types import State
+from mjzoo.types import Task
 
 LONG, SHORT = analytic(50.0, 50, name="long"), analytic(50.0, 20, name="short")
 

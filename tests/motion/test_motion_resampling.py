@@ -6,7 +6,10 @@ from __future__ import annotations
 import mujoco
 import numpy as np
 import pytest
-from motion_models import JOINTS, TORSO, analytic, axis_quat
+from motion_models import JOINTS
+from motion_models import TORSO
+from motion_models import analytic
+from motion_models import axis_quat
 
 from mjzoo import motion
 

@@ -17,9 +17,14 @@ import numpy as np
 import pytest
 
 import mjzoo
-from mjzoo import envs, planning
-from mjzoo.algorithms import cem, mppi, predictive_sampling
-from mjzoo.planning import closed_loop, learned, realtime
+from mjzoo import envs
+from mjzoo import planning
+from mjzoo.algorithms import cem
+from mjzoo.algorithms import mppi
+from mjzoo.algorithms import predictive_sampling
+from mjzoo.planning import closed_loop
+from mjzoo.planning import learned
+from mjzoo.planning import realtime
 
 H, K = 6, 3  # 6 planning steps of 0.05 s: a full push moves the 0.3 kg mass ~0.15 m
 CONFIG = mppi.Config(num_samples=16, horizon_steps=H, num_knots=K)

@@ -17,11 +17,14 @@ from jax.tree_util import Partial
 
 import mjzoo
 import mjzoo.envs
-from mjzoo import physics, planning
+from mjzoo import physics
+from mjzoo import planning
 from mjzoo.algorithms import mppi
 from mjzoo.catalog import actuators
-from mjzoo.planning import closed_loop, native
-from mjzoo.types import State, Task
+from mjzoo.planning import closed_loop
+from mjzoo.planning import native
+from mjzoo.types import State
+from mjzoo.types import Task
 
 PLANNING_ENVS = ["pendulum_swingup", "cartpole_swingup", "cylinder_push", "point_mass"]
 SAMPLES, HORIZON = 8, 25

@@ -35,7 +35,11 @@ import tyro
 
 from mjzoo.harness import compilation
 from mjzoo.harness.cli.arguments import UsageError
-from mjzoo.harness.cli.commands import demo, envs, evaluate, plan, train
+from mjzoo.harness.cli.commands import demo
+from mjzoo.harness.cli.commands import envs
+from mjzoo.harness.cli.commands import evaluate
+from mjzoo.harness.cli.commands import plan
+from mjzoo.harness.cli.commands import train
 from mjzoo.harness.cli.exporting import export
 from mjzoo.harness.cli.trajectories import collect
 from mjzoo.harness.cli.viewing import view

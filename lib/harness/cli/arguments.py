@@ -8,28 +8,20 @@ import contextlib
 import dataclasses
 import importlib
 import inspect
+import re
 import types
 import typing
 from collections.abc import Iterator
 from types import ModuleType
-from typing import Any, Literal
+from typing import Annotated
+from typing import Any
+from typing import Literal
+
+import tyro
 
 import mjzoo
 
-__all__ = [
-    "UsageError",
-    "as_usage_errors",
-    "at_least_one",
-    "parse_assignments",
-    "algorithm_module",
-    "build_algorithm",
-    "imitated",
-    "build_planner",
-    "episode_steps",
-    "slug",
-    "ALGORITHMS",
-    "PLANNERS",
-]
+__all__ = ["UsageError", "as_usage_errors"]
 
 ALGORITHMS = ("ppo", "amp")
 PLANNERS = ("predictive_sampling", "cem", "mppi")
@@ -182,3 +174,22 @@ def episode_steps(task: mjzoo.Task, spec: str, steps: int | None) -> int:
 def slug(spec: str) -> str:
     """A task spec as part of a directory name: my_pkg.tasks:reach -> my_pkg.tasks.reach."""
     return spec.replace(":", ".")
+
+
+def settings_flags(name: str, doc: str, fields: tuple[str, ...]) -> type:
+    """A frozen dataclass of `training.Settings`' `fields` for a command's flags: each
+    with Settings' type and default, and the comment beside it in Settings as its --help,
+    so the command line restates none of them."""
+    from mjzoo.harness.settings import Settings
+
+    hints = typing.get_type_hints(Settings)
+    defaults = {f.name: f.default for f in dataclasses.fields(Settings)}
+    source = inspect.getsource(Settings)
+    flags = []
+    for field in fields:
+        comment = re.search(rf"^\s+{field}: [^#\n]*#\s*(.*)$", source, re.M)
+        help_text = comment.group(1) if comment else None
+        flags.append((field, Annotated[hints[field], tyro.conf.arg(help=help_text)], defaults[field]))
+    cls = dataclasses.make_dataclass(name, flags, frozen=True)
+    cls.__doc__ = doc
+    return cls

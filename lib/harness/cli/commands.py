@@ -8,7 +8,9 @@ import dataclasses
 import json
 import time
 from pathlib import Path
-from typing import Annotated, Any, Literal
+from typing import Annotated
+from typing import Any
+from typing import Literal
 
 import jax
 import jax.numpy as jnp
@@ -17,19 +19,18 @@ import tyro
 
 import mjzoo
 from mjzoo.harness.cli import runs
-from mjzoo.harness.cli.arguments import (
-    PLANNERS,
-    UsageError,
-    algorithm_module,
-    as_usage_errors,
-    at_least_one,
-    build_algorithm,
-    build_planner,
-    episode_steps,
-    imitated,
-    parse_assignments,
-    slug,
-)
+from mjzoo.harness.cli.arguments import PLANNERS
+from mjzoo.harness.cli.arguments import UsageError
+from mjzoo.harness.cli.arguments import algorithm_module
+from mjzoo.harness.cli.arguments import as_usage_errors
+from mjzoo.harness.cli.arguments import at_least_one
+from mjzoo.harness.cli.arguments import build_algorithm
+from mjzoo.harness.cli.arguments import build_planner
+from mjzoo.harness.cli.arguments import episode_steps
+from mjzoo.harness.cli.arguments import imitated
+from mjzoo.harness.cli.arguments import parse_assignments
+from mjzoo.harness.cli.arguments import settings_flags
+from mjzoo.harness.cli.arguments import slug
 from mjzoo.harness.rendering import RenderConfig
 
 __all__ = ["envs", "demo", "train", "evaluate", "plan", "Schedule"]
@@ -40,37 +41,28 @@ RUN_DEFAULTS = {"seed": 0, "eval_envs": 16, "updates_per_chunk": 10}  # how `tra
 _NOT_KEPT = ("out_dir", "resume", "overwrite", "progress", "video")
 
 
-@dataclasses.dataclass(frozen=True)
-class Schedule:
-    """When a run evaluates, records and logs (KSim's validation and logging options).
-    A flag left at its default keeps a new run's default, or what a resumed run was
-    started with."""
-
-    eval_every: int | None = None
-    """Chunks between evaluations; 0: none by count (the last chunk always evaluates). Default:
-    as often as --eval-budget of the wall-clock time allows."""
-    eval_budget: float | None = None
-    """Without --eval-every: the largest share of the wall-clock time evaluations may take (default 0.05)."""
-    eval_every_seconds: float | None = None
-    """Also evaluate when this many wall-clock seconds have passed since the last evaluation."""
-    eval_first_seconds: float | None = None
-    """No evaluation before this many seconds after launch; the first one right after."""
-    eval_steps: int | None = None
-    """Evaluation episode length in control steps (default: the task's episode length)."""
-    eval_seconds: float | None = None
-    """Evaluation episode length in simulated seconds, instead of --eval-steps."""
-    video_every: int | None = None
-    """Also write videos/eval_STEP.mp4 every N evaluations; 0: only the final eval.mp4."""
-    log_every: int | None = None
-    """Chunks between metrics lines (default 1); evaluations are always logged."""
-    log_train_metrics: bool = True
-    """Log training metrics (losses, rewards); off: only eval/*, perf/* (and memory/*)."""
-    profile_memory: bool = False
-    """Record each device's memory in use and its peak as memory/*."""
-    checkpoint_every: int | None = None
-    """Also save a checkpoint every N chunks; 0: never, not even at the end."""
-    checkpoint_every_seconds: float | None = None
-    """Wall-clock seconds between checkpoints (default 60); the last chunk always saves one."""
+# When a run evaluates, records and logs (KSim's validation and logging options): those
+# of `training.Settings`' fields, with their types, defaults and comments, as flags.
+Schedule = settings_flags(
+    "Schedule",
+    "When a run evaluates, records and logs (KSim's validation and logging options). A flag "
+    "left at its default keeps a new run's default, or what a resumed run was started with.",
+    (
+        "eval_every",
+        "eval_budget",
+        "eval_every_seconds",
+        "eval_first_seconds",
+        "eval_steps",
+        "eval_seconds",
+        "video_every",
+        "log_every",
+        "log_train_metrics",
+        "profile_memory",
+        "checkpoint_every",
+        "checkpoint_every_seconds",
+    ),
+)
+SCHEDULE_DEFAULTS = Schedule()
 
 
 def envs() -> None:
@@ -139,7 +131,7 @@ def train(
     updates_per_chunk: int | None = None,
     video: bool = True,
     impl: Literal["jax", "warp"] | None = None,
-    schedule: Annotated[Schedule, tyro.conf.OmitArgPrefixes] = Schedule(),
+    schedule: Annotated[Schedule, tyro.conf.OmitArgPrefixes] = SCHEDULE_DEFAULTS,
     render: RenderConfig = RenderConfig(),
     coordinator: str | None = None,
     num_processes: int | None = None,
@@ -171,7 +163,10 @@ def train(
     each process trains its share of the envs, and process 0 writes --out, which every
     process must reach.
     """
-    from mjzoo.harness import checkpoints, devices, distributed, training
+    from mjzoo.harness import checkpoints
+    from mjzoo.harness import devices
+    from mjzoo.harness import distributed
+    from mjzoo.harness import training
 
     with as_usage_errors():
         distributed.initialize(coordinator, num_processes, process_id)  # before anything touches JAX's devices
@@ -187,7 +182,7 @@ def train(
             "seed": seed,
             "eval_envs": eval_envs,
             "updates_per_chunk": updates_per_chunk,
-            **_changed(schedule, Schedule()),
+            **_changed(schedule, SCHEDULE_DEFAULTS),
         }
         run_settings.update({k: v for k, v in given.items() if v is not None})
         run_settings["render"] = _render(run_settings.pop("render", None), render)

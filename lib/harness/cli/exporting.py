@@ -6,7 +6,10 @@ from __future__ import annotations
 import dataclasses
 from pathlib import Path
 from types import ModuleType
-from typing import TYPE_CHECKING, Annotated, Any, Literal
+from typing import TYPE_CHECKING
+from typing import Annotated
+from typing import Any
+from typing import Literal
 
 import jax
 import jax.numpy as jnp
@@ -14,7 +17,8 @@ import tyro
 
 import mjzoo
 from mjzoo.harness.cli import runs
-from mjzoo.harness.cli.arguments import UsageError, as_usage_errors
+from mjzoo.harness.cli.arguments import UsageError
+from mjzoo.harness.cli.arguments import as_usage_errors
 
 if TYPE_CHECKING:
     from mjzoo.interop import export

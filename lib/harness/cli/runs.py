@@ -6,20 +6,20 @@ from __future__ import annotations
 import json
 from pathlib import Path
 from types import ModuleType
-from typing import Any, NamedTuple
+from typing import Any
+from typing import NamedTuple
 
 import jax
 
 import mjzoo
-from mjzoo.harness import checkpoints, training
-from mjzoo.harness.cli.arguments import (
-    UsageError,
-    algorithm_module,
-    as_usage_errors,
-    build_algorithm,
-    imitated,
-    parse_assignments,
-)
+from mjzoo.harness import checkpoints
+from mjzoo.harness import training
+from mjzoo.harness.cli.arguments import UsageError
+from mjzoo.harness.cli.arguments import algorithm_module
+from mjzoo.harness.cli.arguments import as_usage_errors
+from mjzoo.harness.cli.arguments import build_algorithm
+from mjzoo.harness.cli.arguments import imitated
+from mjzoo.harness.cli.arguments import parse_assignments
 
 __all__ = ["Trained", "refuse_existing", "read_run", "load", "restore"]
 

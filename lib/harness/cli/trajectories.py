@@ -7,23 +7,22 @@ from __future__ import annotations
 import dataclasses
 import json
 from pathlib import Path
-from typing import Annotated, Any
+from typing import Annotated
+from typing import Any
 
 import tyro
 
 import mjzoo
 from mjzoo.harness import datasets
 from mjzoo.harness.cli import runs
-from mjzoo.harness.cli.arguments import (
-    PLANNERS,
-    UsageError,
-    algorithm_module,
-    as_usage_errors,
-    at_least_one,
-    build_planner,
-    episode_steps,
-    parse_assignments,
-)
+from mjzoo.harness.cli.arguments import PLANNERS
+from mjzoo.harness.cli.arguments import UsageError
+from mjzoo.harness.cli.arguments import algorithm_module
+from mjzoo.harness.cli.arguments import as_usage_errors
+from mjzoo.harness.cli.arguments import at_least_one
+from mjzoo.harness.cli.arguments import build_planner
+from mjzoo.harness.cli.arguments import episode_steps
+from mjzoo.harness.cli.arguments import parse_assignments
 from mjzoo.planning.realtime import Problem
 
 __all__ = ["collect"]

@@ -5,7 +5,9 @@ video of what was shown)."""
 from __future__ import annotations
 
 from pathlib import Path
-from typing import Annotated, Any, Literal
+from typing import Annotated
+from typing import Any
+from typing import Literal
 
 import imageio.v3 as iio
 import mujoco
@@ -13,17 +15,16 @@ import numpy as np
 import tyro
 
 import mjzoo
-from mjzoo.harness import datasets, rendering
+from mjzoo.harness import datasets
+from mjzoo.harness import rendering
 from mjzoo.harness.cli import runs
-from mjzoo.harness.cli.arguments import (
-    PLANNERS,
-    UsageError,
-    algorithm_module,
-    as_usage_errors,
-    at_least_one,
-    build_planner,
-    parse_assignments,
-)
+from mjzoo.harness.cli.arguments import PLANNERS
+from mjzoo.harness.cli.arguments import UsageError
+from mjzoo.harness.cli.arguments import algorithm_module
+from mjzoo.harness.cli.arguments import as_usage_errors
+from mjzoo.harness.cli.arguments import at_least_one
+from mjzoo.harness.cli.arguments import build_planner
+from mjzoo.harness.cli.arguments import parse_assignments
 from mjzoo.harness.rendering import RenderConfig
 
 __all__ = ["view", "target_kind"]

@@ -34,28 +34,15 @@ from typing import Any
 from mjzoo import motion
 from mjzoo.harness.viewer.app import Viewer
 from mjzoo.harness.viewer.planning import Planning
-from mjzoo.harness.viewer.recording import Recording, from_clip, from_dataset
-from mjzoo.harness.viewer.scene import Scene, body_groups
-from mjzoo.harness.viewer.sources import CONTROLS, Frame, Simulation
+from mjzoo.harness.viewer.recording import Recording
+from mjzoo.harness.viewer.recording import from_clip
+from mjzoo.harness.viewer.recording import from_dataset
+from mjzoo.harness.viewer.sources import Simulation
 from mjzoo.harness.viewer.sources import controls as make_controls
 from mjzoo.planning.realtime import Problem
 from mjzoo.types import Task
 
-__all__ = [
-    "serve",
-    "env",
-    "policy",
-    "planner",
-    "recording",
-    "Viewer",
-    "Simulation",
-    "Planning",
-    "Recording",
-    "Frame",
-    "Scene",
-    "body_groups",
-    "CONTROLS",
-]
+__all__ = ["serve", "env", "policy", "planner", "recording", "Viewer"]
 
 
 def env(task: Task, controls: str = "zero", num_envs: int = 1, seed: int = 0) -> Simulation:

@@ -10,13 +10,15 @@ setting ``.value`` from Python runs the same callback a browser's change does.
 
 from __future__ import annotations
 
-from typing import TYPE_CHECKING, Any
+from typing import TYPE_CHECKING
+from typing import Any
 
 import mujoco
 import numpy as np
 from viser import uplot
 
-from mjzoo.harness.viewer.sources import ctrl_range, slider_range
+from mjzoo.harness.viewer.sources import ctrl_range
+from mjzoo.harness.viewer.sources import slider_range
 
 if TYPE_CHECKING:
     from mjzoo.harness.viewer.app import Viewer

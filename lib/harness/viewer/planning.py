@@ -25,12 +25,18 @@ import jax.numpy as jnp
 import mujoco
 import numpy as np
 
-from mjzoo.harness.viewer.sources import Frame, float_parameters, host_poses
-from mjzoo.planning import closed_loop, sampling
+from mjzoo.harness.viewer.sources import Frame
+from mjzoo.harness.viewer.sources import float_parameters
+from mjzoo.harness.viewer.sources import host_poses
+from mjzoo.planning import closed_loop
+from mjzoo.planning import sampling
 from mjzoo.planning.ensembles import base_task
 from mjzoo.planning.realtime import Problem
-from mjzoo.running import fill_transition_entries, reset, transition
-from mjzoo.types import State, Task
+from mjzoo.running import fill_transition_entries
+from mjzoo.running import reset
+from mjzoo.running import transition
+from mjzoo.types import State
+from mjzoo.types import Task
 
 __all__ = ["Planning", "trace_point", "config_floats"]
 

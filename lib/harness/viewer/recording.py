@@ -11,7 +11,8 @@ import mujoco
 import numpy as np
 
 from mjzoo import motion
-from mjzoo.harness.viewer.sources import Frame, host_poses
+from mjzoo.harness.viewer.sources import Frame
+from mjzoo.harness.viewer.sources import host_poses
 
 __all__ = ["Recording", "from_dataset", "from_clip"]
 

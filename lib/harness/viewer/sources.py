@@ -18,7 +18,8 @@ from __future__ import annotations
 
 import dataclasses
 import math
-from typing import Any, Callable
+from typing import Any
+from typing import Callable
 
 import jax
 import jax.numpy as jnp
@@ -28,8 +29,12 @@ import numpy as np
 from mjzoo import batching
 from mjzoo.combinators import with_auto_reset
 from mjzoo.parameters import params as task_params
-from mjzoo.running import control_dt, fill_transition_entries, reset, transition
-from mjzoo.types import State, Task
+from mjzoo.running import control_dt
+from mjzoo.running import fill_transition_entries
+from mjzoo.running import reset
+from mjzoo.running import transition
+from mjzoo.types import State
+from mjzoo.types import Task
 
 __all__ = ["Frame", "Simulation", "controls", "host_poses", "float_parameters", "CONTROLS"]
 
