@@ -176,7 +176,7 @@ def retrace_hazard(who: str, what: str, fn) -> None:
     numbers = f", and the numbers it captures ({_preview(captured)}) are constants of the trace" if captured else ""
     warnings.warn(
         f"{who}: {what} is {why}: a rebuilt task holds a new function object, so jax.jit retraces it{numbers}. "
-        "Use a module-level function and pass its numbers as leaves (Partial(fn, weight), or a named "
+        "Use a module-level function and pass its numbers as leaves (jax.tree_util.Partial(fn, weight), or a named "
         "parameter of mjzoo.task).",
         RetraceHazardWarning,
         stacklevel=_first_caller_outside(),
