@@ -60,6 +60,7 @@ from mjzoo.learning.losses import kl_penalty_loss
 from mjzoo.learning.losses import normalize_advantages
 from mjzoo.learning.losses import policy_gradient_loss
 from mjzoo.learning.losses import value_loss
+from mjzoo.learning.motion_features import FeatureWindowState
 from mjzoo.learning.motion_features import feature_layout
 from mjzoo.learning.motion_features import feature_size
 from mjzoo.learning.motion_features import frames_features
@@ -79,6 +80,7 @@ __all__ = [
     "Algorithm",
     "Collector",
     "Evaluation",
+    "FeatureWindowState",
     "Network",
     "RecurrentNetwork",
     "Replay",

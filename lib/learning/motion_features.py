@@ -33,6 +33,8 @@ name a base whose x axis is not vertical.
 from __future__ import annotations
 
 import dataclasses
+from typing import Any
+from typing import NamedTuple
 from typing import Sequence
 
 import jax
@@ -43,14 +45,25 @@ from mujoco import mjx
 from mjzoo import names
 from mjzoo import tree
 from mjzoo.combinators import resets_itself
+from mjzoo.layers import find
+from mjzoo.layers import layered
+from mjzoo.layers import peel
+from mjzoo.layers import wrap
 from mjzoo.types import State
 from mjzoo.types import Task
 
-__all__ = ["Layout", "feature_layout", "feature_size", "frames_features", "motion_features", "with_feature_window"]
+__all__ = [
+    "FeatureWindowState",
+    "Layout",
+    "feature_layout",
+    "feature_size",
+    "frames_features",
+    "motion_features",
+    "with_feature_window",
+]
 
 Array = jax.Array
 Partial = jax.tree_util.Partial
-WINDOW = "motion_window"  # the info key of `with_feature_window`
 _FREE, _BALL = int(mujoco.mjtJoint.mjJNT_FREE), int(mujoco.mjtJoint.mjJNT_BALL)
 
 
@@ -269,9 +282,9 @@ def with_feature_window(task: Task, features: Partial, num_frames: int) -> Task:
     At reset the window is the reset state's features repeated; each step drops the
     oldest frame and appends the new state's. Where the task restarts episodes inside
     its step (`with_auto_reset` inside this combinator), the window restarts with the
-    new episode, so no window spans two episodes. Keeps ``info["motion_window"]``, the
-    window (an outer observation noise does not reach it); the inner step receives the
-    ``"policy"`` observation. Costs one `mjx.kinematics` per step with key bodies.
+    new episode, so no window spans two episodes. Keeps the window in its record,
+    `FeatureWindowState` (an outer observation noise does not reach it); the inner step
+    receives the ``"policy"`` observation. Costs one `mjx.kinematics` per step with key bodies.
 
     Raises:
       ValueError: `num_frames` < 2 (a discriminator judges transitions: at least two
@@ -290,18 +303,26 @@ def with_feature_window(task: Task, features: Partial, num_frames: int) -> Task:
             f"with_feature_window: features were built for a model with (nq, nv, nbody) = "
             f"{layout.model_sizes}, the task's has {sizes}: build them from task.mj_model"
         )
-    if WINDOW in jax.eval_shape(task.start, task.model, jax.random.key(0)).info:
+    if find(jax.eval_shape(task.start, task.model, jax.random.key(0)), FeatureWindowState, None) is not None:
         raise ValueError("with_feature_window: the task already keeps a motion window; raise its num_frames")
     restarts = tree.StaticValue(resets_itself(task))
-    return task.replace(
+    return layered(
+        task,
+        FeatureWindowState,
         start=Partial(_window_start, task.start, features, tree.StaticValue(num_frames)),
         step=Partial(_window_step, task.step, features, restarts),
     )
 
 
+class FeatureWindowState(NamedTuple):
+    """`with_feature_window`'s record: the window [num_frames, F], oldest frame first."""
+
+    window: Array
+    inner: Any = ()
+
+
 def _windowed(state: State, window: Array) -> State:
-    obs = {"policy": state.obs, "motion": window}
-    return state.replace(obs=obs, info={**state.info, WINDOW: window})
+    return wrap(state.replace(obs={"policy": state.obs, "motion": window}), FeatureWindowState(window))
 
 
 def _window_start(start_fn, features, num_frames: tree.StaticValue, model, key) -> State:
@@ -310,7 +331,8 @@ def _window_start(start_fn, features, num_frames: tree.StaticValue, model, key) 
 
 
 def _window_step(step_fn, features, restarts: tree.StaticValue, model, state: State, action, key) -> State:
-    window = state.info[WINDOW]
+    record, state = peel(state, FeatureWindowState)
+    window = record.window
     next_state = step_fn(model, state.replace(obs=state.obs["policy"]), action, key)
     frame = features(model, next_state.data)
     shifted = jnp.concatenate([window[1:], frame[None]])

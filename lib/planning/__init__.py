@@ -5,25 +5,26 @@
                   vmap), configure (both from one dict of fields), PlannerState,
                   sampling around a nominal plan, warm start, the MPPI weights and
                   the CEM update
-    ensembles      batched ensembles of a task's own `transition` and their costs, model
+    ensembles     batched rollouts of a task's own `transition` and their costs, model
                   ensembles and risk measures
-    native        the same ensembles in C MuJoCo (`mujoco.rollout`), costed by the task's
+    native        the same rollouts in C MuJoCo (`mujoco.rollout`), costed by the task's
                   own reward in JAX: the fast backend on a CPU
     learned       learned pieces planners call at run time (a terminal value), as
                   pytrees whose weights are leaves, and committed host-loop arguments
     closed_loop   simulate one task while planning with another, as one jit; Judo's hooks
-    realtime      the same closed loop against the wall clock, or timed offline
+    realtime      the same closed loop against the wall clock, or timed offline (loads on
+                  first use: the env registry needs the closed loop's hooks, not the clock)
 
 `mjzoo.algorithms.mppi`, `cem` and `predictive_sampling` are a few lines each on top
 of `sample_around`; a new planner reuses every piece here. The functions of `sampling`,
 `ensembles` and `learned.as_terminal_value` are re-exported: ``mjzoo.planning.mppi_weights``.
 """
 
+from mjzoo import lazy
 from mjzoo.planning import closed_loop
 from mjzoo.planning import ensembles
 from mjzoo.planning import learned
 from mjzoo.planning import native
-from mjzoo.planning import realtime
 from mjzoo.planning import sampling
 from mjzoo.planning import splines
 from mjzoo.planning.ensembles import RISKS
@@ -86,3 +87,5 @@ __all__ = [
     "mppi_weights",
     "cem_update",
 ]
+
+__getattr__, __dir__ = lazy.submodules(__name__, ("realtime",))

@@ -4,6 +4,8 @@
 from __future__ import annotations
 
 import ast
+import subprocess
+import sys
 from pathlib import Path
 
 import jax
@@ -152,3 +154,11 @@ def test_the_registry_imports_nothing_from_planning_realtime_at_load(module):
         if isinstance(node, ast.ImportFrom):
             assert "realtime" not in (node.module or ""), ast.unparse(node)
             assert all(alias.name != "realtime" for alias in node.names), ast.unparse(node)
+
+
+def test_importing_the_registry_loads_no_real_time_runner():
+    """What `import mjzoo.envs` loads, in a fresh process: the closed loop's hooks that the
+    planning setups name, but not `planning.realtime` (nor its clock)."""
+    script = "import sys, mjzoo.envs; print('mjzoo.planning.realtime' in sys.modules)"
+    out = subprocess.run([sys.executable, "-c", script], capture_output=True, text=True, check=True).stdout
+    assert out.strip() == "False"
