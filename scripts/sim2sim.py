@@ -39,11 +39,12 @@ def main() -> None:
     args = parser.parse_args()
 
     from mjzoo.harness.cli import exporting
+    from mjzoo.interop import deployment
     from mjzoo.interop import export
     from mjzoo.interop import sim2sim
 
     trained, state = exporting.load_run(args.run)
-    task = sim2sim.without_observation_noise(trained.task)
+    task = deployment.without_observation_noise(trained.task)
     if args.steps is None and task.time_limit is None:
         parser.error(f"{trained.spec} has no time limit: give --steps")
     steps = args.steps or int(task.time_limit)

@@ -36,14 +36,24 @@ naming it; `register_observation` teaches the vocabulary a function of one's own
 from __future__ import annotations
 
 import dataclasses
+import functools
 from collections.abc import Callable
 from typing import Any
+from typing import NamedTuple
 
 import jax
+import jax.numpy as jnp
 import mujoco
 import numpy as np
+from mujoco import mjx
 
 from mjzoo import names
+from mjzoo.catalog.observations import ObservationHistoryState
+from mjzoo.layers import find
+from mjzoo.learning import to_controls
+from mjzoo.running import reset
+from mjzoo.running import transition
+from mjzoo.types import State
 from mjzoo.types import Task
 
 __all__ = [
@@ -56,8 +66,13 @@ __all__ = [
     "frame_size",
     "action_mapping",
     "model_section",
+    "stacked",
+    "Check",
+    "check_observation",
+    "without_observation_noise",
 ]
 
+Array = jax.Array
 FORMAT = "mjzoo.policy/1"
 SOURCES = (
     "qpos",
@@ -490,3 +505,130 @@ def physics_section(m: mujoco.MjModel, control_dt: float) -> dict[str, Any]:
         ls_iterations=int(m.opt.ls_iterations),
         disable_flags=int(m.opt.disableflags),
     )
+
+
+class Check(NamedTuple):
+    """What `check_observation` measured."""
+
+    max_error: float  # max |contract's observation - task's| over the checked states
+    control_dt: float  # seconds per task step, measured
+    history: int  # frames per observation
+
+
+# --- the observation, checked on MJX's states ---------------------------------------------------------------------
+
+_NOISE = (
+    "mjzoo.perturbations:_noisy_reset",
+    "mjzoo.perturbations:_noisy_obs_step",
+    "mjzoo.catalog.observations:_bias_reset",
+    "mjzoo.catalog.observations:_scaled_reset",
+    "mjzoo.catalog.observations:_scaled_step",
+)  # (each binds (inner function, scale, ...))
+
+
+def without_observation_noise(task: Task) -> Task:
+    """`task` with the scales of its observation-noise combinators (`with_observation_noise`,
+    `with_observation_bias`, `with_multiplicative_observation_noise`) set to 0: the
+    observation a deployment computes. Same pytree structure, so no recompile."""
+
+    def clean(node: Any) -> Any:
+        if not isinstance(node, jax.tree_util.Partial):
+            return node
+        args = [clean(arg) for arg in node.args]
+        if function_key(node.func) in _NOISE:
+            args[1] = jnp.zeros_like(args[1])
+        return jax.tree_util.Partial(node.func, *args, **node.keywords)
+
+    return task.replace(start=clean(task.start), step=clean(task.step))
+
+
+def stacked(frames: list[np.ndarray], length: int) -> np.ndarray:
+    """The newest `length` frames, newest first, the oldest repeated before there are enough."""
+    recent = frames[-length:][::-1]
+    return np.concatenate(recent + [recent[-1]] * (length - len(recent)))
+
+
+@functools.partial(jax.jit, static_argnums=2)  # module level: one compile per task structure
+def _random_run(task: Task, key: Array, steps: int):
+    """A reset and `steps` transitions under uniform random actions: (first state, (states, task actions))."""
+    reset_key, run_key = jax.random.split(key)
+    state = reset(task, reset_key)
+
+    def body(state: State, key):
+        act_key, step_key = jax.random.split(key)
+        action = to_controls(task, jax.random.uniform(act_key, (task.action_size,), minval=-1.0, maxval=1.0))
+        after = transition(task, state, action, step_key)
+        return after, (after, action)
+
+    return state, jax.lax.scan(body, state, jax.random.split(run_key, steps))[1]
+
+
+_READ = (
+    "qpos",
+    "qvel",
+    "act",
+    "xpos",
+    "xquat",
+    "xmat",
+    "site_xpos",
+    "cvel",
+    "subtree_com",
+    "sensordata",
+    "actuator_force",
+)  # (the arrays the vocabulary reads)
+
+
+def _c_data(m: mujoco.MjModel, data: mjx.Data) -> mujoco.MjData:
+    """A C MjData holding what the vocabulary reads of one MJX state (`mjx.get_data` also
+    refactors the inertia, and warns on MJX's states)."""
+    d = mujoco.MjData(m)
+    d.time = float(data.time)
+    for field in _READ:
+        target = getattr(d, field)
+        target[...] = np.asarray(getattr(data, field)).reshape(target.shape)
+    return d
+
+
+def check_observation(task: Task, terms: list[dict[str, Any]], key: Array, steps: int = 8) -> Check:
+    """Rebuilds `task`'s observation from `terms` on MJX states (a reset, then `steps`
+    transitions under uniformly random actions) and compares it with the task's own,
+    observation noise off (`without_observation_noise`).
+
+    Raises:
+      ContractError: the observation is not one flat array, or the rebuilt one
+        differs by more than 1e-4 (relative above 1); the message names the worst terms.
+    """
+    first, (states, actions) = _random_run(without_observation_noise(task), key, steps)
+    if not isinstance(first.obs, jax.Array) or first.obs.ndim != 1:
+        raise ContractError(
+            f"the task's observation is {jax.tree.structure(first.obs)}; the contract "
+            "describes one flat array (a dict observation is not supported)"
+        )
+    size = frame_size(terms)
+    history = getattr(find(first, ObservationHistoryState, None), "frames", None)
+    length = 1 if history is None else int(history.shape[0])
+    if first.obs.shape[0] != length * size:
+        raise ContractError(
+            f"the task observes {first.obs.shape[0]} numbers; the described terms make "
+            f"{size} per frame x {length} frames: {[t['name'] for t in terms]}"
+        )
+    m, previous, frames = task.mj_model, np.zeros(task.action_size), []
+    errors, expected = [], []
+    for t in range(steps + 1):
+        state = first if t == 0 else jax.tree.map(lambda x, t=t: x[t - 1], states)
+        if t > 0:
+            previous = np.asarray(actions[t - 1], float)
+        frames.append(frame(terms, m, _c_data(m, state.data), previous))
+        want = np.asarray(state.obs, np.float64)
+        errors.append(np.abs(stacked(frames, length) - want) / np.maximum(1.0, np.abs(want)))
+        expected.append(want)
+    worst = np.max(errors, axis=0)
+    if not np.all(worst <= 1e-4) or not np.all(np.isfinite(worst)):
+        per_term, start = [], 0
+        for term in terms:
+            per_term.append((float(np.max(worst[:size].reshape(-1)[start : start + term["size"]])), term["name"]))
+            start += term["size"]
+        bad = ", ".join(f"{n} (error {e:.3g})" for e, n in sorted(per_term, reverse=True) if e > 1e-4)
+        raise ContractError(f"the described observation does not reproduce the task's: {bad or 'history'}")
+    control_dt = float(states.data.time[0] - first.data.time)
+    return Check(max_error=float(np.max(worst)), control_dt=control_dt, history=length)

@@ -100,10 +100,8 @@ def describe(
         or a layout that does not reproduce the task's observation (naming the terms).
       ValueError: the policy's sizes differ from the task's.
     """
-    from mjzoo.interop import sim2sim  # runs MJX: imported when used
-
     terms = deployment.observation_terms(task)
-    check = sim2sim.check_observation(task, terms, jax.random.key(0) if key is None else key, check_steps)
+    check = deployment.check_observation(task, terms, jax.random.key(0) if key is None else key, check_steps)
     size = check.history * deployment.frame_size(terms)
     if (policy.obs_size, policy.action_size) != (size, task.action_size):
         raise ValueError(

@@ -203,7 +203,7 @@ def test_observation_noise_is_off_for_the_contract(task):
     """The check and sim-to-sim compare noiseless observations: the noise combinators'
     scales become 0 and the observation is the bare task's again (same structure)."""
     noisy = observations.with_observation_bias(mjzoo.with_observation_noise(task, 0.3), 0.2)
-    clean = sim2sim.without_observation_noise(noisy)
+    clean = deployment.without_observation_noise(noisy)
     assert jax.tree.structure(clean) == jax.tree.structure(noisy)
     key = jax.random.key(1)
     bare, clean_obs = reset(task, key).obs, reset(clean, key).obs
