@@ -294,17 +294,19 @@ def reference_state(reference: motion.Reference, probability: float = 1.0) -> Re
     clip and frame started from, -1 and -1 when the task's own reset was kept (a
     tracker can follow the reference from there). A looping clip sampled mid-way
     keeps its root position as recorded. The reference and `probability` in [0, 1]
-    are leaves: other clips or probabilities of the same shapes do not recompile.
+    are leaves: other clips or probabilities of the same shapes do not recompile; the
+    probability is the task's parameter ``reference_probability`` (`mjzoo.params`).
     """
     who = "resets.reference_state"
     if not isinstance(reference, motion.Reference):
         raise TypeError(
             f"{who}: reference must be a motion.Reference (motion.reference(...)), got {type(reference).__name__}"
         )
-    return Partial(_reference_state, reference, checks.number(who, "probability", probability, 0.0, 1.0))
+    probability = checks.number(who, "probability", probability, 0.0, 1.0)
+    return Partial(_reference_state, reference, reference_probability=probability)  # a keyword: a named leaf
 
 
-def _reference_state(reference, probability, model, data, key):
+def _reference_state(reference, model, data, key, reference_probability):
     if reference.qpos.shape[1:] != data.qpos.shape or reference.qvel.shape[1:] != data.qvel.shape:
         raise ValueError(
             f"resets.reference_state: the reference has nq={reference.qpos.shape[1]}, "
@@ -314,7 +316,7 @@ def _reference_state(reference, probability, model, data, key):
     use_key, frame_key = jax.random.split(key)
     clip, t = motion.sample_frame(reference, frame_key)
     index = motion.frame_index(reference, clip, t)
-    use = jax.random.uniform(use_key) < probability
+    use = jax.random.uniform(use_key) < reference_probability
     qpos = jnp.where(use, reference.qpos[index].astype(data.qpos.dtype), data.qpos)
     qvel = jnp.where(use, reference.qvel[index].astype(data.qvel.dtype), data.qvel)
     info = {"reference_clip": jnp.where(use, clip, -1), "reference_frame": jnp.where(use, t, -1)}
