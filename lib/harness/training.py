@@ -122,12 +122,17 @@ class Hooks(NamedTuple):
         goes on: ``(function, *args, background=bool) -> handle`` with
         `threading.Thread`'s `join(timeout)` and `is_alive()` (or None: compiled);
         default `compilation.compile_ahead`.
+      compile_chunk: how the training chunk compiles (or loads from the cache) on a
+        thread while init runs: ``(lowered chunk) -> handle`` as above; default
+        `compilation.compile_ahead`. A handle still alive `COLD_GRACE_S` after init is
+        a cold compile, and the evaluation's compile starts beside it.
     """
 
     on_chunk: Callable[[int, dict[str, jax.Array]], None] | None = None
     on_evaluation: Callable[[int, float], None] | None = None
     on_metrics: Callable[[int, dict[str, float]], None] | None = None
     compile_evaluation: Callable[..., Any] = compilation.compile_ahead
+    compile_chunk: Callable[..., Any] = compilation.compile_ahead
 
 
 NO_HOOKS = Hooks()
@@ -450,7 +455,7 @@ def run(
     if out is not None:
         _claim(out, settings)
     key, physics = jax.random.key(settings.seed), physics_info(task)
-    chunk_ahead = _compile_chunk_ahead(algorithm, task, hyperparams, settings, key)
+    chunk_ahead = _compile_chunk_ahead(algorithm, task, hyperparams, settings, key, hooks.compile_chunk)
     state = _start(algorithm, task, hyperparams, settings, out, key, physics)
     shown = {"physics": physics["impl"]} if physics else {}
     loop = _Loop(algorithm, task, settings, out, key, eval_steps, launched, shown, chunk_ahead, clock, hooks)
@@ -470,7 +475,12 @@ def _per_chunk(algorithm: Algorithm, settings: Settings) -> int:
 
 
 def _compile_chunk_ahead(
-    algorithm: Algorithm, task: Task, hyperparams: Any, settings: Settings, key: jax.Array
+    algorithm: Algorithm,
+    task: Task,
+    hyperparams: Any,
+    settings: Settings,
+    key: jax.Array,
+    compile_ahead: Callable[..., Any] = compilation.compile_ahead,
 ) -> threading.Thread | None:
     """Starts compiling the training chunk on a thread (or loading it from the cache) from
     the shapes init will return (`eval_shape`, whose trace init's call reuses) and the
@@ -484,7 +494,7 @@ def _compile_chunk_ahead(
     state = jax.tree.map(described, shapes, shardings)
     chunk = _chunk_fn(algorithm.update, _per_chunk(algorithm, settings))
     try:
-        return compilation.compile_ahead(chunk.lower(replicate(task), state))
+        return compile_ahead(chunk.lower(replicate(task), state))
     except Exception:  # noqa: BLE001 (the chunk's own call raises it where it belongs)
         return None
 

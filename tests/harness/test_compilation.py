@@ -323,10 +323,12 @@ def test_beside_warp_on_a_gpu_the_evaluation_compiles_alone_before_the_first_chu
 
 
 @pytest.mark.parametrize("cold", [True, False])
-def test_the_evaluation_compiles_beside_a_cold_chunk_and_after_a_cached_one(monkeypatch, cold):
+def test_the_evaluation_compiles_beside_a_cold_chunk_and_after_a_cached_one(cold):
     """A chunk still compiling `COLD_GRACE_S` after init is a cold compile: the
     evaluation's compile starts then, beside it, not once the chunk runs. A chunk done
-    by then (loaded from the cache) runs first, and the evaluation compiles while it does."""
+    by then (loaded from the cache) runs first, and the evaluation compiles while it does.
+    Driven by `Hooks` alone: a chunk compile that says it is still at work at the grace
+    check (cold) or that it is done (cached)."""
     from mjzoo.harness import training
     from tests.harness.test_training import TASK
     from tests.harness.test_training import counter
@@ -336,40 +338,35 @@ def test_the_evaluation_compiles_beside_a_cold_chunk_and_after_a_cached_one(monk
             jnp.full(n, s.per_env.sum() * steps), jnp.zeros(n), None
         )
     )
-    events = []
-    compile_for_real, chunk_fn, ahead_for_real = (
-        training._Loop.compile_evaluation_ahead,
-        training._chunk_fn,
-        training._compile_chunk_ahead,
+    events, handles = [], []
+
+    class ChunkCompile:  # the real compile; when cold, alive still at the first join (the grace check)
+        def __init__(self, lowered):
+            self.real, self.joins = compilation.compile_ahead(lowered), 0
+
+        def join(self, timeout=None):
+            self.joins += 1
+            if self.real is not None:
+                self.real.join(timeout)
+
+        def is_alive(self):
+            return (cold and self.joins < 2) or (self.real is not None and self.real.is_alive())
+
+    def compile_chunk(lowered):
+        handles.append(ChunkCompile(lowered))
+        return handles[-1]
+
+    def compile_evaluation(*args, **kwargs):
+        events.append(("evaluation", handles[0].is_alive()))
+        return compilation.compile_ahead(*args, **kwargs)
+
+    hooks = training.Hooks(
+        compile_chunk=compile_chunk,
+        compile_evaluation=compile_evaluation,
+        on_chunk=lambda updates, metrics: events.append(("chunk", updates)),
     )
-
-    def chunk_ahead(*args):  # the real compile, then 0.5 s more of "compiling" when cold
-        real = ahead_for_real(*args)
-        thread = threading.Thread(target=lambda: real.join() or time.sleep(0.5 if cold else 0.0))
-        thread.start()
-        return thread
-
-    def compile_evaluation_ahead(loop, shapes):
-        events.append(("evaluation", loop.chunk_ahead is not None and loop.chunk_ahead.is_alive()))
-        compile_for_real(loop, shapes)
-
-    class Chunk:  # the real chunk (lowered ahead as well), its calls recorded
-        def __init__(self, *args):
-            self.real = chunk_fn(*args)
-
-        def lower(self, *inputs):
-            return self.real.lower(*inputs)
-
-        def __call__(self, *inputs):
-            events.append(("chunk", None))
-            return self.real(*inputs)
-
-    monkeypatch.setattr(training, "COLD_GRACE_S", 0.2)
-    monkeypatch.setattr(training, "_compile_chunk_ahead", chunk_ahead)
-    monkeypatch.setattr(training._Loop, "compile_evaluation_ahead", compile_evaluation_ahead)
-    monkeypatch.setattr(training, "_chunk_fn", Chunk)
     settings = training.Settings(updates_per_chunk=1, eval_every=1, eval_steps=3, video=False, progress=False)
-    _, last = training.run(algorithm, TASK, settings)
-    expected = [("evaluation", True), ("chunk", None)] if cold else [("chunk", None), ("evaluation", False)]
-    assert events[:2] == expected and events.count(("chunk", None)) == 2
+    _, last = training.run(algorithm, TASK, settings, hooks=hooks)
+    assert len(handles) == 1 and handles[0].joins >= 2  # the grace check, then the wait for it
+    assert events == [("evaluation", cold), ("chunk", 1), ("chunk", 2)]  # one evaluation compile, beside if cold
     assert last["eval/return"] == 4 * 2.0 * 3
