@@ -5,7 +5,7 @@ tested against hand-computed values under jit and vmap; `mjzoo.algorithms.ppo` i
 assembled from them, and so can a user's own algorithm be (docs/own-algorithm.md
 writes an A2C from them).
 
-    algorithm       an RL algorithm as a value the harness drives (`Algorithm`)
+    algorithm       an RL algorithm as a value the harness drives (`Algorithm`, `check_algorithm`)
     collection      auto-resetting batched experience, time-major (`collect`, `Collector`)
     hyperparams     checking and splitting an algorithm's numbers (`check_ranges`, `split_fields`)
     evaluation      deterministic first-episode returns from a policy (`evaluate`)
@@ -39,6 +39,7 @@ from mjzoo.learning.actions import to_controls
 from mjzoo.learning.advantages import gae
 from mjzoo.learning.algorithm import Algorithm
 from mjzoo.learning.algorithm import TrainingWarning
+from mjzoo.learning.algorithm import check_algorithm
 from mjzoo.learning.collection import Actor
 from mjzoo.learning.collection import Collector
 from mjzoo.learning.collection import Transitions
@@ -91,6 +92,7 @@ __all__ = [
     "advantages",
     "algorithm",
     "clipped_surrogate_loss",
+    "check_algorithm",
     "collect",
     "collection",
     "discriminator_loss",
