@@ -5,7 +5,6 @@ xdist runs it beside the rest of the PPO tests."""
 from __future__ import annotations
 
 import jax
-import numpy as np
 
 import mjzoo
 import mjzoo.envs
@@ -53,16 +52,3 @@ def test_recurrent_gru_policy_learns_a_partially_observed_task():
     state, last = training.run(ppo.make(config), task, settings, hp)
     assert jax.tree.leaves(state.collector.carry)[0].shape == (64, config.gru_hidden_size)
     assert last["eval/return"] > 450
-
-
-def test_learns_pendulum_swingup():
-    """From hanging still (random-policy return ~20) to swinging up and holding upright:
-    a mean deterministic return >= 380 of ~500 means upright within ~3 s and held."""
-    task = mjzoo.envs.make("pendulum_swingup")
-    config, hp = ppo.configure(**mjzoo.envs.hyperparameters("pendulum_swingup", "ppo"))
-    settings = training.Settings(updates_per_chunk=10, eval_envs=16, eval_steps=500, progress=False)
-    state, last = training.run(ppo.make(config), task, settings, hp)
-    assert last["eval/return"] >= 380
-    trajectory = ppo.evaluate(config, task, state, jax.random.key(7), 4, 500).trajectory
-    angle = np.asarray(trajectory.next_state.data.qpos[-50:, 0])  # the last second
-    assert np.max(np.abs(np.arctan2(np.sin(angle), np.cos(angle)))) < 0.2
