@@ -1,6 +1,6 @@
-"""PPO learns real tasks from scratch: cartpole balance, a partially observed cartpole
-with a GRU policy, and the pendulum swing-up. A module of its own (minutes of CPU), so
-xdist runs it beside the rest of the PPO tests."""
+"""PPO learns real tasks from scratch: cartpole balance, and a partially observed
+cartpole with a GRU policy. A module of its own (minutes of CPU), so xdist runs it
+beside the rest of the PPO tests."""
 
 from __future__ import annotations
 
