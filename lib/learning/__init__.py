@@ -14,6 +14,10 @@ writes an A2C from them).
     losses          vanilla, clipped and KL-penalized policy gradients, value loss
     learner         epochs x shuffled minibatches of updates (`learn`)
     normalization   running observation statistics
+    value_normalization  running value-target statistics and PopArt's output rescaling
+    reward_scaling  rewards divided by the running spread of the discounted return
+    schedules       KL-adaptive learning rate, KL early stop, entropy-coefficient decay
+    guards          dropping gradient steps that are not finite (`skip_non_finite_update`)
     networks        MLP and GRU policies/critics as (init, apply) pairs
     distributions   the tanh-squashed Gaussian policy head
     discriminators  AMP's least-squares and logistic losses, style rewards, gradient penalty
@@ -28,6 +32,7 @@ from mjzoo.learning import collection
 from mjzoo.learning import discriminators
 from mjzoo.learning import distributions
 from mjzoo.learning import evaluation
+from mjzoo.learning import guards
 from mjzoo.learning import hyperparams
 from mjzoo.learning import learner
 from mjzoo.learning import losses
@@ -35,6 +40,9 @@ from mjzoo.learning import motion_features
 from mjzoo.learning import networks
 from mjzoo.learning import normalization
 from mjzoo.learning import replay
+from mjzoo.learning import reward_scaling
+from mjzoo.learning import schedules
+from mjzoo.learning import value_normalization
 from mjzoo.learning.actions import to_controls
 from mjzoo.learning.advantages import gae
 from mjzoo.learning.algorithm import Algorithm
@@ -55,6 +63,7 @@ from mjzoo.learning.discriminators import style_reward
 from mjzoo.learning.evaluation import Evaluation
 from mjzoo.learning.evaluation import episode_steps
 from mjzoo.learning.evaluation import evaluate
+from mjzoo.learning.guards import skip_non_finite_update
 from mjzoo.learning.learner import learn
 from mjzoo.learning.losses import clipped_surrogate_loss
 from mjzoo.learning.losses import kl_penalty_loss
@@ -75,16 +84,32 @@ from mjzoo.learning.normalization import init_stats
 from mjzoo.learning.normalization import normalize
 from mjzoo.learning.normalization import update_stats
 from mjzoo.learning.replay import Replay
+from mjzoo.learning.reward_scaling import RewardScaling
+from mjzoo.learning.reward_scaling import init_reward_scaling
+from mjzoo.learning.reward_scaling import scale_rewards
+from mjzoo.learning.reward_scaling import update_reward_scaling
+from mjzoo.learning.schedules import ENTROPY_SCHEDULES
+from mjzoo.learning.schedules import entropy_coef_schedule
+from mjzoo.learning.schedules import kl_adaptive_lr
+from mjzoo.learning.schedules import kl_early_stop
+from mjzoo.learning.schedules import skip_when_stopped
+from mjzoo.learning.value_normalization import denormalize_values
+from mjzoo.learning.value_normalization import init_value_stats
+from mjzoo.learning.value_normalization import normalize_values
+from mjzoo.learning.value_normalization import popart_rescale
+from mjzoo.learning.value_normalization import update_value_stats
 
 __all__ = [
     "Actor",
     "Algorithm",
     "Collector",
+    "ENTROPY_SCHEDULES",
     "Evaluation",
     "FeatureWindowState",
     "Network",
     "RecurrentNetwork",
     "Replay",
+    "RewardScaling",
     "RunningStats",
     "TrainingWarning",
     "Transitions",
@@ -95,9 +120,11 @@ __all__ = [
     "check_algorithm",
     "collect",
     "collection",
+    "denormalize_values",
     "discriminator_loss",
     "discriminators",
     "distributions",
+    "entropy_coef_schedule",
     "episode_steps",
     "evaluate",
     "evaluation",
@@ -108,8 +135,13 @@ __all__ = [
     "gae",
     "gradient_penalty",
     "gru_mlp",
+    "guards",
     "hyperparams",
+    "init_reward_scaling",
     "init_stats",
+    "init_value_stats",
+    "kl_adaptive_lr",
+    "kl_early_stop",
     "kl_penalty_loss",
     "learn",
     "learner",
@@ -124,11 +156,21 @@ __all__ = [
     "normalization",
     "normalize",
     "normalize_advantages",
+    "normalize_values",
     "policy_gradient_loss",
+    "popart_rescale",
     "replay",
+    "reward_scaling",
+    "scale_rewards",
+    "schedules",
+    "skip_non_finite_update",
+    "skip_when_stopped",
     "style_reward",
     "to_controls",
+    "update_reward_scaling",
     "update_stats",
+    "update_value_stats",
     "value_loss",
+    "value_normalization",
     "with_feature_window",
 ]
