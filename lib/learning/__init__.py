@@ -5,24 +5,24 @@ tested against hand-computed values under jit and vmap; `mjzoo.algorithms.ppo` i
 assembled from them, and so can a user's own algorithm be (docs/own-algorithm.md
 writes an A2C from them).
 
-    algorithm       an RL algorithm as a value the harness drives (`Algorithm`, `check_algorithm`)
-    collection      auto-resetting batched experience, time-major (`collect`, `Collector`)
-    hyperparams     checking and splitting an algorithm's numbers (`check_ranges`, `split_fields`)
-    evaluation      deterministic first-episode returns from a policy (`evaluate`)
-    actions         [-1, 1] actions onto a task's controls (`to_controls`)
-    advantages      generalized advantage estimation (`gae`)
-    losses          vanilla, clipped and KL-penalized policy gradients, value loss
-    learner         epochs x shuffled minibatches of updates (`learn`)
-    normalization   running observation statistics
-    value_normalization  running value-target statistics and PopArt's output rescaling
-    reward_scaling  rewards divided by the running spread of the discounted return
-    schedules       KL-adaptive learning rate, KL early stop, entropy-coefficient decay
-    guards          dropping gradient steps that are not finite (`skip_non_finite_update`)
-    networks        MLP and GRU policies/critics as (init, apply) pairs
-    distributions   the tanh-squashed Gaussian policy head
-    discriminators  AMP's least-squares and logistic losses, style rewards, gradient penalty
-    replay          a jit-able FIFO replay buffer of samples (`Replay`)
-    motion_features AMP's features of a frame, one function for simulation and reference
+    algorithm           an RL algorithm as a value the harness drives (`Algorithm`, `check_algorithm`)
+    collection          auto-resetting batched experience, time-major (`collect`, `Collector`)
+    hyperparams         splitting an algorithm's numbers into Config and Hyperparams (`split_fields`)
+    evaluation          deterministic first-episode returns from a policy (`evaluate`)
+    actions             [-1, 1] actions onto a task's controls (`to_controls`)
+    advantages          generalized advantage estimation (`gae`)
+    losses              vanilla, clipped and KL-penalized policy gradients, value loss
+    learner             epochs x shuffled minibatches of updates (`learn`)
+    normalization       running observation statistics
+    value_normalization running value-target statistics and PopArt's output rescaling
+    reward_scaling      rewards divided by the running spread of the discounted return
+    schedules           KL-adaptive learning rate, KL early stop, entropy-coefficient decay
+    guards              dropping gradient steps that are not finite (`skip_non_finite_update`)
+    networks            MLP and GRU policies/critics as (init, apply) pairs
+    distributions       the tanh-squashed Gaussian policy head
+    discriminators      AMP's least-squares and logistic losses, style rewards, gradient penalty
+    replay              a jit-able FIFO replay buffer of samples (`Replay`)
+    motion_features     AMP's features of a frame, one function for simulation and reference
 """
 
 from mjzoo.learning import actions

@@ -16,7 +16,7 @@ from typing import Any
 import jax
 import jax.numpy as jnp
 
-__all__ = ["RunningStats", "init_stats", "update_stats", "normalize"]
+__all__ = ["RunningStats", "VAR_EPS", "init_stats", "update_stats", "normalize"]
 
 Array = jax.Array
 PyTree = Any
