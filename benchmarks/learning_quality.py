@@ -379,7 +379,9 @@ def plot(rows: list[dict], out: Path, card: str) -> list[Path]:
         plt.close(figure)
 
         cols = min(5, len(at))
-        figure, grid = plt.subplots(-(-len(at) // cols), cols, figsize=(3.2 * cols, 2.6 * -(-len(at) // cols)))
+        figure, grid = plt.subplots(
+            -(-len(at) // cols), cols, figsize=(max(6.0, 3.2 * cols), 2.6 * -(-len(at) // cols) + 0.6)
+        )
         for axes, r in zip(np.ravel(grid), at):
             for name, t in r["trainers"].items():
                 steps = np.asarray([p[0] for p in t["runs"][0]["curve"]])
@@ -392,7 +394,9 @@ def plot(rows: list[dict], out: Path, card: str) -> list[Path]:
         for axes in np.ravel(grid)[len(at) :]:
             axes.axis("off")
         np.ravel(grid)[0].legend(fontsize=7)
-        figure.suptitle(f"evaluation return (unscaled) over env steps, mean ± std over seeds, reward x{scale:g}")
+        figure.suptitle(
+            f"evaluation return (unscaled) over env steps, mean ± std over seeds, reward x{scale:g}", fontsize=9
+        )
         figure.tight_layout()
         paths.append(out / f"curves_{card}{suffix}.png")
         figure.savefig(paths[-1], dpi=110)
