@@ -184,7 +184,7 @@ def _eval_steps(task: Task, settings: Settings) -> int:
         return seconds_to_steps(task, settings.eval_seconds)
     return episode_steps(
         task,
-        "training.Settings: eval_steps=None evaluates the task's own episode length, but",
+        "training.Settings (eval_steps=None: the task's own episode length)",
         "eval_steps or eval_seconds",
     )
 

@@ -280,7 +280,7 @@ def test_two_devices_give_one_devices_result():
         ref = motion.reference(sway_clip(task), task.mj_model, mjzoo.control_dt(task))
         state = amp.init(SMALL, task, ref, HP, jax.random.key(0))
         one = jax.jit(amp.update, static_argnums=0)(SMALL, task, jax.device_put(state, jax.devices()[0]))[0]
-        sharded = devices.shard_envs(state, amp.make(SMALL).per_env_fields)
+        sharded = devices.shard_envs(state, amp.PER_ENV_FIELDS)
         assert len(sharded.ppo.collector.start.sharding.device_set) == 2
         assert len(sharded.disc_params[0]["kernel"].sharding.device_set) == 2  # replicated
         whole = dataclasses.replace(SMALL, split_minibatches=False)  # each device every minibatch step whole

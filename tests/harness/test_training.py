@@ -82,7 +82,7 @@ def test_evaluation_runs_the_task_s_own_episode_length():
 
 def test_a_task_without_time_limit_needs_eval_steps():
     with pytest.raises(
-        ValueError, match="eval_steps=None evaluates the task's own episode length, but the task has no time limit"
+        ValueError, match=r"eval_steps=None: the task's own episode length\): the task has no time limit"
     ):
         training.run(counter(), TASK.replace(time_limit=None), SETTINGS)
 
