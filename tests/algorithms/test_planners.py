@@ -40,9 +40,11 @@ def setup_for(env: str, planner: str, backend: str = "auto") -> realtime.Problem
 
 ENVS = ["pendulum_swingup", "cartpole_swingup", "cylinder_push", "point_mass"]
 # Every planner on every env with C MuJoCo's rollouts (the default on a CPU); MJX's own
-# physics with one planner per env (the planners share everything above the rollouts).
+# physics with one planner on a contact-free env and a contact-rich one (the planners and
+# envs share everything above the rollouts; cart-pole and point-mass on MJX took 160 s of
+# the suite's CPU for no path the other two do not run).
 CASES = [(env, planner, "native") for env in ENVS for planner in PLANNERS]
-CASES += [(env, "mppi", "mjx") for env in ENVS]
+CASES += [(env, "mppi", "mjx") for env in ("pendulum_swingup", "cylinder_push")]
 
 
 @pytest.mark.parametrize(("env", "planner", "backend"), CASES)
