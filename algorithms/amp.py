@@ -96,7 +96,7 @@ class Config(ppo.Config):
         super().__post_init__()
 
         counts = ("num_frames", "disc_epochs", "disc_minibatches", "replay_size")
-        checks.fields("amp.Config", self, {f: (ppo._is_count(getattr(self, f)), "an integer >= 1") for f in counts})
+        checks.fields("amp.Config", self, {f: (checks.is_count(getattr(self, f)), "an integer >= 1") for f in counts})
         # AMP feeds PPO a dict observation {"policy", "motion"}; the keys are its own.
         own_keys = "None: AMP's networks see the task's observation"
         checks.fields(

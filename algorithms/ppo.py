@@ -105,7 +105,7 @@ class Config:
 
     def __post_init__(self):
         counts = ("num_envs", "unroll_length", "num_minibatches", "num_epochs", "total_steps", "gru_hidden_size")
-        checks.fields("ppo.Config", self, {f: (_is_count(getattr(self, f)), "an integer >= 1") for f in counts})
+        checks.fields("ppo.Config", self, {f: (checks.is_count(getattr(self, f)), "an integer >= 1") for f in counts})
         steps = self.num_envs * self.unroll_length
         divides = steps % self.num_minibatches == 0 and (
             not self.recurrent or self.num_envs % self.num_minibatches == 0
@@ -139,10 +139,6 @@ class Config:
     @property
     def num_updates(self) -> int:
         return max(1, self.total_steps // self.steps_per_update)
-
-
-def _is_count(value: Any) -> bool:
-    return isinstance(value, int) and not isinstance(value, bool) and value >= 1
 
 
 @jax.tree_util.register_dataclass

@@ -86,7 +86,6 @@ from ppo_vs_brax import time_to  # noqa: E402
 
 import mjzoo  # noqa: E402
 import mjzoo.envs  # noqa: E402
-from mjzoo import learning  # noqa: E402
 from mjzoo.algorithms import ppo  # noqa: E402
 from mjzoo.interop import playground  # noqa: E402
 
@@ -201,7 +200,7 @@ def train_mjzoo(
     config, hyperparams = ppo.configure(**fields)
     algorithm = ppo.make(config)
     per_chunk = max(1, config.num_updates // evals)
-    eval_steps = learning.episode_steps(task)  # on the host: a static length
+    eval_steps = mjzoo.episode_steps(task)  # on the host: a static length
 
     def chunk(task: mjzoo.Task, state: ppo.TrainState, key: jax.Array) -> tuple[ppo.TrainState, jax.Array]:
         state, _ = jax.lax.scan(lambda s, _: algorithm.update(task, s), state, None, length=per_chunk)
@@ -245,7 +244,7 @@ def train_brax_runs(env: Any, task: mjzoo.Task, config: dict, seeds: list[int], 
             result = train_brax_ppo(
                 scaled_task(task, scale),
                 num_timesteps=config["num_timesteps"],
-                episode_length=learning.episode_steps(task),
+                episode_length=mjzoo.episode_steps(task),
                 num_evals=config["num_evals"],
                 num_eval_envs=config["num_eval_envs"],
                 seed=seed,

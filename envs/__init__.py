@@ -49,8 +49,8 @@ from mjzoo.envs import locomotion
 from mjzoo.envs import pendulum
 from mjzoo.envs import point_mass
 from mjzoo.envs import teachers
-from mjzoo.learning.evaluation import episode_steps
 from mjzoo.running import control_dt
+from mjzoo.running import episode_steps
 from mjzoo.types import Task
 
 EnvSpec = base.EnvSpec

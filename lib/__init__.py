@@ -55,6 +55,7 @@ from mjzoo.perturbations import with_domain_randomization
 from mjzoo.perturbations import with_observation_noise
 from mjzoo.running import Policy
 from mjzoo.running import control_dt
+from mjzoo.running import episode_steps
 from mjzoo.running import fill_transition_entries
 from mjzoo.running import reset
 from mjzoo.running import reward_terms
@@ -88,6 +89,7 @@ __all__ = [
     "rollout",
     "reward_terms",
     "control_dt",
+    "episode_steps",
     "task",
     "params",
     "with_params",

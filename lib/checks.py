@@ -33,6 +33,7 @@ __all__ = [
     "interval",
     "numbers",
     "key",
+    "is_count",
     "fields",
     "ranges",
     "host_value",
@@ -90,6 +91,11 @@ def numbers(who: str, name: str, value, n: int, low: float = 0.0) -> Array:
     if array.ndim > 1 or (array.ndim == 1 and array.shape[0] != n) or not np.all(np.isfinite(array) & (array >= low)):
         raise ValueError(f"{who}: {name}={value!r} must be a finite number >= {low:.6g} or {n} of them")
     return jnp.broadcast_to(jnp.asarray(array, jnp.float32), (n,))
+
+
+def is_count(value: Any) -> bool:
+    """Whether `value` is an int >= 1 (a bool is not): a size, a length, a number of steps."""
+    return isinstance(value, int) and not isinstance(value, bool) and value >= 1
 
 
 def fields(where: str, config: Any, expectations: Mapping[str, tuple[Any, str]]) -> None:

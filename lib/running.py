@@ -31,6 +31,7 @@ __all__ = [
     "rollout",
     "reward_terms",
     "control_dt",
+    "episode_steps",
     "Policy",
 ]
 
@@ -75,3 +76,24 @@ def control_dt(task: Task) -> float:
     state = reset(task, jax.random.key(0))
     after = jax.jit(lambda s: task.step(task.model, s, jnp.zeros(task.action_size), jax.random.key(0)))(state)
     return float(after.data.time - state.data.time)
+
+
+def episode_steps(task: Task, who: str = "episode_steps", instead: str = "num_steps") -> int:
+    """The task's own episode length, ``int(task.time_limit)``, read on the host: the one
+    place every evaluation, CLI command and closed loop reads it (`learning.evaluate`'s
+    default length).
+
+    Raises ValueError (``"{who}: ...; give {instead}"``) if the task has no time limit,
+    TypeError if it is traced (under jit the limit is not a number yet: read it outside,
+    pass it as a static argument).
+    """
+    if task.time_limit is None:
+        raise ValueError(
+            f"{who}: the task has no time limit (mjzoo.with_time_limit) to end its episodes; give {instead}"
+        )
+    if isinstance(task.time_limit, jax.core.Tracer):
+        raise TypeError(
+            "episode_steps: the task's time limit is traced (inside jit); read it outside "
+            "with int(task.time_limit) and pass num_steps as a static argument"
+        )
+    return int(task.time_limit)

@@ -75,7 +75,7 @@ class RenderConfig:
             "RenderConfig",
             self,
             {
-                **{n: (_count(getattr(self, n)), "an integer >= 1") for n in counts},
+                **{n: (checks.is_count(getattr(self, n)), "an integer >= 1") for n in counts},
                 **{n: (getattr(self, n) is None or _positive(getattr(self, n)), "> 0 or None") for n in lengths},
                 "slowdown": (_positive(self.slowdown), "> 0"),
                 "lookat": (self.lookat is None or _vector(self.lookat, 3), "3 finite numbers or None"),
@@ -101,10 +101,6 @@ def _finite(value: Any) -> bool:
 
 def _positive(value: Any) -> bool:
     return _finite(value) and value > 0
-
-
-def _count(value: Any) -> bool:
-    return isinstance(value, int) and not isinstance(value, bool) and value >= 1
 
 
 def _vector(value: Any, size: int) -> bool:

@@ -57,8 +57,8 @@ from mjzoo.learning.algorithm import Algorithm
 from mjzoo.learning.algorithm import TrainingWarning
 from mjzoo.learning.algorithm import check_algorithm
 from mjzoo.learning.algorithm import check_state
-from mjzoo.learning.evaluation import episode_steps
 from mjzoo.running import control_dt
+from mjzoo.running import episode_steps
 from mjzoo.types import Task
 
 __all__ = [

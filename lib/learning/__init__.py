@@ -61,7 +61,6 @@ from mjzoo.learning.discriminators import logistic_loss
 from mjzoo.learning.discriminators import logistic_reward
 from mjzoo.learning.discriminators import style_reward
 from mjzoo.learning.evaluation import Evaluation
-from mjzoo.learning.evaluation import episode_steps
 from mjzoo.learning.evaluation import evaluate
 from mjzoo.learning.guards import skip_non_finite_update
 from mjzoo.learning.learner import learn
@@ -125,7 +124,6 @@ __all__ = [
     "discriminators",
     "distributions",
     "entropy_coef_schedule",
-    "episode_steps",
     "evaluate",
     "evaluation",
     "feature_layout",

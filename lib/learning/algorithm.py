@@ -24,6 +24,8 @@ from typing import NamedTuple
 
 import jax
 
+from mjzoo import checks
+
 __all__ = ["Algorithm", "TrainingWarning", "check_algorithm", "check_state"]
 
 Array = jax.Array
@@ -74,10 +76,6 @@ class Algorithm(NamedTuple):
     diagnose: Callable[[Sequence[dict[str, float]]], str | None] | None = None
 
 
-def _is_count(value: Any) -> bool:
-    return isinstance(value, int) and not isinstance(value, bool) and value >= 1
-
-
 def check_algorithm(algorithm: Any, who: str = "check_algorithm") -> None:
     """Raises one TypeError naming everything `algorithm` lacks of the `Algorithm`
     contract (functions, counts, per-env field names)."""
@@ -88,7 +86,7 @@ def check_algorithm(algorithm: Any, who: str = "check_algorithm") -> None:
     missing += [
         f"{name} (an int >= 1)"
         for name in ("num_updates", "steps_per_update")
-        if not _is_count(getattr(algorithm, name, None))
+        if not checks.is_count(getattr(algorithm, name, None))
     ]
     if missing:
         name = getattr(algorithm, "name", type(algorithm).__name__)

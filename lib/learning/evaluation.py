@@ -19,13 +19,14 @@ import jax.numpy as jnp
 from mjzoo import batching
 from mjzoo import checks
 from mjzoo.learning.collection import Actor
+from mjzoo.running import episode_steps
 from mjzoo.running import reset
 from mjzoo.running import transition
 from mjzoo.tree import Packing
 from mjzoo.types import Task
 from mjzoo.types import Trajectory
 
-__all__ = ["Evaluation", "episode_steps", "evaluate"]
+__all__ = ["Evaluation", "evaluate"]
 
 Array = jax.Array
 
@@ -45,26 +46,6 @@ class Evaluation(NamedTuple):
     trajectory: Trajectory
 
 
-def episode_steps(task: Task, who: str = "episode_steps", instead: str = "num_steps") -> int:
-    """The task's own episode length, ``int(task.time_limit)``, read on the host: the one
-    place every evaluation, CLI command and closed loop reads it.
-
-    Raises ValueError (``"{who}: ...; give {instead}"``) if the task has no time limit,
-    TypeError if it is traced (under jit the limit is not a number yet: read it outside,
-    pass it as a static argument).
-    """
-    if task.time_limit is None:
-        raise ValueError(
-            f"{who}: the task has no time limit (mjzoo.with_time_limit) to end its episodes; give {instead}"
-        )
-    if isinstance(task.time_limit, jax.core.Tracer):
-        raise TypeError(
-            "episode_steps: the task's time limit is traced (inside jit); read it outside "
-            "with int(task.time_limit) and pass num_steps as a static argument"
-        )
-    return int(task.time_limit)
-
-
 def evaluate(
     task: Task, policy: Actor, key: Array, num_envs: int, num_steps: int | None = None, carry: Any = ()
 ) -> Evaluation:
@@ -76,7 +57,7 @@ def evaluate(
       policy: ``(carry, obs, start, key) -> (carry, action, extras)`` for one env.
       key: PRNG key (resets, the task's own noise, and the policy's key).
       num_envs: static batch size.
-      num_steps: static; None: the task's own episode length (`episode_steps`, so
+      num_steps: static; None: the task's own episode length (`mjzoo.episode_steps`, so
         then `task` must not be traced).
       carry: one env's initial policy carry (``()`` for a feed-forward policy).
 

@@ -132,7 +132,7 @@ def test_evaluation_reads_the_task_s_own_episode_length_on_the_host():
         TASK.replace(time_limit=jnp.int32(2)), counting, jax.random.key(0), 1, carry=jnp.int32(0)
     )
     chex.assert_shape(result.trajectory.action, (2, 2))
-    assert learning.episode_steps(TASK) == 3
+    assert mjzoo.episode_steps(TASK) == 3
     with pytest.raises(ValueError, match="the task has no time limit"):
         learning.evaluate(TASK.replace(time_limit=None), counting, jax.random.key(0), 1)
     with pytest.raises(TypeError, match="time limit is traced"):

@@ -168,7 +168,7 @@ def episode_steps(task: mjzoo.Task, spec: str, steps: int | None) -> int:
         at_least_one(steps=steps)
         return steps
     with as_usage_errors(ValueError):
-        return mjzoo.learning.episode_steps(task, spec, "--steps")
+        return mjzoo.episode_steps(task, spec, "--steps")
 
 
 def slug(spec: str) -> str:

@@ -192,7 +192,7 @@ def train(
         data = imitated(module, env, task, env_values)  # AMP: the env's reference, an error now if it has none
         devices.check_split(cfg.num_envs)
         if run_settings.get("eval_steps") is None and run_settings.get("eval_seconds") is None:
-            mjzoo.learning.episode_steps(task, env, "--eval-steps or --eval-seconds")  # its evaluation's length
+            mjzoo.episode_steps(task, env, "--eval-steps or --eval-seconds")  # its evaluation's length
         if resume is None:
             out = out or Path("runs") / f"{slug(env)}-{algorithm}"
             hint = f"continue it with --resume {out}, or choose a new --out"
