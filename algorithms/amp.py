@@ -207,7 +207,9 @@ class TrainState:
         return dataclasses.replace(self, **changes)
 
 
-PER_ENV_FIELDS = ("ppo.collector",)  # a driver may shard these over devices (`Algorithm.per_env_fields`)
+PER_ENV_FIELDS = tuple(
+    f"ppo.{f}" for f in ppo.PER_ENV_FIELDS
+)  # a driver may shard these over devices (`Algorithm.per_env_fields`)
 
 
 # --- the pieces AMP wires -----------------------------------------------------------

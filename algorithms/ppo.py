@@ -39,13 +39,18 @@ import optax
 
 from mjzoo import checks
 from mjzoo import learning
+from mjzoo import tree
 from mjzoo.learning import distributions
 from mjzoo.learning import hyperparams as hyperparams_lib
 from mjzoo.learning import losses
 from mjzoo.learning import networks
 from mjzoo.learning import normalization
+from mjzoo.learning import reward_scaling as reward_scaling_lib
+from mjzoo.learning import schedules
+from mjzoo.learning import value_normalization as value_norm
 from mjzoo.learning.algorithm import Algorithm
 from mjzoo.learning.algorithm import TrainingWarning
+from mjzoo.learning.guards import skip_non_finite_update
 from mjzoo.learning.hyperparams import INF
 from mjzoo.types import Task
 
@@ -70,6 +75,8 @@ __all__ = [
 ]
 
 Array = jax.Array
+LR_SCHEDULES = ("constant", "linear", "cosine", "adaptive")
+VALUE_NORMALIZATIONS = ("none", "running", "popart")
 ACTIVATIONS = {"swish": jax.nn.swish, "tanh": jnp.tanh, "relu": jax.nn.relu, "elu": jax.nn.elu}
 
 
@@ -82,8 +89,19 @@ class Config:
     unroll_length: int = 32
     num_minibatches: int = 8
     num_epochs: int = 4
-    # The schedule's shape; it multiplies Hyperparams.learning_rate over the run's steps.
-    lr_schedule: Literal["constant", "linear", "cosine"] = "constant"
+    # The learning rate's schedule: a shape that multiplies Hyperparams.learning_rate over
+    # the run's steps, or "adaptive": raised or lowered at every minibatch step by the
+    # measured approximate KL against Hyperparams.target_kl (rsl_rl's schedule).
+    lr_schedule: Literal["constant", "linear", "cosine", "adaptive"] = "constant"
+    # The entropy coefficient's decay from Hyperparams.entropy_coef to final_entropy_coef.
+    entropy_schedule: Literal["constant", "linear", "cosine"] = "constant"
+    # The value function's targets: as they are ("none"), in units of their running
+    # mean and spread ("running"), or so and with PopArt's rescaling of the value head,
+    # which keeps its outputs when the statistics move ("popart"; needs the default value
+    # network or an mlp-shaped one).
+    value_normalization: Literal["none", "running", "popart"] = "none"
+    # Rewards divided by the running spread of each env's discounted return.
+    reward_normalization: bool = False
     normalize_observations: bool = True
     normalize_advantages: bool = True
     policy_hidden_sizes: tuple[int, ...] = (64, 64)
@@ -119,7 +137,15 @@ class Config:
                     f"a divisor of num_envs * unroll_length = {steps}"
                     + (" and of num_envs (recurrent minibatches split whole sequences)" if self.recurrent else ""),
                 ),
-                "lr_schedule": (self.lr_schedule in ("constant", "linear", "cosine"), "constant, linear or cosine"),
+                "lr_schedule": (self.lr_schedule in LR_SCHEDULES, ", ".join(LR_SCHEDULES)),
+                "entropy_schedule": (
+                    self.entropy_schedule in schedules.ENTROPY_SCHEDULES,
+                    ", ".join(schedules.ENTROPY_SCHEDULES),
+                ),
+                "value_normalization": (
+                    self.value_normalization in VALUE_NORMALIZATIONS,
+                    ", ".join(VALUE_NORMALIZATIONS),
+                ),
                 "activation": (self.activation in ACTIVATIONS, f"one of {sorted(ACTIVATIONS)}"),
                 "compute_dtype": (self.compute_dtype in ("float32", "bfloat16"), "float32 or bfloat16"),
             },
@@ -147,12 +173,16 @@ class Hyperparams:
     """PPO's numbers: a pytree of scalars (or of [n] batches of them, to sweep under
     `jax.vmap`). `init` stores them in the train state; changing one never recompiles.
 
-    `value_clip_epsilon` and `max_grad_norm` switch off at inf (the defaults: no value
-    clipping; clipping gradients at norm 1): a number, so the switch can be swept too.
+    `value_clip_epsilon`, `max_grad_norm` and `max_kl` switch off at inf (the defaults:
+    no value clipping; clipping gradients at norm 1; no early stop): a number, so the
+    switch can be swept too.
     """
 
-    learning_rate: float | Array = 3e-4  # the schedule's base rate (Config.lr_schedule)
-    entropy_coef: float | Array = 1e-2
+    learning_rate: float | Array = 3e-4  # the schedule's base rate (Config.lr_schedule), or the adaptive one's start
+    target_kl: float | Array = 0.01  # the KL the adaptive schedule steers to
+    max_kl: float | Array = INF  # an update's remaining minibatch steps are skipped once a step's KL exceeds it
+    entropy_coef: float | Array = 1e-2  # at the start of the run (Config.entropy_schedule)
+    final_entropy_coef: float | Array = 0.0  # at its end, for a decaying schedule
     value_coef: float | Array = 0.5
     clip_epsilon: float | Array = 0.2
     value_clip_epsilon: float | Array = INF  # inf: the value loss unclipped
@@ -170,7 +200,10 @@ class Hyperparams:
 
 HYPERPARAM_RANGES = {
     "learning_rate": (0.0, INF, "()"),
+    "target_kl": (0.0, INF, "()"),
+    "max_kl": (0.0, INF, "(]"),
     "entropy_coef": (0.0, INF, "[)"),
+    "final_entropy_coef": (0.0, INF, "[)"),
     "value_coef": (0.0, INF, "[)"),
     "clip_epsilon": (0.0, INF, "()"),
     "value_clip_epsilon": (0.0, INF, "(]"),
@@ -179,7 +212,7 @@ HYPERPARAM_RANGES = {
     "reward_scaling": (0.0, INF, "()"),
     "max_grad_norm": (0.0, INF, "(]"),
 }
-OFF_AT_INF = ("value_clip_epsilon", "max_grad_norm")  # None in a flat dict means inf (off)
+OFF_AT_INF = ("value_clip_epsilon", "max_grad_norm", "max_kl")  # None in a flat dict means inf (off)
 
 
 def configure(**fields: Any) -> tuple[Config, Hyperparams]:
@@ -201,12 +234,17 @@ class TrainState:
 
     `collector` holds the per-env leaves ([num_envs, ...]): env states, recurrent policy
     carries and running episode returns (`learning.Collector`). `hyperparams` are the
-    numbers `update` learns with (float32 leaves).
+    numbers `update` learns with (float32 leaves). The statistics of the value targets
+    and of the discounted returns, and the adaptive learning rate, are kept whatever the
+    Config uses (scalars, and [num_envs] returns): one structure for every Config.
     """
 
     params: dict[str, Any]  # {"policy": ..., "value": ...}
     opt_state: Any
     obs_stats: normalization.RunningStats
+    value_stats: normalization.RunningStats  # scalar: the value targets' (Config.value_normalization)
+    reward_scaling: reward_scaling_lib.RewardScaling  # Config.reward_normalization's
+    learning_rate: jax.Array  # float32 scalar: where the adaptive schedule has steered the rate
     collector: learning.Collector
     key: jax.Array
     updates: jax.Array  # int32 count of updates done
@@ -216,7 +254,10 @@ class TrainState:
         return dataclasses.replace(self, **changes)
 
 
-PER_ENV_FIELDS = ("collector",)  # a driver may shard these over devices (`Algorithm.per_env_fields`)
+PER_ENV_FIELDS = (
+    "collector",
+    "reward_scaling.discounted_return",
+)  # a driver may shard these over devices (`Algorithm.per_env_fields`)
 
 
 class Components(NamedTuple):
@@ -255,8 +296,8 @@ class Batch(NamedTuple):
     start: Array  # [T, N] bool, obs begins an episode
     extras: Extras
     advantages: Array  # [T, N]
-    returns: Array  # [T, N] GAE's value targets
-    values: Array  # [T, N] the value function's estimate when collected
+    returns: Array  # [T, N] GAE's value targets, in the value head's units (normalized or not)
+    values: Array  # [T, N] the value function's estimate when collected, in the same units
 
 
 # --- networks and optimizer ---------------------------------------------------------
@@ -283,20 +324,22 @@ def _networks(config: Config, task: Task, components: Components = NO_COMPONENTS
 
 
 def _optimizer(
-    config: Config, hyperparams: Hyperparams, components: Components = NO_COMPONENTS
+    config: Config, hyperparams: Hyperparams, components: Components = NO_COMPONENTS, adaptive_lr: Any = None
 ) -> optax.GradientTransformation:
-    """The optimizer of these hyperparameters (traced or not). Built afresh where it is
-    used, as `optax.inject_hyperparams` rebuilds its inner one: its state's structure
-    does not depend on the numbers, so init's state serves every value."""
+    """The optimizer of these hyperparameters (traced or not), at the adaptive schedule's
+    current rate `adaptive_lr` where it is used. Built afresh where it is used, as
+    `optax.inject_hyperparams` rebuilds its inner one: its state's structure does not
+    depend on the numbers, so init's state serves every value."""
     if isinstance(components.optimizer, optax.GradientTransformation):
         return components.optimizer
     steps = config.num_updates * config.num_epochs * config.num_minibatches
     shape = {
         "constant": optax.constant_schedule(1.0),
+        "adaptive": optax.constant_schedule(1.0),
         "linear": optax.linear_schedule(1.0, 0.0, steps),
         "cosine": optax.cosine_decay_schedule(1.0, steps),
     }[config.lr_schedule]
-    base = hyperparams.learning_rate
+    base = hyperparams.learning_rate if adaptive_lr is None else adaptive_lr
 
     def schedule(count: Array) -> Array:
         return base * shape(count)
@@ -355,6 +398,9 @@ def init(
         params=params,
         opt_state=_optimizer(config, hyperparams, components).init(params),
         obs_stats=stats,
+        value_stats=value_norm.init_value_stats(),
+        reward_scaling=reward_scaling_lib.init_reward_scaling(config.num_envs),
+        learning_rate=hyperparams.learning_rate,
         collector=collector,
         key=key,
         updates=jnp.zeros((), jnp.int32),
@@ -422,10 +468,19 @@ def policy(
 
 
 def _loss(
-    config: Config, task: Task, components: Components, hp: Hyperparams, params, stats, batch: Batch, key
+    config: Config,
+    task: Task,
+    components: Components,
+    hp: Hyperparams,
+    entropy_coef: Array,
+    params,
+    stats,
+    batch: Batch,
+    key,
 ) -> tuple[jax.Array, dict[str, jax.Array]]:
     """PPO loss on one minibatch: [T, n, ...] sequences (recurrent) or [n, ...] samples;
-    `key` draws the entropy estimate's fresh sample."""
+    `key` draws the entropy estimate's fresh sample. The value head's outputs and
+    `batch.returns` / `batch.values` are in the same units (normalized or not)."""
     policy_net, value_net = _networks(config, task, components)
     obs, value_obs = _inputs(config, stats, batch.obs)
     if _is_recurrent(policy_net):
@@ -446,7 +501,7 @@ def _loss(
     # inf switches clipping off: the unclipped loss exactly (the clipped one, old + (v - old), rounds).
     clipped = losses.value_loss(values, batch.returns, batch.values, hp.value_clip_epsilon)
     v_loss = jnp.where(jnp.isinf(hp.value_clip_epsilon), losses.value_loss(values, batch.returns), clipped)
-    total = policy_loss + hp.value_coef * v_loss - hp.entropy_coef * entropy
+    total = policy_loss + hp.value_coef * v_loss - entropy_coef * entropy
     return total, {
         "loss/policy": policy_loss,
         "loss/value": v_loss,
@@ -479,45 +534,75 @@ def improve(
     components: Components = NO_COMPONENTS,
 ) -> tuple[TrainState, dict[str, jax.Array]]:
     """Learns from `data` (from `collect`, rewards as given) with the state's
-    hyperparameters: the observation statistics, GAE from the value function, then
-    `num_epochs` x `num_minibatches` clipped-surrogate steps. Returns the state with new
-    params, optimizer state and statistics (its collector and key as given) and the
-    learning metrics."""
+    hyperparameters: the observation statistics, the rewards (scaled, and normalized
+    where the Config says), GAE from the value function, the value targets' statistics,
+    then `num_epochs` x `num_minibatches` clipped-surrogate steps. A step whose loss,
+    gradients or results are not finite is dropped ("loss/skipped_steps"); once a step
+    measures a KL above `max_kl`, the update's remaining steps are ("loss/kl_stopped").
+    Returns the state with new params, optimizer state, statistics and rate (its
+    collector and key as given) and the learning metrics."""
     ts, hp = train_state, train_state.hyperparams
     policy_net, value_net = _networks(config, task, components)
     stats = ts.obs_stats
     if config.normalize_observations:
         stats = normalization.update_stats(stats, data.obs, num_batch_dims=2)
 
-    def value_of(obs):
-        return value_net.apply(ts.params["value"], _inputs(config, stats, obs)[1])[..., 0]
+    rewards, reward_scaling = data.reward * hp.reward_scaling, ts.reward_scaling
+    if config.reward_normalization:
+        ended = data.terminated | data.truncated
+        reward_scaling = reward_scaling_lib.update_reward_scaling(reward_scaling, rewards, ended, hp.discount)
+        rewards = reward_scaling_lib.scale_rewards(reward_scaling, rewards)
+
+    normalized = config.value_normalization != "none"
+
+    def value_of(obs):  # in the units of `rewards`
+        out = value_net.apply(ts.params["value"], _inputs(config, stats, obs)[1])[..., 0]
+        return value_norm.denormalize_values(ts.value_stats, out) if normalized else out
 
     values = value_of(data.obs)
     adv, returns = learning.gae(
-        data.reward * hp.reward_scaling,
-        values,
-        value_of(data.next_obs),
-        data.terminated,
-        data.truncated,
-        hp.discount,
-        hp.gae_lambda,
+        rewards, values, value_of(data.next_obs), data.terminated, data.truncated, hp.discount, hp.gae_lambda
     )
+    params, value_stats = ts.params, ts.value_stats
+    if normalized:  # the value head learns (returns - mean) / std, and its old values read alike
+        value_stats = value_norm.update_value_stats(value_stats, returns)
+        if config.value_normalization == "popart":
+            head = value_norm.popart_rescale(params["value"][-1], ts.value_stats, value_stats)
+            params = {**params, "value": [*params["value"][:-1], head]}
+        returns, values = (
+            value_norm.normalize_values(value_stats, returns),
+            value_norm.normalize_values(value_stats, values),
+        )
     batch = Batch(obs=data.obs, start=data.start, extras=data.extras, advantages=adv, returns=returns, values=values)
 
-    optimizer = _optimizer(config, hp, components)
-    grad_fn = jax.grad(lambda p, b, k: _loss(config, task, components, hp, p, stats, b, k), has_aux=True)
+    progress = (ts.updates - 1).astype(jnp.float32) / config.num_updates  # done before this update (`update` counts it)
+    entropy_coef = schedules.entropy_coef_schedule(
+        config.entropy_schedule, progress, hp.entropy_coef, hp.final_entropy_coef
+    )
+    grad_fn = jax.grad(lambda p, b, k: _loss(config, task, components, hp, entropy_coef, p, stats, b, k), has_aux=True)
+    adaptive = config.lr_schedule == "adaptive"
 
     def sgd_step(carry, minibatch):
-        params, opt_state, key = carry
+        params, opt_state, key, lr, stopped = carry
         key, entropy_key = jax.random.split(key)
         grads, metrics = grad_fn(params, minibatch, entropy_key)
-        updates, opt_state = optimizer.update(grads, opt_state, params)
-        return (optax.apply_updates(params, updates), opt_state, key), metrics
+        kl = metrics["loss/approx_kl"]  # at the params this step starts from
+        lr = schedules.kl_adaptive_lr(lr, kl, hp.target_kl) if adaptive else lr
+        stopped = schedules.kl_early_stop(stopped, kl, hp.max_kl)
+        optimizer = _optimizer(config, hp, components, lr if adaptive else None)
+        updates, new_opt_state = optimizer.update(grads, opt_state, params)
+        new_params, new_opt_state, skipped = skip_non_finite_update(
+            optax.apply_updates(params, updates), new_opt_state, params, opt_state, grads, metrics["loss/total"]
+        )
+        params, opt_state = schedules.skip_when_stopped(stopped, (params, opt_state), (new_params, new_opt_state))
+        dropped = {"loss/skipped_steps": skipped.astype(jnp.float32), "loss/kl_stopped": stopped.astype(jnp.float32)}
+        metrics = {**metrics, **dropped}
+        return (params, opt_state, key, lr, stopped), metrics
 
     shuffle_key, entropy_key = jax.random.split(key)
-    (params, opt_state, _), metrics = learning.learn(
+    (params, opt_state, _, lr, _), metrics = learning.learn(
         sgd_step,
-        (ts.params, ts.opt_state, entropy_key),
+        (params, ts.opt_state, entropy_key, ts.learning_rate, jnp.zeros((), bool)),
         batch,
         shuffle_key,
         num_epochs=config.num_epochs,
@@ -525,7 +610,28 @@ def improve(
         sequences=_is_recurrent(policy_net),
         split_over_devices=config.split_minibatches,
     )
-    return ts.replace(params=params, opt_state=opt_state, obs_stats=stats), metrics
+    if adaptive:
+        metrics["learning_rate"] = lr
+    if config.entropy_schedule != "constant":
+        metrics["loss/entropy_coef"] = entropy_coef
+    # A batch with a NaN or inf in it must not poison the statistics every later update reads.
+    stats, value_stats, reward_scaling = _finite_or(
+        (ts.obs_stats, ts.value_stats, ts.reward_scaling), (stats, value_stats, reward_scaling)
+    )
+    new_state = ts.replace(
+        params=params,
+        opt_state=opt_state,
+        obs_stats=stats,
+        value_stats=value_stats,
+        reward_scaling=reward_scaling,
+        learning_rate=lr,
+    )
+    return new_state, metrics
+
+
+def _finite_or(old: Any, new: Any) -> Any:
+    """`new` where every one of its inexact leaves is finite, else `old`."""
+    return tree.where(tree.all_finite(new), new, old)
 
 
 def update(
