@@ -1,0 +1,167 @@
+"""Which of PPO's stability switches help, measured: each variant over seeds, on the same envs and budget.
+
+Variants (``--variants``) are `ppo.configure` fields over an env's registered PPO
+hyperparameters (a Playground env: `ppo.Config()`'s, as learning_quality's
+"mjzoo-defaults"); ``baseline`` is the registered configuration as it is. Every variant
+trains all its seeds (``--seeds``) in one vmapped program (`learning_quality.train_mjzoo`),
+evaluated ``--evals`` times. Reported per env, reward scale and variant: final and best
+return (mean ± std over seeds), kept fraction (final / best; < 0.9 is a collapse), the
+seeds that reach ``--target`` and the median wall-clock seconds and env steps to it.
+
+    python benchmarks/ppo_stability.py --envs humanoid_walk --steps 30000000 --seeds 3 --variants baseline all
+    python benchmarks/ppo_stability.py --envs hopper --reward-scale 100 --variants baseline popart
+    python benchmarks/ppo_stability.py --smoke --envs cartpole_balance   # tiny sizes, on a CPU
+
+Results merge into ``benchmarks/results/ppo_stability/ppo_stability_<card>.json`` (a
+variant re-run replaces its old entry) with one curves figure per reward scale.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import sys
+import tempfile
+import time
+from pathlib import Path
+
+import jax
+import numpy as np
+
+sys.path.insert(0, str(Path(__file__).parent))
+from learning_quality import card_name  # noqa: E402
+from learning_quality import is_playground  # noqa: E402
+from learning_quality import ppo_fields  # noqa: E402
+from learning_quality import print_table  # noqa: E402
+from learning_quality import scaled_task  # noqa: E402
+from learning_quality import summarize  # noqa: E402
+from learning_quality import train_mjzoo  # noqa: E402
+
+import mjzoo  # noqa: E402
+import mjzoo.envs  # noqa: E402
+from mjzoo.interop import playground  # noqa: E402
+
+VARIANTS: dict[str, dict] = {
+    "baseline": {},
+    "adaptive_lr": {"lr_schedule": "adaptive"},
+    "kl_stop": {"max_kl": 0.05},
+    "popart": {"value_normalization": "popart"},
+    "running_values": {"value_normalization": "running"},
+    "reward_norm": {"reward_normalization": True},
+    "entropy_decay": {"entropy_schedule": "linear"},
+    "norms": {"value_normalization": "popart", "reward_normalization": True},
+    "all": {"value_normalization": "popart", "reward_normalization": True, "lr_schedule": "adaptive"},
+}
+SMOKE_STEPS = 4096
+
+
+def load(name: str, impl: str, smoke: bool) -> mjzoo.Task:
+    if is_playground(name):
+        return playground.task(playground.load(name, **({"episode_length": 50} if smoke else {})))
+    short = {"episode_steps": 50} if smoke and mjzoo.envs.accepts(name, "episode_steps") else {}
+    return mjzoo.envs.make(name, impl=impl, **short)
+
+
+def reach(runs: list[dict], target: float | None) -> dict:
+    """Seeds whose evaluation reached `target`, and the median seconds and steps to it
+    over the seeds that did (mjzoo's seeds train at once: seconds are for all of them)."""
+    if target is None:
+        return {}
+    firsts = [next(((s, t) for s, t, r in run["curve"] if r >= target), None) for run in runs]
+    hit = [f for f in firsts if f is not None]
+    return {
+        "target": target,
+        "seeds_reaching_target": len(hit),
+        "median_steps_to_target": float(np.median([s for s, _ in hit])) if hit else None,
+        "median_seconds_to_target": float(np.median([t for _, t in hit])) if hit else None,
+    }
+
+
+def plot(rows: list[dict], out: Path, card: str) -> list[Path]:
+    import matplotlib
+
+    matplotlib.use("Agg")  # no display
+    import matplotlib.pyplot as plt
+
+    paths = []
+    for scale in sorted({r["reward_scale"] for r in rows}):
+        at = sorted((r for r in rows if r["reward_scale"] == scale), key=lambda r: r["env"])
+        figure, grid = plt.subplots(1, len(at), figsize=(4.5 * len(at), 3.4), squeeze=False)
+        for axes, row in zip(grid[0], at):
+            for name, t in sorted(row["trainers"].items()):
+                steps = np.asarray([p[0] for p in t["runs"][0]["curve"]])
+                returns = np.asarray([[p[2] for p in run["curve"]] for run in t["runs"]])  # [seed, evaluation]
+                line = axes.plot(steps, returns.mean(0), label=f"{name} ({len(returns)})")[0]
+                axes.fill_between(steps, returns.min(0), returns.max(0), color=line.get_color(), alpha=0.15)
+            axes.set(title=f"{row['env']} ({row['impl']})", xlabel="env steps")
+            axes.legend(fontsize=7)
+        grid[0][0].set_ylabel("evaluation return (mean, min-max over seeds)")
+        figure.suptitle(f"PPO stability variants, {card}, reward x{scale:g}", fontsize=9)
+        figure.tight_layout()
+        paths.append(out / f"curves_{card}{'' if scale == 1 else f'_scale{scale:g}'}.png")
+        figure.savefig(paths[-1], dpi=110)
+        plt.close(figure)
+    return paths
+
+
+def main() -> None:
+    parser = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
+    parser.add_argument("--envs", nargs="+", default=["humanoid_walk"])
+    parser.add_argument("--variants", nargs="+", default=["baseline", "all"], choices=sorted(VARIANTS))
+    parser.add_argument("--impl", default="jax", choices=["jax", "warp"], help="physics of mjzoo's envs")
+    parser.add_argument("--steps", type=int, default=None, help="env steps per run (default: the registered ones)")
+    parser.add_argument("--evals", type=int, default=10)
+    parser.add_argument("--seeds", type=int, default=3)
+    parser.add_argument("--eval-envs", type=int, default=128)
+    parser.add_argument("--reward-scale", type=float, default=1.0)
+    parser.add_argument("--target", type=float, default=None, help="report the seeds reaching this return")
+    parser.add_argument("--smoke", action="store_true")
+    parser.add_argument("--out", type=Path, default=None)
+    args = parser.parse_args()
+    if args.smoke and args.out is None:
+        args.out = Path(tempfile.mkdtemp(prefix="ppo_stability_smoke_"))
+    out = args.out or Path(__file__).parent / "results" / "ppo_stability"
+    out.mkdir(parents=True, exist_ok=True)
+    card = card_name()
+    path = out / f"ppo_stability_{card}.json"
+    rows = json.loads(path.read_text())["rows"] if path.exists() else []
+    seeds = list(range(args.seeds))
+    print(f"device: {jax.devices()[0].device_kind}, jax {jax.__version__}, seeds {seeds}, writing {path}", flush=True)
+    for name in args.envs:
+        task = load(name, args.impl, args.smoke)
+        default = int(mjzoo.envs.hyperparameters(name, "ppo")["total_steps"]) if not is_playground(name) else 0
+        steps = SMOKE_STEPS if args.smoke else (args.steps or default)
+        base = ppo_fields(name, "mjzoo-defaults", steps, args.smoke)
+        key = (name, args.impl, args.reward_scale)
+        row = next((r for r in rows if (r["env"], r["impl"], r["reward_scale"]) == key), None)
+        if row is None:
+            row = {"env": name, "impl": args.impl, "reward_scale": args.reward_scale, "steps": steps, "trainers": {}}
+            rows.append(row)
+        for variant in args.variants:
+            print(f"{name} ({args.impl}), reward x{args.reward_scale:g}, {variant}: {steps:,} steps", flush=True)
+            start = time.perf_counter()
+            fields = {**base, **VARIANTS[variant]}
+            result = train_mjzoo(
+                scaled_task(task, args.reward_scale),
+                fields,
+                seeds,
+                args.evals,
+                min(args.eval_envs, 8) if args.smoke else args.eval_envs,
+                args.reward_scale,
+            )
+            result.update(
+                reach(result["runs"], args.target), variant=VARIANTS[variant], wall_s=time.perf_counter() - start
+            )
+            row["trainers"][variant] = result
+            summarize(row)
+            path.write_text(json.dumps({"device": jax.devices()[0].device_kind, "rows": rows}, indent=1))
+            print(
+                f"  {time.perf_counter() - start:.0f} s; {result.get('seeds_reaching_target', '-')} reached", flush=True
+            )
+    print_table(rows)
+    for p in plot(rows, out, card):
+        print(f"wrote {p}")
+
+
+if __name__ == "__main__":
+    main()
