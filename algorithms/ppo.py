@@ -124,6 +124,14 @@ class Config:
     def __post_init__(self):
         counts = ("num_envs", "unroll_length", "num_minibatches", "num_epochs", "total_steps", "gru_hidden_size")
         checks.fields("ppo.Config", self, {f: (checks.is_count(getattr(self, f)), "an integer >= 1") for f in counts})
+        switches = (
+            "normalize_observations",
+            "normalize_advantages",
+            "reward_normalization",
+            "split_minibatches",
+            "recurrent",
+        )
+        checks.fields("ppo.Config", self, {f: (isinstance(getattr(self, f), bool), "True or False") for f in switches})
         steps = self.num_envs * self.unroll_length
         divides = steps % self.num_minibatches == 0 and (
             not self.recurrent or self.num_envs % self.num_minibatches == 0

@@ -62,6 +62,7 @@ def _max_change(a, b) -> float:
         ("lr_schedule", "step", "lr_schedule='step' is invalid; expected constant, linear, cosine, adaptive"),
         ("entropy_schedule", "exp", "entropy_schedule='exp' is invalid; expected constant, linear, cosine"),
         ("value_normalization", "batch", "value_normalization='batch' is invalid; expected none, running, popart"),
+        ("reward_normalization", "false", "reward_normalization='false' is invalid; expected True or False"),
     ],
 )
 def test_config_errors_name_the_switch(field, value, message):
