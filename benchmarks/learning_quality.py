@@ -155,13 +155,14 @@ def ppo_fields(name: str, trainer: str, steps: int, smoke: bool) -> dict[str, An
     return {**fields, "total_steps": steps, **(SMOKE_PPO if smoke else {})}
 
 
-def load(name: str, smoke: bool) -> tuple[Any, mjzoo.Task]:
-    """(Playground's env object or None, the mjzoo task): both trainers step the same object."""
+def load(name: str, smoke: bool, impl: str = "jax") -> tuple[Any, mjzoo.Task]:
+    """(Playground's env object or None, the mjzoo task): both trainers step the same
+    object. `impl` is the physics of an mjzoo env (Playground's envs choose their own)."""
     if is_playground(name):
         env = playground.load(name, **({"episode_length": SMOKE_EPISODE} if smoke else {}))
         return env, playground.task(env)
     short = smoke and mjzoo.envs.accepts(name, "episode_steps")
-    return None, mjzoo.envs.make(name, **({"episode_steps": SMOKE_EPISODE} if short else {}))
+    return None, mjzoo.envs.make(name, impl=impl, **({"episode_steps": SMOKE_EPISODE} if short else {}))
 
 
 # --- reward scale ----------------------------------------------------------------------------

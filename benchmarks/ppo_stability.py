@@ -29,17 +29,15 @@ import jax
 import numpy as np
 
 sys.path.insert(0, str(Path(__file__).parent))
+from learning_quality import SMOKE_STEPS  # noqa: E402
 from learning_quality import card_name  # noqa: E402
-from learning_quality import is_playground  # noqa: E402
+from learning_quality import default_steps  # noqa: E402
+from learning_quality import load  # noqa: E402
 from learning_quality import ppo_fields  # noqa: E402
 from learning_quality import print_table  # noqa: E402
 from learning_quality import scaled_task  # noqa: E402
 from learning_quality import summarize  # noqa: E402
 from learning_quality import train_mjzoo  # noqa: E402
-
-import mjzoo  # noqa: E402
-import mjzoo.envs  # noqa: E402
-from mjzoo.interop import playground  # noqa: E402
 
 VARIANTS: dict[str, dict] = {
     "baseline": {},
@@ -52,14 +50,6 @@ VARIANTS: dict[str, dict] = {
     "norms": {"value_normalization": "popart", "reward_normalization": True},
     "all": {"value_normalization": "popart", "reward_normalization": True, "lr_schedule": "adaptive"},
 }
-SMOKE_STEPS = 4096
-
-
-def load(name: str, impl: str, smoke: bool) -> mjzoo.Task:
-    if is_playground(name):
-        return playground.task(playground.load(name, **({"episode_length": 50} if smoke else {})))
-    short = {"episode_steps": 50} if smoke and mjzoo.envs.accepts(name, "episode_steps") else {}
-    return mjzoo.envs.make(name, impl=impl, **short)
 
 
 def reach(runs: list[dict], target: float | None) -> dict:
@@ -128,9 +118,8 @@ def main() -> None:
     seeds = list(range(args.seeds))
     print(f"device: {jax.devices()[0].device_kind}, jax {jax.__version__}, seeds {seeds}, writing {path}", flush=True)
     for name in args.envs:
-        task = load(name, args.impl, args.smoke)
-        default = int(mjzoo.envs.hyperparameters(name, "ppo")["total_steps"]) if not is_playground(name) else 0
-        steps = SMOKE_STEPS if args.smoke else (args.steps or default)
+        task = load(name, args.smoke, args.impl)[1]
+        steps = SMOKE_STEPS if args.smoke else (args.steps or default_steps(name))
         base = ppo_fields(name, "mjzoo-defaults", steps, args.smoke)
         key = (name, args.impl, args.reward_scale)
         row = next((r for r in rows if (r["env"], r["impl"], r["reward_scale"]) == key), None)

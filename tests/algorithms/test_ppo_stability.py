@@ -129,7 +129,7 @@ def test_popart_keeps_the_value_functions_outputs_while_its_statistics_move():
     to below -10 (returns of the raw reward)."""
     config = dataclasses.replace(ALL_ON, lr_schedule="constant", reward_normalization=False)
     start = ppo.init(config, BLOCK, ppo.Hyperparams(learning_rate=1e-30), jax.random.key(3))
-    state, _ = jax.jit(ppo.update, static_argnums=0)(config, BLOCK, start)
+    state, _ = update(config, BLOCK, start)
     assert float(state.value_stats.count) == config.steps_per_update
     assert float(state.value_stats.mean) < -10.0
 
