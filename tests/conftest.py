@@ -54,14 +54,16 @@ def pytest_configure(config):
     `_free_compiled_code` drops every executable after each module, and later modules
     compile many of the same programs again (eager array ops, an env's reset, a task's
     rollout): pendulum's and cartpole's check_task again after `jax.clear_caches()` cost
-    15 s of CPU from this cache, 29 s compiled afresh. The workers share it, each reading
-    what the other compiled: a size limit turns on JAX's file lock around every read and
-    write. Small programs count too (no minimum)."""
+    15 s of CPU from this cache, 29 s compiled afresh. Each process writes a directory of
+    its own, as JAX writes an entry without a lock. Sharing one under JAX's lock (which a
+    size limit turns on) cost more than it saved: every write then reads every entry's
+    access time to decide on eviction, quadratic in the ~10^4 entries of a run (CI: 2507 s
+    to 3861 s). Small programs count too (no minimum)."""
     if _RUN_CACHE not in os.environ:  # the run's controller, or a run without xdist
         os.environ[_RUN_CACHE] = tempfile.mkdtemp(prefix="mjzoo-test-jax-cache-")
         config._mjzoo_run_cache = os.environ[_RUN_CACHE]
-    jax.config.update("jax_compilation_cache_dir", os.environ[_RUN_CACHE])
-    jax.config.update("jax_compilation_cache_max_size", 64 * 2**30)  # never reached: it enables the lock
+    worker = getattr(config, "workerinput", {}).get("workerid", "main")
+    jax.config.update("jax_compilation_cache_dir", os.path.join(os.environ[_RUN_CACHE], worker))
     jax.config.update("jax_persistent_cache_min_compile_time_secs", 0.0)
     jax.config.update("jax_persistent_cache_min_entry_size_bytes", 0)
 
