@@ -284,10 +284,24 @@ def _restarted_batch(axis_size: int, in_batched: list, inner: Task, done: Array,
         return [x for x, k in zip(out, kept) if not k]
 
     fresh = jax.lax.cond(
-        jnp.any(done), jax.vmap(restart), lambda *_: moving, mapped, done, key, moving
+        _any_of_batch(done), jax.vmap(restart), lambda *_: moving, mapped, done, key, moving
     )  # one branch for all
     out = jax.tree.unflatten(ended_def, _merge(ended_leaves, kept, fresh))
     return out, jax.tree.unflatten(ended_def, [not k for k in kept])
+
+
+@jax.custom_batching.custom_vmap
+def _any_of_batch(x: Array) -> Array:
+    """`jnp.any(x)`, and under `jax.vmap` still one unbatched bool: true when any element
+    of any batch member is. It keeps `_restarted_batch`'s condition unbatched under an
+    outer vmap (seeds or hyperparameters over a batch of envs), where a batched one turns
+    the `lax.cond` into a select that computes the new episodes on every step."""
+    return jnp.any(x)
+
+
+@_any_of_batch.def_vmap
+def _any_of_batch_batch(axis_size: int, in_batched: list, x: Array) -> tuple[Array, bool]:
+    return _any_of_batch(x), False
 
 
 def _merge(leaves: list, fixed: list, others: list) -> list:

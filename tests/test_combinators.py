@@ -325,6 +325,32 @@ def test_a_batch_resets_only_on_steps_where_an_env_ended():
     np.testing.assert_array_equal(s.terminated[1], [False, False, True, False, False, True])
 
 
+def test_nested_batches_reset_only_on_steps_where_an_env_ended():
+    """Under a vmap over seeds of a vmap over envs (PPO's seeds trained at once) the
+    condition stays one for the whole batch: no new episodes are computed while no env of
+    any seed ends (Playground's cheetah settles 200 steps per reset), and each seed's
+    states equal its own batch's run."""
+    inner = make_task(threshold=0.05)
+    task = mjzoo.with_auto_reset(inner.replace(start=Partial(_counted_reset, inner.start.args[0])))
+    keys = jax.random.split(KEY, (2, 3))
+    states = jax.vmap(jax.vmap(reset, in_axes=(None, 0)), in_axes=(None, 0))(task, keys)
+    calm = jnp.zeros((2, 3, T, 1))
+    pushed = calm.at[1, 2].set(1.0)  # seed 1's env 2 ends at its 3rd step
+    batched = jax.vmap(run, in_axes=(None, 0, 0, 0))
+    nested = jax.jit(jax.vmap(batched, in_axes=(None, 0, 0, 0)))
+    for actions, resets_expected in ((calm, False), (pushed, True)):
+        jax.block_until_ready(nested(task, states, actions, keys))
+        _RESETS.clear()
+        _, s = jax.block_until_ready(nested(task, states, actions, keys))
+        jax.effects_barrier()
+        assert bool(_RESETS) == resets_expected, (len(_RESETS), resets_expected)
+    for seed in range(2):
+        at = lambda x, seed=seed: x[seed]  # noqa: E731
+        _, alone = batched(task, jax.tree.map(at, states), pushed[seed], keys[seed])
+        chex.assert_trees_all_equal(jax.tree.map(at, s), alone)
+    np.testing.assert_array_equal(s.terminated[1, 2], [False, False, True, False, False, True])
+
+
 # --- with_action_repeat -------------------------------------------------------------------
 
 
