@@ -37,8 +37,6 @@ XML = """
 </mujoco>
 """
 SPEC = "tests.harness.test_distributed:block_task"
-AMP_SPEC = "tests.harness.test_distributed:block_amp_task"
-AMP_FLAGS = ["disc_minibatches=2", "disc_hidden_sizes=(16,)", "replay_size=64"]  # after --config
 FLAGS = [
     "--config",
     "num_envs=8",
@@ -71,23 +69,6 @@ def block_task(impl: str = "jax") -> mjzoo.Task:
     return mjzoo.task(XML, rewards={"distance": _distance}, time_limit=10, impl=impl)
 
 
-def block_amp_task() -> mjzoo.Task:
-    """The block for AMP (its reference: `REFERENCE`). It takes no `impl`: a resumed run
-    builds it as it was first built."""
-    return block_task()
-
-
-def REFERENCE(task: mjzoo.Task, **overrides: object) -> mjzoo.motion.Reference:
-    """The block's motion to imitate, sliding x = 0.3 sin(t): a factory module's
-    reference, which `mjzoo train amp` finds beside the factory (`mjzoo.envs.reference`)."""
-    dt = mjzoo.control_dt(task)
-    t = np.arange(200) * dt
-    clip = mjzoo.motion.Clip(
-        name="slide", fps=1 / dt, qpos=0.3 * np.sin(t)[:, None], qvel=0.3 * np.cos(t)[:, None], joint_names=("x",)
-    )
-    return mjzoo.motion.reference(clip, task.mj_model, dt)
-
-
 Launched = list[tuple[subprocess.Popen, Path]]  # each process with the stem of its log files
 
 
@@ -110,7 +91,7 @@ def _launch(
         JAX_COMPILATION_CACHE_DIR=str(cache),
         XLA_FLAGS=f"{env.get('XLA_FLAGS', '')} --xla_force_host_platform_device_count={devices}",
     )
-    flags = FLAGS[:1] + AMP_FLAGS + FLAGS[1:] if algorithm == "amp" else FLAGS
+
     command = [
         sys.executable,
         "-m",
@@ -119,7 +100,7 @@ def _launch(
         algorithm,
         spec,
         *args,
-        *flags,
+        *FLAGS,
         *(["--out", str(out)] if out else []),
     ]
     port = distributed.free_port("localhost")
@@ -169,10 +150,10 @@ def _saved_arrays(run: Path, step: int) -> dict[str, np.ndarray]:
     return reader.restore(path, {k: np.zeros(m.shape, m.dtype) for k, m in metadata.items()})
 
 
-@pytest.mark.parametrize("algorithm,spec", [("ppo", SPEC), ("amp", AMP_SPEC)])
-def test_two_processes_train_as_one_process_with_two_devices_and_resume(tmp_path, algorithm, spec):
+def test_two_processes_train_as_one_process_with_two_devices_and_resume(tmp_path):
+    """PPO's (AMP shares its harness and learner: `test_amp.py` runs it on two devices)."""
     two, one = tmp_path / "two", tmp_path / "one"
-    run = dict(spec=spec, algorithm=algorithm)
+    run = dict(spec=SPEC)
     first, second = _finish(
         _launch(two, tmp_path / "logs-two", "--total-steps", str(2 * STEPS_PER_CHUNK), processes=2, **run)
     )
