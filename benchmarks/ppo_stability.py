@@ -2,14 +2,16 @@
 
 Variants (``--variants``) are `ppo.configure` fields over an env's registered PPO
 hyperparameters (a Playground env: `ppo.Config()`'s, as learning_quality's
-"mjzoo-defaults"); ``baseline`` is the registered configuration as it is. Every variant
+"mjzoo-defaults"): ``plain`` is PPO without its stability switches (as it was before
+them), each other variant adds some to it, and ``defaults`` is `ppo.Config`'s own (the
+KL-adaptive rate, PopArt and reward normalization, chosen with this benchmark). Every variant
 trains all its seeds (``--seeds``) in one vmapped program (`learning_quality.train_mjzoo`),
 evaluated ``--evals`` times. Reported per env, reward scale and variant: final and best
 return (mean ± std over seeds), kept fraction (final / best; < 0.9 is a collapse), the
 seeds that reach ``--target`` and the median wall-clock seconds and env steps to it.
 
-    python benchmarks/ppo_stability.py --envs humanoid_walk --steps 30000000 --seeds 3 --variants baseline all
-    python benchmarks/ppo_stability.py --envs hopper --reward-scale 100 --variants baseline popart
+    python benchmarks/ppo_stability.py --envs humanoid_walk --steps 30000000 --seeds 3 --variants plain defaults
+    python benchmarks/ppo_stability.py --envs hopper --reward-scale 100 --variants plain popart
     python benchmarks/ppo_stability.py --smoke --envs cartpole_balance   # tiny sizes, on a CPU
 
 Results merge into ``benchmarks/results/ppo_stability/ppo_stability_<card>.json`` (a
@@ -39,16 +41,19 @@ from learning_quality import scaled_task  # noqa: E402
 from learning_quality import summarize  # noqa: E402
 from learning_quality import train_mjzoo  # noqa: E402
 
+# PPO as it was before its stability switches; each variant adds to it. "defaults" is
+# ppo.Config's own: the KL-adaptive rate, PopArt and reward normalization.
+PLAIN = {"lr_schedule": "constant", "value_normalization": "none", "reward_normalization": False}
 VARIANTS: dict[str, dict] = {
-    "baseline": {},
-    "adaptive_lr": {"lr_schedule": "adaptive"},
-    "kl_stop": {"max_kl": 0.05},
-    "popart": {"value_normalization": "popart"},
-    "running_values": {"value_normalization": "running"},
-    "reward_norm": {"reward_normalization": True},
-    "entropy_decay": {"entropy_schedule": "linear"},
-    "norms": {"value_normalization": "popart", "reward_normalization": True},
-    "all": {"value_normalization": "popart", "reward_normalization": True, "lr_schedule": "adaptive"},
+    "plain": PLAIN,
+    "adaptive_lr": {**PLAIN, "lr_schedule": "adaptive"},
+    "kl_stop": {**PLAIN, "max_kl": 0.05},
+    "popart": {**PLAIN, "value_normalization": "popart"},
+    "running_values": {**PLAIN, "value_normalization": "running"},
+    "reward_norm": {**PLAIN, "reward_normalization": True},
+    "entropy_decay": {**PLAIN, "entropy_schedule": "linear"},
+    "norms": {**PLAIN, "value_normalization": "popart", "reward_normalization": True},
+    "defaults": {},
 }
 
 
@@ -81,8 +86,9 @@ def plot(rows: list[dict], out: Path, card: str) -> list[Path]:
             for name, t in sorted(row["trainers"].items()):
                 steps = np.asarray([p[0] for p in t["runs"][0]["curve"]])
                 returns = np.asarray([[p[2] for p in run["curve"]] for run in t["runs"]])  # [seed, evaluation]
-                line = axes.plot(steps, returns.mean(0), label=f"{name} ({len(returns)})")[0]
-                axes.fill_between(steps, returns.min(0), returns.max(0), color=line.get_color(), alpha=0.15)
+                color = f"C{list(VARIANTS).index(name) % 10}"  # one color per variant in every panel
+                axes.plot(steps, returns.mean(0), label=f"{name} ({len(returns)})", color=color)
+                axes.fill_between(steps, returns.min(0), returns.max(0), color=color, alpha=0.15)
             axes.set(title=f"{row['env']} ({row['impl']})", xlabel="env steps")
             axes.legend(fontsize=7)
         grid[0][0].set_ylabel("evaluation return (mean, min-max over seeds)")
@@ -97,7 +103,7 @@ def plot(rows: list[dict], out: Path, card: str) -> list[Path]:
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     parser.add_argument("--envs", nargs="+", default=["humanoid_walk"])
-    parser.add_argument("--variants", nargs="+", default=["baseline", "all"], choices=sorted(VARIANTS))
+    parser.add_argument("--variants", nargs="+", default=["plain", "defaults"], choices=sorted(VARIANTS))
     parser.add_argument("--impl", default="jax", choices=["jax", "warp"], help="physics of mjzoo's envs")
     parser.add_argument("--steps", type=int, default=None, help="env steps per run (default: the registered ones)")
     parser.add_argument("--evals", type=int, default=10)

@@ -13,6 +13,7 @@ import numpy as np
 import pytest
 
 import mjzoo
+from mjzoo import learning
 from mjzoo.algorithms import ppo
 from mjzoo.learning import value_normalization
 
@@ -168,3 +169,31 @@ def test_the_entropy_coefficient_decays_linearly_over_the_run():
     _, metrics = jax.jit(ppo.train, static_argnums=0)(ALL_ON, BLOCK, hp, jax.random.key(5))
     n = ALL_ON.num_updates
     np.testing.assert_allclose(metrics["loss/entropy_coef"], 0.04 * (1 - np.arange(n) / n), rtol=1e-6)
+
+
+def _linear_init(key, x):
+    return {"w": jnp.zeros((x.shape[-1], 1))}
+
+
+def _linear_apply(params, x):
+    return x @ params["w"]
+
+
+def test_popart_refuses_a_value_network_it_cannot_rescale_and_running_takes_it():
+    """PopArt (on by default) rescales an mlp's output layer: a value network of another
+    shape is refused at init, naming the way out, and "running" takes it."""
+    own = ppo.Components(value_network=learning.Network(_linear_init, _linear_apply))
+    plain = ppo.Config(num_envs=8, unroll_length=8, num_minibatches=2, num_epochs=1, total_steps=64)
+    assert plain.value_normalization == "popart"
+    with pytest.raises(
+        ValueError, match=r"value_normalization='popart' \(the default\).*set value_normalization='running'"
+    ):
+        ppo.init(plain, BLOCK, ppo.Hyperparams(), jax.random.key(0), components=own)
+    state = ppo.init(
+        dataclasses.replace(plain, value_normalization="running"),
+        BLOCK,
+        ppo.Hyperparams(),
+        jax.random.key(0),
+        components=own,
+    )
+    assert state.params["value"]["w"].shape == (2, 1)  # the block's observation: position and velocity
