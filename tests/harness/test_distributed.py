@@ -69,6 +69,23 @@ def block_task(impl: str = "jax") -> mjzoo.Task:
     return mjzoo.task(XML, rewards={"distance": _distance}, time_limit=10, impl=impl)
 
 
+def block_amp_task() -> mjzoo.Task:
+    """The block for AMP, a user's factory beside its module's `REFERENCE`
+    (tests/envs/test_records.py finds the reference through it)."""
+    return block_task()
+
+
+def REFERENCE(task: mjzoo.Task, **overrides: object) -> mjzoo.motion.Reference:
+    """The block's motion to imitate, sliding x = 0.3 sin(t): a factory module's
+    reference, which `mjzoo train amp` finds beside the factory (`mjzoo.envs.reference`)."""
+    dt = mjzoo.control_dt(task)
+    t = np.arange(200) * dt
+    clip = mjzoo.motion.Clip(
+        name="slide", fps=1 / dt, qpos=0.3 * np.sin(t)[:, None], qvel=0.3 * np.cos(t)[:, None], joint_names=("x",)
+    )
+    return mjzoo.motion.reference(clip, task.mj_model, dt)
+
+
 Launched = list[tuple[subprocess.Popen, Path]]  # each process with the stem of its log files
 
 
@@ -91,7 +108,6 @@ def _launch(
         JAX_COMPILATION_CACHE_DIR=str(cache),
         XLA_FLAGS=f"{env.get('XLA_FLAGS', '')} --xla_force_host_platform_device_count={devices}",
     )
-
     command = [
         sys.executable,
         "-m",
