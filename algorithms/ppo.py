@@ -27,6 +27,7 @@ from __future__ import annotations
 
 import dataclasses
 import functools
+import types
 import warnings
 from collections.abc import Callable
 from typing import Any
@@ -59,6 +60,7 @@ __all__ = [
     "Batch",
     "Components",
     "Config",
+    "PLAIN",
     "Extras",
     "Hyperparams",
     "TrainState",
@@ -78,6 +80,11 @@ __all__ = [
 Array = jax.Array
 LR_SCHEDULES = ("constant", "linear", "cosine", "adaptive")
 VALUE_NORMALIZATIONS = ("none", "running", "popart")
+# `Config` fields of PPO without its stability switches: its defaults before them, and
+# Brax's PPO (`interop.playground`'s translation of Brax's configs pins them).
+PLAIN = types.MappingProxyType(
+    {"lr_schedule": "constant", "value_normalization": "none", "reward_normalization": False}
+)
 ACTIVATIONS = {"swish": jax.nn.swish, "tanh": jnp.tanh, "relu": jax.nn.relu, "elu": jax.nn.elu}
 
 
@@ -94,8 +101,9 @@ class Config:
     # the run's steps, or "adaptive": raised or lowered at every minibatch step by the
     # measured approximate KL against Hyperparams.target_kl (rsl_rl's schedule). The
     # defaults of this and the two normalizations below were chosen by measurement
-    # (benchmarks/ppo_stability.py; docs/benchmarks.md): on Playground's CheetahRun they
-    # took 3 seeds from 534 +- 170 to 889 +- 4, and with rewards x100 from 353 to 844.
+    # (benchmarks/ppo_stability.py; docs/sweeps.md): on Playground's CheetahRun they took
+    # 3 seeds from 534 +- 170 to 889 +- 4, and with rewards x100 from 353 to 844. `PLAIN`
+    # switches all three off.
     lr_schedule: Literal["constant", "linear", "cosine", "adaptive"] = "adaptive"
     # The entropy coefficient's decay from Hyperparams.entropy_coef to final_entropy_coef.
     entropy_schedule: Literal["constant", "linear", "cosine"] = "constant"
@@ -280,9 +288,10 @@ class Components(NamedTuple):
         whose output is [2 * action_size] (mean, scale parameters).
       value_network: a `learning.Network` with output [1].
       optimizer: an optax `GradientTransformation`, used as it is (the hyperparameters
-        learning_rate and max_grad_norm, and Config.lr_schedule, are then unused), or a function of the learning
-        rate (e.g. `optax.sgd`), which gets the scheduled, traced rate and follows the
-        gradient clipping at max_grad_norm. Default: `optax.adam`.
+        learning_rate and max_grad_norm, and Config.lr_schedule, are then unused), or a
+        function of the learning rate (e.g. `optax.sgd`), which gets the scheduled,
+        traced rate and follows the gradient clipping at max_grad_norm. Default:
+        `optax.adam`.
     """
 
     policy_network: networks.Network | networks.RecurrentNetwork | None = None

@@ -2,10 +2,10 @@
 
 Variants (``--variants``) are `ppo.configure` fields over an env's registered PPO
 hyperparameters (a Playground env: `ppo.Config()`'s, as learning_quality's
-"mjzoo-defaults"): ``plain`` is PPO without its stability switches (as it was before
-them), each other variant adds some to it, and ``defaults`` is `ppo.Config`'s own (the
-KL-adaptive rate, PopArt and reward normalization, chosen with this benchmark). Every variant
-trains all its seeds (``--seeds``) in one vmapped program (`learning_quality.train_mjzoo`),
+"mjzoo-defaults"): ``plain`` is PPO without its stability switches (`ppo.PLAIN`, as it
+was before them), each other variant adds some to it, and ``defaults`` is `ppo.Config`'s
+own (the KL-adaptive rate, PopArt and reward normalization, chosen with this
+benchmark). Every variant trains all its seeds (``--seeds``) in one vmapped program (`learning_quality.train_mjzoo`),
 evaluated ``--evals`` times. Reported per env, reward scale and variant: final and best
 return (mean ± std over seeds), kept fraction (final / best; < 0.9 is a collapse), the
 seeds that reach ``--target`` and the median wall-clock seconds and env steps to it.
@@ -41,9 +41,11 @@ from learning_quality import scaled_task  # noqa: E402
 from learning_quality import summarize  # noqa: E402
 from learning_quality import train_mjzoo  # noqa: E402
 
-# PPO as it was before its stability switches; each variant adds to it. "defaults" is
-# ppo.Config's own: the KL-adaptive rate, PopArt and reward normalization.
-PLAIN = {"lr_schedule": "constant", "value_normalization": "none", "reward_normalization": False}
+from mjzoo.algorithms import ppo  # noqa: E402
+
+# Each variant adds to PPO without its stability switches; "defaults" is ppo.Config's
+# own (the KL-adaptive rate, PopArt and reward normalization).
+PLAIN = dict(ppo.PLAIN)
 VARIANTS: dict[str, dict] = {
     "plain": PLAIN,
     "adaptive_lr": {**PLAIN, "lr_schedule": "adaptive"},

@@ -94,10 +94,7 @@ def mjzoo_config(total_steps: int) -> dict:
         policy_hidden_sizes=(32,) * 4,
         value_hidden_sizes=(256,) * 5,
         activation="swish",
-        # Brax's PPO: a constant rate, value targets and rewards as they are (mjzoo's defaults differ).
-        lr_schedule="constant",
-        value_normalization="none",
-        reward_normalization=False,
+        **ppo.PLAIN,  # Brax's PPO: a constant rate, value targets and rewards as they are
         total_steps=total_steps,
     )
 

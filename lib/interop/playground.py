@@ -212,7 +212,8 @@ def ppo_hyperparameters(name: str) -> dict[str, Any]:
         policy_hidden_sizes=tuple(network.get("policy_hidden_layer_sizes", (32,) * 4)),
         value_hidden_sizes=tuple(network.get("value_hidden_layer_sizes", (256,) * 5)),
         activation="swish",
-        # Brax's PPO: a constant rate, value targets and rewards as they are (mjzoo's defaults differ).
+        # Brax's PPO: a constant rate, value targets and rewards as they are (`ppo.PLAIN`,
+        # which this layer does not import).
         lr_schedule="constant",
         value_normalization="none",
         reward_normalization=False,
