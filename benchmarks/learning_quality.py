@@ -299,7 +299,8 @@ def summarize(row: dict) -> dict:
     row["threshold"] = THRESHOLD * better
     for t in trainers.values():
         times = [time_to([p for p in r["curve"] if p[0] > 0], row["threshold"]) for r in t["runs"]]
-        t["time_to_threshold_s"] = None if None in times else float(np.mean(times))
+        # No threshold where no trainer got above zero (a sparse task nobody solved).
+        t["time_to_threshold_s"] = None if None in times or better <= 0 else float(np.mean(times))
         t["normalized_final"] = t["final_return"] / better if better > 0 else None
         t["normalized_final_std"] = t["final_return_std"] / better if better > 0 else None
     return row
@@ -335,6 +336,14 @@ def summary(rows: list[dict]) -> dict[str, dict]:
                     "runs": sum(t["seeds"] for t in ts),
                 }
     return out
+
+
+def save(path: Path, rows: list[dict], device: str) -> None:
+    path.write_text(
+        json.dumps(
+            {"device": device, "jax": jax.__version__, "summary": summary(rows), "rows": rows}, indent=1, default=float
+        )
+    )
 
 
 def card_name() -> str:
@@ -439,6 +448,19 @@ def main() -> None:
     parser.add_argument("--first-seed", type=int, default=0)
     parser.add_argument("--eval-envs", type=int, default=128, help="episodes per evaluation")
     parser.add_argument("--reward-scale", type=float, default=1.0, help="train on reward x S; report unscaled")
+    parser.add_argument(
+        "--gpu-shared-by",
+        type=int,
+        default=1,
+        help="processes training on this GPU at once (recorded: their times and steps/s are shared)",
+    )
+    parser.add_argument(
+        "--merge",
+        nargs="+",
+        type=Path,
+        default=None,
+        help="merge these JSON files of other runs (in order) into --out's, and plot; trains nothing",
+    )
     parser.add_argument("--smoke", action="store_true", help="tiny sizes, to check the script on a CPU")
     parser.add_argument("--out", type=Path, default=None, help="default: benchmarks/results/learning_quality")
     args = parser.parse_args()
@@ -459,8 +481,21 @@ def main() -> None:
     path = out / f"learning_quality_{card}.json"
     rows = json.loads(path.read_text())["rows"] if path.exists() else []
     seeds = list(range(args.first_seed, args.first_seed + args.seeds))
-    print(f"device: {jax.devices()[0].device_kind}, jax {jax.__version__}, seeds {seeds}, writing {path}", flush=True)
+    if not args.merge:
+        print(
+            f"device: {jax.devices()[0].device_kind}, jax {jax.__version__}, seeds {seeds}, writing {path}", flush=True
+        )
 
+    if args.merge:
+        for other in args.merge:
+            data = json.loads(other.read_text())
+            card = re.sub(r"[^a-z0-9]+", "_", data["device"].lower()).strip("_")
+            path = out / f"learning_quality_{card}.json"
+            rows = json.loads(path.read_text())["rows"] if path.exists() else []
+            for row in data["rows"]:
+                rows = [summarize(r) for r in merged(rows, row)]
+            save(path, rows, data["device"])
+        envs = []  # only the report below
     for name in envs:
         steps = budget(name, args.steps or (SMOKE_STEPS if args.smoke else default_steps(name)), args.evals, args.smoke)
         trainers = [t for t in args.trainers if t != "brax" or name in args.brax_envs or "all" in args.brax_envs]
@@ -488,21 +523,10 @@ def main() -> None:
                 fields = ppo_fields(name, trainer, steps, args.smoke)
                 scaled = scaled_task(task, args.reward_scale)
                 result = train_mjzoo(scaled, fields, seeds, args.evals, eval_envs, args.reward_scale)
-            row["trainers"][trainer] = result
+            row["trainers"][trainer] = {**result, "gpu_shared_by": args.gpu_shared_by}
             # After each trainer: a wave cut off by its time limit keeps what it measured.
             rows = [summarize(r) for r in merged(rows, row)]
-            path.write_text(
-                json.dumps(
-                    {
-                        "device": jax.devices()[0].device_kind,
-                        "jax": jax.__version__,
-                        "summary": summary(rows),
-                        "rows": rows,
-                    },
-                    indent=1,
-                    default=float,
-                )
-            )
+            save(path, rows, jax.devices()[0].device_kind)
         print(f"{name}: {time.perf_counter() - start:.0f} s", flush=True)
 
     print_table(rows)
