@@ -196,7 +196,8 @@ print("ok")
 
 
 def test_arrays_sharded_over_devices_restore_onto_the_template_sharding(tmp_path):
-    env = dict(os.environ, XLA_FLAGS="--xla_force_host_platform_device_count=2", JAX_PLATFORMS="cpu")
+    flags = os.environ.get("XLA_FLAGS", "") + " --xla_force_host_platform_device_count=2"  # the suite's flags kept
+    env = dict(os.environ, XLA_FLAGS=flags, JAX_PLATFORMS="cpu")
     result = subprocess.run(
         [sys.executable, "-c", SHARDED_SCRIPT, str(tmp_path)],
         env=env,
