@@ -54,6 +54,9 @@ for 3 seeds, Brax ~3-10 min per seed; shorten ``--steps`` to fit more):
     python benchmarks/learning_quality.py --envs hopper walker cheetah --steps 20000000
     python benchmarks/learning_quality.py --envs CheetahRun --reward-scale 100 --trainers mjzoo-translated
     python benchmarks/learning_quality.py --smoke --envs CartpoleBalance --out /tmp/lq   # tiny sizes, on a CPU
+    python benchmarks/learning_quality.py --merge wave/p*/learning_quality_nvidia_h200.json  # a wave's processes
+
+Then ``python benchmarks/report.py`` regenerates docs/benchmarks.md from the results.
 """
 
 from __future__ import annotations

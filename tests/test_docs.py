@@ -172,3 +172,15 @@ def test_sweeps_page_draws_every_rate_and_seed(docs):
     assert namespace["returns"].shape == (4, 3, namespace["config"].num_updates)
     assert namespace["states"].hyperparams.learning_rate.shape == (4, 3)
     assert Path("sweep.png").stat().st_size > 10_000  # in the test's temporary working directory
+
+
+def test_benchmarks_page_is_the_reports_output():
+    """docs/benchmarks.md is generated from benchmarks/results/ by benchmarks/report.py:
+    a measurement committed without regenerating it, or a hand edit, fails here."""
+    import subprocess
+    import sys
+
+    out = subprocess.run(
+        [sys.executable, str(ROOT / "benchmarks" / "report.py"), "--check"], capture_output=True, text=True
+    )
+    assert out.returncode == 0, out.stderr
