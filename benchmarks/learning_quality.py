@@ -24,7 +24,9 @@ Trainers (``--trainers``):
 An mjzoo configuration trains all its seeds (``--seeds``, >= 3) in one program per env,
 so one compile: a jitted function, vmapped over seeds, runs ``num_updates // evals`` PPO
 updates (a `lax.scan` of the algorithm's `update`) and then `ppo.evaluate`, deterministic
-first episodes of ``--eval-envs`` envs; it is called ``--evals`` times. Brax evaluates
+first episodes of ``--eval-envs`` envs; it is called ``--evals`` times. Each run keeps
+its per-update learning rate, KL, value loss, clip fraction and KL stops
+(``diagnostics``), to see what a collapse did to the update. Brax evaluates
 at the same ``--evals`` fractions of its budget (plus its own evaluation at step 0).
 
 Reported per env and trainer (the JSON's ``rows``, the printed table): the final return
@@ -107,6 +109,8 @@ BRAX_ENVS = [
     "WalkerWalk",  # contact-rich locomotion with falls, dense
     "HopperHop",  # contact-rich, hard and nearly sparse early on
 ]
+# Per-update metrics kept with each mjzoo run, to see what a collapse did to the update.
+DIAGNOSTICS = ("learning_rate", "loss/approx_kl", "loss/value", "loss/clip_fraction", "loss/kl_stopped")
 COLLAPSE = 0.9  # a run that keeps less than this fraction of its best return has collapsed
 THRESHOLD = 0.9  # time to this fraction of the better trainer's final return
 # --smoke: tiny everything, to run the whole script on a CPU in minutes.
@@ -206,10 +210,14 @@ def train_mjzoo(
     per_chunk = max(1, config.num_updates // evals)
     eval_steps = mjzoo.episode_steps(task)  # on the host: a static length
 
-    def chunk(task: mjzoo.Task, state: ppo.TrainState, key: jax.Array) -> tuple[ppo.TrainState, jax.Array]:
-        state, _ = jax.lax.scan(lambda s, _: algorithm.update(task, s), state, None, length=per_chunk)
+    def chunk(task: mjzoo.Task, state: ppo.TrainState, key: jax.Array):
+        def update(state: ppo.TrainState, _: None) -> tuple[ppo.TrainState, dict[str, jax.Array]]:
+            state, metrics = algorithm.update(task, state)
+            return state, {k: metrics[k] for k in DIAGNOSTICS if k in metrics}
+
+        state, diagnostics = jax.lax.scan(update, state, None, length=per_chunk)
         # Only the mean return leaves the program: XLA drops the evaluation's trajectory.
-        return state, algorithm.evaluate(task, state, key, eval_envs, eval_steps).returns.mean()
+        return state, algorithm.evaluate(task, state, key, eval_envs, eval_steps).returns.mean(), diagnostics
 
     init = jax.jit(jax.vmap(algorithm.init, in_axes=(None, None, 0)))
     donate = () if jax.default_backend() == "cpu" else (1,)  # the CPU backend cannot donate
@@ -217,16 +225,21 @@ def train_mjzoo(
     start = time.perf_counter()
     init_keys, eval_keys = jnp.moveaxis(jax.vmap(jax.random.split)(jax.vmap(jax.random.key)(jnp.asarray(seeds))), 1, 0)
     state = init(task, hyperparams, init_keys)
-    points = []
+    points, diagnostics = [], []
     for i in range(evals):
-        state, returns = run(task, state, jax.vmap(jax.random.fold_in, in_axes=(0, None))(eval_keys, i))
+        state, returns, chunk_diagnostics = run(
+            task, state, jax.vmap(jax.random.fold_in, in_axes=(0, None))(eval_keys, i)
+        )
         returns = np.asarray(returns) / scale  # waits for the chunk
+        diagnostics.append(jax.tree.map(np.asarray, chunk_diagnostics))  # {key: [seed, update]}
         points.append(((i + 1) * per_chunk * config.steps_per_update, time.perf_counter() - start, returns))
         print(
             f"    step {points[-1][0]:,}, {points[-1][1]:.0f} s, returns {', '.join(f'{r:.1f}' for r in returns)}",
             flush=True,
         )
     runs = [run_record(seed, [(step, t, float(r[i])) for step, t, r in points]) for i, seed in enumerate(seeds)]
+    for i, record in enumerate(runs):  # per update, for a collapse's post-mortem
+        record["diagnostics"] = {k: np.concatenate([d[k][i] for d in diagnostics]).tolist() for k in diagnostics[0]}
     per_seed = wall_steps_per_s(runs[0]["curve"])
     return {
         "runs": runs,

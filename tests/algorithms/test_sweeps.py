@@ -44,36 +44,25 @@ def separate(cartpole):
     return lambda rate, key: run(CONFIG, cartpole, ppo.Hyperparams(learning_rate=rate), key)[0].params
 
 
-def test_a_sweep_over_learning_rates_is_one_program_of_the_separate_runs(cartpole, separate):
+def test_a_sweep_over_learning_rates_and_seeds_is_one_program_of_the_separate_runs(cartpole, separate):
+    """4 rates x 2 seeds, a vmap over seeds inside one over rates (docs/sweeps.md's grid):
+    one trace, and each of the 8 runs equals its run alone."""
+
     @chex.assert_max_traces(n=1)
     def train(hyperparams, key):
         return ppo.train(CONFIG, cartpole, hyperparams, key)
 
-    sweep = jax.jit(jax.vmap(train, in_axes=(0, None)))
-    key = jax.random.key(0)
-    states, metrics = sweep(batched(ppo.Hyperparams(), len(RATES), learning_rate=RATES), key)
-    chex.assert_shape(metrics["loss/total"], (len(RATES), CONFIG.num_updates))
-    np.testing.assert_allclose(states.hyperparams.learning_rate, np.float32(RATES))
-    runs = [jax.tree.map(lambda x, i=i: x[i], states.params) for i in range(len(RATES))]
-    for run, rate in zip(runs, RATES):
-        chex.assert_trees_all_close(run, separate(rate, key), **TOLERANCE)
-    for one, other in zip(runs, runs[1:]):  # each rate made a run of its own
+    keys = jax.random.split(jax.random.key(2), 2)
+    grid = jax.jit(jax.vmap(jax.vmap(train, in_axes=(None, 0)), in_axes=(0, None)))  # [rate, seed]
+    states, metrics = grid(batched(ppo.Hyperparams(), len(RATES), learning_rate=RATES), keys)
+    chex.assert_shape(metrics["loss/total"], (len(RATES), len(keys), CONFIG.num_updates))
+    np.testing.assert_allclose(states.hyperparams.learning_rate[:, 0], np.float32(RATES))
+    for i, rate in enumerate(RATES):
+        runs = [jax.tree.map(lambda x, i=i, j=j: x[i, j], states.params) for j in range(len(keys))]
+        for run, key in zip(runs, keys):
+            chex.assert_trees_all_close(run, separate(rate, key), **TOLERANCE)
+        assert max_difference(*runs) > 1e-3  # each seed made a run of its own
+    rows = [jax.tree.map(lambda x, i=i: x[i, 0], states.params) for i in range(len(RATES))]
+    for one, other in zip(rows, rows[1:]):  # and each rate
         assert max_difference(one, other) > 5 * TOLERANCE["atol"]
-    sweep(batched(ppo.Hyperparams(), len(RATES), learning_rate=RATES[::-1]), jax.random.key(1))  # no retrace
-
-
-def test_seeds_by_learning_rates_in_one_call(cartpole, separate):
-    @chex.assert_max_traces(n=1)
-    def train(hyperparams, key):
-        return ppo.train(CONFIG, cartpole, hyperparams, key)
-
-    rates, keys = RATES[1:3], jax.random.split(jax.random.key(2), 2)
-    over_seeds = jax.vmap(train, in_axes=(None, 0))
-    grid = jax.jit(jax.vmap(over_seeds, in_axes=(0, None)))  # [rate, seed]
-    states, metrics = grid(batched(ppo.Hyperparams(), len(rates), learning_rate=rates), keys)
-    chex.assert_shape(metrics["train/episodes"], (len(rates), len(keys), CONFIG.num_updates))
-    for i, rate in enumerate(rates):
-        for j, key in enumerate(keys):
-            one = jax.tree.map(lambda x, i=i, j=j: x[i, j], states.params)
-            chex.assert_trees_all_close(one, separate(rate, key), **TOLERANCE)
-    assert max_difference(states.params["policy"], jax.tree.map(lambda x: x[:, ::-1], states.params["policy"])) > 1e-3
+    grid(batched(ppo.Hyperparams(), len(RATES), learning_rate=RATES[::-1]), keys[::-1])  # no retrace

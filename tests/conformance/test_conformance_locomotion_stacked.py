@@ -2,7 +2,7 @@
 per kind of base: the planar hopper (for walker and cheetah) and the joystick (a free
 base, the ant, under the most wrappers; the humanoids' free base differs only in size).
 Each case costs minutes of CPU compile, hence so few, and a module of their own; every
-env passes the bare conformance in test_conformance_locomotion.py."""
+builder passes the bare conformance in test_conformance_locomotion.py."""
 
 from __future__ import annotations
 
