@@ -78,7 +78,7 @@ __all__ = [
 ]
 
 Array = jax.Array
-LR_SCHEDULES = ("constant", "linear", "cosine", "adaptive")
+LR_SCHEDULES = ("constant", "linear", "cosine", "adaptive", "adaptive_update")
 VALUE_NORMALIZATIONS = ("none", "running", "popart")
 # `Config` fields of PPO without its stability switches: its defaults before them, and
 # Brax's PPO (`interop.playground`'s translation of Brax's configs pins them).
@@ -99,12 +99,14 @@ class Config:
     num_epochs: int = 4
     # The learning rate's schedule: a shape that multiplies Hyperparams.learning_rate over
     # the run's steps, or "adaptive": raised or lowered at every minibatch step by the
-    # measured approximate KL against Hyperparams.target_kl (rsl_rl's schedule). The
+    # measured approximate KL against Hyperparams.target_kl (rsl_rl's schedule), or
+    # "adaptive_update": the same rule once per update, on the update's mean KL (one
+    # minibatch's KL is noisy, and 32 steps can move the rate 1.5^32-fold). The
     # defaults of this and the two normalizations below were chosen by measurement
     # (benchmarks/ppo_stability.py; docs/sweeps.md): on Playground's CheetahRun they took
     # 3 seeds from 534 +- 170 to 889 +- 4, and with rewards x100 from 353 to 844. `PLAIN`
     # switches all three off.
-    lr_schedule: Literal["constant", "linear", "cosine", "adaptive"] = "adaptive"
+    lr_schedule: Literal["constant", "linear", "cosine", "adaptive", "adaptive_update"] = "adaptive"
     # The entropy coefficient's decay from Hyperparams.entropy_coef to final_entropy_coef.
     entropy_schedule: Literal["constant", "linear", "cosine"] = "constant"
     # The value function's targets: as they are ("none"), in units of their running
@@ -357,6 +359,7 @@ def _optimizer(
     shape = {
         "constant": optax.constant_schedule(1.0),
         "adaptive": optax.constant_schedule(1.0),
+        "adaptive_update": optax.constant_schedule(1.0),
         "linear": optax.linear_schedule(1.0, 0.0, steps),
         "cosine": optax.cosine_decay_schedule(1.0, steps),
     }[config.lr_schedule]
@@ -613,14 +616,15 @@ def improve(
         config.entropy_schedule, progress, hp.entropy_coef, hp.final_entropy_coef
     )
     grad_fn = jax.grad(lambda p, b, k: _loss(config, task, components, hp, entropy_coef, p, stats, b, k), has_aux=True)
-    adaptive = config.lr_schedule == "adaptive"
+    adaptive = config.lr_schedule in ("adaptive", "adaptive_update")
+    every_step = config.lr_schedule == "adaptive"
 
     def sgd_step(carry, minibatch):
         params, opt_state, key, lr, stopped = carry
         key, entropy_key = jax.random.split(key)
         grads, metrics = grad_fn(params, minibatch, entropy_key)
         kl = metrics["loss/approx_kl"]  # at the params this step starts from
-        lr = schedules.kl_adaptive_lr(lr, kl, hp.target_kl) if adaptive else lr
+        lr = schedules.kl_adaptive_lr(lr, kl, hp.target_kl) if every_step else lr
         stopped = schedules.kl_early_stop(stopped, kl, hp.max_kl)
         optimizer = _optimizer(config, hp, components, lr if adaptive else None)
         updates, new_opt_state = optimizer.update(grads, opt_state, params)
@@ -643,6 +647,8 @@ def improve(
         sequences=_is_recurrent(policy_net),
         split_over_devices=config.split_minibatches,
     )
+    if config.lr_schedule == "adaptive_update":  # for the next update, by this one's mean KL
+        lr = schedules.kl_adaptive_lr(lr, metrics["loss/approx_kl"], hp.target_kl)
     if adaptive:
         metrics["learning_rate"] = lr
     if config.entropy_schedule != "constant":

@@ -3,6 +3,7 @@ program, and the rate and approximate KL at the end of each update, sampled over
 Runs on a CPU in minutes (compiled at XLA -O3).
 
     python benchmarks/adaptive_lr_probe.py --env cartpole_swingup --steps 2000000
+    python benchmarks/adaptive_lr_probe.py --env cartpole_swingup --steps 2000000 --lr-schedule adaptive_update
 """
 
 from __future__ import annotations
@@ -23,11 +24,17 @@ def main() -> None:
     parser.add_argument("--env", default="cartpole_swingup")
     parser.add_argument("--steps", type=int, default=2_000_000)
     parser.add_argument("--seeds", type=int, default=2)
+    parser.add_argument("--lr-schedule", default="adaptive", choices=["adaptive", "adaptive_update"])
     parser.add_argument("--samples", type=int, default=12, help="updates shown, evenly over the run")
     args = parser.parse_args()
     task = mjzoo.envs.make(args.env)
     config, hyperparams = ppo.configure(
-        num_envs=256, unroll_length=32, num_minibatches=8, num_epochs=4, total_steps=args.steps
+        num_envs=256,
+        unroll_length=32,
+        num_minibatches=8,
+        num_epochs=4,
+        total_steps=args.steps,
+        lr_schedule=args.lr_schedule,
     )
 
     def run(key: jax.Array):
@@ -38,8 +45,8 @@ def main() -> None:
     keys = jax.random.split(jax.random.key(0), args.seeds)
     start = time.perf_counter()
     compiled = jax.jit(jax.vmap(run)).lower(keys).compile({"xla_backend_optimization_level": 3})
-    finals, metrics = compiled(keys)
-    print(f"{args.env}, {args.steps:,} steps, {time.perf_counter() - start:.0f} s with the compile")
+    finals, metrics = jax.block_until_ready(compiled(keys))
+    print(f"{args.env}, {args.lr_schedule}, {args.steps:,} steps, {time.perf_counter() - start:.0f} s with the compile")
     print("final deterministic returns per seed:", np.round(np.asarray(finals), 1))
     for name, values in metrics.items():
         values = np.asarray(values)  # [seed, update]

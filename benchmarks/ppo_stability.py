@@ -49,6 +49,7 @@ PLAIN = dict(ppo.PLAIN)
 VARIANTS: dict[str, dict] = {
     "plain": PLAIN,
     "adaptive_lr": {**PLAIN, "lr_schedule": "adaptive"},
+    "adaptive_update_lr": {**PLAIN, "lr_schedule": "adaptive_update"},
     "kl_stop": {**PLAIN, "max_kl": 0.05},
     "popart": {**PLAIN, "value_normalization": "popart"},
     "running_values": {**PLAIN, "value_normalization": "running"},
@@ -56,6 +57,7 @@ VARIANTS: dict[str, dict] = {
     "entropy_decay": {**PLAIN, "entropy_schedule": "linear"},
     "norms": {**PLAIN, "value_normalization": "popart", "reward_normalization": True},
     "defaults": {},
+    "defaults_update_lr": {"lr_schedule": "adaptive_update"},  # the defaults, the rate adapted once per update
 }
 
 

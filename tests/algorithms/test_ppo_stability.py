@@ -7,6 +7,7 @@ from __future__ import annotations
 
 import dataclasses
 
+import chex
 import jax
 import jax.numpy as jnp
 import numpy as np
@@ -97,6 +98,24 @@ def test_the_adaptive_rate_follows_the_kl_step_by_step_and_carries_over(rate, ta
     assert float(metrics["learning_rate"]) == once
     state, _ = update(ALL_ON, BLOCK, state)
     assert np.isclose(float(state.learning_rate), steered(once), rtol=1e-5).any(), float(state.learning_rate)
+
+
+@pytest.mark.parametrize("target_kl,factor", [(1e3, 1.5), (1e-12, 1 / 1.5)])
+def test_the_per_update_adaptive_rate_holds_within_an_update_and_moves_once(target_kl, factor):
+    """lr_schedule="adaptive_update": every step of an update runs at the rate it started
+    with (the same parameters as a constant schedule at that rate), and the update's
+    mean KL then moves it by exactly one factor of 1.5, for the next update."""
+    per_update = dataclasses.replace(ALL_ON, lr_schedule="adaptive_update")
+    constant = dataclasses.replace(ALL_ON, lr_schedule="constant")
+    hp = ppo.Hyperparams(learning_rate=1e-3, target_kl=target_kl)
+    start = ppo.init(per_update, BLOCK, hp, jax.random.key(3))
+    moved, metrics = update(per_update, BLOCK, start)
+    held, _ = update(constant, BLOCK, start)
+    chex.assert_trees_all_close(moved.params, held.params, rtol=1e-6, atol=1e-7)
+    np.testing.assert_allclose(float(moved.learning_rate), 1e-3 * factor, rtol=1e-6)
+    assert float(metrics["learning_rate"]) == float(moved.learning_rate)
+    again, _ = update(per_update, BLOCK, moved)
+    np.testing.assert_allclose(float(again.learning_rate), 1e-3 * factor**2, rtol=1e-6)
 
 
 def test_max_kl_stops_the_update_after_the_step_that_moved_the_policy():
