@@ -407,17 +407,12 @@ os._exit(0)  # Warp's CPU backend can keep the interpreter from exiting
 
 
 @needs_warp
-def test_warp_training_on_two_devices_matches_one_device():
+def test_warp_training_on_two_devices_matches_one_device(cpu_devices_env):
     """Each device steps its own worlds with its share of Warp's contact pool
     (`batching.vmap_transition` under the mesh): two updates of PPO on the hopper give one
     device's states, and the devices' contact counts add up to one device's."""
-    env = {
-        **os.environ,
-        "XLA_FLAGS": os.environ.get("XLA_FLAGS", "") + " --xla_force_host_platform_device_count=2",
-        "JAX_PLATFORMS": "cpu",
-    }
     result = subprocess.run(
-        [sys.executable, "-c", WARP_TWO_DEVICES], env=env, capture_output=True, text=True, timeout=900
+        [sys.executable, "-c", WARP_TWO_DEVICES], env=cpu_devices_env(2), capture_output=True, text=True, timeout=900
     )
     assert result.returncode == 0, result.stderr[-3000:]
     assert "max qpos difference" in result.stdout

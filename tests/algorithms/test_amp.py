@@ -266,7 +266,7 @@ def test_train_writes_the_discriminators_diagnostics_and_warns_once(swing, sway,
 
 
 @pytest.mark.skipif(sys.platform != "linux", reason="forces host devices with XLA_FLAGS")
-def test_two_devices_give_one_devices_result():
+def test_two_devices_give_one_devices_result(cpu_devices_env):
     """Sharded over 2 CPU devices (the env batch split, the rest replicated), an update
     gives the parameters one device gives, each device computing its share of every
     minibatch step (PPO's two-device test also runs the unsplit steps)."""
@@ -293,8 +293,7 @@ def test_two_devices_give_one_devices_result():
         print("ok")
         """
     )
-    flags = os.environ.get("XLA_FLAGS", "") + " --xla_force_host_platform_device_count=2"  # the suite's flags kept
-    env = {**os.environ, "XLA_FLAGS": flags, "JAX_PLATFORMS": "cpu"}
+    env = cpu_devices_env(2)
     root = os.path.dirname(os.path.dirname(os.path.dirname(os.path.abspath(__file__))))
     out = subprocess.run([sys.executable, "-c", code], env=env, cwd=root, capture_output=True, text=True)
     assert out.returncode == 0 and out.stdout.strip().endswith("ok"), out.stderr[-3000:]

@@ -6,7 +6,6 @@ from __future__ import annotations
 
 import dataclasses
 import json
-import os
 import subprocess
 import sys
 import textwrap
@@ -323,12 +322,9 @@ TWO_DEVICES = textwrap.dedent(
 )
 
 
-def test_two_devices_match_one_device():
-    env = {
-        **os.environ,
-        "XLA_FLAGS": os.environ.get("XLA_FLAGS", "") + " --xla_force_host_platform_device_count=2",
-        "JAX_PLATFORMS": "cpu",
-    }
-    result = subprocess.run([sys.executable, "-c", TWO_DEVICES], env=env, capture_output=True, text=True, timeout=600)
+def test_two_devices_match_one_device(cpu_devices_env):
+    result = subprocess.run(
+        [sys.executable, "-c", TWO_DEVICES], env=cpu_devices_env(2), capture_output=True, text=True, timeout=600
+    )
     assert result.returncode == 0, result.stderr[-3000:]
     assert "max param difference" in result.stdout

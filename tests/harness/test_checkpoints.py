@@ -3,7 +3,6 @@
 from __future__ import annotations
 
 import dataclasses
-import os
 import subprocess
 import sys
 
@@ -195,9 +194,8 @@ print("ok")
 """
 
 
-def test_arrays_sharded_over_devices_restore_onto_the_template_sharding(tmp_path):
-    flags = os.environ.get("XLA_FLAGS", "") + " --xla_force_host_platform_device_count=2"  # the suite's flags kept
-    env = dict(os.environ, XLA_FLAGS=flags, JAX_PLATFORMS="cpu")
+def test_arrays_sharded_over_devices_restore_onto_the_template_sharding(tmp_path, cpu_devices_env):
+    env = cpu_devices_env(2)
     result = subprocess.run(
         [sys.executable, "-c", SHARDED_SCRIPT, str(tmp_path)],
         env=env,

@@ -2,7 +2,6 @@
 
 from __future__ import annotations
 
-import os
 import subprocess
 import sys
 import threading
@@ -242,17 +241,16 @@ print("chunks", int(state.updates))
 """
 
 
-def test_the_chunk_compiles_ahead_for_the_env_batch_split_over_two_devices():
+def test_the_chunk_compiles_ahead_for_the_env_batch_split_over_two_devices(cpu_devices_env):
     """With several devices the chunk is compiled ahead for the shardings `shard_envs`
     gives (`devices.env_shardings`): the call compiles nothing. (It used to compile only
     after init there: on two H200s the first chunk ended 43 s later than on one.)"""
-    env = {
-        **os.environ,
-        "JAX_PLATFORMS": "cpu",
-        "XLA_FLAGS": os.environ.get("XLA_FLAGS", "") + " --xla_force_host_platform_device_count=2",
-    }
     done = subprocess.run(
-        [sys.executable, "-c", CHUNK_AHEAD_ON_TWO_DEVICES], env=env, capture_output=True, text=True, timeout=300
+        [sys.executable, "-c", CHUNK_AHEAD_ON_TWO_DEVICES],
+        env=cpu_devices_env(2),
+        capture_output=True,
+        text=True,
+        timeout=300,
     )
     assert done.returncode == 0, done.stderr[-3000:]
     assert "chunks 2" in done.stdout
