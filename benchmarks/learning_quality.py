@@ -354,6 +354,10 @@ def summary(rows: list[dict]) -> dict[str, dict]:
     return out
 
 
+def saved_rows(path: Path) -> list[dict]:
+    return json.loads(path.read_text())["rows"] if path.exists() else []
+
+
 def save(path: Path, rows: list[dict], device: str) -> None:
     path.write_text(
         json.dumps(
@@ -362,9 +366,10 @@ def save(path: Path, rows: list[dict], device: str) -> None:
     )
 
 
-def card_name() -> str:
-    """The device's kind as a file name part ("nvidia_h100_80gb_hbm3", "cpu")."""
-    return re.sub(r"[^a-z0-9]+", "_", jax.devices()[0].device_kind.lower()).strip("_")
+def card_name(device_kind: str | None = None) -> str:
+    """A device's kind (default: this one's) as a file name part ("nvidia_h100_80gb_hbm3", "cpu")."""
+    kind = jax.devices()[0].device_kind if device_kind is None else device_kind
+    return re.sub(r"[^a-z0-9]+", "_", kind.lower()).strip("_")
 
 
 def plot(rows: list[dict], out: Path, card: str) -> list[Path]:
@@ -495,23 +500,22 @@ def main() -> None:
     eval_envs = min(args.eval_envs, 8) if args.smoke else args.eval_envs
     card = card_name()
     path = out / f"learning_quality_{card}.json"
-    rows = json.loads(path.read_text())["rows"] if path.exists() else []
+    rows = saved_rows(path)
     seeds = list(range(args.first_seed, args.first_seed + args.seeds))
-    if not args.merge:
-        print(
-            f"device: {jax.devices()[0].device_kind}, jax {jax.__version__}, seeds {seeds}, writing {path}", flush=True
-        )
-
     if args.merge:
         for other in args.merge:
             data = json.loads(other.read_text())
-            card = re.sub(r"[^a-z0-9]+", "_", data["device"].lower()).strip("_")
+            card = card_name(data["device"])
             path = out / f"learning_quality_{card}.json"
-            rows = json.loads(path.read_text())["rows"] if path.exists() else []
+            rows = saved_rows(path)
             for row in data["rows"]:
                 rows = [summarize(r) for r in merged(rows, row)]
             save(path, rows, data["device"])
         envs = []  # only the report below
+    else:
+        print(
+            f"device: {jax.devices()[0].device_kind}, jax {jax.__version__}, seeds {seeds}, writing {path}", flush=True
+        )
     for name in envs:
         steps = budget(name, args.steps or (SMOKE_STEPS if args.smoke else default_steps(name)), args.evals, args.smoke)
         trainers = [t for t in args.trainers if t != "brax" or name in args.brax_envs or "all" in args.brax_envs]

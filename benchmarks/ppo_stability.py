@@ -37,6 +37,7 @@ from learning_quality import default_steps  # noqa: E402
 from learning_quality import load  # noqa: E402
 from learning_quality import ppo_fields  # noqa: E402
 from learning_quality import print_table  # noqa: E402
+from learning_quality import saved_rows  # noqa: E402
 from learning_quality import scaled_task  # noqa: E402
 from learning_quality import summarize  # noqa: E402
 from learning_quality import train_mjzoo  # noqa: E402
@@ -124,7 +125,7 @@ def main() -> None:
     out.mkdir(parents=True, exist_ok=True)
     card = card_name()
     path = out / f"ppo_stability_{card}.json"
-    rows = json.loads(path.read_text())["rows"] if path.exists() else []
+    rows = saved_rows(path)
     seeds = list(range(args.seeds))
     print(f"device: {jax.devices()[0].device_kind}, jax {jax.__version__}, seeds {seeds}, writing {path}", flush=True)
     for name in args.envs:
