@@ -11,6 +11,7 @@ from __future__ import annotations
 import argparse
 import json
 import sys
+from collections.abc import Iterator
 from pathlib import Path
 
 ROOT = Path(__file__).resolve().parents[1]
@@ -50,6 +51,13 @@ def _trainer_table(rows: list[dict]) -> list[str]:
     return lines
 
 
+def _per_device(folder: Path) -> Iterator[tuple[dict, list[str]]]:
+    """Each JSON of `folder` (one per device: "<folder name>_<card>.json") and its heading."""
+    for path in sorted(folder.glob(f"{folder.name}_*.json")):
+        data = json.loads(path.read_text())
+        yield data, [f"### {data['device']} ([{path.name}]({_link(path)}))", ""]
+
+
 def _figures(folder: Path) -> list[str]:
     return [f"![{png.stem}]({_link(png)})" for png in sorted(folder.glob("*.png"))]
 
@@ -69,13 +77,11 @@ def learning_quality() -> list[str]:
         "it was shared by 1 process: the waves train several envs at once on one GPU.",
         "",
     ]
-    for path in sorted(folder.glob("learning_quality_*.json")):
-        data = json.loads(path.read_text())
+    for data, heading in _per_device(folder):
         rows = data["rows"]
         playground = sorted({r["env"] for r in rows if r.get("source") == "playground"})
         lines += [
-            f"### {data['device']} ([{path.name}]({_link(path)}))",
-            "",
+            *heading,
             f"Playground's DM Control envs measured: {len(playground)} of {DM_CONTROL_ENVS}; "
             f"mjzoo's own: {len({r['env'] for r in rows}) - len(playground)}.",
             "",
@@ -101,9 +107,8 @@ def ppo_stability() -> list[str]:
         "with each switch alone, and with today's defaults, seeds vmapped in one program.",
         "",
     ]
-    for path in sorted(folder.glob("ppo_stability_*.json")):
-        data = json.loads(path.read_text())
-        lines += [f"### {data['device']} ([{path.name}]({_link(path)}))", "", *_trainer_table(data["rows"]), ""]
+    for data, heading in _per_device(folder):
+        lines += [*heading, *_trainer_table(data["rows"]), ""]
     return [*lines, *_figures(folder), ""]
 
 
