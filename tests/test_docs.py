@@ -16,6 +16,8 @@ from __future__ import annotations
 
 import os
 import re
+import subprocess
+import sys
 from pathlib import Path
 
 import pytest
@@ -177,9 +179,6 @@ def test_sweeps_page_draws_every_rate_and_seed(docs):
 def test_benchmarks_page_is_the_reports_output():
     """docs/benchmarks.md is generated from benchmarks/results/ by benchmarks/report.py:
     a measurement committed without regenerating it, or a hand edit, fails here."""
-    import subprocess
-    import sys
-
     out = subprocess.run(
         [sys.executable, str(ROOT / "benchmarks" / "report.py"), "--check"], capture_output=True, text=True
     )
