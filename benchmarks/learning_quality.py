@@ -322,10 +322,10 @@ def summarize(row: dict) -> dict:
     return row
 
 
-def merged(rows: list[dict], row: dict) -> list[dict]:
-    """`rows` with `row` in place of the one of its env and reward scale; trainers that
-    `row` did not run keep their runs from the old one."""
-    key = lambda r: (r["env"], r["reward_scale"])  # noqa: E731
+def merged(rows: list[dict], row: dict, fields: tuple[str, ...] = ("env", "reward_scale")) -> list[dict]:
+    """`rows` with `row` in place of the one that has its `fields` (its env and reward
+    scale); trainers that `row` did not run keep their runs from the old one."""
+    key = lambda r: tuple(r[f] for f in fields)  # noqa: E731
     old = next((r for r in rows if key(r) == key(row)), None)
     if old is None:
         return [*rows, row]

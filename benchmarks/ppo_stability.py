@@ -35,6 +35,7 @@ from learning_quality import SMOKE_STEPS  # noqa: E402
 from learning_quality import card_name  # noqa: E402
 from learning_quality import default_steps  # noqa: E402
 from learning_quality import load  # noqa: E402
+from learning_quality import merged  # noqa: E402
 from learning_quality import ppo_fields  # noqa: E402
 from learning_quality import print_table  # noqa: E402
 from learning_quality import saved_rows  # noqa: E402
@@ -116,6 +117,8 @@ def main() -> None:
     parser.add_argument("--eval-envs", type=int, default=128)
     parser.add_argument("--reward-scale", type=float, default=1.0)
     parser.add_argument("--target", type=float, default=None, help="report the seeds reaching this return")
+    parser.add_argument("--gpu-shared-by", type=int, default=1, help="processes training on this GPU at once")
+    parser.add_argument("--merge", nargs="+", type=Path, default=None, help="fold these runs' JSON files into --out's")
     parser.add_argument("--smoke", action="store_true")
     parser.add_argument("--out", type=Path, default=None)
     args = parser.parse_args()
@@ -127,6 +130,16 @@ def main() -> None:
     path = out / f"ppo_stability_{card}.json"
     rows = saved_rows(path)
     seeds = list(range(args.seeds))
+    if args.merge:
+        for other in args.merge:
+            data = json.loads(other.read_text())
+            card = card_name(data["device"])
+            path = out / f"ppo_stability_{card}.json"
+            rows = saved_rows(path)
+            for row in data["rows"]:
+                rows = [summarize(r) for r in merged(rows, row, ("env", "impl", "reward_scale"))]
+            path.write_text(json.dumps({"device": data["device"], "rows": rows}, indent=1))
+        args.envs = []  # only the report below
     print(f"device: {jax.devices()[0].device_kind}, jax {jax.__version__}, seeds {seeds}, writing {path}", flush=True)
     for name in args.envs:
         task = load(name, args.smoke, args.impl)[1]
@@ -150,7 +163,10 @@ def main() -> None:
                 args.reward_scale,
             )
             result.update(
-                reach(result["runs"], args.target), variant=VARIANTS[variant], wall_s=time.perf_counter() - start
+                reach(result["runs"], args.target),
+                variant=VARIANTS[variant],
+                wall_s=time.perf_counter() - start,
+                gpu_shared_by=args.gpu_shared_by,
             )
             row["trainers"][variant] = result
             summarize(row)
