@@ -324,13 +324,26 @@ def summarize(row: dict) -> dict:
 
 def merged(rows: list[dict], row: dict, fields: tuple[str, ...] = ("env", "reward_scale")) -> list[dict]:
     """`rows` with `row` in place of the one that has its `fields` (its env and reward
-    scale); trainers that `row` did not run keep their runs from the old one."""
+    scale). A trainer `row` did not run keeps its old runs; one it ran again at the same
+    budget and hyperparameters (a wave that split an env's seeds over GPUs) keeps the old
+    runs of the seeds it did not run."""
     key = lambda r: tuple(r[f] for f in fields)  # noqa: E731
     old = next((r for r in rows if key(r) == key(row)), None)
     if old is None:
         return [*rows, row]
-    kept = {name: t for name, t in old["trainers"].items() if name not in row["trainers"]}
-    new = {**row, "trainers": {**kept, **row["trainers"]}}
+    trainers = dict(old["trainers"])
+    for name, t in row["trainers"].items():
+        before = trainers.get(name)
+        if (
+            before
+            and old.get("steps") == row.get("steps")
+            and before.get("hyperparameters") == t.get("hyperparameters")
+        ):
+            seeds = {r["seed"] for r in t["runs"]}
+            runs = [r for r in before["runs"] if r["seed"] not in seeds] + t["runs"]
+            t = {**t, "runs": sorted(runs, key=lambda r: r["seed"])}
+        trainers[name] = t
+    new = {**row, "trainers": trainers}
     return [new if r is old else r for r in rows]
 
 

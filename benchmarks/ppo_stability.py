@@ -87,17 +87,23 @@ def plot(rows: list[dict], out: Path, card: str) -> list[Path]:
     paths = []
     for scale in sorted({r["reward_scale"] for r in rows}):
         at = sorted((r for r in rows if r["reward_scale"] == scale), key=lambda r: r["env"])
-        figure, grid = plt.subplots(1, len(at), figsize=(4.5 * len(at), 3.4), squeeze=False)
-        for axes, row in zip(grid[0], at):
+        columns = min(4, len(at))
+        lines = -(-len(at) // columns)
+        figure, grid = plt.subplots(lines, columns, figsize=(4.5 * columns, 3.4 * lines), squeeze=False)
+        for axes in grid.flat[len(at) :]:
+            axes.set_visible(False)
+        for axes, row in zip(grid.flat, at):
             for name, t in sorted(row["trainers"].items()):
                 steps = np.asarray([p[0] for p in t["runs"][0]["curve"]])
                 returns = np.asarray([[p[2] for p in run["curve"]] for run in t["runs"]])  # [seed, evaluation]
-                color = f"C{list(VARIANTS).index(name) % 10}"  # one color per variant in every panel
-                axes.plot(steps, returns.mean(0), label=f"{name} ({len(returns)})", color=color)
+                i = list(VARIANTS).index(name)  # one color and line per variant in every panel
+                color, line = f"C{i % 10}", "-" if i < 10 else "--"
+                axes.plot(steps, returns.mean(0), line, label=f"{name} ({len(returns)})", color=color)
                 axes.fill_between(steps, returns.min(0), returns.max(0), color=color, alpha=0.15)
             axes.set(title=f"{row['env']} ({row['impl']})", xlabel="env steps")
             axes.legend(fontsize=7)
-        grid[0][0].set_ylabel("evaluation return (mean, min-max over seeds)")
+        for axes in grid[:, 0]:
+            axes.set_ylabel("evaluation return (mean, min-max over seeds)")
         figure.suptitle(f"PPO stability variants, {card}, reward x{scale:g}", fontsize=9)
         figure.tight_layout()
         paths.append(out / f"curves_{card}{'' if scale == 1 else f'_scale{scale:g}'}.png")
@@ -140,7 +146,10 @@ def main() -> None:
                 rows = [summarize(r) for r in merged(rows, row, ("env", "impl", "reward_scale"))]
             path.write_text(json.dumps({"device": data["device"], "rows": rows}, indent=1))
         args.envs = []  # only the report below
-    print(f"device: {jax.devices()[0].device_kind}, jax {jax.__version__}, seeds {seeds}, writing {path}", flush=True)
+    else:
+        print(
+            f"device: {jax.devices()[0].device_kind}, jax {jax.__version__}, seeds {seeds}, writing {path}", flush=True
+        )
     for name in args.envs:
         task = load(name, args.smoke, args.impl)[1]
         steps = SMOKE_STEPS if args.smoke else (args.steps or default_steps(name))
