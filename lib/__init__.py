@@ -15,6 +15,7 @@ rest is grouped by concern, each subpackage importing only what sits below it:
     mjzoo.envs          concrete tasks and their registry
     mjzoo.testing       check_task: the Task contract's properties, checked on any task
     mjzoo.motion        motion references: clips, their file format, reference-state starts
+    mjzoo.robots        real robot models (Menagerie, Playground scenes) and terrain
 
 The subpackages load on first use (``mjzoo.learning.gae`` works after ``import mjzoo``),
 so importing the core does not pay for the harness's or Brax's imports. See
@@ -69,7 +70,18 @@ from mjzoo.types import Trajectory
 
 __version__ = "0.1.0"
 
-SUBPACKAGES = ("catalog", "learning", "planning", "harness", "interop", "algorithms", "envs", "testing", "motion")
+SUBPACKAGES = (
+    "catalog",
+    "learning",
+    "planning",
+    "harness",
+    "interop",
+    "algorithms",
+    "envs",
+    "testing",
+    "motion",
+    "robots",
+)
 
 __all__ = [
     "Task",

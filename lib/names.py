@@ -31,6 +31,7 @@ KINDS = {
     "site": (mujoco.mjtObj.mjOBJ_SITE, "nsite"),
     "sensor": (mujoco.mjtObj.mjOBJ_SENSOR, "nsensor"),
     "actuator": (mujoco.mjtObj.mjOBJ_ACTUATOR, "nu"),
+    "hfield": (mujoco.mjtObj.mjOBJ_HFIELD, "nhfield"),
 }
 _FREE, _BALL = int(mujoco.mjtJoint.mjJNT_FREE), int(mujoco.mjtJoint.mjJNT_BALL)
 _ONE_DOF = (int(mujoco.mjtJoint.mjJNT_HINGE), int(mujoco.mjtJoint.mjJNT_SLIDE))

@@ -36,7 +36,7 @@ from mujoco import mjx
 from mjzoo.batching import clear_overflow
 from mjzoo.batching import probe_capacity
 
-__all__ = ["Physics", "load", "of_model", "step", "forward", "OPTIONS", "IMPLS", "default_impl"]
+__all__ = ["Physics", "load", "of_model", "of_spec", "step", "forward", "OPTIONS", "IMPLS", "default_impl"]
 
 SOLVERS = {"cg": mujoco.mjtSolver.mjSOL_CG, "newton": mujoco.mjtSolver.mjSOL_NEWTON}
 INTEGRATORS = {
@@ -357,7 +357,6 @@ def _validate(label: str, o: dict[str, Any]) -> None:
 
 @functools.lru_cache(maxsize=64)
 def _compile(text: str, label: str, mtime: float, options: tuple[tuple[str, Any], ...]) -> Physics:
-    o = dict(options)
     try:
         if label == "<xml string>":
             mj_model = mujoco.MjModel.from_xml_string(text)
@@ -365,6 +364,31 @@ def _compile(text: str, label: str, mtime: float, options: tuple[tuple[str, Any]
             mj_model = mujoco.MjModel.from_xml_path(text)
     except ValueError as e:
         raise ValueError(f"{label}: could not compile the MJCF model: {e}") from None
+    return _configured(mj_model, label, dict(options))
+
+
+def of_spec(spec: mujoco.MjSpec, *, label: str = "<MjSpec>", **physics_options: Any) -> Physics:
+    """Compiles an edited model (`mujoco.MjSpec`, e.g. a robot's scene with a terrain
+    added) for MJX with the physics options of `load`. Not cached: the caller keeps the
+    result (a spec has no stable identity to key on)."""
+    unknown = sorted(set(physics_options) - set(_OPTION_DEFAULTS))
+    if unknown:
+        raise TypeError(f"{label}: unknown physics option(s) {unknown}; the options: {sorted(_OPTION_DEFAULTS)}")
+    options = {**_OPTION_DEFAULTS, **physics_options}
+    _validate(label, options)
+    options["impl"] = options["impl"] or default_impl()
+    try:
+        mj_model = spec.compile()
+    except ValueError as e:
+        raise ValueError(f"{label}: could not compile the model: {e}") from None
+    return _configured(mj_model, label, options)
+
+
+_OPTION_DEFAULTS = {name: False if name == "disable_euler_damping" else None for name in OPTIONS}
+
+
+def _configured(mj_model: mujoco.MjModel, label: str, o: dict[str, Any]) -> Physics:
+    """The physics options `o` applied to a compiled model, and its `Physics`."""
     if o["dt"] is not None:
         mj_model.opt.timestep = o["dt"]
     dt = float(mj_model.opt.timestep)

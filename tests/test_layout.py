@@ -15,17 +15,18 @@ import pytest
 
 ROOT = Path(__file__).resolve().parents[1]
 SOURCES = {"mjzoo": ROOT / "lib", "mjzoo.algorithms": ROOT / "algorithms", "mjzoo.envs": ROOT / "envs"}
-SUBPACKAGES = ("catalog", "learning", "planning", "harness", "interop", "algorithms", "envs")
+SUBPACKAGES = ("catalog", "learning", "planning", "robots", "harness", "interop", "algorithms", "envs")
 # What each layer may import from mjzoo; "core" is any module at the package's root.
 ALLOWED = {
     "core": {"core"},
     "catalog": {"core", "catalog"},
     "learning": {"core", "learning"},
     "planning": {"core", "planning"},
-    "harness": {"core", "catalog", "learning", "planning", "harness"},
-    "interop": {"core", "catalog", "learning", "planning", "interop"},
+    "robots": {"core", "catalog", "robots"},  # models and terrain: the terrain's items are catalog-shaped
+    "harness": {"core", "catalog", "learning", "planning", "robots", "harness"},
+    "interop": {"core", "catalog", "learning", "planning", "robots", "interop"},
     "algorithms": {"core", "catalog", "learning", "planning", "harness", "interop", "algorithms"},
-    "envs": {"core", "catalog", "learning", "planning", "harness", "interop", "envs"},
+    "envs": {"core", "catalog", "learning", "planning", "robots", "harness", "interop", "envs"},
 }
 # The `mjzoo` command (the package mjzoo.harness.cli) is the application on top of
 # everything: it alone reaches up.

@@ -41,6 +41,7 @@ from mujoco import mjx
 
 from mjzoo import checks
 from mjzoo import names
+from mjzoo import tree
 from mjzoo.combinators import record
 from mjzoo.combinators import runs_transitions
 from mjzoo.layers import peel
@@ -245,9 +246,12 @@ def by_distance(
     down: float = 0.05,
     initial: float = 0.0,
     body: str | None = None,
+    only_falls: bool = False,
 ) -> Rule:
     """At each episode end: level += up if the base moved >= `target` m (horizontal
     distance from where the episode started), else level -= down; clipped to [0, 1].
+    With `only_falls`, an episode short of `target` lowers the level only if it ended by
+    a termination (a fall), not by its time limit (the terrain curriculum's rule).
 
     The base is the free joint of `body` (None: the model's first). With an auto-reset
     inside, the last state of an episode is replaced by the next episode's start, so the
@@ -256,14 +260,22 @@ def by_distance(
     """
     p = _check("by_distance", target=target, up=up, down=down, initial=initial)
     xy = jnp.asarray(names.free_joint_addresses(mj_model, body, "curriculum.by_distance")[0][:2])
-    return Rule(p["initial"], Partial(_xy, xy), Partial(_by_distance, xy, p["target"], p["up"], p["down"]))
+    if not isinstance(only_falls, bool):
+        raise TypeError(f"curriculum.by_distance: only_falls must be True or False, got {only_falls!r}")
+    return Rule(
+        p["initial"],
+        Partial(_xy, xy),
+        Partial(_by_distance, xy, p["target"], p["up"], p["down"], tree.StaticValue(only_falls)),
+    )
 
 
 def _xy(xy, model, state) -> Array:
     return state.data.qpos[xy]
 
 
-def _by_distance(xy, target, up, down, origin, level, model, state, next_state):
+def _by_distance(xy, target, up, down, only_falls, origin, level, model, state, next_state):
     ended = _ended(next_state)
     distance = jnp.linalg.norm(state.data.qpos[xy] - origin)
+    if only_falls.value:  # short of the target and timed out: stay
+        down = jnp.where(next_state.terminated, down, 0.0)
     return _move(level, ended, distance >= target, up, down), jnp.where(ended, next_state.data.qpos[xy], origin)

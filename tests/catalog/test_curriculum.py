@@ -98,7 +98,9 @@ def make(level: float, *, speed=0.0, spawn=0.0, threshold=np.inf, push=0.0, grav
 
 
 @jax.jit
-@chex.assert_max_traces(n=3)  # one per rule; the numbers of make and of the rules are leaves
+@chex.assert_max_traces(
+    n=4
+)  # one per rule (by_distance's only_falls a second); the numbers of make and of the rules are leaves
 def run(task: Task, keys: jax.Array):
     """B environments, T zero-action transitions each, the same key at every step."""
 
@@ -171,6 +173,18 @@ def test_by_distance_measures_from_the_episode_start():
     )
     _, s = run(task, KEYS)
     np.testing.assert_allclose(s.metrics["curriculum/level"][0], [0.5] * 5 + [0.4] * 5 + [0.3] * 2, rtol=1e-6)
+
+
+def test_by_distance_only_falls_lowers_the_level_after_falls_alone():
+    # Time-outs short of the target (5 steps at 1 m/s: 0.08 m < 0.09 m): the level stays.
+    rule = curriculum.by_distance(MJ, target=0.09, up=0.25, down=0.1, initial=0.5, only_falls=True)
+    _, s = run(curriculum.with_curriculum(functools.partial(make, speed=1.0, spawn=1.0, limit=5), rule), KEYS)
+    np.testing.assert_allclose(s.metrics["curriculum/level"][0], [0.5] * T)
+    # Falls short of it (terminated once x > 1.05: after 3 steps, 0.04 m from the start at
+    # the state before): one step down each.
+    make_falls = functools.partial(make, speed=1.0, spawn=1.0, threshold=1.05, limit=5)
+    _, s = run(curriculum.with_curriculum(make_falls, rule), KEYS)
+    np.testing.assert_allclose(s.metrics["curriculum/level"][0], np.repeat([0.5, 0.4, 0.3, 0.2], 3), rtol=1e-6)
 
 
 # --- errors at construction ---------------------------------------------------------------
