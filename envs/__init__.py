@@ -48,6 +48,7 @@ from mjzoo.envs import joystick
 from mjzoo.envs import locomotion
 from mjzoo.envs import pendulum
 from mjzoo.envs import point_mass
+from mjzoo.envs import robot_joystick
 from mjzoo.envs import teachers
 from mjzoo.running import control_dt
 from mjzoo.running import episode_steps
@@ -93,6 +94,11 @@ _REGISTRY: dict[str, base.EnvSpec] = {
     "humanoid_run": locomotion.HUMANOID_RUN,
     "humanoid_standup": locomotion.HUMANOID_STANDUP,
     "ant_joystick": joystick.JOYSTICK,  # train with joystick.joystick_curriculum()
+    # Real robots: Playground's scenes of Menagerie's models (envs/robot_joystick.py; mjzoo[robots])
+    "g1_joystick": robot_joystick.G1,
+    "t1_joystick": robot_joystick.T1,
+    "berkeley_humanoid_joystick": robot_joystick.BERKELEY_HUMANOID,
+    "go1_joystick": robot_joystick.GO1,
     # AMP: move like a reference motion (envs/humanoid_amp.py)
     "humanoid_amp_walk": humanoid_amp.WALK,
     "humanoid_amp_joystick": humanoid_amp.JOYSTICK,

@@ -1,10 +1,11 @@
 """Every MuJoCo Playground env through `mjzoo.interop.playground.task` and
 `mjzoo.testing.check_task`: which pass the Task contract, which fail and why, which were
-skipped (the locomotion and manipulation envs clone robot assets from GitHub at first
-load: skipped here while those are absent, with the reason).
+skipped (a locomotion or manipulation env whose robot models no source of
+`mjzoo.robots` holds here: ``pip install 'mjzoo[robots]'`` installs them all).
 
     python scripts/playground_conformance.py                       # all, 2 processes
     python scripts/playground_conformance.py --only CartpoleBalance CheetahRun --jobs 1
+                                           # (--only: their records replace theirs in the JSON)
 
 Writes JSON (one record per env: status, passed and failed properties with why, seconds)
 and the same as a Markdown table next to it, and prints the table. Each env compiles once:
@@ -47,7 +48,7 @@ def check_one(name: str, episode_length: int, num_steps: int) -> dict:
         return {
             **record,
             "status": "skipped",
-            "why": "loading it clones robot assets (mujoco_menagerie) from GitHub; they are not on this machine",
+            "why": f"its robot models {playground.robots_of(name)} are not on this machine (pip install 'mjzoo[robots]')",
         }
     started = time.perf_counter()
     try:
@@ -138,9 +139,16 @@ def main() -> None:
         "seconds": round(time.perf_counter() - started, 1),
         "envs": records,
     }
+    if args.only and args.out.exists():  # the other envs' records stay, in registry order
+        earlier = json.loads(args.out.read_text())
+        mine = {r["env"]: r for r in records}
+        kept = [r for r in earlier["envs"] if r["env"] not in mine]
+        order = {name: i for i, name in enumerate(playground.names())}
+        result["envs"] = sorted(kept + records, key=lambda r: order.get(r["env"], len(order)))
+        result["seconds"] = round(earlier["seconds"] + result["seconds"], 1)
     args.out.parent.mkdir(parents=True, exist_ok=True)
     args.out.write_text(json.dumps(result, indent=2) + "\n")
-    text = table(records)
+    text = table(result["envs"])
     args.out.with_suffix(".md").write_text(text + "\n")
     print(text)
     print(f"{args.out} ({result['seconds']} s)")

@@ -53,6 +53,7 @@ __all__ = [
     "torque",
     "pd",
     "position_velocity",
+    "position_targets",
     "step",
     "with_action_latency",
     "with_action_drop",
@@ -147,6 +148,39 @@ def torque(mj_model: mujoco.MjModel, torque_limit: Numbers | None = None) -> Act
 
 def _torque(motors: Motors, model, data, action, key) -> Array:
     return motors.ctrl(jnp.clip(action, -1.0, 1.0) * motors.limit)
+
+
+# --- position servos ------------------------------------------------------------------
+
+
+def position_targets(
+    mj_model: mujoco.MjModel, action_scale: Numbers = 0.5, default_pose: Numbers | None = None
+) -> Actuator:
+    """For a model's own ``<position>`` actuators (MuJoCo's PD servos, with the robot's
+    gains kp, kv and force limits from its MJCF, as MuJoCo Playground's robots have them):
+    ``ctrl = default_pose + action_scale * clip(action, -1, 1)`` [nu], rad, clipped to each
+    actuator's ctrlrange. `default_pose` defaults to the model's first keyframe's ctrl
+    (its standing pose), else zeros. Gains and strength are randomized on the model
+    (`randomizers.scale_position_gains`). Uses no key."""
+    who = "position_targets"
+    servo = (mj_model.actuator_gaintype == mujoco.mjtGain.mjGAIN_FIXED) & (
+        mj_model.actuator_biastype == mujoco.mjtBias.mjBIAS_AFFINE
+    )
+    if mj_model.nu == 0 or not servo.all():
+        bad = [names.all_names(mj_model, "actuator")[i] for i in np.flatnonzero(~servo)]
+        raise ValueError(f"{who}: every actuator must be a <position> servo (fixed gain, affine bias); not: {bad}")
+    if default_pose is None:
+        default_pose = mj_model.key_ctrl[0] if mj_model.nkey else np.zeros(mj_model.nu)
+    pose = np.broadcast_to(np.asarray(default_pose, np.float32), (mj_model.nu,))
+    scale = np.broadcast_to(np.asarray(action_scale, np.float32), (mj_model.nu,))
+    if not (np.all(np.isfinite(pose)) and np.all(np.isfinite(scale)) and np.all(scale > 0)):
+        raise ValueError(f"{who}: default_pose must be finite and action_scale finite and > 0")
+    low, high = np.where(mj_model.actuator_ctrllimited[:, None] > 0, mj_model.actuator_ctrlrange, [-np.inf, np.inf]).T
+    return Partial(_position_targets, *(jnp.asarray(a, jnp.float32) for a in (pose, scale, low, high)))
+
+
+def _position_targets(pose, scale, low, high, model, data, action, key) -> Array:
+    return jnp.clip(pose + scale * jnp.clip(action, -1.0, 1.0), low, high)
 
 
 # --- PD control ---------------------------------------------------------------------

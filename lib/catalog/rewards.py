@@ -53,6 +53,7 @@ __all__ = [
     "flat_orientation",
     "upright",
     "joint_deviation",
+    "stand_still",
     "joint_limits",
     "symmetry",
     "action_rate",
@@ -239,6 +240,24 @@ def joint_deviation(
 
 def _joint_deviation(adr, pose, model, state, action, next_state) -> Array:
     return jnp.sum(jnp.square(next_state.data.qpos[adr] - pose))
+
+
+def stand_still(mj_model: mujoco.MjModel, pose: Sequence[float] | None = None, max_command: float = 0.1) -> Partial:
+    """Cost: `joint_deviation` from `pose` (default: the model's first keyframe, else
+    qpos0) of every hinge and slide joint, counted only while the velocity command of
+    `state` is below `max_command` in norm (m/s and rad/s together): stand still when told to."""
+    if not (math.isfinite(max_command) and max_command >= 0):
+        raise ValueError(f"stand_still: max_command={max_command!r} must be finite and >= 0")
+    ids = names.joints(mj_model, None, "stand_still")
+    adr = mj_model.jnt_qposadr[ids]
+    full = mj_model.key_qpos[0] if (pose is None and mj_model.nkey) else mj_model.qpos0
+    pose = full[adr] if pose is None else np.asarray(pose, np.float32)
+    return Partial(_stand_still, jnp.asarray(adr, jnp.int32), jnp.asarray(pose, jnp.float32), jnp.float32(max_command))
+
+
+def _stand_still(adr, pose, max_command, model, state, action, next_state) -> Array:
+    still = jnp.linalg.norm(_command(state)) < max_command
+    return jnp.where(still, jnp.sum(jnp.square(next_state.data.qpos[adr] - pose)), 0.0)
 
 
 def joint_limits(mj_model: mujoco.MjModel, soft: float = 0.9, joints: Sequence[str] | None = None) -> Partial:

@@ -39,8 +39,13 @@ Physics defaults to MJX's JAX implementation (Playground's DM Control configs sa
 
 from __future__ import annotations
 
+import atexit
 import difflib
+import functools
+import shutil
 import subprocess
+import tempfile
+from pathlib import Path
 from typing import Any
 
 from mujoco_playground import MjxEnv
@@ -51,6 +56,7 @@ from mujoco_playground._src import manipulation
 from mujoco_playground._src import mjx_env
 
 from mjzoo import physics
+from mjzoo import robots
 from mjzoo.interop import _foreign
 from mjzoo.types import Task
 
@@ -75,9 +81,48 @@ def offline_names() -> list[str]:
     return sorted(dm_control_suite.ALL_ENVS)
 
 
+def robots_of(name: str) -> tuple[str, ...]:
+    """The Menagerie robots env `name` loads (none for the DM Control Suite)."""
+    envs = {**locomotion._envs, **manipulation._envs}
+    if _checked_name(name) not in envs:
+        return ()
+    module = getattr(envs[name], "func", envs[name]).__module__  # mujoco_playground._src.<suite>.<folder>.<file>
+    folder = "/".join(module.split(".")[2:4])
+    if folder == "manipulation/franka_emika_panda_robotiq":
+        return ("franka_emika_panda", "robotiq_2f85_v4")
+    return tuple(robot for robot, f in robots.models.PLAYGROUND_FOLDERS.items() if f == folder)
+
+
 def needs_network(name: str) -> bool:
-    """Whether loading `name` clones robot assets (mujoco_menagerie) that are not here yet."""
-    return name not in dm_control_suite.ALL_ENVS and not mjx_env.MENAGERIE_PATH.exists()
+    """Whether loading `name` needs robot models that no offline source here holds
+    (`mjzoo.robots`: a user's folder, the mujoco-menagerie package's cache, EnvPool's
+    wheels), and Playground's own clone of Menagerie is absent too."""
+    if mjx_env.MENAGERIE_PATH.exists():
+        return False
+    return any(all(s.path is None for s in robots.where(r)) for r in robots_of(name))
+
+
+@functools.lru_cache(maxsize=1)
+def _menagerie_folder() -> Path:
+    """This process's Menagerie folder for Playground: links to each robot's folder,
+    wherever `mjzoo.robots` found it (Playground reads one folder, the wheels are two)."""
+    folder = tempfile.mkdtemp(prefix="mjzoo-menagerie-")
+    atexit.register(shutil.rmtree, folder, True)  # the links only: rmtree does not follow them
+    return Path(folder)
+
+
+def _point_playground_at_models(name: str) -> None:
+    """Sets Playground's ``MENAGERIE_PATH`` to a folder linking the robots `name` needs,
+    as `mjzoo.robots` resolves them; nothing on disk of Playground's is changed. A
+    Menagerie clone of Playground's own, where one exists, is left in charge."""
+    needed, current = robots_of(name), mjx_env.MENAGERIE_PATH
+    if not needed or (current.exists() and current != _menagerie_folder()):
+        return
+    folder = _menagerie_folder()
+    for robot in needed:
+        if not (folder / robot).exists():
+            (folder / robot).symlink_to(robots.menagerie(robot), target_is_directory=True)
+    mjx_env.MENAGERIE_PATH = folder
 
 
 def _checked_name(name: str) -> str:
@@ -112,14 +157,20 @@ def load(name: str, **config_overrides: Any) -> MjxEnv:
     "vision_config.nworld" for nested ones); ``impl`` defaults to "jax". On Warp, its
     model's overflow prints are off (`mjzoo.physics.quiet`), for mjzoo and any other trainer.
 
+    The robots of the locomotion and manipulation envs come from `mjzoo.robots` (offline
+    from EnvPool's wheels with ``pip install 'mjzoo[robots]'``): Playground is pointed at
+    them instead of cloning Menagerie from GitHub.
+
     Raises KeyError for an unknown env (naming near ones), TypeError for an unknown
-    override or one of the wrong type, RuntimeError when robot assets cannot be fetched.
+    override or one of the wrong type, `mjzoo.robots.ModelNotFoundError` when a robot's
+    model is nowhere to be found, RuntimeError when Playground's own fetch of it fails.
     """
     allowed = config_defaults(name)
     unknown = sorted(set(config_overrides) - set(allowed))
     if unknown:
         raise TypeError(f"playground:{name}: unknown config override(s) {unknown}; its config: {sorted(allowed)}")
     overrides = {**({"impl": DEFAULT_IMPL} if "impl" in allowed else {}), **config_overrides}
+    _point_playground_at_models(name)
     try:
         env = registry.load(name, config_overrides=overrides)
     except subprocess.CalledProcessError as error:  # locomotion and manipulation clone their robots

@@ -37,6 +37,7 @@ from jax.tree_util import Partial
 from mujoco import mjx
 
 from mjzoo import names
+from mjzoo import tree
 from mjzoo.catalog import curriculum
 from mjzoo.types import State
 
@@ -229,11 +230,12 @@ def add_to_spec(
 
 
 def heights_at(model: mjx.Model, hfield: int, nrow: int, ncol: int, position: Array, xy: Array) -> Array:
-    """Terrain height under world points `xy` [..., 2] (m) of heightfield `hfield`, whose
-    geom sits at `position` [3]: bilinear in the vertex heights; points outside the
-    field read its nearest edge. Returns [...], m."""
-    size = model.hfield_size[hfield]  # (half x, half y, elevation range, base depth)
-    data = jax.lax.dynamic_slice(model.hfield_data, (model.hfield_adr[hfield],), (nrow * ncol,)).reshape(nrow, ncol)
+    """Terrain height under world points `xy` [..., 2] (m) of heightfield `hfield` (a
+    Python int, as are its `nrow` and `ncol`), whose geom sits at `position` [3]: bilinear
+    in the vertex heights; points outside the field read its nearest edge. Returns [...], m."""
+    size = jnp.asarray(model.hfield_size)[hfield]  # (half x, half y, elevation range, base depth)
+    start = int(np.asarray(model.hfield_adr)[hfield])  # `hfield` is static: the layout is the model's
+    data = jnp.asarray(model.hfield_data)[start : start + nrow * ncol].reshape(nrow, ncol)
     u = jnp.clip((xy[..., 0] - position[0] + size[0]) / (2 * size[0]) * (ncol - 1), 0, ncol - 1)
     v = jnp.clip((xy[..., 1] - position[1] + size[1]) / (2 * size[1]) * (nrow - 1), 0, nrow - 1)
     j, i = jnp.minimum(jnp.floor(u), ncol - 2).astype(jnp.int32), jnp.minimum(jnp.floor(v), nrow - 2).astype(jnp.int32)
@@ -266,18 +268,12 @@ def height_scan(
     nx, ny = size
     gx, gy = np.meshgrid((np.arange(nx) - (nx - 1) / 2) * spacing, (np.arange(ny) - (ny - 1) / 2) * spacing)
     pattern = jnp.asarray(np.stack([gx, gy], -1).reshape(-1, 2), jnp.float32)
-    return Partial(
-        _scan,
-        jnp.int32(field),
-        jnp.int32(geom),
-        jnp.int32(names.base_body(mj_model, body, "height_scan")),
-        pattern,
-        int(mj_model.hfield_nrow[field]),
-        int(mj_model.hfield_ncol[field]),
-    )
+    layout = (field, geom, int(mj_model.hfield_nrow[field]), int(mj_model.hfield_ncol[field]))
+    return Partial(_scan, tree.StaticValue(layout), jnp.int32(names.base_body(mj_model, body, "height_scan")), pattern)
 
 
-def _scan(field, geom, body, pattern, nrow, ncol, model, state: State) -> Array:
+def _scan(layout, body, pattern, model, state: State) -> Array:
+    field, geom, nrow, ncol = layout.value
     base = state.data.xpos[body]
     forward = state.data.xmat[body][:2, 0]
     c, s = forward / jnp.maximum(jnp.linalg.norm(forward), 1e-6)

@@ -192,7 +192,10 @@ LOCOMOTION = [
     if mjzoo.envs.factory(e).__module__
     in ("mjzoo.envs.locomotion", "mjzoo.envs.joystick", "mjzoo.envs.humanoid_amp", "mjzoo.envs.deepmimic")
 ]
-ENVS = [e for e in mjzoo.envs.names() if e not in LOCOMOTION]
+# The real robots' joysticks (mjzoo[robots]) run check_task in tests/envs/test_robot_joystick.py:
+# a robot's compile costs minutes of the suite's CPU.
+ROBOTS = [e for e in mjzoo.envs.names() if mjzoo.envs.factory(e).__module__ == "mjzoo.envs.robot_joystick"]
+ENVS = [e for e in mjzoo.envs.names() if e not in LOCOMOTION + ROBOTS]
 CASES = [(env, comb) for env in ENVS for comb in ("bare", "all")]
 # Alone, the combinators the stack leaves out; those in it run in it on every env (and
 # each is unit-tested in its own module: test_combinators.py, tests/catalog/).
