@@ -45,11 +45,17 @@ plots beside the run at S = 1 (a learner robust to the reward's scale draws the 
 
 The JSON (``learning_quality_<card>.json``) is merged with the one already there: each
 wave of GPU time adds envs, and re-running an env at a reward scale replaces the
-trainers it ran (its other trainers stay). Plots beside it: the normalized final returns
-per env and trainer, and per-env learning curves (mean and std band over seeds).
+trainers it ran (its other trainers stay); a trainer re-run at the same budget and
+hyperparameters on other seeds (``--first-seed``) adds them, so one env's seeds can be
+split over GPUs or waves. Plots beside it: the normalized final returns per env and
+trainer, and per-env learning curves (mean and std band over seeds).
 
-Waves of ~30 minutes on one H100 (a 60M-step env costs mjzoo ~1-3 min per configuration
-for 3 seeds, Brax ~3-10 min per seed; shorten ``--steps`` to fit more):
+Waves of ~30 minutes, each command under the device's 10 minutes. Measured on H200s at
+39.3M steps, 3 seeds in one program, compile included: mjzoo-defaults alone on a GPU
+~3-4.5 min on BallInCup, Finger, Fish and Hopper; mjzoo-translated (Playground's 16
+epochs of 32 minibatches) ~8 min on Finger and Fish with the GPU shared by two, and a
+quarter of its budget took Walker ~6 min and Humanoid ~9 min with it shared by three:
+split those seeds over GPUs (``--seeds 1 --first-seed K``). Brax ~3-10 min per seed.
 
     python benchmarks/learning_quality.py --envs CartpoleBalance CartpoleSwingup PendulumSwingup --trainers mjzoo-translated mjzoo-defaults
     python benchmarks/learning_quality.py --envs CartpoleBalance CheetahRun --trainers brax   # merges beside the mjzoo rows
