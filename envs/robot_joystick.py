@@ -46,6 +46,7 @@ import jax.numpy as jnp
 from jax.tree_util import Partial
 
 import mjzoo
+from mjzoo import physics as physics_lib
 from mjzoo import tree
 from mjzoo.builder import named
 from mjzoo.catalog import actuators
@@ -89,7 +90,6 @@ ROBOTS = {
 }
 TERRAINS = {"flat": None, "rough": ("rough", "slope_up", "slope_down"), "stairs": ("stairs_up", "stairs_down")}
 ROWS = 6
-_SCAN_POINTS = 11 * 7  # the height scan's default grid
 # PPO after Playground's for its joysticks (Brax PPO on 8192 envs, 4x128 policy, 5x256 critic).
 PPO = dict(
     num_envs=8192,
@@ -151,7 +151,7 @@ def robot_joystick(
     )
     if grid is not None:
         privileged += (terrain_lib.height_scan(m),)
-    sizes = (6 + (m.nq - 7) + (m.nv - 6), 4 + len(spec.feet) + (0 if grid is None else _SCAN_POINTS))
+    policy_size = 6 + (m.nq - 7) + (m.nv - 6)  # gyro, gravity, the joints' positions and velocities
     start = (terrain_lib.start_on_tile(m, grid, level=level),) if grid is not None else ()
     physics_draw = randomizers.combine(
         randomizers.scale_friction(m, 0.4, 1.25),
@@ -176,7 +176,7 @@ def robot_joystick(
         functools.partial(with_observation_noise, scale=noise),
         functools.partial(with_domain_randomization, randomize=physics_draw),
         functools.partial(events.with_velocity_pushes, interval=(5.0, 10.0), linear=(push, push, 0.0)),
-        functools.partial(mjzoo.with_observation, fn=Partial(_split, tree.StaticValue(sizes))),
+        functools.partial(mjzoo.with_observation, fn=Partial(_split, tree.StaticValue(policy_size))),
     )
     return mjzoo.task(
         physics,
@@ -214,10 +214,9 @@ def robot_joystick(
     )
 
 
-def _split(sizes, obs: jax.Array) -> dict[str, jax.Array]:
+def _split(policy_size, obs: jax.Array) -> dict[str, jax.Array]:
     """[policy, privileged, command] -> the policy's view (its part and the command) and the critic's (all)."""
-    policy, _ = sizes.value
-    return {"state": jnp.concatenate([obs[:policy], obs[-3:]]), "privileged_state": obs}
+    return {"state": jnp.concatenate([obs[: policy_size.value], obs[-3:]]), "privileged_state": obs}
 
 
 def robot_curriculum(robot: str = "go1", terrain: str = "rough", **overrides: Any) -> Task:
@@ -231,11 +230,9 @@ def robot_curriculum(robot: str = "go1", terrain: str = "rough", **overrides: An
     def at(level: float) -> Task:
         return with_auto_reset(robot_joystick(robot, terrain=terrain, level=level, **overrides))
 
-    m = _scene(robot, terrain, tuple(sorted((k, v) for k, v in overrides.items() if k not in _TASK_ARGS)))[0].mj_model
+    options = tuple(sorted((k, v) for k, v in overrides.items() if k in physics_lib.OPTIONS))
+    m = _scene(robot, terrain, options)[0].mj_model
     return curriculum.with_curriculum(at, terrain_lib.by_walked_distance(m, 2.0, rows=ROWS))
-
-
-_TASK_ARGS = ("level", "episode_steps", "push", "noise", "max_action_latency")
 
 
 def _spec(robot: str, description: str) -> base.EnvSpec:

@@ -257,7 +257,7 @@ def stand_still(mj_model: mujoco.MjModel, pose: Sequence[float] | None = None, m
 
 def _stand_still(adr, pose, max_command, model, state, action, next_state) -> Array:
     still = jnp.linalg.norm(_command(state)) < max_command
-    return jnp.where(still, jnp.sum(jnp.square(next_state.data.qpos[adr] - pose)), 0.0)
+    return jnp.where(still, _joint_deviation(adr, pose, model, state, action, next_state), 0.0)
 
 
 def joint_limits(mj_model: mujoco.MjModel, soft: float = 0.9, joints: Sequence[str] | None = None) -> Partial:

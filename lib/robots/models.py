@@ -93,7 +93,7 @@ class ModelNotFoundError(FileNotFoundError):
 class Source:
     """One place a model may come from, and what it holds for one robot."""
 
-    name: str  # "root", "mujoco-menagerie (cached)", an EnvPool wheel, "mujoco-menagerie (download)"
+    name: str  # "root", "mujoco-menagerie (cached)", or an EnvPool wheel's distribution
     path: Path | None  # the robot's folder there; None: not there (or not yet downloaded)
 
 
@@ -199,7 +199,7 @@ def playground_xmls(robot: str) -> Path:
 def assets(robot: str, root: str | os.PathLike | None = None) -> dict[str, bytes]:
     """``{file name: bytes}`` of what Playground's scenes for `robot` include (its XML
     files, textures, and the Menagerie model's files and meshes), for
-    ``mujoco.MjSpec.from_string(xml, assets=...)``: the scenes compile wherever the two
+    ``mujoco.MjSpec.from_file(scene, assets=...)``: the scenes compile wherever the two
     folders came from."""
     found: dict[str, bytes] = {}
     xmls = playground_xmls(robot)
