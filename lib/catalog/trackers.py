@@ -106,19 +106,20 @@ def with_feet(task: Task, feet: names.Names, floor: names.Names) -> Task:
     """
     geoms, floor = contacts.geom_sets(task.mj_model, feet, floor, "with_feet")
     bodies = jnp.asarray(task.mj_model.geom_bodyid[np.asarray(geoms)], jnp.int32)
-    indices = {"geom": geoms, "body": bodies, "floor": floor}
+    indices = (geoms, bodies, floor)  # a tuple: indices are not parameters (mjzoo.params names dict keys)
     return layered(task, FeetState, Partial(_feet_reset, task.start, indices), Partial(_feet_step, task.step, indices))
 
 
-def _feet_now(indices: dict, model: mjx.Model, data: mjx.Data) -> dict[str, Array]:
+def _feet_now(indices: tuple, model: mjx.Model, data: mjx.Data) -> dict[str, Array]:
     """Contact, position and velocity of each foot in `data`."""
-    position = data.geom_xpos[indices["geom"]]
-    velocity, _ = point_velocity(model, data, indices["body"], position)
-    contact = contacts.touching(data, indices["geom"], indices["floor"])
+    geoms, bodies, floor = indices
+    position = data.geom_xpos[geoms]
+    velocity, _ = point_velocity(model, data, bodies, position)
+    contact = contacts.touching(data, geoms, floor)
     return {"contact": contact, "position": position, "velocity": velocity}
 
 
-def _feet_reset(reset_fn, indices: dict, model: mjx.Model, key: Array) -> State:
+def _feet_reset(reset_fn, indices: tuple, model: mjx.Model, key: Array) -> State:
     state = reset_fn(model, key)
     now = _feet_now(indices, model, state.data)
     zeros = jnp.zeros(now["contact"].shape, jnp.float32)
@@ -126,7 +127,7 @@ def _feet_reset(reset_fn, indices: dict, model: mjx.Model, key: Array) -> State:
     return wrap(state, feet)
 
 
-def _feet_step(step_fn, indices: dict, model: mjx.Model, state: State, action: Array, key: Array) -> State:
+def _feet_step(step_fn, indices: tuple, model: mjx.Model, state: State, action: Array, key: Array) -> State:
     before, inner = peel(state, FeetState)
     next_state = step_fn(model, inner, action, key)
     now = _feet_now(indices, model, next_state.data)
