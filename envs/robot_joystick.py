@@ -16,12 +16,14 @@ Playground (feet-only collisions; `mjzoo.robots.scenes`), its models from
   U(0.8, 1.2), armature x U(1, 1.05)); velocity pushes of up to `push` m/s every 5-10 s;
   the divergence guard and a 20 s time limit.
 
-Observation, a dict (PPO's ``policy_obs_key="state"``, ``value_obs_key="privileged_state"``):
-  state             gyro (3), projected gravity (3), joint positions and velocities,
-                    the command (3), with N(0, noise^2) noise
-  privileged_state  the same, then the base's linear velocity (3) and height (1), the
-                    feet's contacts, and on a terrain the height scan (11 x 7 points,
-                    0.1 m apart) under the base: the critic's view (noise included)
+Observation, a dict (PPO's ``policy_obs_key="state"``, ``value_obs_key="privileged_state"``;
+`observations.with_privileged_observation`):
+  state             gyro (3), projected gravity (3), joint positions and velocities
+                    (each with N(0, noise^2) noise), the last action (nu), the command
+                    (3): what a robot has, and all an exported policy reads
+  privileged_state  the same, then without noise the base's linear velocity (3) and
+                    height (1), the feet's contacts, and on a terrain the height scan
+                    (11 x 7 points, 0.1 m apart) under the base: the critic's view
 Reward terms (weights, named parameters): velocity tracking exp(-|v_xy - c_xy|^2 / 0.25)
 (1.0) and yaw-rate tracking (0.5); feet air time past 0.1 s while commanded to move
 (0.5 quadruped, 1.0 humanoids); costs: vertical velocity^2 (2.0), roll/pitch rate^2
@@ -41,13 +43,11 @@ import dataclasses
 import functools
 from typing import Any
 
-import jax
 import jax.numpy as jnp
 from jax.tree_util import Partial
 
 import mjzoo
 from mjzoo import physics as physics_lib
-from mjzoo import tree
 from mjzoo.builder import named
 from mjzoo.catalog import actuators
 from mjzoo.catalog import commands
@@ -138,7 +138,7 @@ def robot_joystick(
     spec = ROBOTS[robot]
     physics, grid = _scene(robot, terrain, tuple(sorted(physics_options.items())))
     m = physics.mj_model
-    policy = (
+    sensed = observations.concat(  # what the robot's IMU and encoders give
         observations.base_angular_velocity(m),
         observations.projected_gravity(m),
         observations.joint_positions,
@@ -151,7 +151,6 @@ def robot_joystick(
     )
     if grid is not None:
         privileged += (terrain_lib.height_scan(m),)
-    policy_size = 6 + (m.nq - 7) + (m.nv - 6)  # gyro, gravity, the joints' positions and velocities
     start = (terrain_lib.start_on_tile(m, grid, level=level),) if grid is not None else ()
     physics_draw = randomizers.combine(
         randomizers.scale_friction(m, 0.4, 1.25),
@@ -163,7 +162,8 @@ def robot_joystick(
     )
     layers = (
         functools.partial(actuators.with_action_latency, max_latency=max_action_latency),
-        functools.partial(trackers.with_action_history, length=2),
+        functools.partial(with_observation_noise, scale=noise),  # on the sensors alone
+        functools.partial(trackers.with_action_history, length=2, observe=True),
         functools.partial(trackers.with_feet, feet=spec.feet, floor="floor"),
         functools.partial(
             commands.with_velocity_command,
@@ -173,14 +173,13 @@ def robot_joystick(
             resample_interval=(5.0, 10.0),
             stand_probability=0.1,
         ),
-        functools.partial(with_observation_noise, scale=noise),
         functools.partial(with_domain_randomization, randomize=physics_draw),
         functools.partial(events.with_velocity_pushes, interval=(5.0, 10.0), linear=(push, push, 0.0)),
-        functools.partial(mjzoo.with_observation, fn=Partial(_split, tree.StaticValue(policy_size))),
+        functools.partial(observations.with_privileged_observation, observe=observations.concat(*privileged)),
     )
     return mjzoo.task(
         physics,
-        observe=observations.concat(*policy, *privileged),
+        observe=sensed,
         start=at_pose,
         resets=(
             named(resets.joint_position_noise(m, 0.1), "reset_noise"),
@@ -212,11 +211,6 @@ def robot_joystick(
         time_limit=episode_steps,
         params={"qpos0": jnp.asarray(m.key_qpos[0], jnp.float32)},
     )
-
-
-def _split(policy_size, obs: jax.Array) -> dict[str, jax.Array]:
-    """[policy, privileged, command] -> the policy's view (its part and the command) and the critic's (all)."""
-    return {"state": jnp.concatenate([obs[: policy_size.value], obs[-3:]]), "privileged_state": obs}
 
 
 def robot_curriculum(robot: str = "go1", terrain: str = "rough", **overrides: Any) -> Task:

@@ -115,7 +115,11 @@ def task(
       resets: reset items as `start`, after it, each with a key of its own.
       actuator: ``(p, model, data, action, key) -> ctrl [nu]`` evaluated before each
         physics substep (a catalog actuator, e.g. `actuators.pd`); default: the action
-        is the controls.
+        is the controls. With an actuator the task's actions are the actuator's own
+        (each in [-1, 1], as the catalog's take them): ``action_dim`` is set to nu, so
+        `mjzoo.learning.to_controls` passes a policy's actions through instead of
+        stretching them over the ctrlranges (``task.replace(action_dim=2 * nu)`` for
+        `actuators.position_velocity`).
       combinators: ``Task -> Task`` functions (catalog ones: commands, latency, noise,
         domain randomization, pushes) applied in order to the model's own task (start,
         step, observation) before the terms: `rewards`, `costs` and `terminate` see the
@@ -185,6 +189,7 @@ def task(
         reward=Partial(_no_terms),
         terminate=Partial(_never),
         mj_model=physics.mj_model,
+        action_dim=None if actuator is None else int(physics.mj_model.nu),
     )
     for layer in combinators:
         core = layer(core)

@@ -22,7 +22,7 @@ from ``state.data`` as the last `mjx.step` left them: MuJoCo computes them befor
 integrates, so they describe the state one physics substep before qpos and qvel.
 
 Combinators: history, per-episode bias, multiplicative noise (additive noise is
-`mjzoo.with_observation_noise`).
+`mjzoo.with_observation_noise`), and the asymmetric actor-critic's privileged view.
 """
 
 from __future__ import annotations
@@ -80,6 +80,7 @@ __all__ = [
     "ObservationHistoryState",
     "ObservationBiasState",
     "with_multiplicative_observation_noise",
+    "with_privileged_observation",
 ]
 
 Array = jax.Array
@@ -394,3 +395,47 @@ def _scaled_reset(reset_fn, scale, model, key) -> State:
 
 def _scaled_step(step_fn, scale, model, state, action, key) -> State:
     return _scaled(step_fn(model, state, action, key), scale, key)
+
+
+def with_privileged_observation(
+    task: Task, observe: Observation, keys: tuple[str, str] = ("state", "privileged_state")
+) -> Task:
+    """An asymmetric actor-critic's two views: the observation becomes
+    ``{keys[0]: obs, keys[1]: concat(obs, observe(model, state))}``.
+
+    The policy's view is the task's own observation (noise, history, command and all);
+    the critic's adds `observe`'s privileged numbers [k], read after every reset and
+    step without noise: what a simulator knows and a robot does not (base velocity,
+    contacts, the terrain under the robot). PPO reads them with
+    ``policy_obs_key=keys[0], value_obs_key=keys[1]``; an exported policy reads
+    ``keys[0]`` alone. The inner step receives its own observation. Keeps no record.
+    """
+    who = "with_privileged_observation"
+    if not callable(observe):
+        raise TypeError(f"{who}: observe must be an observation item, got {type(observe).__name__}")
+    if len(keys) != 2 or not all(isinstance(k, str) and k for k in keys) or keys[0] == keys[1]:
+        raise ValueError(f"{who}: keys={keys!r} must be two different names (the policy's, the critic's)")
+    obs = jax.eval_shape(task.start, task.model, jax.random.key(0)).obs
+    if not (isinstance(obs, jax.ShapeDtypeStruct) and obs.ndim == 1):
+        raise ValueError(f"{who}: the task must observe a 1-D array; it observes {jax.tree.map(jnp.shape, obs)}")
+    observe = observe if isinstance(observe, Partial) else Partial(observe)
+    keys = tree.StaticValue(tuple(keys))
+    return task.replace(
+        start=Partial(_privileged_reset, task.start, observe, keys),
+        step=Partial(_privileged_step, task.step, observe, keys),
+    )
+
+
+def _views(state: State, observe: Partial, keys: tree.StaticValue, model) -> State:
+    privileged = jnp.ravel(jnp.asarray(observe(model, state), jnp.float32))
+    own = state.obs
+    return state.replace(obs={keys.value[0]: own, keys.value[1]: jnp.concatenate([own, privileged.astype(own.dtype)])})
+
+
+def _privileged_reset(reset_fn, observe, keys, model, key) -> State:
+    return _views(reset_fn(model, key), observe, keys, model)
+
+
+def _privileged_step(step_fn, observe, keys, model, state, action, key) -> State:
+    inner = step_fn(model, state.replace(obs=state.obs[keys.value[0]]), action, key)
+    return _views(inner, observe, keys, model)

@@ -58,28 +58,48 @@ class FeetState(NamedTuple):
 # --- action history -----------------------------------------------------------------
 
 
-def with_action_history(task: Task, length: int = 3) -> Task:
+def with_action_history(task: Task, length: int = 3, observe: bool = False) -> Task:
     """Keeps the last `length` actions in an `ActionHistoryState`: [length, nu]
     float32, row 0 the action of the transition that produced the state, row k the one
     k transitions earlier; zeros at reset.
 
     Records the action its step receives: wrap it outside action filters and noise to
-    record the policy's action, inside them to record what the actuators got.
+    record the policy's action, inside them to record what the actuators got. With
+    ``observe=True`` row 0, the last action, is appended to the (1-D) observation, as
+    the command combinators append their command: the one way a policy sees its last
+    action (an observation item cannot, as it runs inside this combinator).
     """
-    shape = tree.StaticValue((checks.integer("with_action_history", "length", length), task.action_size))
-    start = Partial(_history_reset, task.start, shape)
-    return layered(task, ActionHistoryState, start, Partial(_history_step, task.step))
+    length = checks.integer("with_action_history", "length", length)
+    shape = tree.StaticValue((length, task.action_size))
+    if observe:
+        obs = jax.eval_shape(task.start, task.model, jax.random.key(0)).obs
+        if not (isinstance(obs, jax.ShapeDtypeStruct) and obs.ndim == 1):
+            raise ValueError(
+                "with_action_history: observe=True appends the last action to a 1-D array observation, "
+                f"but the task observes {jax.tree.map(lambda x: x.shape, obs)}"
+            )
+    observed = tree.StaticValue(bool(observe))
+    start = Partial(_history_reset, task.start, shape, observed)
+    return layered(task, ActionHistoryState, start, Partial(_history_step, task.step, observed))
 
 
-def _history_reset(reset_fn, shape: tree.StaticValue, model: mjx.Model, key: Array) -> State:
-    return wrap(reset_fn(model, key), ActionHistoryState(actions=jnp.zeros(shape.value, jnp.float32)))
+def _kept_actions(state: State, actions: Array, observed: tree.StaticValue) -> State:
+    if observed.value:
+        state = state.replace(obs=jnp.concatenate([state.obs, actions[0].astype(state.obs.dtype)]))
+    return wrap(state, ActionHistoryState(actions=actions))
 
 
-def _history_step(step_fn, model: mjx.Model, state: State, action: Array, key: Array) -> State:
+def _history_reset(reset_fn, shape: tree.StaticValue, observed: tree.StaticValue, model: mjx.Model, key) -> State:
+    return _kept_actions(reset_fn(model, key), jnp.zeros(shape.value, jnp.float32), observed)
+
+
+def _history_step(step_fn, observed: tree.StaticValue, model: mjx.Model, state: State, action: Array, key) -> State:
     own, inner = peel(state, ActionHistoryState)
+    if observed.value:
+        inner = inner.replace(obs=inner.obs[: -own.actions.shape[1]])
     next_state = step_fn(model, inner, action, key)
     history = jnp.concatenate([jnp.asarray(action, jnp.float32)[None], own.actions[:-1]])
-    return wrap(next_state, ActionHistoryState(actions=history))
+    return _kept_actions(next_state, history, observed)
 
 
 # --- feet ---------------------------------------------------------------------------

@@ -26,11 +26,14 @@ one computable from `mujoco.MjModel` / `mujoco.MjData` with numpy (MjData's fiel
   actuator_force                -                   d.actuator_force
   previous_action               -                   the previous task action (`action.to_task`
                                                     of the policy's last output); zeros at reset
+  command                       record, meaning     the operator's command (a joystick's
+                                                    [vx, vy, yaw rate]), given to `frame`
 
 An observation is ``history`` frames, newest first, each the terms concatenated in order;
-at an episode's start every frame is the first one. A term the vocabulary cannot express
-(contacts, a command kept in the task's info, a user's own function) makes export fail,
-naming it; `register_observation` teaches the vocabulary a function of one's own.
+at an episode's start every frame is the first one. Of a dict observation (an asymmetric
+actor-critic's, `observations.with_privileged_observation`) the contract describes the
+policy's entry, ``observation["key"]``: a robot computes that one alone. A term the vocabulary cannot express
+(contacts, a height scan, a user's own function) makes export fail, naming it; `register_observation` teaches the vocabulary a function of one's own.
 """
 
 from __future__ import annotations
@@ -89,6 +92,7 @@ SOURCES = (
     "sensordata",
     "actuator_force",
     "previous_action",
+    "command",
 )
 _FREE = int(mujoco.mjtJoint.mjJNT_FREE)
 Describer = Callable[..., list[dict[str, Any]]]  # (mj_model, *bound params) -> terms
@@ -243,6 +247,41 @@ _OBSERVATIONS.update(
 _OBSERVATIONS["mjzoo.envs.cartpole:observation"] = lambda m: _cartpole(m, None)
 
 
+# Steps of combinators that append to, or split, the observation of the task they wrap.
+_COMMANDS = {
+    "VelocityCommandState": "[vx m/s, vy m/s, yaw rate rad/s]: forward, left, counter-clockwise, in the base's heading frame",
+    "JointCommandState": "joint position targets, rad (m), in the command's joint order",
+}
+
+
+def _command_step(m, step_fn, c) -> list[dict[str, Any]] | None:
+    """`commands.with_*_command`: the inner terms, then the command when observed."""
+    inner = _find(m, step_fn)
+    if inner is None or not c.observe:
+        return inner
+    record = c.record.__name__
+    size = int(c.low.shape[0])
+    return [*inner, dict(name=c.name, size=size, source="command", record=record, meaning=_COMMANDS.get(record, ""))]
+
+
+def _action_history_step(m, step_fn, observed) -> list[dict[str, Any]] | None:
+    """`trackers.with_action_history(observe=True)`: the inner terms, then the last action."""
+    inner = _find(m, step_fn)
+    if inner is None or not observed.value:
+        return inner
+    return [*inner, dict(name="last_action", size=-1, source="previous_action")]
+
+
+_STEPS.update(
+    {
+        "mjzoo.catalog.commands:_command_step": _command_step,
+        "mjzoo.catalog.trackers:_history_step": _action_history_step,
+        # the policy's view is the inner observation: the privileged part is the critic's
+        "mjzoo.catalog.observations:_privileged_step": lambda m, step_fn, *_: _find(m, step_fn),
+    }
+)
+
+
 def describe_item(m: mujoco.MjModel, fn: Any) -> list[dict[str, Any]]:
     """The terms of one observation item (a Partial over a catalog function, or a registered one)."""
     func, args = (fn.func, fn.args) if isinstance(fn, jax.tree_util.Partial) else (fn, ())
@@ -322,7 +361,7 @@ def _point_velocity(m, d, body: int, point: np.ndarray) -> tuple[np.ndarray, np.
     return v + np.cross(w, point - d.subtree_com[m.body_rootid[body]]), w
 
 
-def _term(m: mujoco.MjModel, d: mujoco.MjData, t: dict[str, Any], previous: np.ndarray) -> np.ndarray:
+def _term(m: mujoco.MjModel, d: mujoco.MjData, t: dict[str, Any], previous: np.ndarray, command) -> np.ndarray:
     s = t["source"]
     if s in ("qpos", "qvel", "cos_qpos", "sin_qpos"):
         x = (d.qvel if s == "qvel" else d.qpos)[t["index"]]
@@ -355,18 +394,29 @@ def _term(m: mujoco.MjModel, d: mujoco.MjData, t: dict[str, Any], previous: np.n
         return d.actuator_force
     if s == "previous_action":
         return previous
+    if s == "command":
+        if command is None:
+            raise ContractError(f"the observation holds a command ({t['name']}: {t.get('meaning')}); pass command=")
+        return np.asarray(command, float)
     raise ContractError(f"unknown observation source {s!r} in term {t.get('name')!r}; known: {', '.join(SOURCES)}")
 
 
-def frame(terms: list[dict[str, Any]], m: mujoco.MjModel, d: mujoco.MjData, previous_action: np.ndarray) -> np.ndarray:
+def frame(
+    terms: list[dict[str, Any]],
+    m: mujoco.MjModel,
+    d: mujoco.MjData,
+    previous_action: np.ndarray,
+    command: np.ndarray | None = None,
+) -> np.ndarray:
     """One observation frame [frame_size] float32 from C MuJoCo's state, term by term.
 
     Args:
       terms: the contract's ``observation["terms"]``.
       m, d: the model and its data after `mj_step` (or `mj_forward` at a reset).
       previous_action: [action size] the last task action (zeros at an episode's start).
+      command: the operator's command, for a ``command`` term (its ``meaning`` says what).
     """
-    parts = [np.ravel(_term(m, d, t, np.asarray(previous_action, float))) for t in terms]
+    parts = [np.ravel(_term(m, d, t, np.asarray(previous_action, float), command)) for t in terms]
     for t, p in zip(terms, parts):
         if p.size != t["size"]:
             raise ContractError(
@@ -378,7 +428,9 @@ def frame(terms: list[dict[str, Any]], m: mujoco.MjModel, d: mujoco.MjData, prev
 # --- actions and the model --------------------------------------------------------------------------------------
 
 
-_ACTUATORS = tuple(f"mjzoo.catalog.actuators:_{kind}" for kind in ("pd", "torque", "position_velocity"))
+_ACTUATORS = tuple(
+    f"mjzoo.catalog.actuators:_{kind}" for kind in ("pd", "torque", "position_velocity", "position_targets")
+)
 
 
 def _actuator_partial(node: Any, depth: int = 0) -> jax.tree_util.Partial | None:
@@ -397,7 +449,7 @@ def _actuator_partial(node: Any, depth: int = 0) -> jax.tree_util.Partial | None
                 raise ContractError(
                     f"the task drives its motors with {function_key(getattr(inner, 'func', inner))}, "
                     "which the contract's vocabulary cannot describe (it knows the catalog's pd, "
-                    "position_velocity and torque actuators)"
+                    "position_velocity, torque and position_targets actuators)"
                 )
             if found is not None:
                 return found
@@ -427,6 +479,16 @@ def action_mapping(task: Task) -> dict[str, Any]:
     actuator = _actuator_partial(task.step)
     if actuator is None:
         to_ctrl = dict(type="direct", formula="ctrl = task action, held over the substeps (MuJoCo clamps to ctrlrange)")
+    elif function_key(actuator.func).endswith(":_position_targets"):
+        pose, scale = actuator.args[:2]
+        to_ctrl = dict(
+            type="position_targets",
+            formula="ctrl = default_pose + action_scale * clip(a, -1, 1), per actuator (MuJoCo clamps it to "
+            "ctrlrange); each <position> servo then applies kp (ctrl - q) - kv qdot within its forcerange",
+            default_pose=_floats(pose),
+            action_scale=_floats(scale),
+            **_servos(m),
+        )
     else:
         p = actuator.args[0]
         motors = p.motors if hasattr(p, "motors") else p
@@ -454,6 +516,19 @@ def action_mapping(task: Task) -> dict[str, Any]:
                 training_noise=dict(gain=float(p.gain_noise), torque=float(p.torque_noise)),
             )
     return dict(size=task.action_size, to_task=to_task, to_ctrl=to_ctrl)
+
+
+def _servos(m: mujoco.MjModel) -> dict[str, Any]:
+    """The gains of a model's <position> servos, in actuator order: what a robot's motor
+    drivers must be set to (kp N m/rad, kv N m s/rad, the force limits, the joint each drives)."""
+    limited = m.actuator_forcelimited.astype(bool)
+    force = np.where(limited[:, None], m.actuator_forcerange, [-np.inf, np.inf])
+    return dict(
+        joints=[_name(m, "joint", j) for j in m.actuator_trnid[:, 0]],
+        kp=_floats(m.actuator_gainprm[:, 0]),
+        kv=_floats(0.0 - m.actuator_biasprm[:, 2]),
+        force_limit=[None if not lim else float(hi) for lim, hi in zip(limited, force[:, 1])],
+    )
 
 
 def model_section(m: mujoco.MjModel) -> dict[str, Any]:
@@ -532,6 +607,8 @@ def without_observation_noise(task: Task) -> Task:
     observation a deployment computes. Same pytree structure, so no recompile."""
 
     def clean(node: Any) -> Any:
+        if isinstance(node, Task):  # a combinator that holds the task it wraps (domain randomization)
+            return node.replace(start=clean(node.start), step=clean(node.step))
         if not isinstance(node, jax.tree_util.Partial):
             return node
         args = [clean(arg) for arg in node.args]
@@ -589,27 +666,46 @@ def _c_data(m: mujoco.MjModel, data: mjx.Data) -> mujoco.MjData:
     return d
 
 
-def check_observation(task: Task, terms: list[dict[str, Any]], key: Array, steps: int = 8) -> Check:
+def _command(terms: list[dict[str, Any]], state: State) -> np.ndarray | None:
+    """The command the task drew, read from its command combinator's record."""
+    from mjzoo.catalog import commands  # the records are the command combinators'
+
+    records = [t["record"] for t in terms if t["source"] == "command"]
+    return None if not records else np.asarray(find(state, getattr(commands, records[0])).command, float)
+
+
+def check_observation(
+    task: Task, terms: list[dict[str, Any]], key: Array, steps: int = 8, obs_key: str | None = None
+) -> Check:
     """Rebuilds `task`'s observation from `terms` on MJX states (a reset, then `steps`
     transitions under uniformly random actions) and compares it with the task's own,
-    observation noise off (`without_observation_noise`).
+    observation noise off (`without_observation_noise`); of a dict observation, the
+    entry `obs_key` (the policy's). A command term takes the command the task drew.
 
     Raises:
-      ContractError: the observation is not one flat array, or the rebuilt one
+      ContractError: the observation (its entry) is not one flat array, or the rebuilt one
         differs by more than 1e-4 (relative above 1); the message names the worst terms.
     """
     first, (states, actions) = _random_run(without_observation_noise(task), key, steps)
-    if not isinstance(first.obs, jax.Array) or first.obs.ndim != 1:
+
+    def observed(state: State) -> Any:
+        obs = state.obs
+        return obs.get(obs_key) if isinstance(obs, dict) and obs_key is not None else obs
+
+    if not isinstance(observed(first), jax.Array) or observed(first).ndim != 1:
+        entries = f"; its entries: {sorted(first.obs)} (give obs_key, PPO's policy_obs_key)" if obs_key is None else ""
         raise ContractError(
-            f"the task's observation is {jax.tree.structure(first.obs)}; the contract "
-            "describes one flat array (a dict observation is not supported)"
+            f"the task's observation{f' entry {obs_key!r}' if obs_key else ''} is "
+            f"{jax.tree.structure(observed(first))}; the contract describes one flat array{entries}"
+            if isinstance(first.obs, dict)
+            else f"the task's observation is {jax.tree.structure(first.obs)}; the contract describes one flat array"
         )
     size = frame_size(terms)
     history = getattr(find(first, ObservationHistoryState, None), "frames", None)
     length = 1 if history is None else int(history.shape[0])
-    if first.obs.shape[0] != length * size:
+    if observed(first).shape[0] != length * size:
         raise ContractError(
-            f"the task observes {first.obs.shape[0]} numbers; the described terms make "
+            f"the task observes {observed(first).shape[0]} numbers; the described terms make "
             f"{size} per frame x {length} frames: {[t['name'] for t in terms]}"
         )
     m, previous, frames = task.mj_model, np.zeros(task.action_size), []
@@ -618,8 +714,8 @@ def check_observation(task: Task, terms: list[dict[str, Any]], key: Array, steps
         state = first if t == 0 else jax.tree.map(lambda x, t=t: x[t - 1], states)
         if t > 0:
             previous = np.asarray(actions[t - 1], float)
-        frames.append(frame(terms, m, _c_data(m, state.data), previous))
-        want = np.asarray(state.obs, np.float64)
+        frames.append(frame(terms, m, _c_data(m, state.data), previous, _command(terms, state)))
+        want = np.asarray(observed(state), np.float64)
         errors.append(np.abs(stacked(frames, length) - want) / np.maximum(1.0, np.abs(want)))
         expected.append(want)
     worst = np.max(errors, axis=0)

@@ -86,6 +86,7 @@ def describe(
     source: dict[str, Any] | None = None,
     key: Array | None = None,
     check_steps: int = 8,
+    obs_key: str | None = None,
 ) -> dict[str, Any]:
     """The deployment contract of `policy` on `task`: model names and ranges, physics
     timing, the observation layout, the action mapping, the policy's inputs and outputs.
@@ -93,15 +94,16 @@ def describe(
     The layout is checked: `check_steps` transitions from a reset (random actions) run in
     MJX, and the observation rebuilt from each state by `contract.frame` must equal the
     task's own (one compile of the task's transition). The measured control step fills
-    ``physics.control_dt``.
+    ``physics.control_dt``. Of a dict observation the policy reads the entry `obs_key`
+    (PPO's ``policy_obs_key``), which the contract describes.
 
     Raises:
-      contract.ContractError: a term the vocabulary cannot describe, a dict observation,
-        or a layout that does not reproduce the task's observation (naming the terms).
+      contract.ContractError: a term the vocabulary cannot describe, a dict observation
+        without `obs_key`, or a layout that does not reproduce the task's observation (naming the terms).
       ValueError: the policy's sizes differ from the task's.
     """
     terms = deployment.observation_terms(task)
-    check = deployment.check_observation(task, terms, jax.random.key(0) if key is None else key, check_steps)
+    check = deployment.check_observation(task, terms, jax.random.key(0) if key is None else key, check_steps, obs_key)
     size = check.history * deployment.frame_size(terms)
     if (policy.obs_size, policy.action_size) != (size, task.action_size):
         raise ValueError(
@@ -109,6 +111,7 @@ def describe(
             f"{policy.action_size} actions; the task has {size} and {task.action_size}"
         )
     observation = dict(
+        **({"key": obs_key} if obs_key is not None else {}),
         size=size,
         frame_size=deployment.frame_size(terms),
         history=check.history,

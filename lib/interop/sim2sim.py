@@ -18,6 +18,7 @@ from __future__ import annotations
 
 import dataclasses
 import os
+from collections.abc import Callable
 from typing import Any
 from typing import NamedTuple
 
@@ -44,7 +45,8 @@ class Rollout(NamedTuple):
     inputs; action [T, A] its outputs; task_action [T, A] (`action.to_task`); ctrl
     [T, nu] at the last substep; time [T+1], qpos [T+1, nq], qvel [T+1, nv], act
     [T+1, na] from the start; sensordata [T, ...] after each step; before_qpos [T, nq],
-    before_qvel [T, nv]: the state before each step's last physics substep."""
+    before_qvel [T, nv]: the state before each step's last physics substep; command
+    [T, k] the command the policy saw at each step (k = 0 without one)."""
 
     obs: np.ndarray
     action: np.ndarray
@@ -57,6 +59,7 @@ class Rollout(NamedTuple):
     sensordata: np.ndarray
     before_qpos: np.ndarray
     before_qvel: np.ndarray
+    command: np.ndarray
 
 
 class Replayed(NamedTuple):
@@ -80,6 +83,8 @@ def to_ctrl(action: dict[str, Any], task_action: np.ndarray, d: mujoco.MjData) -
     c, a = action["to_ctrl"], np.asarray(task_action, float)
     if c["type"] == "direct":
         return a
+    if c["type"] == "position_targets":  # the model's servos close the loop
+        return np.asarray(c["default_pose"]) + np.asarray(c["action_scale"]) * np.clip(a, -1.0, 1.0)
     limit, gear = np.asarray(c["torque_limit"]), np.asarray(c["gear"])
     a = np.clip(a, -1.0, 1.0)
     if c["type"] == "torque":
@@ -101,8 +106,10 @@ def _to_task(action: dict[str, Any], a: np.ndarray) -> np.ndarray:
     return np.where(t["limited"], low + (a + 1.0) * 0.5 * (high - low), a)
 
 
-def _check_model(contract: dict[str, Any], m: mujoco.MjModel) -> None:
-    """The contract's model and physics step, or a ValueError naming what differs."""
+def _substeps(contract: dict[str, Any], m: mujoco.MjModel) -> int:
+    """Physics steps per control step on `m`: the contract's control rate at `m`'s
+    timestep; a ValueError when the model differs from the contract's or its timestep
+    does not divide the control step."""
     want = contract["model"]
     have = deployment.model_section(m)
     for field in ("nq", "nv", "nu", "joint_names", "actuator_names"):
@@ -110,11 +117,17 @@ def _check_model(contract: dict[str, Any], m: mujoco.MjModel) -> None:
             raise ValueError(
                 f"run_in_mujoco: the model's {field} is {have[field]}; the policy was exported for {want[field]}"
             )
-    if not np.isclose(m.opt.timestep, contract["physics"]["physics_dt"], rtol=1e-6):
+    control_dt, dt = contract["physics"]["control_dt"], float(m.opt.timestep)
+    substeps = max(1, round(control_dt / dt))
+    if not np.isclose(substeps * dt, control_dt, rtol=1e-4):
         raise ValueError(
-            f"run_in_mujoco: the model's timestep is {m.opt.timestep} s; the policy's contract says "
-            f"{contract['physics']['physics_dt']} s (set mj_model.opt.timestep)"
+            f"run_in_mujoco: the model's timestep {dt} s does not divide the policy's control step "
+            f"{control_dt} s (the contract's physics step is {contract['physics']['physics_dt']} s)"
         )
+    return substeps
+
+
+Command = np.ndarray | Callable[[int, mujoco.MjData], np.ndarray] | None
 
 
 def run_in_mujoco(
@@ -124,50 +137,75 @@ def run_in_mujoco(
     *,
     qpos: np.ndarray | None = None,
     qvel: np.ndarray | None = None,
+    command: Command = None,
+    latency: int = 0,
+    perturb: Callable[[int, mujoco.MjModel, mujoco.MjData], None] | None = None,
 ) -> Rollout:
     """Runs the exported policy for `steps` control steps on `mj_model` in C MuJoCo.
 
     Each step: build the observation from the contract's terms and history, run the
     policy (carrying its recurrent state), map its action to ctrl (`to_task`, then
-    `to_ctrl` at every physics substep), `mj_step` `substeps` times. Nothing here
-    knows the task: only the contract.
+    `to_ctrl` at every physics substep), `mj_step` until the control step has passed.
+    Nothing here knows the task: only the contract.
 
     Args:
       artifact: a path to an exported policy, or `export.load`'s result.
-      mj_model: the robot's model; names, sizes and timestep must match the contract.
+      mj_model: the robot's model; names and sizes must match the contract. Its
+        options may differ from training's (another solver, fewer iterations, another
+        timestep that divides the control step): the control rate stays the contract's.
       steps: control steps to run (>= 1).
       qpos, qvel: the start state (default the model's qpos0, zero velocity).
+      command: for a policy whose observation holds a command (a ``command`` term): one
+        [k] array, or ``command(step, mj_data) -> [k]`` asked before every step.
+      latency: control steps each action waits before reaching the motors (zeros until
+        the first arrives), as `actuators.with_action_latency` delays it in training.
+      perturb: ``perturb(step, mj_model, mj_data)`` before every step: pushes, or any
+        edit of the state a test wants.
     """
     from mjzoo.interop import export
 
     loaded = artifact if isinstance(artifact, export.Loaded) else export.load(artifact)
     contract = loaded.contract
-    _check_model(contract, mj_model)
+    substeps = _substeps(contract, mj_model)
     if isinstance(steps, bool) or not isinstance(steps, (int, np.integer)) or steps < 1:
         raise ValueError(f"run_in_mujoco: steps={steps!r} must be an integer >= 1")
+    if isinstance(latency, bool) or not isinstance(latency, (int, np.integer)) or latency < 0:
+        raise ValueError(f"run_in_mujoco: latency={latency!r} must be an integer >= 0")
+    obs_spec, action_spec = contract["observation"], contract["action"]
+    wants_command = any(t["source"] == "command" for t in obs_spec["terms"])
+    if wants_command and command is None:
+        term = next(t for t in obs_spec["terms"] if t["source"] == "command")
+        raise ValueError(
+            f"run_in_mujoco: the policy observes a command ({term['name']}: {term['meaning']}); pass command="
+        )
     m, d = mj_model, mujoco.MjData(mj_model)
     if qpos is not None:
         d.qpos[:] = qpos
     if qvel is not None:
         d.qvel[:] = qvel
     mujoco.mj_forward(m, d)
-    obs_spec, action_spec = contract["observation"], contract["action"]
-    substeps, recurrent = contract["physics"]["substeps"], contract["policy"]["recurrent"]
+    recurrent = contract["policy"]["recurrent"]
     carry = np.zeros(contract["policy"]["carry_size"], np.float32) if recurrent else None
     previous, frames = np.zeros(action_spec["size"]), []
+    pending = [np.zeros(action_spec["size"])] * latency  # actions on their way to the motors
     log: dict[str, list] = {k: [] for k in Rollout._fields}
     for name in ("time", "qpos", "qvel", "act"):
         log[name].append(np.array(getattr(d, name)))
-    for _ in range(steps):
-        frames = (frames + [deployment.frame(obs_spec["terms"], m, d, previous)])[-obs_spec["history"] :]
+    for step in range(steps):
+        if perturb is not None:
+            perturb(step, m, d)
+        now = np.zeros(0) if not wants_command else np.asarray(command(step, d) if callable(command) else command)
+        frames = (frames + [deployment.frame(obs_spec["terms"], m, d, previous, now)])[-obs_spec["history"] :]
         obs = deployment.stacked(frames, obs_spec["history"])
         if recurrent:
             action, carry = loaded.act(obs, carry)
         else:
             action = loaded.act(obs)
         task_action = _to_task(action_spec, np.asarray(action, float))
+        pending.append(task_action)
+        applied = pending.pop(0)
         for i in range(substeps):
-            d.ctrl[:] = to_ctrl(action_spec, task_action, d)
+            d.ctrl[:] = to_ctrl(action_spec, applied, d)
             if i == substeps - 1:
                 log["before_qpos"].append(np.array(d.qpos))
                 log["before_qvel"].append(np.array(d.qvel))
@@ -183,6 +221,7 @@ def run_in_mujoco(
             ("qvel", d.qvel),
             ("act", d.act),
             ("sensordata", d.sensordata),
+            ("command", now),
         ):
             log[name].append(np.array(value))
     return Rollout(**{k: np.asarray(v) for k, v in log.items()})

@@ -11,6 +11,7 @@
     mjzoo train amp humanoid_amp_walk             # adversarial motion priors: move like a reference
     mjzoo view pendulum_swingup --controls sliders --num-envs 4  # a live browser viewer (also runs, planners, datasets)
     mjzoo export runs/cb --format onnx   # the policy as ONNX (or a jax.export artifact) with its deployment contract
+    mjzoo sim2sim runs/g1 --timestep 0.002 --latency 1   # the exported joystick in C MuJoCo: tracking and falls
 
 Wherever a task is named, ``package.module:factory`` names a function returning a
 `mjzoo.Task` (importable from the current directory, as with ``python -m``), and
@@ -40,11 +41,12 @@ from mjzoo.harness.cli.commands import envs
 from mjzoo.harness.cli.commands import evaluate
 from mjzoo.harness.cli.commands import plan
 from mjzoo.harness.cli.commands import train
+from mjzoo.harness.cli.deploying import sim2sim
 from mjzoo.harness.cli.exporting import export
 from mjzoo.harness.cli.trajectories import collect
 from mjzoo.harness.cli.viewing import view
 
-__all__ = ["main", "demo", "envs", "train", "evaluate", "plan", "collect", "view", "export", "UsageError"]
+__all__ = ["main", "demo", "envs", "train", "evaluate", "plan", "collect", "view", "export", "sim2sim", "UsageError"]
 
 COMMANDS = {
     "demo": demo,
@@ -55,6 +57,7 @@ COMMANDS = {
     "collect": collect,
     "view": view,
     "export": export,
+    "sim2sim": sim2sim,
 }
 
 

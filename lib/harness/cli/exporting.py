@@ -32,19 +32,19 @@ def policy(module: ModuleType, cfg: Any, task: mjzoo.Task, params: dict[str, Any
     """The deterministic policy of PPO or AMP `params` (``module.policy_params(state)``:
     {"policy": network params, "obs_stats": `RunningStats`}) as an `export.Deployable` for one
     observation: `ppo.acting` (the normalization, the network, tanh of the mean, so
-    [-1, 1]), the carry explicit. AMP's policy sees the task's own observation; a dict
-    observation (PPO's ``policy_obs_key``) is refused with a `UsageError`.
+    [-1, 1]), the carry explicit. AMP's policy sees the task's own observation; where
+    PPO's policy sees the entry ``policy_obs_key`` of a dict observation (an asymmetric
+    critic's privileged view beside it), the exported policy takes that entry alone.
     """
     from mjzoo.algorithms import ppo
     from mjzoo.interop import export
 
     if module.__name__.endswith(".amp"):
         cfg = dataclasses.replace(cfg, policy_obs_key=None, value_obs_key=None)
-    elif cfg.policy_obs_key is not None:
-        raise UsageError(
-            f"the run's policy sees the entry {cfg.policy_obs_key!r} of a dict observation; export "
-            "describes one flat observation array"
-        )
+    elif cfg.policy_obs_key is not None:  # the policy's entry alone, as if it were the whole observation
+        stats, key = params["obs_stats"], cfg.policy_obs_key
+        params = {**params, "obs_stats": stats.replace(mean=stats.mean[key], var=stats.var[key])}
+        cfg = dataclasses.replace(cfg, policy_obs_key=None, value_obs_key=None)
     # With action_dim set, to_controls passes the action through: the output stays in [-1, 1].
     act = ppo.acting(cfg, task.replace(action_dim=task.action_size), params, deterministic=True)
     obs_size = int(jax.tree.leaves(params["obs_stats"].mean)[0].shape[-1])
@@ -109,7 +109,8 @@ def export(
         step=int(state.updates),
     )
     with as_usage_errors(deployment.ContractError):
-        described = exporting.describe(trained.task, fn, source=source)
+        obs_key = None if trained.module.__name__.endswith(".amp") else trained.cfg.policy_obs_key
+        described = exporting.describe(trained.task, fn, source=source, obs_key=obs_key)
     write = exporting.write_onnx if format == "onnx" else exporting.write_jax
     path = write(fn, described, out, overwrite=overwrite)
     obs = described["observation"]
