@@ -138,6 +138,11 @@ def check_task(
     check("no_retrace", lambda: _retraces(task, keys, policy, num_steps))
     if task.time_limit is None:
         skipped["time_limit"] = "the task has no time limit (task.time_limit is None)"
+    elif resets_itself(task) and int(task.time_limit) > num_steps:
+        skipped["time_limit"] = (
+            f"the task starts its own episodes and their limit ({int(task.time_limit)} steps) is past the "
+            f"rollout's {num_steps}: an outer limit would cut across them; run num_steps > the limit to check it"
+        )
     else:
         check("time_limit", lambda: _time_limit_problem(task, keys, policy, num_steps, trajectory))
     if failures:

@@ -1,5 +1,5 @@
-"""The documentation's Python examples run as written: README.md, docs/own-task.md and
-docs/sweeps.md.
+"""The documentation's Python examples run as written: README.md, docs/own-task.md,
+docs/sweeps.md and docs/robots.md.
 
 Each ```python block is one test. A document's blocks share one namespace and run in
 the order the document reads (the README's PPO block trains the task its first block
@@ -23,7 +23,7 @@ from pathlib import Path
 import pytest
 
 ROOT = Path(__file__).resolve().parents[1]
-DOCS = ("README.md", "docs/own-task.md", "docs/sweeps.md")
+DOCS = ("README.md", "docs/own-task.md", "docs/sweeps.md", "docs/robots.md")
 _FENCE = re.compile(r"^```python\n(.*?)^```", re.S | re.M)
 
 
@@ -61,11 +61,13 @@ NOT_RUN = {
     },
     "docs/own-task.md": {"training.run(ppo.make": _PPO_TRAIN},
     "docs/sweeps.md": {},
+    "docs/robots.md": {},
 }
 # Lines run smaller than printed, by document: {what the line contains: (its replacement there, why)}.
 SHRUNK = {
     "README.md": {},
     "docs/own-task.md": {},
+    "docs/robots.md": {},
     "docs/sweeps.md": {
         "total_steps=327_680": (
             "total_steps=2 * 64 * 32",
@@ -77,7 +79,7 @@ SHRUNK = {
         ),
     },
 }
-MIN_BLOCKS = {"README.md": 3, "docs/own-task.md": 3, "docs/sweeps.md": 2}
+MIN_BLOCKS = {"README.md": 3, "docs/own-task.md": 3, "docs/sweeps.md": 2, "docs/robots.md": 1}
 
 
 def _source(doc: str, line: int, source: str) -> str:

@@ -4,7 +4,7 @@ Playground's MJX scenes for them.
     robots.menagerie("g1")                # Path of Menagerie's unitree_g1 folder
     robots.playground_xmls("go1")         # Path of Playground's Go1 scenes (scene_mjx_*.xml)
     robots.assets("go1")                  # {file name: bytes}: what those scenes include
-    robots.where("g1")                    # every source and what it holds, for `mjzoo robots`
+    robots.where("g1")                    # every source, and the folder each holds (None: not there)
 
 A Menagerie robot is looked for, in order, in
   1. a folder the user names: the `root` argument, else the ``MENAGERIE_ROOT`` variable

@@ -65,9 +65,9 @@ def test_stand_still_counts_only_at_a_zero_command():
 def test_go1_keeps_the_task_contract():
     task = mjzoo.envs.make("go1_joystick")
     obs = jax.eval_shape(lambda k: mjzoo.reset(task, k), jax.random.key(0)).obs
-    # The policy: gyro, gravity, 12 joint positions and velocities, the command; the critic
-    # adds base velocity and height and 4 foot contacts.
-    assert obs["state"].shape == (3 + 3 + 12 + 12 + 3,) and obs["privileged_state"].shape == (30 + 4 + 4 + 3,)
+    # The policy: gyro, gravity, 12 joint positions and velocities, its last action, the
+    # command; the critic adds base velocity and height and 4 foot contacts.
+    assert obs["state"].shape == (3 + 3 + 12 + 12 + 12 + 3,) and obs["privileged_state"].shape == (45 + 3 + 1 + 4,)
     report = mjzoo.testing.check_task(task, num_steps=8)  # raises on any failed property
     assert set(report.skipped) <= {"time_limit"}  # 1000 steps: longer than the rollout
 
