@@ -25,7 +25,6 @@ from __future__ import annotations
 
 import copy
 import dataclasses
-import functools
 import os
 from collections.abc import Callable
 from typing import Any
@@ -45,7 +44,7 @@ from mjzoo.running import reset
 from mjzoo.running import transition
 from mjzoo.types import Task
 
-__all__ = ["Tracking", "base_velocities", "velocity_command", "in_task", "in_mujoco"]
+__all__ = ["Tracking", "base_velocities", "velocity_command", "closed_loop", "summarize", "in_task", "in_mujoco"]
 
 Array = jax.Array
 _FREE = int(mujoco.mjtJoint.mjJNT_FREE)
@@ -115,15 +114,27 @@ def _summarize(linear: np.ndarray, yaw: np.ndarray, lived: np.ndarray, fell: np.
     )
 
 
-@functools.partial(jax.jit, static_argnames=("apply", "steps", "num_envs", "obs_key", "address"))
-def _closed_loop(task: Task, key: Array, apply: Callable, steps: int, num_envs: int, obs_key, address):
+def closed_loop(
+    task: Task, act: Callable[[Any], Array], key: Array, num_envs: int, steps: int, obs_key: str | None = None
+) -> tuple[Array, Array, Array, Array]:
+    """`num_envs` episodes of `steps` steps of ``act(obs) -> action [A] in [-1, 1]`` in
+    `task` (traceable: jit it, or call it inside a program of one's own), each from
+    ``reset(task, split(key_i)[0])`` as `sim2sim.starts` draws them. `act` sees
+    ``obs[obs_key]``, or the whole observation when `obs_key` is None.
+
+    Returns:
+      (linear error [E, T] m/s, yaw error [E, T] rad/s, lived [E, T] bool: the step
+      began before the episode ended, fell [E, T] bool: it ended there by a termination).
+    """
+    address = _free_joint(task.mj_model)
+
     def one(key):
         state = reset(task, jax.random.split(key)[0])
 
         def body(carry, key):
             state, done = carry
             obs = state.obs[obs_key] if obs_key is not None else state.obs
-            after = transition(task, state, to_controls(task, apply(obs)), key)
+            after = transition(task, state, to_controls(task, act(obs)), key)
             v_xy, w_z = base_velocities(after.data.qpos, after.data.qvel, address)
             command = find(state, commands.VelocityCommandState).command
             errors = jnp.linalg.norm(v_xy - command[:2]), jnp.abs(w_z - command[2])
@@ -134,6 +145,17 @@ def _closed_loop(task: Task, key: Array, apply: Callable, steps: int, num_envs: 
         return jax.lax.scan(body, (state, jnp.zeros((), bool)), keys)[1]
 
     return jax.vmap(one)(jax.random.split(key, num_envs))
+
+
+def summarize(linear: Any, yaw: Any, lived: Any, fell: Any, seconds: float) -> Tracking:
+    """A `Tracking` of `closed_loop`'s arrays ([E, T] each; `fell` may be [E])."""
+    fell = np.asarray(fell)
+    return _summarize(
+        np.asarray(linear), np.asarray(yaw), np.asarray(lived), fell.any(-1) if fell.ndim == 2 else fell, seconds
+    )
+
+
+_closed_loop = jax.jit(closed_loop, static_argnames=("act", "num_envs", "steps", "obs_key"))
 
 
 def in_task(
@@ -151,10 +173,7 @@ def in_task(
     reading ``obs[obs_key]`` of a dict observation. The task must hold a velocity
     command (`commands.with_velocity_command`)."""
     steps = max(1, round(seconds / control_dt))
-    linear, yaw, lived, fell = jax.device_get(
-        _closed_loop(task, key, apply, steps, num_envs, obs_key, _free_joint(task.mj_model))
-    )
-    return _summarize(linear, yaw, lived, fell.any(1), seconds)
+    return summarize(*jax.device_get(_closed_loop(task, apply, key, num_envs, steps, obs_key)), seconds)
 
 
 def velocity_command(node: Any, depth: int = 0) -> Any:
@@ -215,7 +234,7 @@ def in_mujoco(
     address = _free_joint(m)
     starts = sim2sim.starts(task, jax.random.key(seed), episodes)
     rng = np.random.default_rng(seed)
-    errors = {"linear": [], "yaw": [], "lived": [], "fell": []}
+    errors: dict[str, list] = {"linear": [], "yaw": [], "lived": [], "fell": []}
     for e in range(episodes):
         schedule = _schedule(rng, steps, control_dt, low, high, stand, zero)
         kicks = _schedule(rng, steps, control_dt, -np.full(2, push), np.full(2, push), 0.0, 0.0, changes_only=True)
@@ -241,8 +260,7 @@ def in_mujoco(
         errors["yaw"].append(np.abs(w_z - rollout.command[:, 2]))
         errors["lived"].append(lived)
         errors["fell"].append(down.any())
-    stacked = {k: np.asarray(v) for k, v in errors.items()}
-    return _summarize(stacked["linear"], stacked["yaw"], stacked["lived"], stacked["fell"], seconds)
+    return summarize(errors["linear"], errors["yaw"], errors["lived"], errors["fell"], seconds)
 
 
 def _schedule(rng, steps, dt, low, high, stand, zero, changes_only=False):

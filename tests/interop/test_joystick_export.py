@@ -22,6 +22,7 @@ from mjzoo.catalog import actuators
 from mjzoo.catalog import commands
 from mjzoo.catalog import observations
 from mjzoo.catalog import trackers
+from mjzoo.harness import cli
 from mjzoo.interop import deployment
 from mjzoo.interop import export
 from mjzoo.interop import sim2sim
@@ -176,3 +177,19 @@ def test_tracking_of_a_standing_policy_in_both_simulators(tmp_path):
     for measured in (trained, deployed):
         assert measured.episodes == 2 and measured.falls == 0 and np.all(measured.per_episode["steps"] == 30)
         assert abs(measured.linear_error - 0.5) < 0.02 and measured.yaw_error < 0.02, measured.summary()
+
+
+def test_cli_sim2sim_names_what_is_missing(tmp_path, capsys):
+    run = tmp_path / "run"
+    run.mkdir()
+    (run / "sim2sim.json").write_text("{}")
+    for argv, words in (
+        ([str(run)], ("no exported policy", "mjzoo export")),
+        ([str(run), "--policy", str(run / "sim2sim.json")], ("already exists", "--overwrite")),
+        ([str(run), "--policy", str(run / "sim2sim.json"), "--overwrite", "--episodes", "0"], ("--episodes 0",)),
+    ):
+        with pytest.raises(SystemExit) as exit_info:
+            cli.main(["sim2sim", *argv])
+        err = capsys.readouterr().err
+        assert exit_info.value.code == 2 and len(err.splitlines()) == 1, err
+        assert all(w in err for w in words), err

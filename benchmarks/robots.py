@@ -1,0 +1,205 @@
+"""The robot joysticks trained with PPO on one GPU: time until a policy tracks commands.
+
+Per robot and terrain (``--variants go1:flat g1:rough ...``), all ``--seeds`` train in one
+vmapped program (the registered PPO settings, after Playground's: 8192 envs, privileged
+critic), evaluated ``--evals`` times during training. An evaluation runs
+``--eval-envs`` deterministic 20 s episodes of the task as trained (its pushes, noise and
+randomized physics; on a terrain, from the hardest row) and measures velocity tracking
+(`mjzoo.interop.tracking`). A seed **tracks** at the first evaluation where
+
+    mean |v_xy - cmd_xy| <= 0.15 m/s,  mean |w_z - cmd_yaw| <= 0.2 rad/s,  no falls
+
+and its time to tracking is the wall-clock from the start of the process's work on the
+variant (setup and compile included). The goal (issue 46): flat terrain within 5
+minutes, rough within 15 (anchors: Playground's Go1 joystick in 7 min and Berkeley
+Humanoid in 17 on an RTX 4090; mjlab's G1 flat velocity within ~1 h on an RTX 5090).
+
+    python benchmarks/robots.py --variants go1:flat g1:flat --seeds 3 --steps 200000000
+    python benchmarks/robots.py --smoke --variants go1:flat     # tiny sizes, on a CPU
+
+Results merge into ``benchmarks/results/robots/robots_<card>.json`` (a variant's re-run
+replaces its entry), with the curves of tracking error against seconds in a figure.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import sys
+import time
+from pathlib import Path
+from typing import Any
+
+import jax
+import jax.numpy as jnp
+import numpy as np
+
+sys.path.insert(0, str(Path(__file__).parent))
+from learning_quality import card_name  # noqa: E402
+
+import mjzoo.envs  # noqa: E402
+from mjzoo.algorithms import ppo  # noqa: E402
+from mjzoo.envs import robot_joystick  # noqa: E402
+from mjzoo.interop import tracking  # noqa: E402
+
+OUT = Path(__file__).parent / "results" / "robots"
+GOAL = dict(linear_error=0.15, yaw_error=0.2)
+EVAL_SECONDS = 20.0
+SMOKE = dict(num_envs=8, unroll_length=4, num_minibatches=2, num_epochs=1, total_steps=64)
+
+
+def tracks(point: dict) -> bool:
+    return (
+        point["linear_error"] <= GOAL["linear_error"]
+        and point["yaw_error"] <= GOAL["yaw_error"]
+        and point["falls"] == 0
+    )
+
+
+def train(variant: str, seeds: list[int], steps: int | None, evals: int, eval_envs: int, smoke: bool) -> dict[str, Any]:
+    """Every seed of one robot and terrain in one vmapped program: `evals` chunks of
+    updates, each followed by a tracking evaluation. Returns the runs' curves."""
+    start = time.perf_counter()
+    robot, terrain = variant.split(":")
+    name = f"{robot}_joystick"
+    task = mjzoo.envs.make(name, terrain=terrain)  # on a terrain: the curriculum, auto-reset inside
+    # Evaluated where the curriculum ends: the hardest row (flat: the task itself).
+    judge = task if terrain == "flat" else robot_joystick.robot_joystick(robot, terrain=terrain, level=1.0)
+    fields = mjzoo.envs.hyperparameters(name, "ppo")
+    fields.update(SMOKE if smoke else {})
+    if steps:
+        fields["total_steps"] = steps
+    config, hyperparams = ppo.configure(**fields)
+    algorithm = ppo.make(config)
+    per_chunk = max(1, config.num_updates // evals)
+    eval_steps = 10 if smoke else round(EVAL_SECONDS / 0.02)
+
+    def chunk(state: ppo.TrainState, key: jax.Array):
+        state, _ = jax.lax.scan(lambda s, _: algorithm.update(task, s), state, None, length=per_chunk)
+        act = ppo.acting(config, judge, ppo.policy_params(state), deterministic=True)
+        linear, yaw, lived, fell = tracking.closed_loop(
+            judge, lambda obs: act((), obs, jnp.zeros((), bool), None)[1], key, eval_envs, eval_steps
+        )
+        steps_lived = jnp.maximum(lived.sum(1), 1)
+        per_episode = [jnp.where(lived, e, 0.0).sum(1) / steps_lived for e in (linear, yaw)]
+        return state, {
+            "linear_error": per_episode[0].mean(),
+            "yaw_error": per_episode[1].mean(),
+            "falls": fell.any(1).sum(),
+        }
+
+    init = jax.jit(jax.vmap(algorithm.init, in_axes=(None, None, 0)))
+    run = jax.jit(jax.vmap(chunk), donate_argnums=() if jax.default_backend() == "cpu" else (0,))
+    keys = jax.vmap(jax.random.key)(jnp.asarray(seeds))
+    state = init(task, hyperparams, keys)
+    curves: list[list[dict]] = [[] for _ in seeds]
+    for i in range(evals):
+        state, measured = run(state, jax.vmap(jax.random.fold_in, in_axes=(0, None))(keys, 1000 + i))
+        measured = jax.device_get(measured)  # waits for the chunk
+        seconds = time.perf_counter() - start
+        for s in range(len(seeds)):
+            point = {k: float(v[s]) for k, v in measured.items()}
+            curves[s].append({"step": (i + 1) * per_chunk * config.steps_per_update, "seconds": seconds, **point})
+        print(
+            f"  {variant} step {curves[0][-1]['step']:,} {seconds:.0f} s: "
+            + "; ".join(
+                f"seed {seed} |v-c| {c[-1]['linear_error']:.3f} |w-c| {c[-1]['yaw_error']:.3f} falls {c[-1]['falls']:.0f}"
+                for seed, c in zip(seeds, curves)
+            ),
+            flush=True,
+        )
+    runs = []
+    for seed, curve in zip(seeds, curves):
+        reached = next((p for p in curve if tracks(p)), None)
+        runs.append(
+            {
+                "seed": seed,
+                "curve": curve,
+                "seconds_to_tracking": None if reached is None else reached["seconds"],
+                "steps_to_tracking": None if reached is None else reached["step"],
+                "final": curve[-1],
+            }
+        )
+    reached = [r["seconds_to_tracking"] for r in runs if r["seconds_to_tracking"] is not None]
+    return {
+        "variant": variant,
+        "robot": robot,
+        "terrain": terrain,
+        "hyperparameters": {k: (list(v) if isinstance(v, tuple) else v) for k, v in fields.items()},
+        "seeds": seeds,
+        "eval_envs": eval_envs,
+        "eval_seconds": EVAL_SECONDS if not smoke else eval_steps * 0.02,
+        "goal": GOAL,
+        "runs": runs,
+        "seeds_tracking": len(reached),
+        "median_seconds_to_tracking": float(np.median(reached)) if len(reached) == len(runs) else None,
+        "total_seconds": time.perf_counter() - start,
+        "smoke": smoke,
+    }
+
+
+def plot(rows: list[dict], path: Path) -> None:
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    fig, axes = plt.subplots(1, 2, figsize=(11, 4))
+    for row in rows:
+        for i, run in enumerate(row["runs"]):
+            t = [p["seconds"] / 60 for p in run["curve"]]
+            for ax, key in zip(axes, ("linear_error", "yaw_error")):
+                ax.plot(
+                    t,
+                    [p[key] for p in run["curve"]],
+                    color=f"C{rows.index(row)}",
+                    label=row["variant"] if i == 0 else None,
+                )
+    for ax, key, unit in zip(axes, ("linear_error", "yaw_error"), ("m/s", "rad/s")):
+        ax.axhline(GOAL[key], color="k", linestyle="--", linewidth=0.8)
+        ax.set(
+            xlabel="wall-clock minutes (compile included)",
+            ylabel=f"mean {key.replace('_', ' ')} ({unit})",
+            yscale="log",
+        )
+    axes[0].legend()
+    fig.tight_layout()
+    fig.savefig(path, dpi=100)
+
+
+def main() -> None:
+    parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
+    parser.add_argument("--variants", nargs="+", default=["go1:flat", "g1:flat", "t1:flat", "berkeley_humanoid:flat"])
+    parser.add_argument("--seeds", type=int, default=1)
+    parser.add_argument("--steps", type=int, default=None, help="env steps per seed (default: the registered budget)")
+    parser.add_argument("--evals", type=int, default=20)
+    parser.add_argument("--eval-envs", type=int, default=64)
+    parser.add_argument("--smoke", action="store_true", help="tiny sizes: checks the script runs, on a CPU")
+    args = parser.parse_args()
+    card = card_name() + ("_smoke" if args.smoke else "")
+    path = OUT / f"robots_{card}.json"
+    rows = json.loads(path.read_text())["rows"] if path.is_file() else []
+    for variant in args.variants:
+        row = train(
+            variant,
+            list(range(args.seeds)),
+            args.steps,
+            2 if args.smoke else args.evals,
+            4 if args.smoke else args.eval_envs,
+            args.smoke,
+        )
+        row["device"] = jax.devices()[0].device_kind
+        rows = [r for r in rows if r["variant"] != variant] + [row]
+        OUT.mkdir(parents=True, exist_ok=True)
+        path.write_text(json.dumps({"rows": rows}, indent=1) + "\n")
+        plot(rows, path.with_suffix(".png"))
+        median = row["median_seconds_to_tracking"]
+        print(
+            f"{variant}: {row['seeds_tracking']}/{len(row['seeds'])} seeds track; median time to tracking "
+            f"{'not reached by every seed' if median is None else f'{median:.0f} s'}; {path}",
+            flush=True,
+        )
+
+
+if __name__ == "__main__":
+    main()
