@@ -49,7 +49,9 @@ def main() -> None:
         entry.update(seconds=round(time.perf_counter() - start, 1), num_envs=args.num_envs, num_steps=args.num_steps)
         entry.update(machine=f"{platform.node()} ({jax.devices()[0].platform}, {jax.__version__})")
         results[variant] = entry
-        verdict = "FAILED " + "; ".join(f"{k}: {v}" for k, v in entry["failures"].items()) if entry["failures"] else "ok"
+        verdict = (
+            "FAILED " + "; ".join(f"{k}: {v}" for k, v in entry["failures"].items()) if entry["failures"] else "ok"
+        )
         skipped = f" (skipped: {', '.join(entry['skipped'])})" if entry["skipped"] else ""
         print(f"{variant:26s} {verdict}{skipped}  {entry['seconds']:.0f} s", flush=True)
         OUT.parent.mkdir(parents=True, exist_ok=True)
