@@ -11,7 +11,10 @@
     deployment   the deployment contract: names, control ranges, the action mapping and the
                  observation as terms computable from ``mujoco.MjData``
     sim2sim      an exported policy driving plain C MuJoCo from its contract
-                 (``run_in_mujoco``), scored by the task's own reward (``replay``)
+                 (``run_in_mujoco``: commands, latency, pushes, other physics options),
+                 scored by the task's own reward (``replay``)
+    tracking     a joystick policy's velocity tracking and falls, in the training
+                 simulator (``in_task``, ``closed_loop``) and in C MuJoCo (``in_mujoco``)
 
 Each module loads on first use and imports the other library only then, so the core never
 needs it.
@@ -19,6 +22,6 @@ needs it.
 
 from mjzoo import lazy
 
-__all__ = ["brax", "playground", "export", "deployment", "sim2sim"]
+__all__ = ["brax", "playground", "export", "deployment", "sim2sim", "tracking"]
 
 __getattr__, __dir__ = lazy.submodules(__name__, __all__)
