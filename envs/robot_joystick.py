@@ -115,7 +115,7 @@ def _scene(robot: str, terrain: str, options: tuple[tuple[str, Any], ...]):
     """(physics, terrain grid or None): one compile per robot, terrain and options."""
     kinds = TERRAINS[terrain]
     grid = None if kinds is None else terrain_lib.grid(kinds, rows=ROWS, tile_size=8.0, resolution=0.1)
-    return scenes.load(ROBOTS[robot].name, grid, ctrl_dt=0.02, **dict(options)), grid
+    return scenes.load(ROBOTS[robot].name, grid, **{"ctrl_dt": 0.02, **dict(options)}), grid
 
 
 def robot_joystick(
@@ -230,10 +230,19 @@ def robot_curriculum(robot: str = "go1", terrain: str = "rough", **overrides: An
 
 
 def _spec(robot: str, description: str) -> base.EnvSpec:
-    def make(*, terrain: str = "flat", **overrides: Any) -> Task:
+    def make(
+        *,
+        terrain: str = "flat",
+        episode_steps: int = 1000,
+        push: float = 0.5,
+        noise: float = 0.02,
+        max_action_latency: int = 1,
+        **physics_options: Any,
+    ) -> Task:
+        options = dict(episode_steps=episode_steps, push=push, noise=noise, max_action_latency=max_action_latency)
         if TERRAINS.get(terrain) is not None:
-            return robot_curriculum(robot, terrain, **overrides)
-        return robot_joystick(robot, terrain=terrain, **overrides)
+            return robot_curriculum(robot, terrain, **options, **physics_options)
+        return robot_joystick(robot, terrain=terrain, **options, **physics_options)
 
     make.__name__ = f"{robot}_joystick"
     make.__doc__ = f"{description}: `robot_joystick({robot!r})`, on a terrain with its curriculum."
