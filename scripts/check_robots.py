@@ -56,6 +56,7 @@ def main() -> None:
         print(f"{variant:26s} {verdict}{skipped}  {entry['seconds']:.0f} s", flush=True)
         OUT.parent.mkdir(parents=True, exist_ok=True)
         OUT.write_text(json.dumps(results, indent=1, sort_keys=True) + "\n")
+        jax.clear_caches()  # nine robots' programs in one process exhausted LLVM's memory
     sys.exit(1 if failed else 0)
 
 
