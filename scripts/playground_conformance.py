@@ -7,7 +7,8 @@ skipped (a locomotion or manipulation env whose robot models no source of
     python scripts/playground_conformance.py --only CartpoleBalance CheetahRun --jobs 1
                                            # (--only: their records replace theirs in the JSON)
 
-Writes JSON (one record per env: status, passed and failed properties with why, seconds)
+Writes JSON (one record per env: status, passed and failed properties with why, seconds;
+"seconds" sums the envs' build and check times)
 and the same as a Markdown table next to it, and prints the table. Each env compiles once:
 its episode is shortened to --episode-length steps (inside check_task's rollout of
 --num-steps, so the time limit is checked on the same compile); --episode-length 0 keeps
@@ -108,7 +109,6 @@ def main() -> None:
     unknown = sorted(set(names) - set(playground.names()))
     if unknown:
         parser.error(f"unknown Playground env(s) {unknown}")
-    started = time.perf_counter()
     context = multiprocessing.get_context("spawn")  # JAX does not survive fork
     with concurrent.futures.ProcessPoolExecutor(args.jobs, mp_context=context, max_tasks_per_child=1) as pool:
         futures = {name: pool.submit(check_one, name, args.episode_length, args.num_steps) for name in names}
@@ -125,9 +125,17 @@ def main() -> None:
                 }
             records.append(record)
             print(f"{name}: {record['status']} {record.get('why', '')}".rstrip(), flush=True)
+            write(args, records, final=False)  # a run cut short keeps what it checked
+    write(args, records, final=True)
+
+
+def write(args: argparse.Namespace, records: list[dict], final: bool) -> None:
+    """The JSON and Markdown files: with --only, `records` replace theirs among the earlier ones."""
     from importlib import metadata
 
     import mujoco_playground  # noqa: F401 (its version, below)
+
+    from mjzoo.interop import playground
 
     result = {
         "machine": f"{platform.machine()}, {multiprocessing.cpu_count()} CPUs, {args.jobs} jobs",
@@ -136,7 +144,6 @@ def main() -> None:
         "mujoco_mjx": metadata.version("mujoco-mjx"),
         "episode_length": args.episode_length or "own",
         "num_steps": args.num_steps,
-        "seconds": round(time.perf_counter() - started, 1),
         "envs": records,
     }
     if args.only and args.out.exists():  # the other envs' records stay, in registry order
@@ -145,13 +152,14 @@ def main() -> None:
         kept = [r for r in earlier["envs"] if r["env"] not in mine]
         order = {name: i for i, name in enumerate(playground.names())}
         result["envs"] = sorted(kept + records, key=lambda r: order.get(r["env"], len(order)))
-        result["seconds"] = round(earlier["seconds"] + result["seconds"], 1)
+    result["seconds"] = round(sum(r.get("build_s", 0.0) + r.get("check_s", 0.0) for r in result["envs"]), 1)
     args.out.parent.mkdir(parents=True, exist_ok=True)
     args.out.write_text(json.dumps(result, indent=2) + "\n")
     text = table(result["envs"])
     args.out.with_suffix(".md").write_text(text + "\n")
-    print(text)
-    print(f"{args.out} ({result['seconds']} s)")
+    if final:
+        print(text)
+        print(f"{args.out} ({result['seconds']} s)")
 
 
 if __name__ == "__main__":
