@@ -294,3 +294,21 @@ def test_multiplicative_noise_scales_with_the_signal():
     assert abs(np.corrcoef(relative[:, 0, 0], relative[:, 1, 0])[0, 1]) < 0.15  # fresh noise every step
     with pytest.raises(ValueError, match="scale"):
         obs.with_multiplicative_observation_noise(block_task(), float("nan"))
+
+
+def test_privileged_view_and_observed_actions_refuse_what_they_cannot_build():
+    """Both append to a 1-D observation: a dict one (say, already split) is refused by
+    name, as are two keys that are the same."""
+    from catalog_tasks import make_task
+
+    task = make_task()
+    split = obs.with_privileged_observation(task, obs.joint_positions)
+    assert set(jax.eval_shape(lambda k: mjzoo.reset(split, k), jax.random.key(0)).obs) == {"state", "privileged_state"}
+    with pytest.raises(ValueError, match="with_action_history: observe=True appends"):
+        trackers.with_action_history(split, observe=True)
+    with pytest.raises(ValueError, match="must observe a 1-D array"):
+        obs.with_privileged_observation(split, obs.joint_positions)
+    with pytest.raises(ValueError, match="two different names"):
+        obs.with_privileged_observation(task, obs.joint_positions, keys=("state", "state"))
+    with pytest.raises(TypeError, match="observation item"):
+        obs.with_privileged_observation(task, 3)
