@@ -184,7 +184,7 @@ def velocity_command(node: Any, depth: int = 0) -> Any:
     if isinstance(node, Task):
         return velocity_command(node.step, depth + 1)
     if dataclasses.is_dataclass(node) and type(node).__name__ == "_Command":
-        return node if node.record is commands.VelocityCommandState else None
+        return node if node.name == "velocity_command" else None  # a heading command draws headings
     for child in getattr(node, "args", ()):
         found = velocity_command(child, depth + 1)
         if found is not None:
