@@ -521,13 +521,13 @@ def action_mapping(task: Task) -> dict[str, Any]:
 def _servos(m: mujoco.MjModel) -> dict[str, Any]:
     """The gains of a model's <position> servos, in actuator order: what a robot's motor
     drivers must be set to (kp N m/rad, kv N m s/rad, the force limits, the joint each drives)."""
-    limited = m.actuator_forcelimited.astype(bool)
-    force = np.where(limited[:, None], m.actuator_forcerange, [-np.inf, np.inf])
     return dict(
         joints=[_name(m, "joint", j) for j in m.actuator_trnid[:, 0]],
         kp=_floats(m.actuator_gainprm[:, 0]),
         kv=_floats(0.0 - m.actuator_biasprm[:, 2]),
-        force_limit=[None if not lim else float(hi) for lim, hi in zip(limited, force[:, 1])],
+        force_limit=[
+            float(hi) if lim else None for lim, hi in zip(m.actuator_forcelimited, m.actuator_forcerange[:, 1])
+        ],
     )
 
 
@@ -693,12 +693,12 @@ def check_observation(
         return obs.get(obs_key) if isinstance(obs, dict) and obs_key is not None else obs
 
     if not isinstance(observed(first), jax.Array) or observed(first).ndim != 1:
-        entries = f"; its entries: {sorted(first.obs)} (give obs_key, PPO's policy_obs_key)" if obs_key is None else ""
+        split = isinstance(first.obs, dict)
+        which = f" entry {obs_key!r}" if split and obs_key is not None else ""
+        hint = f"; its entries: {sorted(first.obs)} (give obs_key, PPO's policy_obs_key)" if split and not which else ""
         raise ContractError(
-            f"the task's observation{f' entry {obs_key!r}' if obs_key else ''} is "
-            f"{jax.tree.structure(observed(first))}; the contract describes one flat array{entries}"
-            if isinstance(first.obs, dict)
-            else f"the task's observation is {jax.tree.structure(first.obs)}; the contract describes one flat array"
+            f"the task's observation{which} is {jax.tree.structure(observed(first))}; "
+            f"the contract describes one flat array{hint}"
         )
     size = frame_size(terms)
     history = getattr(find(first, ObservationHistoryState, None), "frames", None)

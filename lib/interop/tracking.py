@@ -35,6 +35,7 @@ import jax.numpy as jnp
 import mujoco
 import numpy as np
 
+from mjzoo import names
 from mjzoo import params as task_params
 from mjzoo.catalog import commands
 from mjzoo.interop import sim2sim
@@ -47,7 +48,6 @@ from mjzoo.types import Task
 __all__ = ["Tracking", "base_velocities", "velocity_command", "closed_loop", "summarize", "in_task", "in_mujoco"]
 
 Array = jax.Array
-_FREE = int(mujoco.mjtJoint.mjJNT_FREE)
 
 
 class Tracking(NamedTuple):
@@ -78,10 +78,8 @@ class Tracking(NamedTuple):
 
 def _free_joint(mj_model: mujoco.MjModel) -> tuple[int, int]:
     """(qpos, qvel) address of the model's first free joint: the base."""
-    free = np.flatnonzero(mj_model.jnt_type == _FREE)
-    if free.size == 0:
-        raise ValueError("tracking: the model has no free joint, so no floating base to track")
-    return int(mj_model.jnt_qposadr[free[0]]), int(mj_model.jnt_dofadr[free[0]])
+    qpos, qvel = names.free_joint_addresses(mj_model, None, "tracking")
+    return int(qpos[0]), int(qvel[0])
 
 
 def base_velocities(qpos: Any, qvel: Any, address: tuple[int, int]) -> tuple[Any, Any]:
