@@ -72,7 +72,6 @@ from __future__ import annotations
 import argparse
 import json
 import os
-import re
 import sys
 import tempfile
 import time
@@ -88,6 +87,7 @@ from mujoco_playground._src import wrapper as playground_wrapper
 sys.path.insert(0, str(Path(__file__).parent))
 from brax_peer import train_brax_ppo  # noqa: E402
 from brax_peer import wall_steps_per_s  # noqa: E402
+from cards import card_name  # noqa: E402
 from playground import brax_config  # noqa: E402
 from playground import brax_env_steps  # noqa: E402
 from playground import train_brax  # noqa: E402
@@ -383,12 +383,6 @@ def save(path: Path, rows: list[dict], device: str) -> None:
             {"device": device, "jax": jax.__version__, "summary": summary(rows), "rows": rows}, indent=1, default=float
         )
     )
-
-
-def card_name(device_kind: str | None = None) -> str:
-    """A device's kind (default: this one's) as a file name part ("nvidia_h100_80gb_hbm3", "cpu")."""
-    kind = jax.devices()[0].device_kind if device_kind is None else device_kind
-    return re.sub(r"[^a-z0-9]+", "_", kind.lower()).strip("_")
 
 
 def plot(rows: list[dict], out: Path, card: str) -> list[Path]:

@@ -24,22 +24,26 @@ replaces its entry), with the curves of tracking error against seconds in a figu
 from __future__ import annotations
 
 import argparse
+import dataclasses
 import json
 import sys
 import time
 from pathlib import Path
 from typing import Any
+from typing import Callable
 
 import jax
 import jax.numpy as jnp
 import numpy as np
 
 sys.path.insert(0, str(Path(__file__).parent))
-from learning_quality import card_name  # noqa: E402
+from cards import card_name  # noqa: E402
 
 import mjzoo.envs  # noqa: E402
 from mjzoo.algorithms import ppo  # noqa: E402
 from mjzoo.envs import robot_joystick  # noqa: E402
+from mjzoo.harness import checkpoints  # noqa: E402
+from mjzoo.harness import settings  # noqa: E402
 from mjzoo.interop import tracking  # noqa: E402
 
 OUT = Path(__file__).parent / "results" / "robots"
@@ -56,9 +60,21 @@ def tracks(point: dict) -> bool:
     )
 
 
-def train(variant: str, seeds: list[int], steps: int | None, evals: int, eval_envs: int, smoke: bool) -> dict[str, Any]:
-    """Every seed of one robot and terrain in one vmapped program: `evals` chunks of
-    updates, each followed by a tracking evaluation. Returns the runs' curves."""
+def train(
+    variant: str,
+    seeds: list[int],
+    steps: int | None,
+    evals: int,
+    eval_envs: int,
+    smoke: bool,
+    budget: float,
+    report: Callable[[dict], None],
+    run_dir: Path | None,
+) -> dict[str, Any]:
+    """Every seed of one robot and terrain in one vmapped program: up to `evals` chunks of
+    updates, each followed by a tracking evaluation, until every seed tracks or `budget`
+    seconds have passed. `report` gets the row so far after each evaluation; `run_dir`, if
+    given, gets seed 0's policy as a run (`save_run`). Returns the row."""
     start = time.perf_counter()
     robot, terrain = variant.split(":")
     name = f"{robot}_joystick"
@@ -93,6 +109,7 @@ def train(variant: str, seeds: list[int], steps: int | None, evals: int, eval_en
     keys = jax.vmap(jax.random.key)(jnp.asarray(seeds))
     state = init(task, hyperparams, keys)
     curves: list[list[dict]] = [[] for _ in seeds]
+    row: dict[str, Any] = {}
     for i in range(evals):
         state, measured = run(state, jax.vmap(jax.random.fold_in, in_axes=(0, None))(keys, 1000 + i))
         measured = jax.device_get(measured)  # waits for the chunk
@@ -108,6 +125,18 @@ def train(variant: str, seeds: list[int], steps: int | None, evals: int, eval_en
             ),
             flush=True,
         )
+        row = summarize(variant, fields, seeds, curves, eval_envs, eval_steps, start, smoke)
+        report(row)
+        if row["seeds_tracking"] == len(seeds) or seconds > budget:
+            break
+    if run_dir is not None:
+        save_run(run_dir / variant.replace(":", "_"), name, terrain, config, jax.tree.map(lambda x: x[0], state))
+    return row
+
+
+def summarize(variant, fields, seeds, curves, eval_envs, eval_steps, start, smoke) -> dict[str, Any]:
+    """The benchmark's row for a variant from the seeds' curves so far."""
+    robot, terrain = variant.split(":")
     runs = []
     for seed, curve in zip(seeds, curves):
         reached = next((p for p in curve if tracks(p)), None)
@@ -128,7 +157,7 @@ def train(variant: str, seeds: list[int], steps: int | None, evals: int, eval_en
         "hyperparameters": {k: (list(v) if isinstance(v, tuple) else v) for k, v in fields.items()},
         "seeds": seeds,
         "eval_envs": eval_envs,
-        "eval_seconds": EVAL_SECONDS if not smoke else eval_steps * 0.02,
+        "eval_seconds": eval_steps * 0.02,
         "goal": GOAL,
         "runs": runs,
         "seeds_tracking": len(reached),
@@ -136,6 +165,28 @@ def train(variant: str, seeds: list[int], steps: int | None, evals: int, eval_en
         "total_seconds": time.perf_counter() - start,
         "smoke": smoke,
     }
+
+
+def save_run(out: Path, name: str, terrain: str, config: ppo.Config, state: ppo.TrainState, envs: int = 16) -> None:
+    """One seed's train state as a run directory that `mjzoo export` and `mjzoo sim2sim`
+    read: task.json, config.json and a checkpoint, its per-env leaves cut to `envs` envs
+    (config.json says so) so that the run is megabytes rather than the 8192 envs' state."""
+    envs = min(envs, config.num_envs)
+    small = dataclasses.replace(config, num_envs=envs)
+    state = state.replace(
+        collector=jax.tree.map(lambda x: x[:envs], state.collector),
+        reward_scaling=dataclasses.replace(
+            state.reward_scaling, discounted_return=state.reward_scaling.discounted_return[:envs]
+        ),
+    )
+    checkpoints.save(out / "checkpoints", int(state.updates), state)
+    info = {
+        "algorithm": "ppo",
+        "config": settings.config_dict(small),
+        "hyperparams": settings.hyperparams_dict(state.hyperparams),
+    }
+    (out / "config.json").write_text(json.dumps(info, indent=2))
+    (out / "task.json").write_text(json.dumps({"env": name, "overrides": {"terrain": terrain}}, indent=2))
 
 
 def plot(rows: list[dict], path: Path) -> None:
@@ -153,7 +204,7 @@ def plot(rows: list[dict], path: Path) -> None:
                     t,
                     [p[key] for p in run["curve"]],
                     color=f"C{rows.index(row)}",
-                    label=row["variant"] if i == 0 else None,
+                    label=f"{row['variant']}, {len(row['seeds'])} seed(s) in one program" if i == 0 else None,
                 )
     for ax, key, unit in zip(axes, ("linear_error", "yaw_error"), ("m/s", "rad/s")):
         ax.axhline(GOAL[key], color="k", linestyle="--", linewidth=0.8)
@@ -174,12 +225,26 @@ def main() -> None:
     parser.add_argument("--steps", type=int, default=None, help="env steps per seed (default: the registered budget)")
     parser.add_argument("--evals", type=int, default=20)
     parser.add_argument("--eval-envs", type=int, default=64)
+    parser.add_argument(
+        "--budget", type=float, default=None, help="seconds per variant before it stops (default: 5 min flat, 15 rough)"
+    )
+    parser.add_argument(
+        "--runs", type=Path, default=None, help="save seed 0's policy as a run in RUNS/<robot>_<terrain>"
+    )
     parser.add_argument("--smoke", action="store_true", help="tiny sizes: checks the script runs, on a CPU")
     args = parser.parse_args()
     card = card_name() + ("_smoke" if args.smoke else "")
     path = OUT / f"robots_{card}.json"
     rows = json.loads(path.read_text())["rows"] if path.is_file() else []
+
+    def report(row: dict) -> None:  # after every evaluation: a run stopped midway keeps its curve
+        row["device"] = jax.devices()[0].device_kind
+        rows[:] = [r for r in rows if (r["variant"], r["seeds"]) != (row["variant"], row["seeds"])] + [row]
+        OUT.mkdir(parents=True, exist_ok=True)
+        path.write_text(json.dumps({"rows": rows}, indent=1) + "\n")
+
     for variant in args.variants:
+        budget = args.budget or (300.0 if variant.endswith(":flat") else 900.0)
         row = train(
             variant,
             list(range(args.seeds)),
@@ -187,11 +252,10 @@ def main() -> None:
             2 if args.smoke else args.evals,
             4 if args.smoke else args.eval_envs,
             args.smoke,
+            budget,
+            report,
+            args.runs,
         )
-        row["device"] = jax.devices()[0].device_kind
-        rows = [r for r in rows if r["variant"] != variant] + [row]
-        OUT.mkdir(parents=True, exist_ok=True)
-        path.write_text(json.dumps({"rows": rows}, indent=1) + "\n")
         plot(rows, path.with_suffix(".png"))
         median = row["median_seconds_to_tracking"]
         print(

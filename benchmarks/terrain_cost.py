@@ -32,7 +32,7 @@ import jax
 import jax.numpy as jnp
 
 sys.path.insert(0, str(Path(__file__).parent))
-from learning_quality import card_name  # noqa: E402
+from cards import card_name  # noqa: E402
 
 import mjzoo  # noqa: E402
 from mjzoo import physics as physics_lib  # noqa: E402
