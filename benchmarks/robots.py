@@ -14,11 +14,14 @@ variant (setup and compile included). The goal (issue 46): flat terrain within 5
 minutes, rough within 15 (anchors: Playground's Go1 joystick in 7 min and Berkeley
 Humanoid in 17 on an RTX 4090; mjlab's G1 flat velocity within ~1 h on an RTX 5090).
 
-    python benchmarks/robots.py --variants go1:flat g1:flat --seeds 3 --steps 200000000
+    python benchmarks/robots.py --variants go1:flat --seeds 3 --budget 400 --runs runs/robots
     python benchmarks/robots.py --smoke --variants go1:flat     # tiny sizes, on a CPU
 
-Results merge into ``benchmarks/results/robots/robots_<card>.json`` (a variant's re-run
-replaces its entry), with the curves of tracking error against seconds in a figure.
+A variant stops once every seed tracks or after ``--budget`` seconds (default: the goal,
+5 min flat, 15 rough). Results merge into ``benchmarks/results/robots/robots_<card>.json``
+after every evaluation (a variant's re-run with the same seeds replaces its entry), with
+the curves of tracking error against seconds in a figure. ``--runs`` keeps seed 0's
+policy as a run that `mjzoo export` and `mjzoo sim2sim` take.
 """
 
 from __future__ import annotations
