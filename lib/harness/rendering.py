@@ -58,7 +58,14 @@ from mjzoo.harness.render_config import RenderConfig
 if TYPE_CHECKING:
     from mjzoo.types import Task
 
-__all__ = ["RenderConfig", "render_frames", "render_video", "trajectory_video", "with_model_camera"]
+__all__ = [
+    "RenderConfig",
+    "render_frames",
+    "render_video",
+    "trajectory_video",
+    "first_episode_rows",
+    "with_model_camera",
+]
 
 # Why a failure is remembered: the backend is fixed when mujoco is imported, so it
 # cannot start working later, and a second attempt after a failed one can abort the
@@ -163,19 +170,33 @@ def render_video(
 
 
 def trajectory_video(
-    task: Task, trajectory: Any, path: str | Path, config: RenderConfig = RenderConfig()
+    task: Task,
+    trajectory: Any,
+    path: str | Path,
+    config: RenderConfig = RenderConfig(),
+    *,
+    first_episode: bool = True,
 ) -> Path | None:
     """Renders one environment's trajectory (`mjzoo.rollout`'s, or an algorithm's
     ``evaluate``: leaves [T, ...]) into an MP4 at `path`, as `config` says.
 
-    The time step is read from ``next_state.data.time``; the camera is
-    `with_model_camera`'s.
+    With `first_episode` the video ends where the trajectory's first episode does
+    (`first_episode_rows`): an evaluation runs its batch on for a fixed number of steps,
+    past env 0's fall. The time step is read from ``next_state.data.time``; the camera
+    is `with_model_camera`'s.
 
     Returns:
       `path`, or None if no OpenGL backend works (after printing one line saying so).
     """
-    data = trajectory.next_state.data
-    qpos, time = np.asarray(data.qpos), np.asarray(data.time, np.float64).reshape(-1)
+    from mjzoo.combinators import AutoResetState
+    from mjzoo.layers import find
+
+    state = trajectory.next_state
+    data, rows = state.data, None
+    if first_episode:
+        resets = find(state, AutoResetState, None) is not None
+        rows = first_episode_rows(state.terminated, state.truncated, resets)
+    qpos, time = np.asarray(data.qpos)[:rows], np.asarray(data.time, np.float64).reshape(-1)[:rows]
     if len(time) > 1 and time[1] > time[0]:
         dt = float(time[1] - time[0])
     else:  # one row, or an episode reset at the first step: measure the task's own step
@@ -186,11 +207,28 @@ def trajectory_video(
         task.mj_model,
         qpos,
         path,
-        mocap_pos=np.asarray(data.mocap_pos),
-        mocap_quat=np.asarray(data.mocap_quat),
+        mocap_pos=np.asarray(data.mocap_pos)[:rows],
+        mocap_quat=np.asarray(data.mocap_quat)[:rows],
         dt=dt,
         config=with_model_camera(config, task.mj_model),
     )
+
+
+def first_episode_rows(terminated: ArrayLike, truncated: ArrayLike, resets: bool = False) -> int:
+    """How many rows of a trajectory show its first episode: up to and including the
+    first row whose transition ended it (all T rows if none did).
+
+    Args:
+      terminated: [T] bool, ``next_state.terminated`` of each row.
+      truncated: [T] bool, ``next_state.truncated``.
+      resets: the task starts its next episode inside its step (`mjzoo.with_auto_reset`),
+        so the ending row already shows the new episode's start and is left out too
+        (one row is kept at least: a video has a frame).
+    """
+    done = np.asarray(terminated, bool).reshape(-1) | np.asarray(truncated, bool).reshape(-1)
+    if not done.any():
+        return len(done)
+    return max(1, int(np.argmax(done)) + (0 if resets else 1))
 
 
 def with_model_camera(config: RenderConfig, mj_model: mujoco.MjModel) -> RenderConfig:

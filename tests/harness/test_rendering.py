@@ -410,7 +410,7 @@ def test_trajectory_video_takes_time_step_and_first_camera(model, monkeypatch, t
         qpos=np.zeros((5, 1)), time=np.arange(1, 6) * 0.04, mocap_pos=np.zeros((5, 1, 3)), mocap_quat=np.ones((5, 1, 4))
     )
     task = SimpleNamespace(mj_model=model)
-    trajectory = SimpleNamespace(next_state=SimpleNamespace(data=data))
+    trajectory = SimpleNamespace(next_state=_next_states(data, ended=None))
     for config, camera in [
         (RenderConfig(), 0),  # the model's first camera
         (RenderConfig(camera="side"), "side"),
@@ -421,6 +421,53 @@ def test_trajectory_video_takes_time_step_and_first_camera(model, monkeypatch, t
         assert args[0] is model and args[2] == tmp_path / "v.mp4"
         assert kwargs["dt"] == pytest.approx(0.04) and kwargs["config"].camera == camera
         np.testing.assert_array_equal(kwargs["mocap_quat"], data.mocap_quat)
+
+
+def _next_states(data, ended: int | None, layers=()) -> SimpleNamespace:
+    """A trajectory's next states over `data` ([T] rows), terminated at row `ended`."""
+    terminated = np.arange(len(data.time)) == ended
+    return SimpleNamespace(data=data, terminated=terminated, truncated=np.zeros_like(terminated), layers=layers)
+
+
+@pytest.mark.parametrize(
+    "terminated, truncated, resets, rows",
+    [
+        ([0, 0, 0, 0, 0], [0, 0, 0, 0, 0], False, 5),  # no end: every row
+        ([0, 0, 1, 0, 1], [0, 0, 0, 0, 0], False, 3),  # up to and including the first end
+        ([0, 0, 0, 0, 0], [0, 1, 0, 0, 0], False, 2),  # a time limit ends it too
+        ([0, 0, 1, 0, 0], [0, 0, 0, 0, 0], True, 2),  # auto-reset: the ending row is the next start
+        ([1, 0, 0, 0, 0], [0, 0, 0, 0, 0], True, 1),  # a frame at least
+    ],
+)
+def test_first_episode_rows_end_at_the_first_termination_or_truncation(terminated, truncated, resets, rows):
+    assert rendering.first_episode_rows(terminated, truncated, resets) == rows
+
+
+def test_an_episode_that_terminates_early_makes_a_video_of_that_many_frames(model, monkeypatch, tmp_path):
+    from mjzoo.combinators import AutoResetState
+
+    calls = []
+    monkeypatch.setattr(rendering, "render_video", lambda *args, **kwargs: calls.append((args, kwargs)))
+    data = SimpleNamespace(
+        qpos=np.arange(8.0)[:, None],
+        time=np.arange(1, 9) * 0.04,
+        mocap_pos=np.zeros((8, 1, 3)),
+        mocap_quat=np.ones((8, 1, 4)),
+    )
+    task = SimpleNamespace(mj_model=model)
+    resetting = AutoResetState(final_obs=np.zeros((8, 1)))  # with_auto_reset's record, as `layers` holds it
+    for states, first_episode, rows in [
+        (_next_states(data, ended=2), True, 3),  # the fall is the last frame
+        (_next_states(data, ended=2, layers=resetting), True, 2),  # row 2 is already the next episode
+        (_next_states(data, ended=2), False, 8),  # the whole trajectory, when asked for
+    ]:
+        rendering.trajectory_video(
+            task, SimpleNamespace(next_state=states), tmp_path / "v.mp4", first_episode=first_episode
+        )
+        (args, kwargs), *_ = calls[::-1]
+        np.testing.assert_array_equal(args[1], data.qpos[:rows])
+        assert len(kwargs["mocap_pos"]) == len(kwargs["mocap_quat"]) == rows
+        assert kwargs["dt"] == pytest.approx(0.04)
 
 
 def test_large_images_enlarge_the_framebuffer_of_a_copy(model, no_opengl):
