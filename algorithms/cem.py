@@ -11,6 +11,9 @@ At every replan, with mean mu and std s shifted to the current time:
     theta_i = clip(mu + sigma_max * eps_i)    for an explore fraction f of them
     E = the num_elites samples of lowest cost J
     mu' = mean_{i in E} theta_i,   s' = clip(std_{i in E} theta_i, sigma_min, sigma_max)
+J is a rollout's cost (`mjzoo.planning.masked_cost`): minus its return up to and including
+its first terminated step (nothing after it), plus the `termination_cost` hyperparameter
+(default 0) if a step terminated.
 sigma_min keeps the search from collapsing; the explore fraction keeps wide samples in
 play after it has narrowed. sigma_min / sigma_max are fractions of each actuator's half
 control range (like noise_scale, the initial std). The numbers (s0, sigma_min,

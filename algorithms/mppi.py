@@ -13,6 +13,9 @@ At every replan, with the nominal knots mu shifted to the current time:
     theta_i = clip(mu + sigma * eps_i),  eps_i ~ N(0, I)   (theta_0 = mu)
     w_i = exp(-(J_i - min_j J_j) / lambda) / sum_k exp(-(J_k - min_j J_j) / lambda)
     mu' = sum_i w_i theta_i
+J is a rollout's cost (`mjzoo.planning.masked_cost`): minus its return up to and including
+its first terminated step (nothing after it), plus the `termination_cost` hyperparameter
+(default 0) if a step terminated.
 The temperature lambda is in cost units: lambda -> 0 recovers predictive sampling,
 large lambda averages all samples. Defaults: 128 samples, 25 planning steps, 4 cubic
 knots, sigma = 0.3 x half ctrl range, lambda = 0.1.

@@ -8,8 +8,10 @@
 At every replan, with the nominal knots mu shifted to the current time:
     theta_0 = mu,   theta_i = clip(mu + sigma * eps_i),  eps_i ~ N(0, I),  i = 1..N-1
     mu' = theta_{i*},  i* = argmin_i J(theta_i)
-where J is the rollout cost (`mjzoo.planning`). Keeping mu as a sample makes the plan's
-cost non-increasing along a deterministic receding horizon. sigma (the noise scale) is a
+where J is a rollout's cost (`mjzoo.planning.masked_cost`): minus its return up to and
+including its first terminated step (nothing after it), plus the `termination_cost`
+hyperparameter (default 0) if a step terminated. Keeping mu as a sample makes the
+plan's cost non-increasing along a deterministic receding horizon. sigma (the noise scale) is a
 hyperparameter kept in the planner state: vmapping over states sweeps it.
 Defaults: 128 samples, 25 planning steps, 4 cubic knots, sigma = 0.3 x half ctrl range.
 """

@@ -5,7 +5,8 @@
                   vmap), configure (both from one dict of fields), PlannerState,
                   sampling around a nominal plan, warm start, the MPPI weights and
                   the CEM update
-    ensembles     batched rollouts of a task's own `transition` and their costs, model
+    ensembles     batched rollouts of a task's own `transition` and their costs (no
+                  reward after a termination, an optional termination cost), model
                   ensembles and risk measures
     native        the same rollouts in C MuJoCo (`mujoco.rollout`), costed by the task's
                   own reward in JAX: the fast backend on a CPU
@@ -32,6 +33,7 @@ from mjzoo.planning.ensembles import Ensemble
 from mjzoo.planning.ensembles import aggregate
 from mjzoo.planning.ensembles import base_task
 from mjzoo.planning.ensembles import ensemble
+from mjzoo.planning.ensembles import masked_cost
 from mjzoo.planning.ensembles import rollout_costs
 from mjzoo.planning.learned import TerminalValue
 from mjzoo.planning.learned import as_terminal_value
@@ -81,6 +83,7 @@ __all__ = [
     "sample_around",
     "controls",
     "control_at",
+    "masked_cost",
     "rollout_costs",
     "aggregate",
     "sample_costs",

@@ -1,9 +1,11 @@
 """Batched rollouts of a task's own `transition`, and the risk measures that turn costs
 over a model ensemble into one cost per sample: the physics side of a sampling planner.
 
-Cost of a control sequence = -(sum over the horizon of the task's summed reward terms)
-- terminal_value(final state). Physics runs on past termination: a fall costs the
-rewards it forfeits, as in the task's own reward.
+Cost of a control sequence (`masked_cost`): -(the task's summed reward terms up to and
+including the first step whose `terminate` says terminated) - terminal_value(final
+state) if the rollout never terminated, + a `termination_cost` if it did. Physics runs
+on past a termination (a scan has a fixed length), but what comes after it is masked: a
+fall earns nothing after it, as an episode would (truncation ends nothing here).
 """
 
 from __future__ import annotations
@@ -14,6 +16,7 @@ import numbers
 from typing import Any
 from typing import Callable
 
+import chex
 import jax
 import jax.numpy as jnp
 
@@ -25,7 +28,7 @@ from mjzoo.running import transition
 from mjzoo.types import State
 from mjzoo.types import Task
 
-__all__ = ["Ensemble", "ensemble", "base_task", "with_base", "rollout_costs", "aggregate", "RISKS"]
+__all__ = ["Ensemble", "ensemble", "base_task", "with_base", "masked_cost", "rollout_costs", "aggregate", "RISKS"]
 
 Array = jax.Array
 RISKS = ("mean", "worst", "cvar")
@@ -50,6 +53,31 @@ def ensemble(task: Task, randomize: Callable, num_models: int, key: Array) -> En
     return Ensemble(task, {k: jnp.asarray(v, getattr(task.model, k).dtype) for k, v in fields.items()})
 
 
+def masked_cost(
+    rewards: Array, terminated: Array, final_value: float | Array = 0.0, termination_cost: float | Array = 0.0
+) -> Array:
+    """[] cost of one rollout that stops counting at its first termination.
+
+    cost = -sum_t alive_t r_t - alive_H V + termination_cost (1 - alive_H),
+    alive_t = 1 if no step before t terminated (step t's own reward counts), and alive_H
+    = 1 if none of the H steps did: a terminated rollout has no future to value, and
+    pays the termination cost once. Masked by `jnp.where`, so NaN physics after a
+    termination (a divergence guard's) stays out of the cost.
+
+    Args:
+      rewards: [H] each step's summed reward (`State.reward` after the step).
+      terminated: [H] bool, `State.terminated` after each step.
+      final_value: [] value of the final state (a terminal value), 0 for none.
+      termination_cost: [] cost added if any step terminated.
+    """
+    chex.assert_rank([rewards, terminated], 1)
+    ended = jnp.cumsum(terminated.astype(jnp.int32))  # terminations up to and including t
+    counted = ended - terminated.astype(jnp.int32) == 0
+    alive = ended[-1] == 0
+    total = jnp.sum(jnp.where(counted, rewards, 0.0)) + jnp.where(alive, final_value, 0.0)
+    return -total + jnp.where(alive, 0.0, termination_cost)
+
+
 def rollout_costs(
     task: Task | Ensemble,
     state: State,
@@ -57,6 +85,7 @@ def rollout_costs(
     key: Array,
     terminal_value: TerminalValue | None = None,
     unroll: int = 1,
+    termination_cost: float | Array = 0.0,
 ) -> tuple[Array, Array]:
     """Costs of open-loop control sequences from `state`, by `lax.scan` over the horizon
     of the task's `transition`, vmapped over samples (and over an ensemble's models).
@@ -69,6 +98,8 @@ def rollout_costs(
       terminal_value: optional `(model, state) -> []` value of a rollout's final state,
         added to its return (`mjzoo.planning.learned`; a TypeError if not callable).
       unroll: `lax.scan` unroll of the horizon loop.
+      termination_cost: [] cost added once to a rollout that terminates (`masked_cost`:
+        rewards after its first termination are not counted).
 
     Returns:
       ([M, N] costs, M = 1 for a plain task; [] control step dt of the planning task, s).
@@ -83,14 +114,14 @@ def rollout_costs(
     def cost(model, sample_controls: Array) -> tuple[Array, Array]:
         planning_task = base.replace(model=model)
 
-        def body(s: State, inputs) -> tuple[State, Array]:
+        def body(s: State, inputs) -> tuple[State, tuple[Array, Array]]:
             action, step_key = inputs
             s = transition(planning_task, s, action, step_key)
-            return s, s.reward
+            return s, (s.reward, s.terminated)
 
-        final, rewards = jax.lax.scan(body, start, (sample_controls, step_keys), unroll=unroll)
+        final, (rewards, terminated) = jax.lax.scan(body, start, (sample_controls, step_keys), unroll=unroll)
         value = terminal_value(model, final) if terminal_value is not None else 0.0
-        return -(jnp.sum(rewards) + value), final.data.time
+        return masked_cost(rewards, terminated, value, termination_cost), final.data.time
 
     per_sample = jax.vmap(cost, in_axes=(None, 0))
     if variants.fields:

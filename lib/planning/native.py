@@ -51,6 +51,7 @@ from mujoco import mjx
 
 from mjzoo import physics
 from mjzoo.planning.ensembles import Ensemble
+from mjzoo.planning.ensembles import masked_cost
 from mjzoo.planning.learned import TerminalValue
 from mjzoo.planning.learned import as_terminal_value
 from mjzoo.planning.native_engine import APPLIED
@@ -330,9 +331,11 @@ def rollout_costs(
     key: Array,
     terminal_value: TerminalValue | None = None,
     unroll: int = 1,
+    termination_cost: float | Array = 0.0,
 ) -> tuple[Array, Array]:
     """`mjzoo.planning.rollout_costs` with the physics in C MuJoCo: ([M, N] costs,
-    [] control step dt) of controls [N, H, nu] from `state`."""
+    [] control step dt) of controls [N, H, nu] from `state`, costed alike
+    (`mjzoo.planning.masked_cost`: nothing counts after a rollout's first termination)."""
     terminal_value = as_terminal_value(terminal_value)
     variants = task.task if isinstance(task.task, Ensemble) else Ensemble(task.task, {})
     base, engine = variants.task, task.engine
@@ -345,7 +348,7 @@ def rollout_costs(
     c_states = _roll(engine, base, models, start, controls, keys)
 
     def cost(model, actions: Array, sample: dict) -> Array:
-        final, rewards, _ = _replay(
+        final, rewards, terminated = _replay(
             base.replace(model=model),
             start,
             actions,
@@ -355,7 +358,7 @@ def rollout_costs(
             unroll,
         )
         value = terminal_value(model, final) if terminal_value is not None else 0.0
-        return -(jnp.sum(rewards) + value)
+        return masked_cost(rewards, terminated, value, termination_cost)
 
     per_model = lambda model, states: jax.vmap(cost, in_axes=(None, 0, 0))(model, controls, states)
     costs = jax.vmap(per_model)(models, c_states)

@@ -6,7 +6,8 @@ control steps of the *planning* task (`mjzoo.planning.splines`). `PlannerState.t
 anchors the plan in the environment's clock (`data.time`, seconds) and `PlannerState.dt`
 is the planning task's control step, measured from its rollouts, so a simulation with a
 different timestep can ask for the control at any time (`control_at`). Samples are
-costed by `mjzoo.planning.ensembles`.
+costed by `mjzoo.planning.ensembles`: the negative return of the planning task's
+rewards up to a rollout's first termination, plus an optional termination cost.
 
 A planner's settings come in two parts. Its `Config` is structure (sizes, the spline
 kind, the risk measure): a static argument of `plan`, so a new value compiles again. Its
@@ -120,10 +121,13 @@ class SamplingHyperparams:
     Attributes:
       noise_scale: sampling std as a fraction of each actuator's half control range.
       cvar_alpha: the worst fraction of models CVaR averages over (with risk="cvar").
+      termination_cost: cost added once to a rollout whose task terminates (a fall);
+        its rewards stop counting there either way (`mjzoo.planning.masked_cost`).
     """
 
     noise_scale: float | Array = 0.3
     cvar_alpha: float | Array = 0.25
+    termination_cost: float | Array = 0.0
 
     def __post_init__(self) -> None:
         names = [f.name for f in dataclasses.fields(self)]
@@ -141,6 +145,7 @@ class SamplingHyperparams:
                 np.logical_and(np.greater(self.cvar_alpha, 0), np.less_equal(self.cvar_alpha, 1)),
                 "in (0, 1]",
             ),
+            "termination_cost": (np.isfinite(self.termination_cost), "finite"),
         }
 
 
@@ -338,13 +343,15 @@ def sample_costs(
     key: Array,
     terminal_value: TerminalValue | None = None,
     cvar_alpha: float | Array = 0.25,
+    termination_cost: float | Array = 0.0,
 ) -> tuple[Array, Array]:
     """([N] risk-aggregated costs of knot samples [N, K, nu] from `state`, [] dt), each
     less the `terminal_value` of its final state if one is given; `cvar_alpha` ([]) is
-    the tail CVaR averages over when ``config.risk == "cvar"``."""
+    the tail CVaR averages over when ``config.risk == "cvar"``. A rollout's rewards stop
+    at its first termination, which adds `termination_cost` ([]) once."""
     sequences = controls(config, samples, *control_limits(task))
     costs_of = native.rollout_costs if isinstance(task, native.Native) else rollout_costs
-    costs, dt = costs_of(task, state, sequences, key, terminal_value, config.unroll)
+    costs, dt = costs_of(task, state, sequences, key, terminal_value, config.unroll, termination_cost)
     costs = aggregate(costs, config.risk, cvar_alpha)
     # A sample whose physics blew up must never win.
     return jnp.where(jnp.isfinite(costs), costs, jnp.inf), dt
@@ -362,8 +369,9 @@ def sample_around(
     """The step every sampling planner starts with: shift the plan to `env_state`'s time,
     sample knots around it (sample 0 = the nominal) with `std` ([K, nu] or [N, K, nu];
     default `state.std`), and cost them, with the final states valued by
-    `terminal_value` (a `(model, state) -> []` `jax.tree_util.Partial`, or None) and
-    models aggregated with `state.hyperparams.cvar_alpha`.
+    `terminal_value` (a `(model, state) -> []` `jax.tree_util.Partial`, or None), a
+    termination costing `state.hyperparams.termination_cost`, and models aggregated
+    with `state.hyperparams.cvar_alpha`.
 
     Returns (the shifted state with the measured dt, [N, K, nu] samples, [N] costs).
     """
@@ -372,8 +380,17 @@ def sample_around(
     low, high = control_limits(task)
     std = state.std if std is None else std
     samples = sample_knots(sample_key, state.knots, std, config.num_samples, low, high)
-    alpha = state.hyperparams.cvar_alpha
-    costs, dt = sample_costs(config, task, env_state, samples, rollout_key, terminal_value, alpha)
+    hyperparams = state.hyperparams
+    costs, dt = sample_costs(
+        config,
+        task,
+        env_state,
+        samples,
+        rollout_key,
+        terminal_value,
+        hyperparams.cvar_alpha,
+        hyperparams.termination_cost,
+    )
     return state.replace(dt=dt), samples, costs
 
 

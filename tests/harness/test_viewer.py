@@ -149,6 +149,7 @@ def test_a_planner_draws_its_samples_and_plan():
             "config/cvar_alpha",
             "config/noise_scale",
             "config/temperature",
+            "config/termination_cost",
         ]
         compiles = shown.source.compiles
         shown.controls["config/temperature"].value = 0.0  # mppi.Config refuses it: no compile
