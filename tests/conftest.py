@@ -4,6 +4,7 @@ fusion emitters compile an MJX rollout in about 1.5x the time of its classic one
 (check_task's rollout of cartpole_balance under the combinator stack: 44 s of CPU
 against 29 s), with the same run time."""
 
+import collections
 import os
 import shutil
 import subprocess
@@ -47,6 +48,29 @@ import pytest  # noqa: E402
 
 _RUN_CACHE = "MJZOO_TEST_RUN_COMPILE_CACHE"
 
+# The modules that keep a worker busiest, heaviest first (CPU seconds of the whole module
+# run alone; a stale figure only reorders, it skips nothing). xdist's `--dist loadfile`
+# hands out whole modules, by default most tests first: these have 1-40 tests, so most of
+# them came last, where one worker ran the tail of minutes-long modules while the other
+# sat idle. Handed out first, they run while the hundreds of short modules fill in behind.
+HEAVY_FIRST = (
+    "tests/test_docs.py",  # 280
+    "tests/algorithms/test_ppo_learning.py",  # 280
+    "tests/conformance/test_conformance.py",
+    "tests/algorithms/test_planners.py",
+    "tests/algorithms/test_ppo.py",
+    "tests/conformance/test_conformance_locomotion.py",
+    "tests/harness/test_distributed.py",  # 180
+    "tests/conformance/test_conformance_locomotion_stacked.py",
+    "tests/algorithms/test_amp.py",
+    "tests/learning/test_a2c_doc.py",  # 130
+    "tests/interop/test_joystick_export.py",
+    "tests/envs/test_locomotion.py",
+    "tests/envs/test_robot_joystick.py",  # 105
+    "tests/algorithms/test_amp_learning.py",  # 96
+    "tests/algorithms/test_sweeps.py",  # 95
+)
+
 
 def pytest_configure(config):
     """JAX's persistent compilation cache, for this run only: a temporary directory the
@@ -63,10 +87,21 @@ def pytest_configure(config):
     if _RUN_CACHE not in os.environ:  # the run's controller, or a run without xdist
         os.environ[_RUN_CACHE] = tempfile.mkdtemp(prefix="mjzoo-test-jax-cache-")
         config._mjzoo_run_cache = os.environ[_RUN_CACHE]
+    if getattr(config.option, "loadscopereorder", False):  # HEAVY_FIRST's order, not xdist's count
+        config.option.loadscopereorder = False
     worker = getattr(config, "workerinput", {}).get("workerid", "main")
     jax.config.update("jax_compilation_cache_dir", os.path.join(os.environ[_RUN_CACHE], worker))
     jax.config.update("jax_persistent_cache_min_compile_time_secs", 0.0)
     jax.config.update("jax_persistent_cache_min_entry_size_bytes", 0)
+
+
+def pytest_collection_modifyitems(config, items):
+    """HEAVY_FIRST's modules first, then the rest most tests first (xdist's own order), each
+    module's tests in their own order."""
+    rank = {path: i for i, path in enumerate(HEAVY_FIRST)}
+    module = {id(item): item.nodeid.split("::")[0] for item in items}
+    count = collections.Counter(module.values())
+    items.sort(key=lambda item: (rank.get(module[id(item)], len(rank)), -count[module[id(item)]]))
 
 
 def pytest_unconfigure(config):
