@@ -48,27 +48,28 @@ import pytest  # noqa: E402
 
 _RUN_CACHE = "MJZOO_TEST_RUN_COMPILE_CACHE"
 
-# The modules that keep a worker busiest, heaviest first (CPU seconds of the whole module
-# run alone; a stale figure only reorders, it skips nothing). xdist's `--dist loadfile`
-# hands out whole modules, by default most tests first: these have 1-40 tests, so most of
-# them came last, where one worker ran the tail of minutes-long modules while the other
-# sat idle. Handed out first, they run while the hundreds of short modules fill in behind.
+# The modules that keep a worker busiest, heaviest first: seconds of CPU, the module run
+# alone (2026-11-29), or ~ an estimate (its slowest tests in an earlier full run, or its
+# docstring's figures). A stale figure only reorders; nothing is skipped. xdist's `--dist loadfile` hands out
+# whole modules, by default most tests first: these have 1-38 tests, so most of them
+# came last, where one worker ran the tail of minutes-long modules while the other sat
+# idle. Handed out first, they run while the short modules fill in behind them.
 HEAVY_FIRST = (
-    "tests/test_docs.py",  # 280
-    "tests/algorithms/test_ppo_learning.py",  # 280
-    "tests/conformance/test_conformance.py",
-    "tests/algorithms/test_planners.py",
-    "tests/algorithms/test_ppo.py",
-    "tests/conformance/test_conformance_locomotion.py",
-    "tests/harness/test_distributed.py",  # 180
-    "tests/conformance/test_conformance_locomotion_stacked.py",
-    "tests/algorithms/test_amp.py",
-    "tests/learning/test_a2c_doc.py",  # 130
-    "tests/interop/test_joystick_export.py",
-    "tests/envs/test_locomotion.py",
-    "tests/envs/test_robot_joystick.py",  # 105
-    "tests/algorithms/test_amp_learning.py",  # 96
-    "tests/algorithms/test_sweeps.py",  # 95
+    "tests/conformance/test_conformance.py",  # 419
+    "tests/algorithms/test_planners.py",  # 319
+    "tests/algorithms/test_ppo.py",  # 311
+    "tests/algorithms/test_ppo_learning.py",  # ~282
+    "tests/test_docs.py",  # 279
+    "tests/conformance/test_conformance_locomotion.py",  # ~250
+    "tests/harness/test_distributed.py",  # ~180
+    "tests/conformance/test_conformance_locomotion_stacked.py",  # ~165
+    "tests/algorithms/test_amp.py",  # ~150
+    "tests/learning/test_a2c_doc.py",  # 139
+    "tests/envs/test_locomotion.py",  # ~120
+    "tests/interop/test_joystick_export.py",  # 115
+    "tests/envs/test_robot_joystick.py",  # ~105
+    "tests/algorithms/test_amp_learning.py",  # ~96
+    "tests/algorithms/test_sweeps.py",  # ~95
 )
 
 
