@@ -4,6 +4,7 @@ fusion emitters compile an MJX rollout in about 1.5x the time of its classic one
 (check_task's rollout of cartpole_balance under the combinator stack: 44 s of CPU
 against 29 s), with the same run time."""
 
+import collections
 import os
 import shutil
 import subprocess
@@ -47,6 +48,30 @@ import pytest  # noqa: E402
 
 _RUN_CACHE = "MJZOO_TEST_RUN_COMPILE_CACHE"
 
+# The modules that keep a worker busiest, heaviest first: seconds of CPU, the module run
+# alone (2026-11-29), or ~ an estimate (its slowest tests in an earlier full run, or its
+# docstring's figures). A stale figure only reorders; nothing is skipped. xdist's `--dist loadfile` hands out
+# whole modules, by default most tests first: these have 1-38 tests, so most of them
+# came last, where one worker ran the tail of minutes-long modules while the other sat
+# idle. Handed out first, they run while the short modules fill in behind them.
+HEAVY_FIRST = (
+    "tests/conformance/test_conformance.py",  # 419
+    "tests/algorithms/test_planners.py",  # 319
+    "tests/algorithms/test_ppo.py",  # 311
+    "tests/algorithms/test_ppo_learning.py",  # ~282
+    "tests/test_docs.py",  # 279
+    "tests/conformance/test_conformance_locomotion.py",  # ~250
+    "tests/harness/test_distributed.py",  # ~180
+    "tests/conformance/test_conformance_locomotion_stacked.py",  # ~165
+    "tests/algorithms/test_amp.py",  # ~150
+    "tests/learning/test_a2c_doc.py",  # 139
+    "tests/envs/test_locomotion.py",  # ~120
+    "tests/interop/test_joystick_export.py",  # 115
+    "tests/envs/test_robot_joystick.py",  # ~105
+    "tests/algorithms/test_amp_learning.py",  # ~96
+    "tests/algorithms/test_sweeps.py",  # ~95
+)
+
 
 def pytest_configure(config):
     """JAX's persistent compilation cache, for this run only: a temporary directory the
@@ -63,10 +88,21 @@ def pytest_configure(config):
     if _RUN_CACHE not in os.environ:  # the run's controller, or a run without xdist
         os.environ[_RUN_CACHE] = tempfile.mkdtemp(prefix="mjzoo-test-jax-cache-")
         config._mjzoo_run_cache = os.environ[_RUN_CACHE]
+    if getattr(config.option, "loadscopereorder", False):  # HEAVY_FIRST's order, not xdist's count
+        config.option.loadscopereorder = False
     worker = getattr(config, "workerinput", {}).get("workerid", "main")
     jax.config.update("jax_compilation_cache_dir", os.path.join(os.environ[_RUN_CACHE], worker))
     jax.config.update("jax_persistent_cache_min_compile_time_secs", 0.0)
     jax.config.update("jax_persistent_cache_min_entry_size_bytes", 0)
+
+
+def pytest_collection_modifyitems(config, items):
+    """HEAVY_FIRST's modules first, then the rest most tests first (xdist's own order), each
+    module's tests in their own order."""
+    rank = {path: i for i, path in enumerate(HEAVY_FIRST)}
+    module = {id(item): item.nodeid.split("::")[0] for item in items}
+    count = collections.Counter(module.values())
+    items.sort(key=lambda item: (rank.get(module[id(item)], len(rank)), -count[module[id(item)]]))
 
 
 def pytest_unconfigure(config):

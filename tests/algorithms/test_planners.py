@@ -48,11 +48,17 @@ CASES += [("pendulum_swingup", "predictive_sampling", "native"), ("cartpole_swin
 CASES += [("point_mass", "mppi", "native"), ("pendulum_swingup", "mppi", "mjx")]
 
 
+@functools.cache
+def closed_loop_run(env: str, planner: str, backend: str) -> tuple[realtime.Problem, closed_loop.Result, dict]:
+    """The case's problem and its run from key 0: one compile, shared with the hooks test."""
+    setup = setup_for(env, planner, backend)
+    return setup, *realtime.offline(setup, jax.random.key(0), OPTIMIZED)
+
+
 @pytest.mark.parametrize(("env", "planner", "backend"), CASES)
 def test_planner_solves_env_closed_loop(env, planner, backend):
-    setup = setup_for(env, planner, backend)
+    setup, result, stats = closed_loop_run(env, planner, backend)
     assert setup.physics == backend
-    result, stats = realtime.offline(setup, jax.random.key(0), OPTIMIZED)
     solved, score = setup.success(jax.device_get(result.states))
     print(f"{env} {planner} {backend}: score {score:.3f}, {stats['plan_latency_ms']:.1f} ms per replan on the CPU")
     assert solved, f"{env} with {planner}: score {score}"
@@ -142,14 +148,11 @@ def test_plan_cli_runs_in_real_time_and_writes_its_files(tmp_path):
 def test_pre_sim_step_and_post_rollout_hooks_reach_the_simulation():
     """point_mass's gusts push the mass before every simulation step (xfrc_applied), and
     the post-rollout hook keeps the cost the planner predicted for its chosen plan."""
-    setup = setup_for("point_mass", "mppi", "native")
+    setup, windy, _ = closed_loop_run("point_mass", "mppi", "native")  # the closed-loop case's run, gusts on
     assert "xfrc_applied" in setup.tasks[0].engine.held  # held at what the hook set, for the step's C rollout
-    calm = dataclasses.replace(setup, hooks=dataclasses.replace(setup.hooks, pre_sim_step=None), seconds=0.4)
-    windy = dataclasses.replace(setup, seconds=0.4)
-    states = {}
-    for name, problem in (("calm", calm), ("windy", windy)):
-        result, _ = realtime.offline(problem, jax.random.key(0))
-        states[name] = jax.device_get(result.states)
+    calm = dataclasses.replace(setup, hooks=dataclasses.replace(setup.hooks, pre_sim_step=None))
+    states = {"windy": jax.device_get(windy.states)}
+    states["calm"] = jax.device_get(realtime.offline(calm, jax.random.key(0), OPTIMIZED)[0].states)
     assert setup.sim_task.mj_model.body(point_mass.MASS_BODY).name == "mass"
     wind = states["windy"].data.xfrc_applied[:, point_mass.MASS_BODY, :2]
     assert np.all(np.abs(wind) > 0) and np.std(wind) < 0.2  # N(0, 0.05 N), fresh every step

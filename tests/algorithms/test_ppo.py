@@ -5,6 +5,7 @@ networks and optimizers, an import that loads no harness."""
 from __future__ import annotations
 
 import dataclasses
+import functools
 import json
 import subprocess
 import sys
@@ -25,6 +26,7 @@ from mjzoo.harness import training
 from mjzoo.learning import networks
 
 SMALL = ppo.Config(num_envs=8, unroll_length=8, num_minibatches=2, num_epochs=1, total_steps=8 * 8 * 4)
+BF16 = dataclasses.replace(SMALL, compute_dtype="bfloat16")
 HP = ppo.Hyperparams()
 
 
@@ -134,14 +136,15 @@ def test_update_changes_parameters_and_normalizer(pendulum, small_update):
     assert float(new.obs_stats.count) == SMALL.num_envs * SMALL.unroll_length
 
 
-def test_a_bfloat16_update_keeps_float32_state_and_moves_like_float32(pendulum):
+def test_a_bfloat16_update_keeps_float32_state_and_moves_like_float32(pendulum, small_update):
     """Mixed precision: the train state stays float32, and one update's step on the
     params is the float32 update's to within bfloat16's rounding."""
+    assert SMALL.compute_dtype == "float32"  # so the float32 arm is the module's compiled update
+    updates = {"float32": small_update[0], "bfloat16": jax.jit(functools.partial(ppo.update, BF16))}
     states = {}
-    for dtype in ("float32", "bfloat16"):
-        config = dataclasses.replace(SMALL, compute_dtype=dtype)
-        state = ppo.init(config, pendulum, HP, jax.random.key(2))
-        states[dtype] = (state, jax.jit(ppo.update, static_argnums=0)(config, pendulum, state)[0])
+    for dtype, update in updates.items():
+        state = ppo.init(dataclasses.replace(SMALL, compute_dtype=dtype), pendulum, HP, jax.random.key(2))
+        states[dtype] = (state, update(pendulum, state)[0])
     (before, f32), (_, bf16) = states["float32"], states["bfloat16"]
     assert all(x.dtype == jnp.float32 for x in jax.tree.leaves(bf16.params))
     steps = [jax.tree.leaves(jax.tree.map(jnp.subtract, s.params, before.params)) for s in (f32, bf16)]
@@ -162,9 +165,9 @@ def test_deployable_policy_acts_within_ctrlrange(pendulum):
     assert float(jnp.std(draws)) > 0.05
 
 
-def test_vmapped_seeds_equal_separate_runs(pendulum):
+def test_vmapped_seeds_equal_separate_runs(pendulum, small_update):
     keys = jax.random.split(jax.random.key(3), 2)
-    update = jax.jit(lambda task, s: ppo.update(SMALL, task, s))
+    update, _ = small_update  # the lone runs: the module's compiled update, not a copy compiled again
     batched = jax.jit(jax.vmap(lambda s: ppo.update(SMALL, pendulum, s)))
     states, _ = batched(jax.vmap(lambda k: ppo.init(SMALL, pendulum, HP, k))(keys))
     for i, key in enumerate(keys):
