@@ -125,7 +125,10 @@ def task(
         step, observation) before the terms: `rewards`, `costs` and `terminate` see the
         states they make (``info["command"]``), and the guard and time limit wrap them.
       time_limit: steps after which an episode is truncated; None: no limit.
-      params: named numbers (scalars or arrays) given to every function as `p`.
+      params: named numbers (scalars or arrays) given to every function as `p`. A
+        bound may be infinite (a healthy height range ``(0.7, inf)``, a fall angle
+        ``inf``: never binds); NaN is refused, and so is an infinite weight (a
+        parameter a term names as its weight), whose product with 0 is NaN.
       check: trace a reset and a transition abstractly at construction (below); False
         for a part that combinators added later complete (an observation that reads
         what a tracker wrapped around it keeps).
@@ -166,6 +169,11 @@ def task(
                     raise ValueError(
                         f"mjzoo.task: the weight of {kind} term {name!r} names the parameter {weight!r}, "
                         f"which params lacks; params: {', '.join(p) or 'none'}"
+                    )
+                if not np.all(np.isfinite(p[weight])):
+                    raise ValueError(
+                        f"mjzoo.task: the weight of {kind} term {name!r}, params[{weight!r}]="
+                        f"{np.asarray(p[weight]).tolist()}, must be finite"
                     )
             else:
                 value = checks.number("mjzoo.task", f"the weight of {name!r}", weight)
@@ -422,12 +430,13 @@ def _dtype(leaf):
 
 
 def _params(values: Mapping[str, Any]) -> dict[str, Array]:
+    """`values` as float32 leaves: numbers, +-inf allowed (bounds), NaN never."""
     p = {}
     for name, value in values.items():
         _identifier("params", name)
         array = np.asarray(value, np.float64) if _numeric(value) else None
-        if array is None or not np.all(np.isfinite(array)):
-            raise ValueError(f"mjzoo.task: params[{name!r}]={value!r} must be finite numbers")
+        if array is None or np.any(np.isnan(array)):
+            raise ValueError(f"mjzoo.task: params[{name!r}]={value!r} must be numbers (+-inf for a bound), not NaN")
         p[name] = jnp.asarray(array, jnp.float32)
     return p
 

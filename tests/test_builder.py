@@ -153,7 +153,9 @@ def _vector(p, model, state, action, next_state):
         (dict(rewards={"push": (push, "gian")}), ValueError, "names the parameter 'gian', which params lacks"),
         (dict(rewards={"a b": push}), ValueError, "'a b' must be a Python identifier"),
         (dict(params={"reach_weight": 1.0}), ValueError, "'reach_weight' is given in params and as"),
-        (dict(params={"gain": "x"}), ValueError, r"params\['gain'\]='x' must be finite numbers"),
+        (dict(params={"gain": "x"}), ValueError, r"params\['gain'\]='x' must be numbers"),
+        (dict(params={"gain": 0.5, "limit": [0.0, float("nan")]}), ValueError, r"params\['limit'\].*not NaN"),
+        (dict(params={"gain": float("inf")}), ValueError, r"weight of reward term 'push', params\['gain'\]=inf"),
         (dict(observe=3), TypeError, "observe must be callable"),
         (dict(rewards={"reach": (reach, float("nan"))}), ValueError, "weight of 'reach'"),
         (dict(rewards={"vector": (_vector, 1.0)}), ValueError, r"reward term 'vector' has shape \(2,\)"),
@@ -162,6 +164,15 @@ def _vector(p, model, state, action, next_state):
 def test_construction_names_the_mistake(kwargs, error, message):
     with pytest.raises(error, match=message):
         make(**kwargs)
+
+
+def test_an_infinite_bound_is_a_parameter():
+    """A published healthy range ``(0.7, inf)``: an infinite limit that never binds."""
+    task = make(params={"goal_low": 0.5, "gain": 0.5, "limit": float("inf")})
+    assert float(mjzoo.params(task)["limit"]) == float("inf")
+    _, after = step(task, jax.random.key(0))
+    assert not bool(after.terminated)
+    assert bool(step(task.with_params(limit=0.005), jax.random.key(0))[1].terminated)  # the same trace
 
 
 def test_a_lambda_or_nested_function_warns_of_retracing_and_a_module_function_does_not():

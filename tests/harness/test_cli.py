@@ -23,6 +23,7 @@ from mjzoo.harness import checkpoints
 from mjzoo.harness import cli
 from mjzoo.harness import rendering
 from mjzoo.harness import training
+from mjzoo.harness.cli.arguments import parse_assignments
 
 ENV = "pendulum_swingup"
 TINY = dict(num_envs=8, unroll_length=8, num_minibatches=2, num_epochs=1, total_steps=128)
@@ -62,6 +63,18 @@ def write_run(directory: Path, algorithm: str = "ppo", **config) -> Path:
     fields = {"config": training.config_dict(structure), "hyperparams": training.hyperparams_dict(numbers)}
     (directory / "config.json").write_text(json.dumps({"algorithm": algorithm, **fields, "settings": {}}))
     return directory
+
+
+def test_assignments_read_python_literals_and_inf():
+    pairs = ("a=1", "b=(64, 64)", "c=swish", "d=(0.7, inf)", "e=-inf", "f=info")
+    assert parse_assignments(pairs, "--env-overrides") == {
+        "a": 1,
+        "b": (64, 64),
+        "c": "swish",
+        "d": (0.7, float("inf")),  # a published healthy range
+        "e": -float("inf"),
+        "f": "info",
+    }
 
 
 def damage(directory: Path, step: int) -> None:

@@ -20,6 +20,7 @@ import mjzoo.envs
 from mjzoo import learning
 from mjzoo.algorithms import ppo
 from mjzoo.algorithms import predictive_sampling
+from mjzoo.harness import checkpoints
 from mjzoo.harness import cli
 from mjzoo.harness import datasets
 from mjzoo.harness import training
@@ -27,11 +28,20 @@ from mjzoo.harness import training
 MODULE = "mjzoo_cli_user_tasks"  # unique: imported modules stay in sys.modules
 SPEC = f"{MODULE}:make_pendulum"
 USER_TASKS = """
+import jax.numpy as jnp
 import mjzoo, mjzoo.envs
 from mjzoo.envs import base
+from mjzoo.envs.base import ASSETS
 
 def make_pendulum(*, episode_steps: int = 20, upright_weight: float = 1.0) -> mjzoo.Task:
     return mjzoo.envs.make("pendulum_swingup", episode_steps=episode_steps, upright_weight=upright_weight)
+
+def upright(p, model, state, action, next_state):
+    return jnp.cos(next_state.data.qpos[0] - p["target"])
+
+def make_own(**params):  # as docs/own-task.md writes a factory: its keywords are task parameters
+    return mjzoo.task(ASSETS / "pendulum.xml", rewards={"upright": upright}, time_limit=20,
+                      params={"target": 3.14, **params}, ctrl_dt=0.02)
 
 def make_heavy(mass: float, episode_steps: int = 20):
     return make_pendulum(episode_steps=episode_steps)
@@ -178,6 +188,17 @@ def cli_run(user_dir) -> Path:
         patch.chdir(user_dir)
         cli.main(["train", "ppo", SPEC, "--out", "runs/cli", "--env-overrides", "upright_weight=2.0", *TRAIN])
     return user_dir / "runs" / "cli"
+
+
+def test_resume_builds_a_factorys_task_as_the_first_run_did(in_user_dir):
+    """A ``**params`` factory takes any keyword as a task parameter: a resume passes it
+    task.json's overrides alone, no physics `impl` (which it would take as a number)."""
+    own, out = f"{MODULE}:make_own", in_user_dir / "runs" / "own"
+    first = [f"{k}={v}" for k, v in {**TINY, "total_steps": 64}.items()]
+    cli.main(["train", "ppo", own, "--out", str(out), *TRAIN, "--config", *first, "--updates-per-chunk", "1"])
+    assert checkpoints.latest_step(out / "checkpoints") == 64
+    cli.main(["train", "ppo", own, "--resume", str(out), "--config", "total_steps=128"])
+    assert checkpoints.latest_step(out / "checkpoints") == 128
 
 
 def test_train_writes_the_spec_and_eval_runs_its_episode_length(capsys, cli_run, in_user_dir, monkeypatch):

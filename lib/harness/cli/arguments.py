@@ -52,14 +52,15 @@ def at_least_one(**flags: int) -> None:
 
 
 def parse_assignments(pairs: tuple[str, ...], what: str) -> dict[str, Any]:
-    """["a=1", "b=(64, 64)", "c=swish"] -> {"a": 1, "b": (64, 64), "c": "swish"}."""
+    """["a=1", "b=(64, 64)", "c=swish", "d=(0.7, inf)"] -> {"a": 1, "b": (64, 64), "c":
+    "swish", "d": (0.7, inf)}: ``inf`` is a number (an unbounded limit)."""
     parsed = {}
     for pair in pairs:
         name, sep, text = pair.partition("=")
         if not sep or not name:
             raise UsageError(f"{what}: expected NAME=VALUE, got {pair!r}")
         try:
-            parsed[name] = ast.literal_eval(text)
+            parsed[name] = ast.literal_eval(re.sub(r"\binf\b", "1e999", text))  # 1e999 reads as inf
         except (ValueError, SyntaxError):
             parsed[name] = text  # a bare word: a string
     return parsed

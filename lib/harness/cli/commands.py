@@ -5,6 +5,7 @@ trajectories.py). Each takes a task spec: a registered env, or ``package.module:
 from __future__ import annotations
 
 import dataclasses
+import inspect
 import json
 import time
 from pathlib import Path
@@ -245,8 +246,9 @@ def _resumed(
     impl: str | None,
 ) -> tuple[Path, dict, dict, dict]:
     """(out, env overrides, config values, run settings) of the run `--resume` continues,
-    checked against what the command line says of it. It keeps its physics
-    implementation (config.json) where the env takes `impl`, unless --impl names one."""
+    checked against what the command line says of it. Its task is built as the first run
+    built it (task.json's overrides), on the physics implementation it ran on
+    (config.json) where the env names `impl` as an option, unless --impl names one."""
     if out is not None and out != resume:
         raise UsageError(f"--out {out} and --resume {resume}: a resumed run stays in its directory; give one")
     if env_overrides:
@@ -263,14 +265,23 @@ def _resumed(
 
     kept = {f.name for f in dataclasses.fields(training.Settings)} - set(_NOT_KEPT)
     run_settings = {**RUN_DEFAULTS, **{k: v for k, v in info.get("settings", {}).items() if k in kept}}
-    # The physics it ran on, where the env lets it be chosen (a factory without `impl` chose its own).
-    physics_impl = impl or (info.get("physics", {}).get("impl") if mjzoo.envs.accepts(env, "impl") else None)
+    physics_impl = impl or (info.get("physics", {}).get("impl") if _names_impl(env) else None)
     return (
         resume,
         {**saved["overrides"], **({"impl": physics_impl} if physics_impl else {})},
         config_values,
         run_settings,
     )
+
+
+def _names_impl(env: str) -> bool:
+    """Whether `env` takes the physics option `impl`: a registered env, or a factory with
+    an `impl` keyword. A factory's ``**params`` may be its task's parameters (as
+    docs/own-task.md writes one), which a physics option passed in would break."""
+    if ":" not in env or env.startswith(mjzoo.envs.PLAYGROUND):
+        return mjzoo.envs.accepts(env, "impl")
+    parameter = inspect.signature(mjzoo.envs.factory(env)).parameters.get("impl")
+    return parameter is not None and parameter.kind in (parameter.POSITIONAL_OR_KEYWORD, parameter.KEYWORD_ONLY)
 
 
 def evaluate(

@@ -18,7 +18,7 @@ one jitted `lax.scan` over a few control steps per call, paced to the chosen spe
 which environment of a batch to show (all side by side, shifted in x, or one), a
 camera that tracks a body, a live plot of each weighted reward term, a slider for every
 float the task names (`mjzoo.params`; applied with `Task.with_params`, so nothing
-compiles again), one slider per actuator (``controls="sliders"``), a planner's Config
+compiles again; an infinite bound is shown as text), one slider per actuator (``controls="sliders"``), a planner's Config
 floats (a separate folder: they are static, so a change compiles the planner again,
 keeping its state), and a recording's timeline, loop switch and speed.
 

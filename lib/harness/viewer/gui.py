@@ -10,11 +10,14 @@ setting ``.value`` from Python runs the same callback a browser's change does.
 
 from __future__ import annotations
 
+import math
 from typing import TYPE_CHECKING
 from typing import Any
 
 import mujoco
 import numpy as np
+from viser import GuiSliderHandle
+from viser import GuiTextHandle
 from viser import uplot
 
 from mjzoo.harness.viewer.sources import ctrl_range
@@ -140,16 +143,25 @@ def _set_control(viewer: Viewer, index: int, value: float) -> None:
 
 
 def _parameter_sliders(viewer: Viewer, controls: dict[str, Any]) -> None:
-    """The task's float parameters, a slider per scalar or vector entry."""
+    """The task's float parameters, a slider per scalar or vector entry (an infinite
+    bound, which no slider range holds, is shown as text)."""
     g = viewer.server.gui
     with g.add_folder("Task parameters (no recompile)"):
         for name, value in viewer.source.parameters().items():
             for i, entry in enumerate(value.reshape(-1)):
                 label = name if value.ndim == 0 else f"{name}[{i}]"
-                low, high, step = slider_range(float(entry))
-                handle = g.add_slider(label, low, high, step, float(entry))
+                handle = _number(viewer, label, float(entry))
                 controls[f"param/{label}"] = handle
-                handle.on_update(lambda _, n=name, i=i, h=handle: _set_parameter(viewer, n, i, h.value))
+                if isinstance(handle, GuiSliderHandle):
+                    handle.on_update(lambda _, n=name, i=i, h=handle: _set_parameter(viewer, n, i, h.value))
+
+
+def _number(viewer: Viewer, label: str, value: float) -> GuiSliderHandle | GuiTextHandle:
+    """A slider around `value`, or for a non-finite one (``inf``: a bound that never
+    binds) its value as read-only text."""
+    if not math.isfinite(value):
+        return viewer.server.gui.add_text(label, f"{value:g}", disabled=True)
+    return viewer.server.gui.add_slider(label, *slider_range(value), value)
 
 
 def _set_parameter(viewer: Viewer, name: str, index: int, value: float) -> None:
@@ -166,10 +178,9 @@ def _config_sliders(viewer: Viewer, controls: dict[str, Any]) -> None:
     g = viewer.server.gui
     with g.add_folder("Planner hyperparameters"):
         for name, value in config_floats(viewer.source.hyperparams).items():
-            low, high, step = slider_range(value)
-            handle = g.add_slider(name, low, high, step, value)
-            controls[f"config/{name}"] = handle
-            handle.on_update(lambda _, n=name, h=handle: _set_config(viewer, controls, n, h.value))
+            handle = controls[f"config/{name}"] = _number(viewer, name, value)
+            if isinstance(handle, GuiSliderHandle):
+                handle.on_update(lambda _, n=name, h=handle: _set_config(viewer, controls, n, h.value))
 
 
 def _set_config(viewer: Viewer, controls: dict[str, Any], name: str, value: float) -> None:
