@@ -10,7 +10,7 @@ randomized physics; on a terrain, from the hardest row) and measures velocity tr
     mean |v_xy - cmd_xy| <= 0.15 m/s,  mean |w_z - cmd_yaw| <= 0.2 rad/s,  no falls
 
 and its time to tracking is the wall-clock from the start of the process's work on the
-variant (setup and compile included). The goal (issue 46): flat terrain within 5
+variant (setup and compile included). The goal: flat terrain within 5
 minutes, rough within 15 (anchors: Playground's Go1 joystick in 7 min and Berkeley
 Humanoid in 17 on an RTX 4090; mjlab's G1 flat velocity within ~1 h on an RTX 5090).
 

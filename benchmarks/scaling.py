@@ -8,7 +8,7 @@ the harness shards the env batch over every local device (`mjzoo.harness.devices
 each minibatch step is split too, unless ``--config split_minibatches=False``). Reported per count: the median training steps/s
 after the first chunk, its speedup over one device and its share of linear scaling,
 the time to the threshold (compile included; every chunk of about 3.3M env steps is
-evaluated) and the final evaluation return. Goal (issue 19): >= 1.85x on 2 GPUs and
+evaluated) and the final evaluation return. Goal: >= 1.85x on 2 GPUs and
 >= 3.5x on 4. With `--processes`, each device gets a process of its own, joined by
 `jax.distributed` on localhost, as on several hosts. MuJoCo Warp (`--impl warp`) runs
 here on one GPU only: split over two, its program crashed XLA's GPU compiler, in one

@@ -7,6 +7,7 @@ from __future__ import annotations
 
 import ast
 import importlib
+import re
 import subprocess
 import sys
 from pathlib import Path
@@ -189,3 +190,22 @@ def test_the_package_imports_without_circles():
     time sits above it."""
     graph = import_graph()
     assert cycle(graph) is None, f"an import cycle: {' -> '.join(cycle(graph))}"
+
+
+def test_project_files_speak_of_the_project_not_its_tracker():
+    """A tracker's issue number in the README, docs or code means nothing to a user, who
+    has no tracker: say what it was (results files keep their recorded notes)."""
+    pattern = re.compile(r"\bissues? #?\d+", re.IGNORECASE)
+    files = [ROOT / "README.md", *(ROOT / "docs").rglob("*.md")]
+    files += [
+        p
+        for folder in ("lib", "algorithms", "envs", "benchmarks", "scripts", "tests")
+        for p in (ROOT / folder).rglob("*.py")
+    ]
+    found = [
+        f"{path.relative_to(ROOT)}:{number}: {line.strip()}"
+        for path in files
+        for number, line in enumerate(path.read_text().splitlines(), 1)
+        if pattern.search(line)
+    ]
+    assert not found, "\n".join(found)
