@@ -25,7 +25,6 @@ physics; overrides change weights, targets, episode length and physics options
 from __future__ import annotations
 
 import dataclasses
-import difflib
 import functools
 import importlib
 import inspect
@@ -38,6 +37,7 @@ from typing import Callable
 
 import numpy as np
 
+from mjzoo import checks
 from mjzoo import motion
 from mjzoo import physics
 from mjzoo.envs import base
@@ -327,7 +327,9 @@ def make(spec: str, **overrides: Any) -> Task:
         allowed = set(defaults(spec)) | set(physics.OPTIONS)
         unknown = sorted(set(overrides) - allowed)
         if unknown:
-            raise TypeError(f"{spec}: unknown override(s) {unknown}; allowed: {sorted(allowed)}")
+            raise TypeError(
+                f"{spec}: unknown override(s) {unknown}{checks.did_you_mean(unknown, allowed)}; allowed: {sorted(allowed)}"
+            )
     for key, value in overrides.items():
         if key in parameters and parameters[key].kind in _KEYWORDS:
             expected = _expected_type(parameters[key], value)
@@ -345,7 +347,8 @@ def _check_arguments(spec: str, parameters: dict[str, inspect.Parameter], overri
     open_ended = any(p.kind == inspect.Parameter.VAR_KEYWORD for p in parameters.values())
     unknown = [] if open_ended else sorted(set(overrides) - set(named))
     if unknown:
-        raise TypeError(f"{spec}: unknown override(s) {unknown}; {spec.partition(':')[2]} takes {named}")
+        hint = checks.did_you_mean(unknown, named)
+        raise TypeError(f"{spec}: unknown override(s) {unknown}{hint}; {spec.partition(':')[2]} takes {named}")
     missing = [k for k in named if parameters[k].default is parameters[k].empty and k not in overrides]
     if missing:
         raise TypeError(f"{spec}: required argument(s) {missing} not given; {spec.partition(':')[2]} takes {named}")
@@ -394,9 +397,7 @@ def factory(spec: str) -> Callable[..., Task]:
         return _imported(spec)
     name = spec
     if name not in _REGISTRY:
-        close = difflib.get_close_matches(name, _REGISTRY, n=1)
-        hint = f" (did you mean {close[0]!r}?)" if close else ""
-        raise KeyError(f"unknown env {name!r}{hint}; registered envs: {names()}")
+        raise KeyError(f"unknown env {name!r}{checks.did_you_mean([name], _REGISTRY)}; registered envs: {names()}")
     return _REGISTRY[name].make
 
 

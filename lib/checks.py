@@ -14,6 +14,7 @@ values it can see on the host and leaves the rest.
 
 from __future__ import annotations
 
+import difflib
 import functools
 import math
 import numbers as _numbers
@@ -37,6 +38,7 @@ __all__ = [
     "fields",
     "ranges",
     "host_value",
+    "did_you_mean",
     "RetraceHazardWarning",
     "retrace_hazard",
 ]
@@ -207,3 +209,15 @@ def _is_numeric(cell) -> bool:
 
 def _preview(values: list) -> str:
     return ", ".join(repr(v) if _is_real(v) else f"an array {getattr(v, 'shape', ())}" for v in values[:3])
+
+
+def did_you_mean(unknown: Any, known: Any) -> str:
+    """`` (did you mean 'num_envs'?)`` for the first of the `unknown` names (an iterable
+    of strings) that is close to one of the `known` names, else ``""``: the hint an
+    error message about a misspelled name ends with."""
+    known = [str(k) for k in known]
+    for name in unknown:
+        close = difflib.get_close_matches(str(name), known, n=1)
+        if close:
+            return f" (did you mean {close[0]!r}?)"
+    return ""

@@ -15,6 +15,8 @@ from typing import Any
 import jax
 import jax.numpy as jnp
 
+from mjzoo import checks
+
 __all__ = ["INF", "as_leaves", "split_fields"]
 
 INF = float("inf")  # a number that switches a clip off, so the switch can be swept too
@@ -29,7 +31,8 @@ def split_fields(
     number is a ValueError (Hyperparams lets None pass, as JAX rebuilds pytrees with it)."""
     unknown = sorted(set(fields) - structure - numbers)
     if unknown:
-        raise ValueError(f"{where}: unknown field(s) {unknown}; fields: {sorted(structure | numbers)}")
+        known = sorted(structure | numbers)
+        raise ValueError(f"{where}: unknown field(s) {unknown}{checks.did_you_mean(unknown, known)}; fields: {known}")
     config = {k: v for k, v in fields.items() if k in structure}
     hyper = {k: (INF if v is None and k in off_at_inf else v) for k, v in fields.items() if k in numbers}
     for name in [k for k, v in hyper.items() if v is None]:

@@ -266,7 +266,9 @@ def configure(planner: ModuleType, fields: Mapping[str, Any]) -> tuple[SamplingC
     owner = {f.name: cls for cls in classes for f in dataclasses.fields(cls)}
     unknown = sorted(set(fields) - set(owner))
     if unknown:
-        raise ValueError(f"{name}: unknown field(s) {unknown}; fields: {sorted(owner)}")
+        raise ValueError(
+            f"{name}: unknown field(s) {unknown}{checks.did_you_mean(unknown, owner)}; fields: {sorted(owner)}"
+        )
     split: dict[type, dict[str, Any]] = {cls: {} for cls in classes}
     for field, value in fields.items():
         hint = typing.get_type_hints(owner[field])[field]

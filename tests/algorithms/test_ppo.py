@@ -66,7 +66,8 @@ def test_configure_splits_one_flat_dict_and_names_unknown_fields():
     assert config == ppo.Config(num_envs=8, unroll_length=8, num_minibatches=2)
     assert hp == ppo.Hyperparams(learning_rate=1e-3, max_grad_norm=float("inf"))  # None: off, as before
     with pytest.raises(
-        ValueError, match=r"ppo.configure: unknown field\(s\) \['lerning_rate'\]; fields: \[.*'learning_rate'"
+        ValueError,
+        match=r"ppo.configure: unknown field\(s\) \['lerning_rate'\] \(did you mean 'learning_rate'\?\); fields: \[.*'learning_rate'",
     ):
         ppo.configure(lerning_rate=1e-3)
     with pytest.raises(ValueError, match="ppo.Hyperparams: gae_lambda=2.0 is invalid"):

@@ -11,6 +11,7 @@ import pytest
 
 import mjzoo
 import mjzoo.envs
+from mjzoo import checks
 
 
 def test_names_and_unknown_name():
@@ -29,7 +30,8 @@ def test_names_and_unknown_name():
 
 def test_unknown_override_lists_allowed():
     with pytest.raises(
-        TypeError, match=r"unknown override\(s\) \['upright_wieght'\]; allowed: .*'ctrl_dt'.*'upright_weight'"
+        TypeError,
+        match=r"unknown override\(s\) \['upright_wieght'\] \(did you mean 'upright_weight'\?\); allowed: .*'ctrl_dt'.*'upright_weight'",
     ):
         mjzoo.envs.make("cartpole_swingup", upright_wieght=2.0)
 
@@ -193,3 +195,11 @@ def test_an_override_of_a_compatible_type_is_accepted(monkeypatch):
         with pytest.raises(TypeError, match=message):
             mjzoo.envs.make("typed", **overrides)
     assert mjzoo.envs.make("cartpole_balance", upright_weight=2).action_size == 1
+
+
+def test_a_misspelled_name_gets_the_nearest_known_one():
+    assert checks.did_you_mean(["num_env"], ["num_envs", "num_epochs", "seed"]) == " (did you mean 'num_envs'?)"
+    assert checks.did_you_mean(["zzz", "lerning_rate"], ["learning_rate"]) == " (did you mean 'learning_rate'?)"
+    assert checks.did_you_mean(["nonsense"], ["num_envs", "seed"]) == ""
+    with pytest.raises(KeyError, match=r"unknown env 'cartpole_balanse' \(did you mean 'cartpole_balance'\?\)"):
+        mjzoo.envs.make("cartpole_balanse")

@@ -94,6 +94,7 @@ def damage(directory: Path, step: int) -> None:
         (["plan", "mppi", "cartpole_balance"], ["'cartpole_balance' has no planning setup", "pendulum_swingup"]),
         (["train", "ppo", ENV, "--config", "num_envs=-3"], ["num_envs=-3", "integer >= 1"]),
         (["train", "ppo", ENV, "--config", "nonsense=1"], ["--config: unknown field(s) ['nonsense']", "num_envs"]),
+        (["train", "ppo", ENV, "--config", "num_env=8"], ["unknown field(s) ['num_env'] (did you mean 'num_envs'?)"]),
         (["train", "ppo", ENV, "--config", "num_envs"], ["--config: expected NAME=VALUE, got 'num_envs'"]),
         (["train", "ppo", ENV, "--config", "learning_rate=abc"], ["learning_rate='abc' must be a number"]),
         (

@@ -465,7 +465,11 @@ def test_configure_splits_a_flat_dict_into_structure_and_numbers():
 @pytest.mark.parametrize(
     "module,fields,message",
     [
-        (mppi, {"temprature": 0.1}, r"^mppi: unknown field\(s\) \['temprature'\]; fields: .*'temperature'"),
+        (
+            mppi,
+            {"temprature": 0.1},
+            r"^mppi: unknown field\(s\) \['temprature'\] \(did you mean 'temperature'\?\); fields: .*'temperature'",
+        ),
         (cem, {"temperature": 0.1}, r"^cem: unknown field\(s\) \['temperature'\]"),
         (mppi, {"num_samples": "many"}, r"^mppi: num_samples='many' is invalid; expected an int"),
         (mppi, {"num_samples": 1.5}, r"num_samples=1.5 is invalid; expected an int"),

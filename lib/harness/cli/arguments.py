@@ -20,6 +20,7 @@ from typing import Literal
 import tyro
 
 import mjzoo
+from mjzoo import checks
 
 __all__ = ["UsageError", "as_usage_errors"]
 
@@ -98,7 +99,9 @@ def build_algorithm(
     values = {**mjzoo.envs.hyperparameters(spec, module.__name__.split(".")[-1]), **overrides}
     unknown = sorted(set(values) - set(hints))
     if unknown:
-        raise UsageError(f"{what}: unknown field(s) {unknown}; fields: {sorted(hints)}")
+        raise UsageError(
+            f"{what}: unknown field(s) {unknown}{checks.did_you_mean(unknown, hints)}; fields: {sorted(hints)}"
+        )
     for name, value in values.items():
         values[name] = _as_type(value, hints[name])
         if values[name] is _MISMATCH:
