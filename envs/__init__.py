@@ -298,13 +298,15 @@ def defaults(spec: str) -> dict[str, Any]:
     return {p.name: p.default for p in parameters if p.kind in kinds and p.default is not p.empty}
 
 
-def accepts(spec: str, name: str) -> bool:
+def accepts(spec: str, name: str, *, catch_all: bool = True) -> bool:
     """Whether `make(spec, **{name: ...})` accepts the override `name`: a registered env
     its keyword arguments and the physics options, a user's factory its own keyword
-    arguments (any, with ``**kwargs``), a Playground env its config's entries."""
+    arguments (any, with ``**kwargs``, unless `catch_all` is False: a ``**params`` may
+    hold the task's parameters, which an option meant for something else would break),
+    a Playground env its config's entries."""
     if _is_user(spec):
         parameters = inspect.signature(factory(spec)).parameters
-        return any(p.kind == inspect.Parameter.VAR_KEYWORD for p in parameters.values()) or (
+        return (catch_all and any(p.kind == inspect.Parameter.VAR_KEYWORD for p in parameters.values())) or (
             name in parameters and parameters[name].kind in _KEYWORDS
         )
     return name in defaults(spec) or (not _is_playground(spec) and name in physics.OPTIONS)

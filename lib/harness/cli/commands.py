@@ -5,7 +5,6 @@ trajectories.py). Each takes a task spec: a registered env, or ``package.module:
 from __future__ import annotations
 
 import dataclasses
-import inspect
 import json
 import time
 from pathlib import Path
@@ -265,23 +264,15 @@ def _resumed(
 
     kept = {f.name for f in dataclasses.fields(training.Settings)} - set(_NOT_KEPT)
     run_settings = {**RUN_DEFAULTS, **{k: v for k, v in info.get("settings", {}).items() if k in kept}}
-    physics_impl = impl or (info.get("physics", {}).get("impl") if _names_impl(env) else None)
+    # A factory's **params does not count: it may be the task's parameters (docs/own-task.md's).
+    named = mjzoo.envs.accepts(env, "impl", catch_all=False)
+    physics_impl = impl or (info.get("physics", {}).get("impl") if named else None)
     return (
         resume,
         {**saved["overrides"], **({"impl": physics_impl} if physics_impl else {})},
         config_values,
         run_settings,
     )
-
-
-def _names_impl(env: str) -> bool:
-    """Whether `env` takes the physics option `impl`: a registered env, or a factory with
-    an `impl` keyword. A factory's ``**params`` may be its task's parameters (as
-    docs/own-task.md writes one), which a physics option passed in would break."""
-    if ":" not in env or env.startswith(mjzoo.envs.PLAYGROUND):
-        return mjzoo.envs.accepts(env, "impl")
-    parameter = inspect.signature(mjzoo.envs.factory(env)).parameters.get("impl")
-    return parameter is not None and parameter.kind in (parameter.POSITIONAL_OR_KEYWORD, parameter.KEYWORD_ONLY)
 
 
 def evaluate(
