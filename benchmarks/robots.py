@@ -137,7 +137,16 @@ def train(
     return row
 
 
-def summarize(variant, fields, seeds, curves, eval_envs, eval_steps, start, smoke) -> dict[str, Any]:
+def summarize(
+    variant: str,
+    fields: dict[str, Any],
+    seeds: list[int],
+    curves: list[list[dict]],
+    eval_envs: int,
+    eval_steps: int,
+    start: float,
+    smoke: bool,
+) -> dict[str, Any]:
     """The benchmark's row for a variant from the seeds' curves so far."""
     robot, terrain = variant.split(":")
     runs = []

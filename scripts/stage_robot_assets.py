@@ -24,10 +24,10 @@ def stage(robot: str, out: Path) -> int:
     spec = scenes.spec(robot)
     used = {Path(item.file).name for group in (spec.meshes, spec.textures, spec.hfields) for item in group if item.file}
     name = models.canonical(robot)
-    root = out / models.WHEELS[-1] / models._WHEEL_ROOT  # where `models` looks inside a wheel
+    root = out / models.WHEELS[-1] / models.WHEEL_ROOT  # where `models` looks inside a wheel
     places = {
-        models.playground_xmls(robot): root / "mujoco_playground" / "_src" / models.PLAYGROUND_FOLDERS[name] / "xmls",
-        models.menagerie(robot): root / "mujoco_menagerie" / name,
+        models.playground_xmls(robot): root / models.WHEEL_PLAYGROUND / models.PLAYGROUND_FOLDERS[name] / "xmls",
+        models.menagerie(robot): root / models.WHEEL_MENAGERIE / name,
     }
     copied = 0
     for source, target in places.items():

