@@ -106,7 +106,7 @@ def sway(swing):
         (dict(disc_learning_rate=0.0), "amp.Hyperparams: disc_learning_rate=0.0 is invalid"),
         (
             dict(style_wieght=1.0),
-            "amp.configure: unknown field\\(s\\) \\['style_wieght'\\]; fields: \\[.*'style_weight'",
+            "amp.configure: unknown field\\(s\\) \\['style_wieght'\\] \\(did you mean 'style_weight'\\?\\); fields: \\[.*'style_weight'",
         ),
     ],
 )

@@ -366,8 +366,11 @@ class Data(NamedTuple):  # what rendering reads of a trajectory: next_state.data
     mocap_pos: Any
     mocap_quat: Any
 
-class State(NamedTuple):
+class State(NamedTuple):  # and what it reads to end the video at the first episode
     data: Data
+    terminated: Any
+    truncated: Any
+    layers: Any = None
 
 class Trajectory(NamedTuple):
     next_state: State
@@ -375,7 +378,7 @@ class Trajectory(NamedTuple):
 def evaluate(task, s, key, n, steps):
     qpos = jnp.full((4, 1), 0.02) * s.updates  # each evaluation's video differs (the box in view)
     data = Data(jnp.arange(4) * 0.02, qpos, jnp.zeros((4, 0, 3)), jnp.zeros((4, 0, 4)))
-    return learning.Evaluation(jnp.full(n, steps, jnp.float32), jnp.full(n, steps), Trajectory(State(data)))
+    return learning.Evaluation(jnp.full(n, steps, jnp.float32), jnp.full(n, steps), Trajectory(State(data, jnp.zeros(4), jnp.zeros(4))))
 
 algorithm = t.counter(evaluate=evaluate)
 out = Path(sys.argv[1])
