@@ -72,16 +72,22 @@ def check(clip: Clip, mj_model: mujoco.MjModel) -> Clip:
     return clip
 
 
-def velocities_from_positions(qpos: np.ndarray, fps: float, mj_model: mujoco.MjModel) -> np.ndarray:
+def velocities_from_positions(
+    qpos: np.ndarray, fps: float, mj_model: mujoco.MjModel, *, backward: bool = False
+) -> np.ndarray:
     """float64 [T, nv] velocities (per second) of positions `qpos` [T, nq] sampled at
-    `fps`: central differences inside, one-sided at the two ends (what a clip whose
-    velocities were never recorded gets; quaternions through `mj_differentiatePos`)."""
+    `fps` (what a clip whose velocities were never recorded gets; quaternions through
+    `mj_differentiatePos`): central differences inside, one-sided at the two ends; with
+    `backward`, ``qvel[t]`` carries ``qpos[t-1]`` to ``qpos[t]`` as after a MuJoCo step
+    (``qvel[0] = qvel[1]``), which keeps a one-frame jump in one frame."""
     qpos = np.asarray(qpos, np.float64)
     if qpos.ndim != 2 or qpos.shape[1] != mj_model.nq or qpos.shape[0] < 2:
         raise ValueError(
             f"motion.velocities_from_positions: qpos has shape {qpos.shape}; give [T >= 2, nq={mj_model.nq}]"
         )
     d = differences(qpos, fps, mj_model)  # [T-1, nv], d[t] between frames t and t+1
+    if backward:
+        return np.concatenate([d[:1], d])
     return np.concatenate([d[:1], 0.5 * (d[:-1] + d[1:]), d[-1:]])
 
 

@@ -47,7 +47,7 @@ import numpy as np
 
 from mjzoo import names
 from mjzoo.motion.checking import check
-from mjzoo.motion.checking import differences
+from mjzoo.motion.checking import velocities_from_positions
 from mjzoo.motion.clips import Clip
 from mjzoo.motion.resampling import slerp
 
@@ -126,8 +126,7 @@ def load(
             qpos[:, a : a + 4] = to_z_up(qpos[:, a : a + 4])
     qpos = _continuous(qpos, quats)
     qpos, dt = _uniform(who, frames[:, 0], qpos, quats)
-    d = differences(qpos, 1.0 / dt, mj_model)  # [T'-1, nv]: frame t to t+1, per second
-    qvel = np.concatenate([d[:1], d])  # backward: qvel[t] carries qpos[t-1] to qpos[t]
+    qvel = velocities_from_positions(qpos, 1.0 / dt, mj_model, backward=True)
     clip = Clip(
         name=name or Path(path).stem,
         fps=1.0 / dt,
