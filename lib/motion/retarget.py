@@ -94,16 +94,16 @@ class Link:
 # arms and shins are shorter than the scaled human's, so elbows, wrists and knees only
 # steer (low costs); the pelvis and feet are held in place and orientation.
 DEEPMIMIC_TO_G1: dict[str, Link] = {
-    "root": Link("pelvis", 1.0, 1.0),
+    "root": Link("pelvis", 2.0, 2.0),
     "chest": Link("torso_link", 0.0, 0.5),
-    "right_ankle": Link("right_ankle_roll_link", 1.0, 0.5),
-    "left_ankle": Link("left_ankle_roll_link", 1.0, 0.5),
+    "right_ankle": Link("right_ankle_roll_link", 5.0, 2.5),
+    "left_ankle": Link("left_ankle_roll_link", 5.0, 2.5),
     "right_knee": Link("right_knee_link", 0.1),
     "left_knee": Link("left_knee_link", 0.1),
-    "right_elbow": Link("right_elbow_link", 0.1),
-    "left_elbow": Link("left_elbow_link", 0.1),
-    "right_wrist": Link("right_wrist_yaw_link", 0.2),
-    "left_wrist": Link("left_wrist_yaw_link", 0.2),
+    "right_elbow": Link("right_elbow_link", 0.3),
+    "left_elbow": Link("left_elbow_link", 0.3),
+    "right_wrist": Link("right_wrist_yaw_link", 0.5),
+    "left_wrist": Link("left_wrist_yaw_link", 0.5),
 }
 DEEPMIMIC_FEET = ("right_ankle", "left_ankle")
 
@@ -117,7 +117,7 @@ class Config:
     contact_height: float = 0.03  # m: a source sole this close to the floor ...
     contact_speed: float = 0.6  # m/s: ... and slower than this horizontally is in contact
     lock_contacts: bool = True  # a foot in contact in the source stays put
-    posture_cost: float = 1e-2  # per rad, pulling every joint to the robot's standing pose
+    posture_cost: float = 1e-3  # per rad, pulling every joint to the robot's standing pose
     iterations: int = 20  # IK steps per frame at most (the first frame: 10x)
     tolerance: float = 1e-6  # stop a frame's steps when the squared error falls by less
     damping: float = 1e-3  # Levenberg-Marquardt damping of each step
