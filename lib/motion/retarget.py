@@ -218,7 +218,9 @@ def retarget(
 
     # Targets: scaled positions, rest-calibrated orientations, feet raised to the robot's ankles.
     target_pos = scale * pos
-    calib = np.einsum("kji,kjl->kil", src_rest.xmat[src_ids].reshape(-1, 3, 3), rob_rest.xmat[rob_ids].reshape(-1, 3, 3))
+    calib = np.einsum(
+        "kji,kjl->kil", src_rest.xmat[src_ids].reshape(-1, 3, 3), rob_rest.xmat[rob_ids].reshape(-1, 3, 3)
+    )
     target_rot = rot @ calib
     rest_z = rob_rest.xpos[rob_feet, 2]
     target_pos[:, foot_index, 2] += rest_z - scale * src_rest.xpos[src_feet, 2]
