@@ -12,8 +12,12 @@ is given (`amp.make(config, reference)`), not the task. AMP's discriminator, ref
     formats      public formats: IsaacLab humanoid-AMP .npz (`isaaclab_npz`)
     deepmimic_format    DeepMimic's motion text files (`deepmimic_format.load`), y-up to z-up
     measures     style measures: `nearest_window_error`
+    retarget     a clip onto another character (a human's onto a robot) by inverse
+                 kinematics with mink, and its quality (loaded on first use: needs mink,
+                 ``pip install 'mjzoo[mocap]'``)
 """
 
+from mjzoo import lazy
 from mjzoo.motion import checking
 from mjzoo.motion import clips
 from mjzoo.motion import deepmimic_format
@@ -58,8 +62,11 @@ __all__ = [
     "references",
     "resample",
     "resampling",
+    "retarget",
     "sample_frame",
     "save",
     "slerp",
     "velocities_from_positions",
 ]
+
+__getattr__, __dir__ = lazy.submodules(__name__, ("retarget",))
