@@ -68,6 +68,17 @@ def test_velocities_from_positions_are_second_order_accurate_and_pass():
         motion.velocities_from_positions(clip.qpos[:, :8], FPS, TORSO)
 
 
+def test_backward_velocities_carry_each_frame_to_the_next_as_a_step_would():
+    clip = analytic(FPS, 20)
+    qvel = motion.velocities_from_positions(clip.qpos, FPS, TORSO, backward=True)
+    for t in (1, 10, 19):  # integrating qpos[t-1] with qvel[t] over 1/fps lands on qpos[t]
+        q = clip.qpos[t - 1].copy()
+        mujoco.mj_integratePos(TORSO, q, qvel[t], 1.0 / FPS)
+        np.testing.assert_allclose(q, clip.qpos[t], atol=1e-9)
+    np.testing.assert_array_equal(qvel[0], qvel[1])
+    motion.check(clip.replace(qvel=qvel), TORSO)
+
+
 def test_joints_in_another_order_or_missing_are_named():
     clip = analytic(FPS, 10, name="walk")
     with pytest.raises(ValueError, match="'walk': joint 1 is 'h2' but the model's joint 1 is 'h1'"):
