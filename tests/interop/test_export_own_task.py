@@ -181,8 +181,12 @@ def test_cli_exports_an_own_task(task, tmp_path, capsys):
     assert loaded.contract["format"] == export.END_TO_END
     out = loaded.act({"qpos": np.zeros(2), "qvel": np.zeros(2), "site_xpos": np.zeros((1, 3)), "info['goal']": [0, 0]})
     assert out["action"].shape == (2,)
-    with pytest.raises(SystemExit) as exit_info:
-        cli.main(["export", str(run), "--format", "onnx"])
-    err = capsys.readouterr().err
-    assert exit_info.value.code == 2 and len(err.splitlines()) == 1, err
-    assert "test_export_own_task:observe" in err and "--format jax" in err, err
+    for argv, words in (
+        (["export", str(run), "--format", "onnx"], ("test_export_own_task:observe", "--format jax")),
+        (["sim2sim", str(run), "--policy", str(run / "policy.jaxexport")], ("end-to-end", "--format onnx")),
+    ):
+        with pytest.raises(SystemExit) as exit_info:
+            cli.main(argv)
+        err = capsys.readouterr().err
+        assert exit_info.value.code == 2 and len(err.splitlines()) == 1, err
+        assert all(w in err for w in words), err
