@@ -303,17 +303,6 @@ class _Given(physics.StandIn):
         return self.data
 
 
-@jax.tree_util.register_dataclass
-@dataclasses.dataclass(frozen=True)
-class _Ticking(physics.StandIn):
-    """Physics that only advances the time: a step with it measures the control step, compiling no physics."""
-
-    model: mjx.Model
-
-    def substep(self, data: mjx.Data) -> mjx.Data:
-        return data.replace(time=data.time + self.model.opt.timestep)
-
-
 def _unguarded_step(inner: Task, model, state: State, action: Array, key: Array) -> State:
     return inner.step(model, state, action, key)
 
@@ -462,10 +451,12 @@ def end_to_end(
 
 
 def _control_dt(task: Task, shape: State) -> float:
-    """Seconds per step of `task` (no physics compiled: `_Ticking`)."""
+    """Seconds per step of `task`, with physics that only advances the time (compiling none)."""
+    from mjzoo.planning.native import _Recorder  # the native planner's stand-in, which measures its steps so
+
     start = jax.tree.map(_placeholder, shape)
     action, key = jnp.zeros(task.action_size), jax.random.key(0)
-    return float(jax.jit(lambda: task.step(_Ticking(task.model), start, action, key).data.time - start.data.time)())
+    return float(jax.jit(lambda: task.step(_Recorder(task.model), start, action, key).data.time - start.data.time)())
 
 
 def inputs_of(e2e: EndToEnd, state: State, previous_action: Array | None = None, carry: Array | None = None) -> dict:

@@ -35,20 +35,17 @@ ARM = """
 <mujoco model="arm">
   <compiler angle="radian"/>
   <option timestep="0.01"><flag contact="disable"/></option>
+  <default><joint type="hinge" axis="0 0 1" damping="0.01"/><geom type="capsule" size="0.01"/></default>
   <worldbody>
     <body name="upper">
-      <joint name="shoulder" type="hinge" axis="0 0 1" damping="0.01"/>
-      <geom type="capsule" fromto="0 0 0 0.12 0 0" size="0.01"/>
+      <joint name="shoulder"/><geom fromto="0 0 0 0.12 0 0"/>
       <body name="lower" pos="0.12 0 0">
-        <joint name="elbow" type="hinge" axis="0 0 1" damping="0.01"/>
-        <geom type="capsule" fromto="0 0 0 0.12 0 0" size="0.01"/>
-        <site name="tip" pos="0.12 0 0"/>
+        <joint name="elbow"/><geom fromto="0 0 0 0.12 0 0"/><site name="tip" pos="0.12 0 0"/>
       </body>
     </body>
   </worldbody>
   <actuator>
-    <motor joint="shoulder" gear="0.05" ctrlrange="-1 1" ctrllimited="true"/>
-    <motor joint="elbow" gear="0.05" ctrlrange="-1 2" ctrllimited="true"/>
+    <motor joint="shoulder" gear="0.05" ctrlrange="-1 1"/><motor joint="elbow" gear="0.05" ctrlrange="-1 2"/>
   </actuator>
 </mujoco>
 """
