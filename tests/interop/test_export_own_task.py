@@ -4,8 +4,8 @@ physics state, its observation inside, which plain `jax.export` runs and C MuJoC
 drives; the contract's formats name the term they cannot describe and say what to do.
 
 Tolerances, from measurements: the deserialized artifact against the in-process PPO
-policy on MJX states of a rollout 1e-6 absolute on actions in [-1, 1] (the same float32
-program, lowered once more: measured 0 to 1.2e-7); C MuJoCo's observation against the
+policy on MJX states of a rollout 1e-6 absolute on actions in the ctrlrange (the same
+float32 program, lowered once more: measured 0 over 36 states); C MuJoCo's observation against the
 one recomputed by hand from its own data 1e-5 (the artifact reads float32 copies of C's
 float64 fields).
 """
