@@ -7,7 +7,8 @@
                  needs ``pip install 'mjzoo[playground]'``)
     export       a trained policy out of JAX: ONNX (``write_onnx``; needs ``pip install
                  'mjzoo[export]'``) or a serialized jax.export artifact (``write_jax``),
-                 each carrying its deployment contract, and ``load`` to run either
+                 each carrying its deployment contract; any task's policy from the
+                 physics state, its own observation inside (``end_to_end``); ``load``
     deployment   the deployment contract: names, control ranges, the action mapping and the
                  observation as terms computable from ``mujoco.MjData``
     sim2sim      an exported policy driving plain C MuJoCo from its contract

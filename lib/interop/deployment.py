@@ -33,7 +33,9 @@ An observation is ``history`` frames, newest first, each the terms concatenated 
 at an episode's start every frame is the first one. Of a dict observation (an asymmetric
 actor-critic's, `observations.with_privileged_observation`) the contract describes the
 policy's entry, ``observation["key"]``: a robot computes that one alone. A term the vocabulary cannot express
-(contacts, a height scan, a user's own function) makes export fail, naming it; `register_observation` teaches the vocabulary a function of one's own.
+(contacts, a height scan, a user's own function) makes the contract fail, naming it and saying what to do:
+`mjzoo.interop.export.end_to_end` exports any task's policy with its observation inside (no contract), and
+`register_observation` teaches the vocabulary a function of one's own.
 """
 
 from __future__ import annotations
@@ -102,6 +104,14 @@ _STEPS: dict[str, Describer] = {}  # "module:qualname" of a task step that obser
 
 class ContractError(ValueError):
     """The task observes or acts in a way the contract's vocabulary cannot describe."""
+
+
+_INSTEAD = (
+    "export the policy with the task's own observation inside instead, which needs no contract: "
+    "mjzoo.interop.export.end_to_end (`mjzoo export RUN --format jax`); or build the observation from "
+    "catalog terms (mjzoo.catalog.observations); or describe it with "
+    "mjzoo.interop.deployment.register_observation"
+)
 
 
 def function_key(fn: Callable) -> str:
@@ -290,8 +300,7 @@ def describe_item(m: mujoco.MjModel, fn: Any) -> list[dict[str, Any]]:
         raise ContractError(
             f"cannot describe the observation term {function_key(func)}: the contract's vocabulary "
             f"covers {', '.join(SOURCES)} (the catalog's joint, base, body, site, sensor, "
-            "actuator-force and last-action items); describe it with "
-            "mjzoo.interop.deployment.register_observation"
+            f"actuator-force and last-action items); {_INSTEAD}"
         )
     return describe(m, *args)
 
@@ -309,7 +318,7 @@ def _find(m: mujoco.MjModel, node: Any, depth: int = 0) -> list[dict[str, Any]] 
         if key == "mjzoo.combinators:_observed_step":  # with_observation: a function of the observation
             raise ContractError(
                 f"the task's observation passes through mjzoo.with_observation("
-                f"{function_key(node.args[1].func)}), which the contract's vocabulary cannot describe"
+                f"{function_key(node.args[1].func)}), which the contract's vocabulary cannot describe; {_INSTEAD}"
             )
         for arg in node.args:
             if dataclasses.is_dataclass(arg) and not isinstance(arg, type) and hasattr(arg, "observe"):
@@ -334,7 +343,7 @@ def observation_terms(task: Task) -> list[dict[str, Any]]:
         raise ContractError(
             f"cannot find how the task observes: its step ({function_key(task.step.func)}) is not a "
             "known task step, and none of the steps it wraps holds a catalog observation (`observe`); "
-            "describe it with mjzoo.interop.deployment.register_observation(..., step=True)"
+            f"{_INSTEAD}(..., step=True)"
         )
     size = task.action_size
     return [{**t, "size": size} if t["source"] == "previous_action" else t for t in terms]

@@ -46,7 +46,8 @@ class Rollout(NamedTuple):
     [T, nu] at the last substep; time [T+1], qpos [T+1, nq], qvel [T+1, nv], act
     [T+1, na] from the start; sensordata [T, ...] after each step; before_qpos [T, nq],
     before_qvel [T, nv]: the state before each step's last physics substep; command
-    [T, k] the command the policy saw at each step (k = 0 without one)."""
+    [T, k] the command the policy saw at each step (k = 0 without one); inputs: of an
+    `export.end_to_end` artifact, each input it was given, by name, [T, ...] (else {})."""
 
     obs: np.ndarray
     action: np.ndarray
@@ -60,6 +61,7 @@ class Rollout(NamedTuple):
     before_qpos: np.ndarray
     before_qvel: np.ndarray
     command: np.ndarray
+    inputs: dict[str, np.ndarray]
 
 
 class Replayed(NamedTuple):
@@ -128,6 +130,25 @@ def _substeps(contract: dict[str, Any], m: mujoco.MjModel) -> int:
 
 
 Command = np.ndarray | Callable[[int, mujoco.MjData], np.ndarray] | None
+Entries = dict[str, Any] | Callable[[int, mujoco.MjData], dict[str, Any]] | None
+
+
+def _end_to_end_inputs(contract: dict[str, Any], d: mujoco.MjData, known: dict[str, Any]) -> dict[str, np.ndarray]:
+    """An `end_to_end` artifact's inputs: `known` ones (the previous action, the carry, the
+    task's state entries), the rest MjData's fields of those names, in MJX's shapes."""
+    inputs = {}
+    for spec in contract["inputs"]:
+        name = spec["name"]
+        if name in known:
+            inputs[name] = np.asarray(known[name])
+        elif not name.startswith("_") and hasattr(d, name):
+            inputs[name] = np.array(getattr(d, name)).reshape(spec["shape"][1:])  # a copy: MjData changes
+        else:
+            raise ValueError(
+                f"run_in_mujoco: the policy reads {name} ({spec['source']}), which C MuJoCo's MjData does not "
+                "hold; pass entries={name: value} (the episode start's) or entries(step, mj_data) -> {name: value}"
+            )
+    return inputs
 
 
 def run_in_mujoco(
@@ -138,6 +159,7 @@ def run_in_mujoco(
     qpos: np.ndarray | None = None,
     qvel: np.ndarray | None = None,
     command: Command = None,
+    entries: Entries = None,
     latency: int = 0,
     perturb: Callable[[int, mujoco.MjModel, mujoco.MjData], None] | None = None,
 ) -> Rollout:
@@ -146,7 +168,9 @@ def run_in_mujoco(
     Each step: build the observation from the contract's terms and history, run the
     policy (carrying its recurrent state), map its action to ctrl (`to_task`, then
     `to_ctrl` at every physics substep), `mj_step` until the control step has passed.
-    Nothing here knows the task: only the contract.
+    An `export.end_to_end` artifact observes inside: it is given the MjData fields it
+    reads (and `entries`) and returns the task's action. Nothing here knows the task:
+    only the artifact.
 
     Args:
       artifact: a path to an exported policy, or `export.load`'s result.
@@ -157,6 +181,10 @@ def run_in_mujoco(
       qpos, qvel: the start state (default the model's qpos0, zero velocity).
       command: for a policy whose observation holds a command (a ``command`` term): one
         [k] array, or ``command(step, mj_data) -> [k]`` asked before every step.
+      entries: for an `export.end_to_end` artifact whose observation reads the task's
+        state entries (``info['goal']``): their values at the start, ``{name: value}``
+        (then the artifact's ``next <name>`` outputs carry them on), or
+        ``entries(step, mj_data) -> {name: value}`` asked before every step.
       latency: control steps each action waits before reaching the motors (zeros until
         the first arrives), as `actuators.with_action_latency` delays it in training.
       perturb: ``perturb(step, mj_model, mj_data)`` before every step: pushes, or any
@@ -172,7 +200,10 @@ def run_in_mujoco(
     if isinstance(latency, bool) or not isinstance(latency, (int, np.integer)) or latency < 0:
         raise ValueError(f"run_in_mujoco: latency={latency!r} must be an integer >= 0")
     obs_spec, action_spec = contract["observation"], contract["action"]
-    wants_command = any(t["source"] == "command" for t in obs_spec["terms"])
+    end_to_end = contract.get("format") == export.END_TO_END
+    if end_to_end and action_spec["to_ctrl"]["type"] == "own":
+        raise ValueError(f"run_in_mujoco: the policy's action is not ctrl: {action_spec['to_ctrl']['formula']}")
+    wants_command = any(t["source"] == "command" for t in obs_spec.get("terms", ()))
     if wants_command and command is None:
         term = next(t for t in obs_spec["terms"] if t["source"] == "command")
         raise ValueError(
@@ -187,6 +218,7 @@ def run_in_mujoco(
     recurrent = contract["policy"]["recurrent"]
     carry = np.zeros(contract["policy"]["carry_size"], np.float32) if recurrent else None
     previous, frames = np.zeros(action_spec["size"]), []
+    known = {} if callable(entries) else dict(entries or {})  # an end-to-end artifact's state entries
     pending = [np.zeros(action_spec["size"])] * latency  # actions on their way to the motors
     log: dict[str, list] = {k: [] for k in Rollout._fields}
     for name in ("time", "qpos", "qvel", "act"):
@@ -195,13 +227,23 @@ def run_in_mujoco(
         if perturb is not None:
             perturb(step, m, d)
         now = np.zeros(0) if not wants_command else np.asarray(command(step, d) if callable(command) else command)
-        frames = (frames + [deployment.frame(obs_spec["terms"], m, d, previous, now)])[-obs_spec["history"] :]
-        obs = deployment.stacked(frames, obs_spec["history"])
-        if recurrent:
-            action, carry = loaded.act(obs, carry)
+        if end_to_end:
+            known.update({export.PREVIOUS_ACTION: previous, export.CARRY: carry})
+            known.update(entries(step, d) if callable(entries) else {})
+            inputs = _end_to_end_inputs(contract, d, known)
+            out = loaded.act(inputs)
+            known.update({k.removeprefix(export.NEXT): v for k, v in out.items() if k.startswith(export.NEXT)})
+            obs, action, carry = out["obs"], out["action"], out.get("next_carry")
+            task_action = np.asarray(action, float)
+            log["inputs"].append(inputs)
         else:
-            action = loaded.act(obs)
-        task_action = _to_task(action_spec, np.asarray(action, float))
+            frames = (frames + [deployment.frame(obs_spec["terms"], m, d, previous, now)])[-obs_spec["history"] :]
+            obs = deployment.stacked(frames, obs_spec["history"])
+            if recurrent:
+                action, carry = loaded.act(obs, carry)
+            else:
+                action = loaded.act(obs)
+            task_action = _to_task(action_spec, np.asarray(action, float))
         pending.append(task_action)
         applied = pending.pop(0)
         for i in range(substeps):
@@ -224,7 +266,9 @@ def run_in_mujoco(
             ("command", now),
         ):
             log[name].append(np.array(value))
-    return Rollout(**{k: np.asarray(v) for k, v in log.items()})
+    inputs = log.pop("inputs")
+    stacked = {k: np.stack([step[k] for step in inputs]) for k in (inputs[0] if inputs else {})}
+    return Rollout(**{k: np.asarray(v) for k, v in log.items()}, inputs=stacked)
 
 
 # --- scoring C's states with the task's reward ------------------------------------------------------------------

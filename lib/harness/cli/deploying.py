@@ -59,13 +59,18 @@ def sim2sim(
             raise UsageError(f"--{name} {value}: must be >= {low}")
     if seconds <= 0 or push < 0 or (timestep is not None and timestep <= 0):
         raise UsageError("--seconds and --timestep must be > 0 and --push >= 0")
-    trained, state = load_run(run, task, env_overrides)
-    if tracking.velocity_command(trained.task) is None:
-        raise UsageError(f"{trained.spec}: its task has no velocity command; sim2sim measures a joystick's tracking")
     from mjzoo.interop import export
 
     with as_usage_errors():
         loaded = export.load(policy_file)
+    if loaded.contract.get("format") == export.END_TO_END:
+        raise UsageError(
+            f"{policy_file}: an end-to-end artifact (--format jax); sim2sim gives a joystick its command "
+            f"through the ONNX contract: run `mjzoo export {run} --format onnx`"
+        )
+    trained, state = load_run(run, task, env_overrides)
+    if tracking.velocity_command(trained.task) is None:
+        raise UsageError(f"{trained.spec}: its task has no velocity command; sim2sim measures a joystick's tracking")
     deployable = policy(trained.module, trained.cfg, trained.task, trained.module.policy_params(state))
     contract = loaded.contract
     key = jax.random.key(seed)

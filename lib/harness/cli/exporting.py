@@ -1,5 +1,6 @@
-"""`mjzoo export`: a trained run's deterministic policy as an ONNX model or a jax.export
-artifact with its deployment contract (`mjzoo.interop.export`)."""
+"""`mjzoo export`: a trained run's deterministic policy as an ONNX model with its
+deployment contract, or as a jax.export artifact from the physics state, the task's own
+observation inside (`mjzoo.interop.export`)."""
 
 from __future__ import annotations
 
@@ -75,16 +76,20 @@ def export(
     env_overrides: tuple[str, ...] = (),
     overwrite: bool = False,
 ) -> None:
-    """Export RUN's deterministic policy (PPO or AMP, recurrent ones included) with its
-    deployment contract, to --out (default RUN/policy.onnx or RUN/policy.jaxexport).
+    """Export RUN's deterministic policy (PPO or AMP, recurrent ones included) to --out
+    (default RUN/policy.onnx or RUN/policy.jaxexport).
 
-    --format onnx: an ONNX model (jax2onnx; the observation normalization inside, a
-    dynamic batch size, a recurrent carry as an input and an output), the contract in
-    its metadata_props. --format jax: a serialized jax.export artifact, the contract
-    beside it in OUT.json. The contract (names, control ranges, the action mapping, the
-    observation's terms and history, the control and physics steps, PD gains) is checked
-    against the task's own observation first. --task and --env-overrides as for `mjzoo
-    eval`. An existing file is replaced only with --overwrite. Needs `pip install
+    --format onnx: an ONNX model from the observation (jax2onnx; the observation
+    normalization inside, a dynamic batch size, a recurrent carry as an input and an
+    output) with its deployment contract in its metadata_props: names, control ranges,
+    the action mapping, the observation as catalog terms computable from MjData (checked
+    against the task's own first), the control and physics steps, PD gains. A task that
+    observes with a function of its own has no contract: use --format jax.
+    --format jax: any task's policy end to end, a serialized jax.export artifact from
+    the physics state (the MjData fields and the task's state entries its observation
+    reads, by name) to the task's action, the task's own observation function inside;
+    its inputs and outputs described in OUT.json. --task and --env-overrides as for
+    `mjzoo eval`. An existing file is replaced only with --overwrite. Needs `pip install
     'mjzoo[export]'` for ONNX.
     """
     from mjzoo.interop import deployment
@@ -108,19 +113,24 @@ def export(
         algorithm=trained.module.__name__,
         step=int(state.updates),
     )
+    obs_key = None if trained.module.__name__.endswith(".amp") else trained.cfg.policy_obs_key
+    carry = f", carry {fn.carry_size}" if fn.recurrent else ""
+    if format == "jax":
+        with as_usage_errors():
+            e2e = exporting.end_to_end(trained.task, fn, obs_key=obs_key, source=source)
+        path = exporting.write_end_to_end(e2e, out, overwrite=overwrite)
+        inputs = ", ".join(f"{i['name']} {i['shape'][1:]}" for i in e2e.contract["inputs"])
+        print(f"{path}: {trained.spec}, from {inputs} to action [{fn.action_size}]{carry}, the observation inside")
+        print(f"inputs and outputs: {exporting.sidecar(path)}")
+        return
     with as_usage_errors(deployment.ContractError):
-        obs_key = None if trained.module.__name__.endswith(".amp") else trained.cfg.policy_obs_key
         described = exporting.describe(trained.task, fn, source=source, obs_key=obs_key)
-    write = exporting.write_onnx if format == "onnx" else exporting.write_jax
-    path = write(fn, described, out, overwrite=overwrite)
+    path = exporting.write_onnx(fn, described, out, overwrite=overwrite)
     obs = described["observation"]
     print(
         f"{path}: {trained.spec}, obs {obs['size']} ({len(obs['terms'])} terms x {obs['history']} frames), "
-        f"action {fn.action_size}{f', carry {fn.carry_size}' if fn.recurrent else ''}; observation layout checked "
-        f"(max error {obs['checked']['max_abs_error']:.2g})"
+        f"action {fn.action_size}{carry}; observation layout checked (max error {obs['checked']['max_abs_error']:.2g})"
     )
-    if format == "jax":
-        print(f"contract: {exporting.sidecar(path)}")
 
 
 def _need_onnx() -> None:
