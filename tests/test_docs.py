@@ -174,7 +174,8 @@ def test_readme_example_plans_the_heavier_pendulum_without_recompiling(docs):
     run, task = namespace["closed_loop"].run, namespace["task"]
     compiled = run._cache_size()
     lighter = task.replace(model=task.model.replace(body_mass=task.model.body_mass * 0.9))
-    run(namespace["mppi"], namespace["config"], lighter, lighter, namespace["start"], namespace["key"], 150, 2)
+    args = namespace["mppi"], namespace["config"], lighter, lighter, namespace["start"], namespace["key"], 150
+    run(*args, replan_every=2, hyperparams=namespace["hyperparams"])
     assert run._cache_size() == compiled, "a task with another mass compiled the README's closed loop again"
 
 
