@@ -10,7 +10,6 @@ script's output (so it cannot drift from the JSON beside the scripts that wrote 
 
 from __future__ import annotations
 
-import argparse
 import json
 import sys
 from collections.abc import Callable
@@ -665,18 +664,8 @@ def render() -> str:
     return "\n".join(lines).rstrip() + "\n"
 
 
-def main() -> None:
-    parser = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
-    parser.add_argument("--check", action="store_true", help="exit 1 if docs/benchmarks.md is not up to date")
-    args = parser.parse_args()
-    page = render()
-    if args.check:
-        if not PAGE.exists() or PAGE.read_text() != page:
-            sys.exit(f"{PAGE} is out of date: run python benchmarks/report.py")
-        return
-    PAGE.write_text(page)
-    print(f"wrote {PAGE}")
-
-
 if __name__ == "__main__":
-    main()
+    sys.path.insert(0, str(ROOT / "scripts"))  # the write-or-check step every generated page shares
+    import generated_page
+
+    generated_page.main(PAGE, render, __doc__)
