@@ -1,6 +1,8 @@
-"""Writes docs/benchmarks.md from the measurements in benchmarks/results/: the page is
-never edited by hand, and the suite checks that it is this script's output (so it
-cannot drift from the JSON beside the scripts that wrote it).
+"""Writes docs/benchmarks.md from the measurements in benchmarks/results/: one section per
+result family (robots, learning quality, PPO against Brax, Playground, locomotion, AMP,
+planning, scaling, start-up, physics), each a short account and tables built from its
+JSON files. The page is never edited by hand, and the suite checks that it is this
+script's output (so it cannot drift from the JSON beside the scripts that wrote it).
 
     python benchmarks/report.py           # rewrite docs/benchmarks.md
     python benchmarks/report.py --check   # exit 1 if the page differs from the results
@@ -8,9 +10,9 @@ cannot drift from the JSON beside the scripts that wrote it).
 
 from __future__ import annotations
 
-import argparse
 import json
 import sys
+from collections.abc import Callable
 from collections.abc import Iterator
 from pathlib import Path
 
@@ -112,31 +114,573 @@ def ppo_stability() -> list[str]:
     return [*lines, *_figures(folder), ""]
 
 
+# --- tables from rows of JSON --------------------------------------------------------
+
+Column = tuple[str, Callable[[dict], object]]  # (header, the cell's value from a row)
+
+
+def _at(path: str) -> Callable[[dict], object]:
+    """A getter of `path` ("mjzoo.steps_per_s") in a row; None where any part is missing."""
+
+    def get(row: dict) -> object:
+        value: object = row
+        for key in path.split("."):
+            if not isinstance(value, dict) or key not in value:
+                return None
+            value = value[key]
+        return value
+
+    return get
+
+
+def _cell(value: object) -> str:
+    """A table cell: numbers to 3-4 significant figures, rates as 347k or 1.37M."""
+    if value is None:
+        return "-"
+    if isinstance(value, bool):
+        return "yes" if value else "no"
+    if isinstance(value, int):
+        return f"{value:,}"
+    if isinstance(value, float):
+        if value != value:
+            return "-"
+        if abs(value) >= 1000:
+            return f"{value:,.0f}"
+        return f"{value:.3g}" if abs(value) < 10 else f"{value:.1f}"
+    return str(value).replace("|", "\\|").replace("\n", " ")
+
+
+def _rate(path: str) -> Callable[[dict], object]:
+    """Steps per second at `path` as 347k or 1.37M."""
+
+    def get(row: dict) -> object:
+        x = _at(path)(row)
+        if not isinstance(x, (int, float)):
+            return x
+        return f"{x / 1e6:.3g}M" if x >= 1e6 else f"{x / 1e3:.0f}k" if x >= 1e3 else f"{x:.0f}"
+
+    return get
+
+
+def _percent(path: str) -> Callable[[dict], object]:
+    def get(row: dict) -> object:
+        x = _at(path)(row)
+        return f"{100 * x:+.1f}%" if isinstance(x, (int, float)) else x
+
+    return get
+
+
+def _table(rows: list[dict], columns: list[Column]) -> list[str]:
+    """A Markdown table of `rows`, one line each, with the columns any row has."""
+    kept = [(header, get) for header, get in columns if any(get(row) is not None for row in rows)]
+    lines = ["| " + " | ".join(_cell(h) for h, _ in kept) + " |", "|" + " --- |" * len(kept)]
+    lines += ["| " + " | ".join(_cell(get(row)) for _, get in kept) + " |" for row in rows]
+    return lines
+
+
+def _card(data: dict | list, path: Path) -> str:
+    """The device a file was measured on, as the file records it (at its top, in its
+    meta or rows, or in its name: robots_nvidia_h200.json)."""
+    rows = data if isinstance(data, list) else data.get("rows", [])
+    meta = data.get("meta", {}) if isinstance(data, dict) else {}
+    for where in (data, meta, rows[0] if rows and isinstance(rows[0], dict) else {}):
+        for key in ("device", "card", "machine"):
+            if isinstance(where, dict) and isinstance(where.get(key), str):
+                return where[key]
+    for suffix, card in (
+        ("_nvidia_h200", "NVIDIA H200"),
+        ("_cpu", "CPU"),
+        ("_H200", "NVIDIA H200"),
+        ("_4xH100", "4x NVIDIA H100"),
+    ):
+        if path.stem.endswith(suffix) or f"{suffix}_" in path.stem:
+            return card
+    return "card not recorded"
+
+
+def _notes(data: dict | list) -> list[str]:
+    """A file's own notes on how it was measured, as quoted lines."""
+    if not isinstance(data, dict):
+        return []
+    notes = [
+        n for key in ("note", "notes") for n in ([data[key]] if isinstance(data.get(key), str) else data.get(key) or [])
+    ]
+    return [line for note in notes for line in (f"> {' '.join(str(note).split())}", ">")][:-1] + ([""] if notes else [])
+
+
+def _files(pattern: str) -> list[Path]:
+    return sorted(RESULTS.glob(pattern))
+
+
+def _file_tables(pattern: str, columns: list[Column], rows: Callable[[dict], list[dict]] | None = None) -> list[str]:
+    """For each JSON file matching `pattern`: a heading naming it and its card, its notes
+    if it has any, and the table of its rows."""
+    lines = []
+    for path in _files(pattern):
+        data = json.loads(path.read_text())
+        lines += [f"**[{path.name}]({_link(path)})** ({_card(data, path)})", "", *_notes(data)]
+        lines += [*_table((rows or _at("rows"))(data) if isinstance(data, dict) else data, columns), ""]
+    return lines
+
+
+def _section(title: str, prose: str, *parts: list[str]) -> list[str]:
+    return [f"## {title}", "", *prose.strip().splitlines(), "", *[line for part in parts for line in part]]
+
+
+def _tracking_rows(data: dict) -> list[dict]:
+    """One row per robot, terrain and seed of benchmarks/robots.py's JSON."""
+    return [
+        {"robot": row["robot"], "terrain": row["terrain"], "envs": row["hyperparameters"]["num_envs"], **run}
+        for row in data["rows"]
+        for run in row["runs"]
+    ]
+
+
+def robots() -> list[str]:
+    prose = """
+`benchmarks/robots.py` trains the joysticks of [robots.md](robots.md) with PPO on one
+GPU. A policy *tracks* when, over 64 evaluation episodes of 20 s with the task's pushes,
+noise and randomized physics, the mean |v_xy − cmd| ≤ 0.15 m/s, the mean |ω_z − cmd| ≤
+0.2 rad/s and none falls; the time to tracking includes compiling. The G1 is bound by its
+physics: 10 substeps of 2 ms per control step. `benchmarks/terrain_cost.py` measures
+what a heightfield costs the physics, `scripts/check_robots.py` runs `check_task` on
+every robot and terrain, and `mjzoo sim2sim` drives the exported Go1 policy in C MuJoCo
+under another simulation configuration than training's (2 ms steps, 2 solver
+iterations, pushes of 0.5 m/s).
+"""
+    runs = [
+        ("robot", _at("robot")),
+        ("terrain", _at("terrain")),
+        ("envs", _at("envs")),
+        ("seed", _at("seed")),
+        ("to tracking (s)", _at("seconds_to_tracking")),
+        ("steps to tracking", _at("steps_to_tracking")),
+        ("final step", _at("final.step")),
+        ("final velocity error (m/s)", _at("final.linear_error")),
+        ("final yaw-rate error (rad/s)", _at("final.yaw_error")),
+        ("falls", _at("final.falls")),
+    ]
+    cost = [
+        ("variant", _at("variant")),
+        ("physics", _at("impl")),
+        ("envs", _at("num_envs")),
+        ("substeps", _at("n_substeps")),
+        ("env steps/s", _rate("steps_per_s")),
+        ("compile (s)", _at("compile_s")),
+    ]
+    checks = [
+        ("variant", _at("variant")),
+        ("properties passed", lambda r: len(r["passed"])),
+        ("failed", lambda r: ", ".join(r["failures"]) or "none"),
+        ("machine", _at("machine")),
+        ("seconds", _at("seconds")),
+    ]
+    sim2sim = [
+        ("file", _at("file")),
+        ("C latency (steps)", _at("mujoco.options.latency")),
+        ("C velocity error", _at("mujoco.linear_error")),
+        ("MJX velocity error", _at("training.linear_error")),
+        ("velocity ratio", _at("ratio.linear_error")),
+        ("C yaw-rate error", _at("mujoco.yaw_error")),
+        ("MJX yaw-rate error", _at("training.yaw_error")),
+        ("yaw ratio", _at("ratio.yaw_error")),
+        ("C falls", _at("mujoco.falls")),
+        ("episodes", _at("mujoco.episodes")),
+    ]
+    sim_rows = [{"file": p.name, **json.loads(p.read_text())} for p in _files("robots/sim2sim_*.json")]
+    check_rows = [
+        {"variant": k, **v} for k, v in json.loads((RESULTS / "robots" / "check_task.json").read_text()).items()
+    ]
+    return _section(
+        "Real robots",
+        prose,
+        _file_tables("robots/robots_*.json", runs, _tracking_rows),
+        _figures(RESULTS / "robots"),
+        [""],
+        _file_tables("robots/terrain_cost_*.json", cost),
+        ["**Sim-to-sim, the Go1 in C MuJoCo against MJX** (each file holds its command)", ""],
+        _table(sim_rows, sim2sim),
+        ["", f"**[check_task.json]({_link(RESULTS / 'robots' / 'check_task.json')})**", ""],
+        _table(check_rows, checks),
+        [""],
+    )
+
+
+def _versus(prefix: str) -> list[Column]:
+    """mjzoo against Brax columns of ppo_vs_brax.py's and playground.py's rows."""
+    return [
+        ("env", _at("env")),
+        ("physics", _at("impl")),
+        ("mjzoo steps/s", _rate("mjzoo.steps_per_s")),
+        ("Brax steps/s", _rate("brax.steps_per_s")),
+        ("ratio", _at("mjzoo_over_brax_steps_per_s")),
+        ("mjzoo training alone", _rate("mjzoo.train_steps_per_s")),
+        ("Brax training alone", _rate("brax.train_steps_per_s")),
+        ("mjzoo to 90% (s)", _at(f"{prefix}time_to_threshold_s" if prefix else "mjzoo.time_to_threshold_s")),
+        ("Brax to 90% (s)", _at("brax_time_to_threshold_s" if prefix else "brax.time_to_threshold_s")),
+        ("mjzoo final", _at("mjzoo.final_return")),
+        ("Brax final", _at("brax.final_return")),
+        ("seeds", _at("mjzoo.seeds")),
+        ("mjzoo compile (s)", _at("mjzoo.compile_s")),
+    ]
+
+
+def ppo_vs_brax() -> list[str]:
+    prose = """
+`benchmarks/ppo_vs_brax.py`: mjzoo's PPO against Brax's PPO on the same task with
+Playground's DM Control hyperparameters, 20M steps, each trainer in its own process.
+Both rates are measured alike: *wall-clock*, env steps between the first and the last
+evaluation after training began (evaluations included), and *training alone* (mjzoo's
+median chunk, Brax's `training/walltime`). On MJX-JAX physics mjzoo's rollout is already
+96% of raw stepping, so raw stepping over Brax bounds the ratio; on Warp the learner and
+the evaluation decide. `compute_dtype="bfloat16"` runs the hidden layers in bfloat16
+(float32 params and Adam). `benchmarks/ppo_profile.py` splits an update: the rollout, the
+learner's minibatch steps and their compiles. Per 983,040 env steps on our cart-pole the
+rollout takes ~1.06 s and the learner's 512 minibatch steps 0.47 s with JAX's default TF32
+matmuls, 0.29 s in bfloat16 and 0.91 s in full float32. On Playground's cart-pole, whose
+physics is 8x cheaper, the learner decides: a minibatch step (30,720 samples) launches 69
+kernels and takes ~0.56 ms, bound by the value net's work rather than by launches;
+capturing the minibatch loop in CUDA graphs or one Adam update over all parameters
+concatenated changes it by under 2% (`*_sgd*.json`). The harness's chunk costs 9% over a
+bare update (`*_chunk.json`), and the evaluation stacks the state it films packed into
+one array per dtype, 2.5x cheaper than leaf by leaf (`*_eval.json`).
+"""
+    profile = [
+        ("variant", _at("variant")),
+        ("env", _at("env")),
+        ("rollout (s)", _at("rollout_s")),
+        ("learner (s)", _at("improve_s")),
+        ("update (s)", _at("update_s")),
+        ("minibatch step (ms)", _at("sgd_step_ms")),
+        ("env steps/s", _rate("steps_per_s")),
+        ("evaluation (s)", _at("eval_s")),
+    ]
+    return _section(
+        "PPO against Brax PPO",
+        prose,
+        _file_tables("ppo_vs_brax_gpu*.json", _versus("mjzoo_")),
+        _file_tables("warp/ppo_vs_brax_gpu*.json", _versus("mjzoo_")),
+        ["### Where an update's time goes", ""],
+        _file_tables("ppo_profile/*.json", profile),
+    )
+
+
+def playground() -> list[str]:
+    prose = """
+`benchmarks/playground.py`: MuJoCo Playground's own envs, mjzoo's PPO through
+`mjzoo.interop.playground` against Brax's PPO as Playground trains it, on the very same
+env object with Playground's tuned hyperparameters, each trainer in its own process.
+Brax trains Playground's 60M-step config for 88.5M steps (whole epochs of
+`num_resets_per_eval`) and mjzoo as many. A *time to 90%* is to 90% of the better final
+return; rates are defined as for PPO against Brax. PendulumSwingup's sparse reward makes a
+swing-up a lottery for both trainers at this budget (on Warp, two of eight mjzoo seeds and
+two of three Brax seeds), and one seed per row is not yet a comparison within seed noise.
+Files named `*_entropy_fix` come after PPO's entropy estimate was fixed: it now takes a
+fresh reparameterized sample per minibatch, as Brax's does; estimated at the rollout's
+stored pre-tanh sample, its gradient only grew the policy's scale where the reward is
+sparse (PendulumSwingup's first update took it from 0.69 to a median of 580:
+`pendulum_diagnostics/`). `playground_jax_cheetah_recompile_fix.json` comes after the
+harness began owning its initial state strongly typed: CheetahRun resets `data.time` to a
+weakly typed 0.0, which made the second chunk and the evaluation compile again.
+`scripts/playground_conformance.py` runs every Playground env through `check_task`
+offline; `benchmarks/background_compile.py` times the evaluation's compile alone and beside
+a training chunk.
+"""
+    conformance = json.loads((RESULTS / "playground" / "conformance.json").read_text())
+    envs = conformance["envs"]
+    return _section(
+        "Playground's envs against Brax",
+        prose,
+        _file_tables("playground/playground_*.json", _versus("")),
+        [
+            f"**[conformance.json]({_link(RESULTS / 'playground' / 'conformance.json')})** "
+            f"({conformance['machine']}, Playground {conformance['playground']}): "
+            f"{sum(e['status'] == 'pass' for e in envs)} of {len(envs)} envs pass `check_task`.",
+            "",
+        ],
+        _file_tables(
+            "playground/background_compile_*.json",
+            [
+                ("where", _at("where")),
+                ("options", _at("options")),
+                ("eval envs", _at("eval_envs")),
+                ("compile (s)", _at("compile_s")),
+            ],
+        ),
+    )
+
+
+def locomotion() -> list[str]:
+    prose = """
+`benchmarks/locomotion.py`: PPO on the locomotion catalog, one GPU, evaluating every
+chunk. The time to the stated return (`humanoid_walk` 6000: every episode its full 1000
+steps at ≥ 1 m/s; `ant` 3000: ≥ 2 m/s) includes compiling; the final columns are a
+deterministic evaluation of 256 episodes. Before the fall ceiling of 1 m (Brax's and
+Gym's too) PPO learned to bounce the ant 4 m high off the soft contacts; with torque
+actions the joystick ant only learned to stand still, so its actions are PD targets.
+Files named `*_entropy_fix` were measured after PPO's entropy estimate was fixed (a
+fresh reparameterized sample per minibatch, as Brax's), the others before.
+"""
+    columns = [
+        ("task", _at("task")),
+        ("physics", _at("impl")),
+        ("envs", _at("config.num_envs")),
+        ("env steps/s", _rate("steps_per_s")),
+        ("share of raw", _at("fraction_of_raw")),
+        ("threshold", _at("threshold")),
+        ("to threshold (s)", _at("time_to_threshold_s")),
+        ("first update (s)", _at("first_update_s")),
+        ("final return", _at("final.return")),
+        ("speed (m/s)", _at("final.forward_speed_m_s")),
+        ("command error (m/s)", _at("final.velocity_error_m_s")),
+        ("fell", _at("final.fell_fraction")),
+    ]
+    return _section(
+        "Locomotion with PPO",
+        prose,
+        _file_tables("locomotion/locomotion_*.json", columns),
+        _file_tables("warp/locomotion_*.json", columns),
+    )
+
+
+def amp() -> list[str]:
+    prose = """
+`benchmarks/amp.py`: `humanoid_amp_walk` rewards only being alive and little effort, no
+forward speed, and AMP's discriminator supplies the style of a teacher's walk (the PPO
+policy of `humanoid_walk`, recorded with `mjzoo collect`). The *style error* is the mean
+hinge-angle error to the nearest 10-frame window of the reference (below the threshold:
+walks like the teacher); PPO on `humanoid_walk`'s task reward at the same batch is the
+comparison. AMP trains as fast per step as PPO.
+"""
+    columns = [
+        ("trainer", _at("trainer")),
+        ("env steps/s", _rate("steps_per_s")),
+        ("to style (s)", _at("time_to_style_s")),
+        ("steps to style", _at("steps_to_style")),
+        ("final step", _at("final.step")),
+        ("style error (rad)", _at("final.style_error")),
+        ("speed (m/s)", _at("final.forward_speed_m_s")),
+        ("episode length", _at("final.length")),
+    ]
+    lines = []
+    for path in _files("amp/**/amp_gpu_*.json"):
+        data = json.loads(path.read_text())
+        rows = [{"trainer": name, **data[name]} for name in ("ppo", "amp") if isinstance(data.get(name), dict)]
+        teacher = data["teacher"]
+        lines += [
+            f"**[{path.relative_to(RESULTS / 'amp').as_posix()}]({_link(path)})** ({_card(data, path)}; "
+            f"teacher: style error {teacher['style_error']} rad at {teacher['forward_speed_m_s']} m/s)",
+            "",
+            *_notes(data),
+            *_table(rows, columns),
+            "",
+        ]
+    return _section("AMP: walking in a teacher's style", prose, lines)
+
+
+def planning() -> list[str]:
+    prose = """
+`benchmarks/planner_latency.py`: a replan's latency on a GPU against bare MJX rollouts of
+the same samples x horizon. Latency, not throughput, bounds it: a sequential physics step
+costs 0.6-1 ms whatever the batch up to ~1024 samples, so a humanoid plans on a coarse
+model (0.025 s physics steps, 1 solver iteration). XLA's default GPU command buffers
+matter (without them a replan is 4x slower); capturing while loops bought nothing.
+"""
+    latency = [
+        ("env", _at("env")),
+        ("planner", _at("planner")),
+        ("samples", _at("samples")),
+        ("horizon (steps)", _at("horizon_steps")),
+        ("horizon (s)", _at("horizon_s")),
+        ("replan (ms)", _at("plan_ms")),
+        ("bare rollouts (ms)", _at("bare_ms")),
+        ("overhead", _percent("overhead")),
+        ("ms per physics step", _at("ms_per_physics_step")),
+        ("replans/s", _at("plan_hz")),
+    ]
+    cpu_prose = """
+`benchmarks/planner_cpu.py`, side by side with Judo (`judo-rai` 0.1.0 in its own venv:
+`bash benchmarks/judo_env.sh`) on a 2-core CPU: Judo's shipped settings (4 knots, a 1 s
+horizon, replanning every 0.05 s of simulated time), 2 rollout threads each. mjzoo's
+*native* backend rolls out in C MuJoCo through `mujoco.rollout` and scores the samples
+with the task's own JAX reward; *mjx* is MJX on the CPU. Replan times are medians; the
+rollouts are C MuJoCo's share, the rest everything but physics.
+"""
+    cpu = [
+        ("task", _at("task")),
+        ("planner", _at("planner")),
+        ("samples", _at("num_samples")),
+        ("who", _at("peer")),
+        ("backend", _at("backend")),
+        ("replan (ms)", _at("replan_ms.median")),
+        ("p95 (ms)", _at("replan_ms.p95")),
+        ("rollouts (ms)", _at("rollout_ms.median")),
+        ("rest (ms)", _at("overhead_ms.median")),
+        ("success", _at("success_rate")),
+        ("seeds", _at("seeds")),
+    ]
+    return _section(
+        "Planning latency",
+        prose,
+        _file_tables("planner_latency_gpu*.json", latency),
+        _file_tables("warp/planner_latency_*.json", latency),
+        _file_tables(
+            "warp/planner_graph_modes.json",
+            [
+                ("Warp graph mode", _at("mode")),
+                *[(f"bare, {n} samples (ms)", _at(f"bare_ms_{n}")) for n in (64, 256, 1024, 4096)],
+                ("replan, 1024 (ms)", _at("plan_ms_1024")),
+            ],
+            lambda data: data,
+        ),
+        ["### Planning on a CPU, against Judo", "", *cpu_prose.strip().splitlines(), ""],
+        _file_tables("planner_cpu/planner_cpu.json", cpu),
+    )
+
+
+def scaling() -> list[str]:
+    prose = """
+`benchmarks/scaling.py`: PPO (and AMP) on several GPUs of one host, the env batch sharded
+and each gradient step split over the devices (`split_minibatches`); `num_envs` x N with
+`unroll_length` / N keeps one GPU's learning per env step. The learner caps the speedup:
+its ~130 kernels a step are bound by latency. MuJoCo Warp trains on one GPU only (split
+over two, its program crashed XLA's GPU compiler). [scaling.md](scaling.md) explains the
+recipes.
+"""
+    columns = [
+        ("algorithm", _at("algorithm")),
+        ("recipe", _at("recipe")),
+        ("devices", _at("devices")),
+        ("processes", _at("processes")),
+        ("physics", _at("impl")),
+        ("seed", _at("seed")),
+        ("envs", _at("num_envs")),
+        ("unroll", _at("unroll_length")),
+        ("env steps/s", _rate("steps_per_s")),
+        ("speedup", _at("speedup")),
+        ("efficiency", _at("efficiency")),
+        ("to threshold (s)", _at("time_to_threshold_s")),
+        ("final return", _at("final_return")),
+        ("error", _at("error")),
+    ]
+    return _section("Several GPUs", prose, _file_tables("scaling/*.json", columns))
+
+
+def startup() -> list[str]:
+    prose = """
+`benchmarks/startup.py`: from launching `mjzoo train ppo` to its first update, on a fresh
+machine (*cold*: nothing cached) and again with JAX's persistent compile cache warm. The
+training chunk is traced on the launching thread and compiled, or loaded from the cache,
+on its own while init compiles; importing `mjzoo` costs ~3.7 s of a warm launch (1.5 s of
+it `trimesh`, which MJX imports), loading the chunk's executable from the cache ~2 s.
+Fresh machines differ by 2-3 s.
+"""
+    columns = [
+        ("env", _at("env")),
+        ("variant", _at("variant")),
+        ("round", _at("round")),
+        ("cold: launch to first update (s)", _at("cold_launch_to_first_update_s")),
+        ("warm (s)", _at("warm_launch_to_first_update_s")),
+        ("cold: inside training.run (s)", _at("cold_first_update_s")),
+        ("warm (s) ", _at("warm_first_update_s")),
+    ]
+    return _section("Starting a run", prose, _file_tables("startup/*.json", columns))
+
+
+def physics() -> list[str]:
+    prose = """
+`benchmarks/task_overhead.py`: the task layer (`mjzoo.transition`, then with an
+auto-reset) against raw batched `mjx.step`; overheads are relative to raw stepping. A
+batch computes its new episodes in one `lax.cond`, only on steps where some env ended.
+`benchmarks/warp_conformance.py`: every env through `check_task` on MuJoCo Warp, bare and
+under the combinator stack; bit-exact repeats are the one property atomics in Warp's
+kernels break (by up to 4e-6). Warp launches in 73 s cold, its kernel build included.
+`benchmarks/tree_ab.py` compares two source trees' training rates on one warm card.
+"""
+    overhead = [
+        ("env", _at("env")),
+        ("physics", _at("impl")),
+        ("batch", _at("batch")),
+        ("raw steps/s", _rate("raw_steps_per_s")),
+        ("transition", _rate("transition_steps_per_s")),
+        ("overhead", _percent("transition_overhead")),
+        ("with auto-reset", _rate("auto_reset_steps_per_s")),
+        ("overhead ", _percent("auto_reset_overhead")),
+    ]
+    conformance = [
+        ("env", _at("env")),
+        ("stack", _at("stack")),
+        ("passes", _at("ok")),
+        ("failed", lambda r: ", ".join(k for k, v in r.get("properties", {}).items() if v != "pass") or None),
+        ("seconds", _at("seconds")),
+    ]
+    tree = [
+        ("algorithm", _at("algorithm")),
+        ("env", _at("env")),
+        ("steps", _at("steps")),
+        ("base steps/s", _rate("steps_per_s.base")),
+        ("new steps/s", _rate("steps_per_s.new")),
+        ("new / base", _at("ratio_to_base.new")),
+    ]
+    return _section(
+        "Physics and the task layer",
+        prose,
+        _file_tables("task_overhead_*.json", overhead),
+        _file_tables("warp/task_overhead_*.json", overhead),
+        _file_tables("warp/conformance_*.json", conformance, _at("conformance")),
+        _file_tables("tree_ab/*.json", tree),
+    )
+
+
+def sim2sim() -> list[str]:
+    prose = """
+`scripts/sim2sim.py`: a trained `humanoid_walk` policy, exported to ONNX, earns in C MuJoCo
+the returns its JAX evaluation gives, episode by episode (observation noise off in both).
+"""
+    path = RESULTS / "sim2sim" / "humanoid_walk.json"
+    data = json.loads(path.read_text())
+    columns = [
+        ("episode", _at("episode")),
+        ("JAX return", _at("jax_return")),
+        ("C MuJoCo return", _at("c_return")),
+        ("relative difference", _at("relative_difference")),
+        ("largest observation error", _at("obs_error")),
+    ]
+    return _section(
+        "Sim-to-sim: the exported policy in C MuJoCo",
+        prose,
+        [f"**[{path.name}]({_link(path)})** ({data['episodes']} episodes of {data['steps']} steps)", ""],
+        _table(data["rows"], columns),
+        [""],
+    )
+
+
 def render() -> str:
     lines = [
         "# Benchmarks",
         "",
         "Generated by `python benchmarks/report.py` from the JSON in `benchmarks/results/`; do not",
-        "edit it by hand (the suite checks that it is the script's output).",
+        "edit it by hand (the suite checks that it is the script's output). Each section names the",
+        "script that measures it; each table, the file it comes from and the card it ran on.",
         "",
+        *robots(),
         *learning_quality(),
         *ppo_stability(),
+        *ppo_vs_brax(),
+        *playground(),
+        *locomotion(),
+        *amp(),
+        *planning(),
+        *scaling(),
+        *startup(),
+        *physics(),
+        *sim2sim(),
     ]
     return "\n".join(lines).rstrip() + "\n"
 
 
-def main() -> None:
-    parser = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
-    parser.add_argument("--check", action="store_true", help="exit 1 if docs/benchmarks.md is not up to date")
-    args = parser.parse_args()
-    page = render()
-    if args.check:
-        if not PAGE.exists() or PAGE.read_text() != page:
-            sys.exit(f"{PAGE} is out of date: run python benchmarks/report.py")
-        return
-    PAGE.write_text(page)
-    print(f"wrote {PAGE}")
-
-
 if __name__ == "__main__":
-    main()
+    sys.path.insert(0, str(ROOT / "scripts"))  # the write-or-check step every generated page shares
+    import generated_page
+
+    generated_page.main(PAGE, render, __doc__)

@@ -1,5 +1,7 @@
-"""The documentation's Python examples run as written: README.md, docs/own-task.md,
-docs/sweeps.md and docs/robots.md.
+"""The documentation runs and holds together: every ```python block of README.md and the
+docs pages in DOCS runs as written; the README stays short; every link points at a file
+that exists in the repository; and the generated pages (docs/benchmarks.md, docs/cli.md,
+docs/api.md) are their scripts' output.
 
 Each ```python block is one test. A document's blocks share one namespace and run in
 the order the document reads (the README's PPO block trains the task its first block
@@ -23,7 +25,18 @@ from pathlib import Path
 import pytest
 
 ROOT = Path(__file__).resolve().parents[1]
-DOCS = ("README.md", "docs/own-task.md", "docs/sweeps.md", "docs/robots.md")
+DOCS = (
+    "README.md",
+    "docs/concepts.md",
+    "docs/training.md",
+    "docs/planning.md",
+    "docs/interop.md",
+    "docs/own-task.md",
+    "docs/sweeps.md",
+    "docs/robots.md",
+    "docs/catalog.md",
+)
+README_MAX_LINES = 200
 _FENCE = re.compile(r"^```python\n(.*?)^```", re.S | re.M)
 
 
@@ -49,12 +62,18 @@ _EXPORTED = (
 )
 # Lines the block tests leave out, by document (matched by what the line contains), and why.
 NOT_RUN = {
-    "README.md": {
+    "README.md": {},
+    "docs/concepts.md": {},
+    "docs/planning.md": {},
+    "docs/catalog.md": {},
+    "docs/training.md": {
         "training.run(ppo.make": _PPO_TRAIN,
         "whole_run(config, task, hyperparams, jax.random.key(0))": _WHOLE_RUN,
         "training.run(algorithm, pole": _PPO_TRAIN.replace(
             "tests/algorithms/test_ppo.py", "tests/algorithms/test_amp.py"
         ),
+    },
+    "docs/interop.md": {
         **dict.fromkeys(
             ('export.load("runs/cb', "act(obs)", 'run_in_mujoco("runs/cb', "sim2sim.replay(task, start"), _EXPORTED
         ),
@@ -65,9 +84,7 @@ NOT_RUN = {
 }
 # Lines run smaller than printed, by document: {what the line contains: (its replacement there, why)}.
 SHRUNK = {
-    "README.md": {},
-    "docs/own-task.md": {},
-    "docs/robots.md": {},
+    **{doc: {} for doc in DOCS},
     "docs/sweeps.md": {
         "total_steps=327_680": (
             "total_steps=2 * 64 * 32",
@@ -79,7 +96,7 @@ SHRUNK = {
         ),
     },
 }
-MIN_BLOCKS = {"README.md": 3, "docs/own-task.md": 3, "docs/sweeps.md": 2, "docs/robots.md": 1}
+MIN_BLOCKS = {doc: 1 for doc in DOCS} | {"docs/training.md": 3, "docs/own-task.md": 3, "docs/sweeps.md": 2}
 
 
 def _source(doc: str, line: int, source: str) -> str:
@@ -143,9 +160,51 @@ def test_doc_block(docs, doc, index):
     _run(docs, doc, index)
 
 
-def test_readme_example_changes_a_mass_without_recompiling(docs):
-    run = _run(docs, "README.md", 0)["run"]  # the first block's jitted rollout, called with two tasks
-    assert run._cache_size() == 1, "the heavier task recompiled the README's first example"
+def test_concepts_example_changes_a_mass_without_recompiling(docs):
+    run = _run(docs, "docs/concepts.md", 0)["run"]  # the page's jitted rollout, called with two tasks
+    assert run._cache_size() == 1, "the heavier task recompiled docs/concepts.md's example"
+
+
+def test_readme_example_plans_the_heavier_pendulum_without_recompiling(docs):
+    """The README's closed loop swings the pendulum up, and its heavier task reuses the
+    compiled program: one more mass compiles nothing either."""
+    namespace = _run(docs, "README.md", 0)
+    angle = namespace["mjzoo"].catalog.wrap_angle(namespace["result"].states.data.qpos[-1, 0])
+    assert abs(float(angle)) < 0.3, f"the README's MPPI left the heavier pendulum {float(angle):.2f} rad from upright"
+    run, task = namespace["closed_loop"].run, namespace["task"]
+    compiled = run._cache_size()
+    lighter = task.replace(model=task.model.replace(body_mass=task.model.body_mass * 0.9))
+    args = namespace["mppi"], namespace["config"], lighter, lighter, namespace["start"], namespace["key"], 150
+    run(*args, replan_every=2, hyperparams=namespace["hyperparams"])
+    assert run._cache_size() == compiled, "a task with another mass compiled the README's closed loop again"
+
+
+def test_readme_is_short():
+    lines = (ROOT / "README.md").read_text().count("\n")
+    assert lines <= README_MAX_LINES, (
+        f"README.md has {lines} lines; keep it to {README_MAX_LINES} and move the rest to docs/"
+    )
+
+
+_LINK = re.compile(r"!?\[[^\]]*\]\(([^)\s]+)(?:\s+\"[^\"]*\")?\)")
+
+
+def _pages() -> list[Path]:
+    return [ROOT / "README.md", *sorted((ROOT / "docs").glob("*.md"))]
+
+
+@pytest.mark.parametrize("page", _pages(), ids=lambda p: p.relative_to(ROOT).as_posix())
+def test_links_point_at_files_in_the_repository(page):
+    """Every relative link and image of README.md and docs/*.md names a file or folder
+    that exists inside the repository (anchors and web addresses are not checked)."""
+    broken = []
+    for target in _LINK.findall(page.read_text()):
+        if re.match(r"[a-z]+:", target) or target.startswith("#"):
+            continue
+        path = (page.parent / target.split("#")[0]).resolve()
+        if not path.is_relative_to(ROOT) or not path.exists():
+            broken.append(target)
+    assert not broken, f"{page.relative_to(ROOT)} links to files not in the repository: {broken}"
 
 
 def test_own_task_reacher_is_reached_by_mppi(docs):
@@ -178,10 +237,16 @@ def test_sweeps_page_draws_every_rate_and_seed(docs):
     assert Path("sweep.png").stat().st_size > 10_000  # in the test's temporary working directory
 
 
-def test_benchmarks_page_is_the_reports_output():
-    """docs/benchmarks.md is generated from benchmarks/results/ by benchmarks/report.py:
-    a measurement committed without regenerating it, or a hand edit, fails here."""
-    out = subprocess.run(
-        [sys.executable, str(ROOT / "benchmarks" / "report.py"), "--check"], capture_output=True, text=True
-    )
+@pytest.mark.parametrize(
+    "script",
+    [
+        "benchmarks/report.py",  # docs/benchmarks.md, from benchmarks/results/
+        "scripts/cli_reference.py",  # docs/cli.md, from the parsers of `mjzoo`'s commands
+        "scripts/api_reference.py",  # docs/api.md, from the modules' __all__ and docstrings
+    ],
+)
+def test_generated_page_is_its_scripts_output(script):
+    """Each generated page is its script's output: a measurement, flag or public name
+    committed without regenerating the page, or a hand edit, fails here."""
+    out = subprocess.run([sys.executable, str(ROOT / script), "--check"], capture_output=True, text=True)
     assert out.returncode == 0, out.stderr
