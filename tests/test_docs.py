@@ -34,6 +34,7 @@ DOCS = (
     "docs/own-task.md",
     "docs/sweeps.md",
     "docs/robots.md",
+    "docs/motion.md",
     "docs/catalog.md",
 )
 README_MAX_LINES = 200
@@ -81,6 +82,7 @@ NOT_RUN = {
     "docs/own-task.md": {"training.run(ppo.make": _PPO_TRAIN},
     "docs/sweeps.md": {},
     "docs/robots.md": {},
+    "docs/motion.md": {},
 }
 # Lines run smaller than printed, by document: {what the line contains: (its replacement there, why)}.
 SHRUNK = {
