@@ -50,7 +50,6 @@ def main() -> int:
     try:
         with browser.chromium() as page:
             page.open(f"http://127.0.0.1:{shown.port}")
-            page.dismiss_notices()
             found = lambda image: counts.update({str(c): int(browser.colored(image, c).sum()) for c in colours})
             try:
                 page.until(

@@ -146,7 +146,8 @@ class Page:
 
     def scene(self) -> np.ndarray:
         """The screenshot's part left of the control panel, less the axes gizmo in its
-        bottom-left corner (white there): RGB [H, W', 3]."""
+        bottom-left corner (white there), notices closed: RGB [H, W', 3]."""
+        self.dismiss_notices()
         image = self.screenshot()
         left = self.evaluate(_PANEL_LEFT)
         image = image[:, : int(left)] if isinstance(left, int | float) and 0 < left < image.shape[1] else image
