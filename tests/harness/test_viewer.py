@@ -2,17 +2,17 @@
 free port, driven from Python (`Viewer.step`, GUI handles' ``.value``, which run the
 browser's callbacks). One pendulum simulation, one tiny planner and hand-made
 recordings share their compiles through module fixtures; the offscreen frames and
-video run in a fresh EGL process, and the browser check in headless Chromium, both
-started first so that they overlap the rest."""
+video run in a fresh EGL process started first, so that it overlaps the rest. The last
+tests open the same viewers in headless Chromium (`viewer.browser`) and read what it
+draws, moving its sliders and pressing its buttons with mouse clicks."""
 
 from __future__ import annotations
 
-import json
 import os
-import shutil
 import subprocess
 import sys
 import textwrap
+import time
 import urllib.request
 from pathlib import Path
 
@@ -27,7 +27,9 @@ from mjzoo.harness import datasets
 from mjzoo.harness import viewer
 from mjzoo.harness.cli import viewing
 from mjzoo.harness.cli.arguments import UsageError
+from mjzoo.harness.viewer import browser
 from mjzoo.harness.viewer import scene
+from mjzoo.harness.viewer.app import PLAN_RGB
 
 ROOT = Path(__file__).resolve().parents[2]
 ENV = "pendulum_swingup"
@@ -60,16 +62,13 @@ def _start(args: list[str], out: Path, env: dict[str, str]) -> subprocess.Popen:
 
 @pytest.fixture(scope="module", autouse=True)
 def background(tmp_path_factory) -> dict[str, tuple[Path, subprocess.Popen | None]]:
-    """The EGL run and the browser check, started before any test of this module."""
+    """The EGL run, started before any test of this module."""
     env = {**os.environ, "MUJOCO_GL": "egl"}
     saved = tmp_path_factory.mktemp("saved")
     started = {"saved": (saved, _start([sys.executable, "-c", SAVE_SCRIPT, str(saved)], saved, env))}
-    shot = tmp_path_factory.mktemp("browser")
-    script = [sys.executable, str(ROOT / "scripts" / "viewer_screenshot.py"), "--out", str(shot / "shot.png")]
-    started["browser"] = (shot, _start(script, shot, env) if shutil.which("chromium") else None)
     yield started
     for _, process in started.values():
-        if process is not None and process.poll() is None:
+        if process.poll() is None:
             process.kill()
 
 
@@ -135,27 +134,31 @@ def test_one_env_shown_and_a_tracked_body(sim):
     assert sim.track is None and all(h.visible for h in sim.scene.handles.values())
 
 
-def test_a_planner_draws_its_samples_and_plan():
-    config = mppi.Config(num_samples=8, horizon_steps=6, num_knots=2)
+@pytest.fixture(scope="module")
+def planned():
+    """A small MPPI planning the pendulum, paused (the tests step it)."""
+    config = mppi.Config(num_samples=8, horizon_steps=20, num_knots=2)
     problem = mjzoo.envs.closed_loop_problem(ENV, mppi, config)
     shown = viewer.serve(viewer.planner(problem), port=0, host="127.0.0.1", playing=False)
-    try:
-        shown.step(2)
-        samples, plan = shown.trace_handles["samples"].points, shown.trace_handles["plan"].points
-        assert samples.shape == (7 * 5, 2, 3) and plan.shape == (5, 2, 3)  # 7 samples, 6 points each
-        assert np.all(np.isfinite(samples)) and np.ptp(samples[..., 0]) > 0
-        assert shown.stats()["plan_latency_ms"] > 0
-        assert sorted(k for k in shown.controls if k.startswith("config/")) == [
-            "config/cvar_alpha",
-            "config/noise_scale",
-            "config/temperature",
-            "config/termination_cost",
-        ]
-        compiles = shown.source.compiles
-        shown.controls["config/temperature"].value = 0.0  # mppi.Config refuses it: no compile
-        assert "temperature" in shown.message and shown.source.compiles == compiles
-    finally:
-        shown.stop()
+    yield shown
+    shown.stop()
+
+
+def test_a_planner_draws_its_samples_and_plan(planned):
+    planned.step(2)
+    samples, plan = planned.trace_handles["samples"].points, planned.trace_handles["plan"].points
+    assert samples.shape == (7 * 19, 2, 3) and plan.shape == (19, 2, 3)  # 7 samples, 20 points each
+    assert np.all(np.isfinite(samples)) and np.ptp(samples[..., 0]) > 0
+    assert planned.stats()["plan_latency_ms"] > 0
+    assert sorted(k for k in planned.controls if k.startswith("config/")) == [
+        "config/cvar_alpha",
+        "config/noise_scale",
+        "config/temperature",
+        "config/termination_cost",
+    ]
+    compiles = planned.source.compiles
+    planned.controls["config/temperature"].value = 0.0  # mppi.Config refuses it: no compile
+    assert "temperature" in planned.message and planned.source.compiles == compiles
 
 
 def _dataset(task: mjzoo.Task, episodes: int = 2, steps: int = 12) -> datasets.Dataset:
@@ -275,10 +278,97 @@ def _has_pyav() -> bool:
     return True
 
 
-def test_the_browser_draws_the_scene(background):
-    if background["browser"][1] is None:
-        pytest.skip("no chromium on PATH (Debian: apt-get install -y chromium): the browser check needs it")
-    out, stdout = _finished(background["browser"])
-    result = json.loads(stdout.strip().splitlines()[-1])
-    assert result["ok"], result
-    assert (out / "shot.png").stat().st_size > 0
+# --- in headless Chromium: what the page draws -------------------------------------------
+
+
+@pytest.fixture(scope="module")
+def page():
+    """One headless Chromium tab (1280 x 560 page pixels) for the browser checks."""
+    if browser.find_chromium() is None:
+        pytest.skip("no chromium on PATH (Debian: apt-get install -y chromium): the browser checks need it")
+    with browser.chromium() as tab:
+        yield tab
+
+
+def _rgb(shown: viewer.Viewer, geom: str = "bob") -> tuple[int, int, int]:
+    """A geom's colour as the scene sends it: the pendulum's bob is orange, its pole grey, the floor dark."""
+    found = next(g for group in shown.scene.groups for g in group.geoms if g.name == geom)
+    return tuple(int(255 * c) for c in found.rgba[:3])
+
+
+def _blobs(mask: np.ndarray, gap: int = 20) -> list[np.ndarray]:
+    """Centres (x, y) of the groups of True pixels of `mask` [H, W] that `gap` empty
+    columns part, left to right."""
+    ys, xs = np.nonzero(mask)
+    order = np.argsort(xs)
+    groups = np.split(order, np.flatnonzero(np.diff(xs[order]) > gap) + 1) if len(xs) else []
+    return [np.array([xs[g].mean(), ys[g].mean()]) for g in groups]
+
+
+def _open(page: browser.Page, shown: viewer.Viewer) -> np.ndarray:
+    """Shows `shown` in the tab (loaded once) and returns the scene once its bodies are drawn."""
+    url = f"http://127.0.0.1:{shown.port}/"
+    if page.evaluate("location.href") != url:
+        page.open(url)
+    bob = _rgb(shown)
+    return page.until(lambda image: browser.colored(image, bob).sum() > 20)
+
+
+def _wait_for(done, timeout: float = 30.0) -> None:
+    deadline = time.time() + timeout
+    while not done():
+        assert time.time() < deadline, f"not within {timeout:.0f} s"
+        time.sleep(0.02)
+
+
+def test_the_browser_draws_the_scene(sim, page, tmp_path):
+    image = _open(page, sim)
+    iio.imwrite(tmp_path / "scene.png", image)
+    bobs = _blobs(browser.colored(image, _rgb(sim)))
+    assert len(bobs) == 2 and bobs[1][0] - bobs[0][0] > 100  # both pendulums, side by side
+    assert browser.colored(image, PLAN_RGB).sum() == 0  # no planner: none of its red
+    floor = np.all(np.abs(image.astype(int) - _rgb(sim, "floor")) < 30, axis=-1)  # shaded a little
+    assert floor.mean() > 0.1
+
+
+def test_a_slider_moved_in_the_browser_changes_the_scene(sim, page, tmp_path):
+    """Reset, the torque slider to one end, ten steps: the two ends leave the bobs
+    apart, each env's (the buttons and the slider clicked in the page)."""
+    image, bob, shots = _open(page, sim), _rgb(sim), []
+    for end, torque in ((1.0, 1.0), (0.0, -1.0)):
+        page.click_button("Reset")
+        page.move_slider("torque", end)
+        for _ in range(10):  # each click once the last one's step is done, as a user watching it would
+            steps = sim.source.steps
+            page.click_button("Step")
+            _wait_for(lambda steps=steps: sim.source.steps > steps)
+        np.testing.assert_array_equal(sim.source.act_params, [torque])  # the click reached the server
+        image = page.until(lambda shown, before=image: not np.array_equal(shown, before))
+        iio.imwrite(tmp_path / f"torque{torque:+.0f}.png", image)
+        shots.append(_blobs(browser.colored(image, bob)))
+    sim.controls["ctrl/torque"].value = 0.0
+    assert [len(s) for s in shots] == [2, 2]
+    for pushed, pulled in zip(*shots):
+        assert np.linalg.norm(pushed - pulled) > 5  # pixels
+
+
+def test_the_browser_draws_the_planners_traces(planned, page, tmp_path):
+    """The plan's red and the samples' lines on screen: hiding each one's handle takes its pixels away."""
+    for _ in range(100):  # until it swings: a plan longer than the bob is wide
+        planned.step()
+        plan = planned.trace_handles["plan"].points
+        if np.linalg.norm(plan - plan[0, 0], axis=-1).max() > 0.2:
+            break
+    shown = _open(page, planned)
+    iio.imwrite(tmp_path / "planner.png", shown)
+    assert browser.colored(shown, PLAN_RGB).sum() > 20  # the plan's red
+    try:
+        planned.trace_handles["samples"].visible = False
+        no_samples = page.until(lambda image: not np.array_equal(image, shown))
+        planned.trace_handles["plan"].visible = False
+        neither = page.until(lambda image: not np.array_equal(image, no_samples))
+    finally:
+        for handle in planned.trace_handles.values():
+            handle.visible = True
+    assert np.any(shown != no_samples, axis=-1).sum() > 20  # the samples' pixels
+    assert browser.colored(neither, PLAN_RGB).sum() == 0  # all the red was the plan's

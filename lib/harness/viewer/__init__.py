@@ -22,6 +22,9 @@ compiles again; an infinite bound is shown as text), one slider per actuator (``
 floats (a separate folder: they are static, so a change compiles the planner again,
 keeping its state), and a recording's timeline, loop switch and speed.
 
+`mjzoo.harness.viewer.browser` opens a viewer's page in headless Chromium and clicks
+it as a user would (the browser check in the tests; ``scripts/viewer_screenshot.py``).
+
 Sources are built from objects: this package sits in the harness layer and names no
 env or algorithm; `mjzoo view` (`mjzoo.harness.cli.viewing`) resolves names and run
 directories into these calls.

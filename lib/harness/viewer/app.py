@@ -23,10 +23,11 @@ from mjzoo.harness.viewer import gui
 from mjzoo.harness.viewer.scene import Scene
 from mjzoo.harness.viewer.sources import Frame
 
-__all__ = ["Viewer"]
+__all__ = ["Viewer", "SAMPLES_RGB", "PLAN_RGB"]
 
 _BEHIND_LIMIT_S = 0.25  # simulated time a slow source may fall behind before it is let go
 _PLOT_PERIOD_S = 0.2  # the reward plot at 5 Hz: plots cost more to send than poses
+SAMPLES_RGB, PLAN_RGB = (150, 150, 160), (230, 40, 40)  # a planner's traces: its samples, its plan
 
 
 class Viewer:
@@ -174,16 +175,17 @@ class Viewer:
             return frame
 
     def _draw_traces(self, points: np.ndarray, offset: np.ndarray) -> None:
-        """Sampled rollouts (grey) and the chosen plan (red) as line segments:
-        points [S + 1, H, 3], the plan last."""
-        for name, part, color in (("samples", points[:-1], (150, 150, 160)), ("plan", points[-1:], (230, 40, 40))):
+        """Sampled rollouts (grey) and the chosen plan (red) as line segments of a
+        fixed width on screen (a robot seen from afar keeps them): points [S + 1, H, 3],
+        the plan last."""
+        for name, part, color in (("samples", points[:-1], SAMPLES_RGB), ("plan", points[-1:], PLAN_RGB)):
             segments = np.stack([part[:, :-1], part[:, 1:]], axis=2).reshape(-1, 2, 3) + offset
             colors = np.broadcast_to(np.array(color, np.uint8), segments.shape)
             handle = self.trace_handles.get(name)
             if handle is None:
-                width = 0.004 if name == "samples" else 0.012
+                width = 1.5 if name == "samples" else 4.0  # pixels
                 self.trace_handles[name] = self.server.scene.add_line_segments(
-                    f"/traces/{name}", segments.astype(np.float32), colors, thickness=width
+                    f"/traces/{name}", segments.astype(np.float32), colors, thickness=width, thickness_units="screen"
                 )
             else:
                 handle.points, handle.colors = segments.astype(np.float32), colors
