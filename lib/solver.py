@@ -25,7 +25,17 @@ import numpy as np
 
 from mjzoo import physics as physics_lib
 
-__all__ = ["SHIPPED", "COSTLY_ITERATIONS", "SolverCostWarning", "Settings", "settings", "shipped", "accuracy"]
+__all__ = [
+    "SHIPPED",
+    "COSTLY_ITERATIONS",
+    "SolverCostWarning",
+    "Settings",
+    "settings",
+    "shipped",
+    "Accuracy",
+    "accuracy",
+    "warn_if_costly",
+]
 
 # The planar locomotion envs' physics options (envs/locomotion.py); free-floating ones go to iterations=1.
 SHIPPED = dict(solver="newton", iterations=4, ls_iterations=4, disable_euler_damping=True)
@@ -131,9 +141,10 @@ def accuracy(
     the ctrlranges), for `seeds` rollouts of `seconds`."""
     other = shipped(physics) if other is None else other
     models = (physics.mj_model, other.mj_model)
-    if models[0].nq != models[1].nq or models[0].nu != models[1].nu:
-        raise ValueError("mjzoo.solver.accuracy: the two models must have the same joints and actuators")
     m = models[0]
+    same = (m.nq, m.nu, m.opt.timestep, physics.n_substeps)
+    if same != (models[1].nq, models[1].nu, models[1].opt.timestep, other.n_substeps):
+        raise ValueError("mjzoo.solver.accuracy: the two must be one model (joints, actuators, timestep, substeps)")
     low, high = np.where(m.actuator_ctrllimited.astype(bool)[None], m.actuator_ctrlrange.T, [[-1.0], [1.0]])
     steps = max(1, round(seconds / m.opt.timestep))
     drift, niter = 0.0, np.zeros(2)
@@ -161,7 +172,7 @@ def warn_if_costly(physics: physics_lib.Physics, who: str) -> None:
     message = (
         f"{who}: {physics.source} keeps costly solver settings for a model with contacts ({found}); "
         f"batched on MJX a step may cost an order of magnitude more than with the shipped envs' "
-        f"{', '.join(f'{k}={v!r}' for k, v in SHIPPED.items())} (up to {fast.bound}): give them as physics "
+        f"{', '.join(f'{k}={v!r}' for k, v in SHIPPED.items())} (up to {fast.bound} iterations): give them as physics "
         "options (**mjzoo.solver.SHIPPED); mjzoo.solver.accuracy(physics) measures what they cost in accuracy"
     )
     if message not in _WARNED:

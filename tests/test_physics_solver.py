@@ -20,8 +20,7 @@ BALL = """
   <worldbody>
     <geom name="floor" type="plane" size="1 1 0.1"/>
     <body name="ball" pos="0 0 0.1">
-      <joint name="z" type="slide" axis="0 0 1"/>
-      <joint name="x" type="slide" axis="1 0 0"/>
+      <joint name="z" type="slide" axis="0 0 1"/><joint name="x" type="slide" axis="1 0 0"/>
       <geom type="sphere" size="0.1" mass="1"/>
     </body>
   </worldbody>
@@ -78,6 +77,8 @@ def test_accuracy_is_the_qpos_drift_from_the_model_s_own_settings_in_c_mujoco():
     # One iteration of one line-search step does not settle the contact: the ball drifts by cm.
     tight = solver.accuracy(physics, solver.shipped(physics, iterations=1, ls_iterations=1), seconds=0.5, seeds=2)
     assert tight.qpos_drift > 1e-3 and tight.iterations[1] <= 1.0
+    with pytest.raises(ValueError, match=r"the two must be one model \(joints, actuators, timestep, substeps\)"):
+        solver.accuracy(physics, mjzoo.physics.load(ROLLING, ctrl_dt=0.02))
 
 
 def test_a_kit_task_warns_once_of_costly_settings_and_not_when_they_were_chosen(monkeypatch):
@@ -86,7 +87,7 @@ def test_a_kit_task_warns_once_of_costly_settings_and_not_when_they_were_chosen(
         mjzoo.task(ROLLING, ctrl_dt=0.04, check=False)
     (message,) = [str(w.message) for w in caught if w.category is solver.SolverCostWarning]
     assert message.startswith("mjzoo.task: <xml string> keeps costly solver settings for a model with contacts")
-    assert "up to 1600 solver iterations per control step" in message and "(up to 64)" in message
+    assert "up to 1600 solver iterations per control step" in message and "(up to 64 iterations)" in message
     assert "**mjzoo.solver.SHIPPED" in message and "\n" not in message
     with warnings.catch_warnings():
         warnings.simplefilter("error", solver.SolverCostWarning)
