@@ -138,10 +138,10 @@ def task(
         for a part that combinators added later complete (an observation that reads
         what a tracker wrapped around it keeps).
       **physics_options: `mjzoo.physics.load`'s (dt, ctrl_dt, solver, iterations, ...).
-        A model whose bodies can touch and that keeps MuJoCo's solver iteration limits
-        (100 and 50), none given here, warns once (`mjzoo.solver.SolverCostWarning`):
-        batched on MJX they cost an order of magnitude; ``**mjzoo.solver.SHIPPED`` are
-        the shipped envs' settings.
+        A model whose bodies can touch and that keeps solver iteration limits above
+        10 (MuJoCo's are 100 and 50), none given here, warns once
+        (`mjzoo.solver.SolverCostWarning`): a batched MJX step lasts as long as its
+        slowest world's solve; ``**mjzoo.solver.SHIPPED`` are the shipped envs' settings.
 
     Raises ValueError or TypeError at construction, naming the argument: a name that is
     not an identifier or is taken twice, a weight naming no parameter, a function that

@@ -5,12 +5,13 @@
     mjzoo.solver.accuracy(physics)     # what they cost in accuracy, in C MuJoCo: qpos drift
 
 An MJCF file that sets no solver options keeps MuJoCo's (Newton, 100 iterations, 50
-line-search steps), tuned for one float64 world on a CPU. MJX runs a batch of worlds in
-lockstep, so each step costs what its slowest world needs, and in float32 the solver
-rarely meets MuJoCo's tolerance: it tends to run every iteration it is allowed. The
+line-search steps), made for one float64 world on a CPU. MJX runs a batch of worlds in
+lockstep, so a step lasts as long as its slowest world's solve: the limits bound what a
+step may cost, and the more worlds, the likelier one of them needs many iterations. The
 shipped envs (hopper, walker, cheetah: Brax's MJX settings) allow 4 of each. `mjzoo.task`
 warns once (`SolverCostWarning`) when a model whose bodies can touch keeps iteration
-limits above `COSTLY_ITERATIONS`; docs/own-task.md has measured costs.
+limits above `COSTLY_ITERATIONS` that no physics option chose; docs/own-task.md has
+measured costs.
 """
 
 from __future__ import annotations
@@ -45,9 +46,10 @@ _WARNED: set[str] = set()
 
 
 class SolverCostWarning(UserWarning):
-    """A task's model keeps costly constraint-solver settings (MuJoCo's defaults): on
-    MJX each step may cost an order of magnitude more than with the shipped envs'.
-    Silence it with ``warnings.simplefilter("ignore", mjzoo.solver.SolverCostWarning)``."""
+    """A task's model with contacts keeps costly constraint-solver limits (MuJoCo's
+    defaults): a batched MJX step may run many more solver iterations than with the
+    shipped envs' settings. Silence it with
+    ``warnings.simplefilter("ignore", mjzoo.solver.SolverCostWarning)``."""
 
 
 @dataclasses.dataclass(frozen=True)
@@ -171,9 +173,10 @@ def warn_if_costly(physics: physics_lib.Physics, who: str) -> None:
     fast = dataclasses.replace(found, **{k: SHIPPED[k] for k in ("solver", "iterations", "ls_iterations")})
     message = (
         f"{who}: {physics.source} keeps costly solver settings for a model with contacts ({found}); "
-        f"batched on MJX a step may cost an order of magnitude more than with the shipped envs' "
-        f"{', '.join(f'{k}={v!r}' for k, v in SHIPPED.items())} (up to {fast.bound} iterations): give them as physics "
-        "options (**mjzoo.solver.SHIPPED); mjzoo.solver.accuracy(physics) measures what they cost in accuracy"
+        "batched on MJX a step lasts as long as its slowest world's solve. The shipped envs' "
+        f"{', '.join(f'{k}={v!r}' for k, v in SHIPPED.items())} allow up to {fast.bound} iterations: give them "
+        "as physics options (**mjzoo.solver.SHIPPED; mjzoo.solver.accuracy(physics) measures their qpos drift), "
+        "or give iterations yourself"
     )
     if message not in _WARNED:
         _WARNED.add(message)

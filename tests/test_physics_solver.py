@@ -87,7 +87,7 @@ def test_a_kit_task_warns_once_of_costly_settings_and_not_when_they_were_chosen(
         mjzoo.task(ROLLING, ctrl_dt=0.04, check=False)
     (message,) = [str(w.message) for w in caught if w.category is solver.SolverCostWarning]
     assert message.startswith("mjzoo.task: <xml string> keeps costly solver settings for a model with contacts")
-    assert "up to 1600 solver iterations per control step" in message and "(up to 64 iterations)" in message
+    assert "up to 1600 solver iterations per control step" in message and "allow up to 64 iterations" in message
     assert "**mjzoo.solver.SHIPPED" in message and "\n" not in message
     with warnings.catch_warnings():
         warnings.simplefilter("error", solver.SolverCostWarning)
