@@ -34,6 +34,7 @@ from mjzoo import layers
 from mjzoo import lazy
 from mjzoo import names
 from mjzoo import physics
+from mjzoo import solver
 from mjzoo import tree
 from mjzoo.builder import task
 from mjzoo.checks import RetraceHazardWarning
@@ -117,6 +118,7 @@ __all__ = [
     "with_action_noise",
     "with_domain_randomization",
     "physics",
+    "solver",
     "batching",
     "tree",
     "layers",

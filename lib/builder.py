@@ -19,7 +19,9 @@ example, `envs/locomotion.py` the one made of catalog items.
 
 Every plain function gets the task's named parameters first: `p`, a dict of float32
 leaves holding `params` and each term's weight (``"<term>_weight"``, or the parameter
-named in its place). A `jax.tree_util.Partial` (a catalog item, or ``Partial(fn,
+named in its place), and two entries read from the model each call: ``p["dt"]``, the
+physics timestep, and ``p["ctrl_dt"]``, the control step (timestep x substeps: the time
+one step of the task advances), so they follow a changed or randomized timestep. A `jax.tree_util.Partial` (a catalog item, or ``Partial(fn,
 ...)``) carries its own numbers and is called without `p`; `named(item, "name", ...)`
 moves a catalog item's numbers into `p` under those names. Since every number is a
 leaf with a name, `mjzoo.with_params` changes any of them on the built task.
@@ -63,6 +65,7 @@ from mujoco import mjx
 from mjzoo import batching
 from mjzoo import checks
 from mjzoo import physics as physics_lib
+from mjzoo import solver
 from mjzoo.combinators import with_divergence_guard
 from mjzoo.combinators import with_time_limit
 from mjzoo.tree import StaticValue
@@ -75,6 +78,7 @@ Array = jax.Array
 Term = Callable | tuple[Callable, float | str]
 _RESETS_STREAM = 0x4E5  # `catalog.resets.RESETS_STREAM`: reset items draw keys as with_resets does
 _SUBSTEP_STREAM = 0xAC7  # `catalog.actuators.SUBSTEP_STREAM`: an actuator's keys as actuators.step's
+STEPS = ("dt", "ctrl_dt")  # what every function finds in `p` besides the parameters: read from the model
 
 
 def task(
@@ -125,14 +129,19 @@ def task(
         step, observation) before the terms: `rewards`, `costs` and `terminate` see the
         states they make (``info["command"]``), and the guard and time limit wrap them.
       time_limit: steps after which an episode is truncated; None: no limit.
-      params: named numbers (scalars or arrays) given to every function as `p`. A
-        bound may be infinite (a healthy height range ``(0.7, inf)``, a fall angle
+      params: named numbers (scalars or arrays) given to every function as `p`, beside
+        ``p["dt"]`` and ``p["ctrl_dt"]`` (`STEPS`: the model's timestep and control step,
+        names params may not take). A bound may be infinite (a healthy height range ``(0.7, inf)``, a fall angle
         ``inf``: never binds); NaN is refused, and so is an infinite weight (a
         parameter a term names as its weight), whose product with 0 is NaN.
       check: trace a reset and a transition abstractly at construction (below); False
         for a part that combinators added later complete (an observation that reads
         what a tracker wrapped around it keeps).
       **physics_options: `mjzoo.physics.load`'s (dt, ctrl_dt, solver, iterations, ...).
+        A model whose bodies can touch and that keeps solver iteration limits above
+        10 (MuJoCo's are 100 and 50), none given here, warns once
+        (`mjzoo.solver.SolverCostWarning`): a batched MJX step lasts as long as its
+        slowest world's solve; ``**mjzoo.solver.SHIPPED`` are the shipped envs' settings.
 
     Raises ValueError or TypeError at construction, naming the argument: a name that is
     not an identifier or is taken twice, a weight naming no parameter, a function that
@@ -140,6 +149,8 @@ def task(
     term or termination that is not a scalar or an observation whose shape changes.
     """
     physics = _physics(model, physics_options)
+    if not {"solver", "iterations", "ls_iterations"} & set(physics_options):  # else the caller chose them
+        solver.warn_if_costly(physics, "mjzoo.task")  # MuJoCo's default iterations, batched on MJX: slow
     p = _params(params or {})
     ends = terminate if isinstance(terminate, Mapping) else ({} if terminate is None else {"": terminate})
     fns = {}
@@ -203,7 +214,8 @@ def task(
         core = layer(core)
         if not isinstance(core, Task):
             raise TypeError(f"mjzoo.task: a combinator returned {type(core).__name__}, not a Task")
-    ended = Partial(_terminate, tuple(fns.values()), p, core.terminate)
+    n = StaticValue(physics.n_substeps)
+    ended = Partial(_terminate, tuple(fns.values()), p, n, core.terminate)
     terms = {}
     for name, fn, weight, kind in weighted:
         fn = Partial(_own_numbers, Partial(_alive, ended)) if fn is alive else fn
@@ -211,8 +223,8 @@ def task(
     ends = {name: fn for name, fn in fns.items() if name}  # the named ones, recorded in metrics
     built = core.replace(
         start=Partial(_start_ends, StaticValue(tuple(ends)), core.start),
-        step=Partial(_step_ends, ends, p, core.step),
-        reward=Partial(_reward, terms, p, core.reward),
+        step=Partial(_step_ends, ends, p, n, core.step),
+        reward=Partial(_reward, terms, p, n, core.reward),
         terminate=ended,
     )
     built = with_divergence_guard(built)
@@ -272,7 +284,7 @@ def named(item: jax.tree_util.Partial, *names: str) -> jax.tree_util.Partial:
             f"but {len(names)} name(s) were given: {names}"
         )
     for name in names:
-        _identifier("named", name)
+        _parameter_name("named", name)
     return _Named(item, tuple(zip(slots, names)))
 
 
@@ -288,7 +300,15 @@ class _Named:
 # --- the task's four functions ------------------------------------------------------
 
 
+def _timed(p: dict, model: mjx.Model, n_substeps: int) -> dict:
+    """`p` with `STEPS`, read from the model on every call: a changed or randomized
+    timestep is the one the functions see."""
+    dt = jnp.asarray(model.opt.timestep, jnp.float32)
+    return {**p, "dt": dt, "ctrl_dt": dt * n_substeps}
+
+
 def _start(spec: Spec, p: dict, model: mjx.Model, key: Array) -> State:
+    p = _timed(p, model, spec.n_substeps)
     data, info = spec.data0, {}
     keys = jax.random.split(jax.random.fold_in(key, _RESETS_STREAM), max(len(spec.resets), 1))
     calls = ([(spec.start, key)] if spec.start is not None else []) + list(zip(spec.resets, keys))
@@ -301,6 +321,7 @@ def _start(spec: Spec, p: dict, model: mjx.Model, key: Array) -> State:
 
 
 def _step(spec: Spec, p: dict, model: mjx.Model, state: State, action: Array, key: Array) -> State:
+    p = _timed(p, model, spec.n_substeps)
     action = jnp.asarray(action, jnp.float32)
     if spec.actuator is None:
         data = physics_lib.step(model, state.data, action, spec.n_substeps)
@@ -331,18 +352,20 @@ def _start_ends(names: StaticValue, start_fn, model: mjx.Model, key: Array) -> S
     return state.replace(metrics={**state.metrics, **zeros})
 
 
-def _step_ends(ends: dict, p: dict, step_fn, model: mjx.Model, state: State, action: Array, key: Array) -> State:
+def _step_ends(ends: dict, p: dict, n: StaticValue, step_fn, model, state: State, action: Array, key: Array) -> State:
     """The step, each named termination recorded on the state it returns (1.0 / 0.0)."""
     next_state = step_fn(model, state, action, key)
     if not ends:
         return next_state
+    p = _timed(p, model, n.value)
     flags = {f"termination/{name}": _flag(fn, p, model, next_state) for name, fn in ends.items()}
     return next_state.replace(metrics={**next_state.metrics, **flags})
 
 
-def _reward(weighted: dict, p: dict, reward_fn, model, state, action, next_state) -> dict[str, Array]:
+def _reward(weighted: dict, p: dict, n: StaticValue, reward_fn, model, state, action, next_state) -> dict[str, Array]:
     """The inner task's terms, then each ``name: (fn, StaticValue((weight's name, kind)))``,
     a "cost" charged."""
+    p = _timed(p, model, n.value)
     terms = dict(reward_fn(model, state, action, next_state))
     for name, (fn, weight) in weighted.items():
         weight_name, kind = weight.value
@@ -355,10 +378,11 @@ def _flag(fn, p: dict, model: mjx.Model, state: State) -> Array:
     return jnp.asarray(fn(p, model, state), bool).astype(jnp.float32)
 
 
-def _terminate(fns: tuple, p: dict, terminate_fn, model: mjx.Model, state: State) -> tuple[Array, Array]:
+def _terminate(fns: tuple, p: dict, n: StaticValue, terminate_fn, model, state: State) -> tuple[Array, Array]:
     terminated, truncated = terminate_fn(model, state)
     terminated = jnp.asarray(terminated, bool)
     if fns:
+        p = _timed(p, model, n.value)
         terminated = terminated | jnp.any(jnp.stack([jnp.asarray(fn(p, model, state), bool) for fn in fns]))
     return terminated, jnp.asarray(truncated, bool) & ~terminated
 
@@ -433,7 +457,7 @@ def _params(values: Mapping[str, Any]) -> dict[str, Array]:
     """`values` as float32 leaves: numbers, +-inf allowed (bounds), NaN never."""
     p = {}
     for name, value in values.items():
-        _identifier("params", name)
+        _parameter_name("params", name)
         array = np.asarray(value, np.float64) if _numeric(value) else None
         if array is None or np.any(np.isnan(array)):
             raise ValueError(f"mjzoo.task: params[{name!r}]={value!r} must be numbers (+-inf for a bound), not NaN")
@@ -460,6 +484,15 @@ def _add(p: dict, name: str, value: Array) -> dict:
 def _identifier(where: str, name) -> None:
     if not (isinstance(name, str) and name.isidentifier() and not keyword.iskeyword(name)):
         raise ValueError(f"mjzoo.task: {where} name {name!r} must be a Python identifier (usable in with_params)")
+
+
+def _parameter_name(where: str, name) -> None:
+    _identifier(where, name)
+    if name in STEPS:  # a copy would drift from the model's timestep
+        raise ValueError(
+            f"mjzoo.task: {where} name {name!r} is taken: every function finds the model's {name} in "
+            f"p[{name!r}], read from the model each step; drop it from {where}"
+        )
 
 
 def _physics(model, options: dict[str, Any]) -> physics_lib.Physics:

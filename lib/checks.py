@@ -38,6 +38,7 @@ __all__ = [
     "fields",
     "ranges",
     "host_value",
+    "same_observation",
     "did_you_mean",
     "RetraceHazardWarning",
     "retrace_hazard",
@@ -209,6 +210,22 @@ def _is_numeric(cell) -> bool:
 
 def _preview(values: list) -> str:
     return ", ".join(repr(v) if _is_real(v) else f"an array {getattr(v, 'shape', ())}" for v in values[:3])
+
+
+def same_observation(reset_obs, step_obs) -> None:
+    """Raises unless a step observes what the episode's first state does (same pytree
+    structure, shapes and dtypes), naming the first leaf that differs."""
+    reset_leaves, reset_tree = jax.tree_util.tree_flatten_with_path(reset_obs)
+    step_leaves, step_tree = jax.tree_util.tree_flatten_with_path(step_obs)
+    if reset_tree != step_tree:
+        raise ValueError(f"the observation's structure differs between reset ({reset_tree}) and step ({step_tree})")
+    for (path, a), (_, b) in zip(reset_leaves, step_leaves):
+        (sa, da), (sb, db) = (jnp.shape(a), jnp.result_type(a)), (jnp.shape(b), jnp.result_type(b))
+        if (sa, da) != (sb, db):
+            raise ValueError(
+                f"the observation{jax.tree_util.keystr(path)} differs between reset ({da}{list(sa)}) "
+                f"and step ({db}{list(sb)}): a step must observe what the reset does"
+            )
 
 
 def did_you_mean(unknown: Any, known: Any) -> str:

@@ -472,6 +472,7 @@ def _revert_physics(ok: Array, new: mjx.Data, old: mjx.Data) -> mjx.Data:
 def _guard_step(max_qvel, inner: Task, model, state: State, action: Array, key: Array) -> State:
     inner = inner.replace(model=model)
     next_state, terms = transition_with_terms(inner, state, action, key)
+    checks.same_observation(state.obs, next_state.obs)  # named here, before selecting between them
     state = state.replace(info=tree.fill_missing(state.info, next_state.info))  # while `reset` traces
     data = next_state.data
     ok = tree.all_finite((data.qpos, data.qvel, next_state.obs, terms))

@@ -20,6 +20,7 @@ private fields.
 
 from __future__ import annotations
 
+import copy
 import dataclasses
 import functools
 import importlib.util
@@ -36,7 +37,18 @@ from mujoco import mjx
 from mjzoo.batching import clear_overflow
 from mjzoo.batching import probe_capacity
 
-__all__ = ["Physics", "load", "of_model", "of_spec", "step", "forward", "OPTIONS", "IMPLS", "default_impl"]
+__all__ = [
+    "Physics",
+    "load",
+    "of_model",
+    "of_spec",
+    "with_options",
+    "step",
+    "forward",
+    "OPTIONS",
+    "IMPLS",
+    "default_impl",
+]
 
 SOLVERS = {"cg": mujoco.mjtSolver.mjSOL_CG, "newton": mujoco.mjtSolver.mjSOL_NEWTON}
 INTEGRATORS = {
@@ -412,6 +424,24 @@ def _configured(mj_model: mujoco.MjModel, label: str, o: dict[str, Any]) -> Phys
     if o["disable_euler_damping"]:
         mj_model.opt.disableflags |= mujoco.mjtDisableBit.mjDSBL_EULERDAMP
     return of_model(mj_model, n_substeps, o["impl"], o["max_contacts"], o["max_constraints"], source=label)
+
+
+def with_options(physics: Physics, **options: Any) -> Physics:
+    """`physics` with other solver options (`load`'s solver, iterations, ls_iterations,
+    integrator, tolerance, disable_euler_damping), set on a copy of its host model; the
+    timestep, control step and backend stay. Not cached."""
+    kept = sorted(set(options) & {"dt", "ctrl_dt", "impl", "max_contacts", "max_constraints"})
+    unknown = sorted(set(options) - set(_OPTION_DEFAULTS))
+    if kept or unknown:
+        raise ValueError(
+            f"{physics.source}: with_options changes solver options only, not {', '.join(kept + unknown)}; "
+            f"the options: solver, iterations, ls_iterations, integrator, tolerance, disable_euler_damping"
+        )
+    kept = dict(ctrl_dt=physics.ctrl_dt, impl=physics.impl)
+    kept.update(max_contacts=physics.max_contacts, max_constraints=physics.max_constraints)
+    options = {**_OPTION_DEFAULTS, **options, **kept}
+    _validate(physics.source, options)
+    return _configured(copy.copy(physics.mj_model), physics.source, options)
 
 
 def of_model(

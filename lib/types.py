@@ -267,28 +267,12 @@ def fill_transition_entries(task: Task, state: State) -> State:
     structure comes from `jax.eval_shape`.
     """
     shape = _transition_shape(task, state)
-    _check_observation(state.obs, shape.obs)
+    checks.same_observation(state.obs, shape.obs)
     _check_layers(state.layers, shape.layers)
     return state.replace(
         info=tree.fill_missing(state.info, shape.info),
         metrics=tree.fill_missing(state.metrics, shape.metrics),
     )
-
-
-def _check_observation(reset_obs, step_obs) -> None:
-    """Raises unless a step observes what the episode's first state does (same pytree
-    structure, shapes and dtypes), naming the first leaf that differs."""
-    reset_leaves, reset_tree = jax.tree_util.tree_flatten_with_path(reset_obs)
-    step_leaves, step_tree = jax.tree_util.tree_flatten_with_path(step_obs)
-    if reset_tree != step_tree:
-        raise ValueError(f"the observation's structure differs between reset ({reset_tree}) and step ({step_tree})")
-    for (path, a), (_, b) in zip(reset_leaves, step_leaves):
-        (sa, da), (sb, db) = (jnp.shape(a), jnp.result_type(a)), (jnp.shape(b), jnp.result_type(b))
-        if (sa, da) != (sb, db):
-            raise ValueError(
-                f"the observation{jax.tree_util.keystr(path)} differs between reset ({da}{list(sa)}) "
-                f"and step ({db}{list(sb)}): a step must observe what the reset does"
-            )
 
 
 def _check_layers(reset_layers, step_layers) -> None:

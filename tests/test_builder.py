@@ -271,3 +271,47 @@ def _double_action(task):
 
 def _doubled_step(step_fn, model, state, action, key):
     return step_fn(model, state, 2.0 * action, key)
+
+
+def speed(p, model, state, action, next_state):  # m/s over the control step
+    return (next_state.data.qpos[0] - state.data.qpos[0]) / p["ctrl_dt"]
+
+
+def steps_seen(p, model, state):
+    return jnp.stack([p["dt"], p["ctrl_dt"]])
+
+
+def test_every_function_sees_the_model_s_timestep_and_control_step():
+    # 3 substeps of 0.1 s from rest at 1 N: v = 0.1, 0.2, 0.3 m/s, x = 0.01, 0.03, 0.06 m:
+    # 0.2 m/s over the 0.3 s control step. At dt = 0.05 s: x = 0.015 m over 0.15 s, 0.1 m/s.
+    task = mjzoo.task(XML, ctrl_dt=0.3, observe=steps_seen, rewards={"speed": speed})
+    assert "ctrl_dt" not in mjzoo.params(task)  # read from the model, not a copy to change
+
+    def run(timestep):
+        model = task.model.replace(opt=task.model.opt.replace(timestep=timestep))
+        return step(task.replace(model=model), jax.random.key(0))
+
+    start, after = run(0.1)
+    np.testing.assert_allclose(start.obs, [0.1, 0.3], rtol=1e-6)
+    np.testing.assert_allclose(after.obs, [0.1, 0.3], rtol=1e-6)
+    np.testing.assert_allclose(mjzoo.reward_terms(after)["speed"], 0.2, rtol=1e-5)
+    # A traced timestep (a randomized model, one per world) is the one each world sees.
+    start, after = jax.vmap(run)(jnp.array([0.1, 0.05]))
+    np.testing.assert_allclose(after.obs, [[0.1, 0.3], [0.05, 0.15]], rtol=1e-6)
+    np.testing.assert_allclose(mjzoo.reward_terms(after)["speed"], [0.2, 0.1], rtol=1e-5)
+    with pytest.raises(ValueError, match=r"params name 'ctrl_dt' is taken.*p\['ctrl_dt'\]"):
+        mjzoo.task(XML, params={"ctrl_dt": 0.3})
+
+
+def stacked(p, model, state):  # a hand-made history: the reset has no previous observation to keep
+    return jnp.concatenate([state.obs, state.data.qpos, state.data.qvel])
+
+
+@pytest.mark.parametrize("check", [True, False])
+def test_an_observation_whose_shape_changes_is_named_before_the_guard_selects_between_them(check):
+    # Unnamed, the divergence guard's select of [4] against [2] failed first ("Incompatible
+    # shapes for broadcasting"): at construction, and without the check at the first trace.
+    message = r"the observation differs between reset \(float32\[2\]\) and step \(float32\[4\]\)"
+    with pytest.raises(ValueError, match=message):
+        task = mjzoo.task(XML, observe=stacked, check=check)
+        mjzoo.reset(task, jax.random.key(0))
