@@ -168,7 +168,10 @@ def push(
         time_limit=episode_steps,
         params=dict(margin=margin, spawn_range=spawn_range),
         ctrl_dt=ctrl_dt,
-        **physics_options,
+        # Judo's scene keeps MuJoCo's own solver limits, and so does this one: the CPU
+        # planners are measured against Judo's on the same physics (mjzoo.solver.SHIPPED
+        # drifts the cylinder 1.9 cm over 2 s). Named, they are a choice, not an oversight.
+        **{"iterations": 100, "ls_iterations": 50, **physics_options},
     )
 
 
