@@ -244,12 +244,12 @@ class _Loop:
         self.algorithm, self.settings, self.clock, self.hooks = algorithm, settings, clock, hooks
         self.task, self.host_task = replicate(task), task  # videos are drawn by one process, from its own copy
         self.out, self.key, self.launched, self.shown = out, key, launched, shown
-        self.schedule = EvalSchedule(settings, launched)
         self.per_chunk = _per_chunk(algorithm, settings)
         self.chunk = _chunk_fn(algorithm.update, self.per_chunk)
         self.chunk_ahead = chunk_ahead  # the chunk compiling while init ran (`_compile_chunk_ahead`)
         self.evaluate, self.eval_steps = _evaluate_fn(algorithm.evaluate), eval_steps
         self.total_updates = -(-algorithm.num_updates // self.per_chunk) * self.per_chunk
+        self.schedule = EvalSchedule(settings, launched, self.total_updates)
         self.writer = metrics_lib.MetricsWriter(out) if out is not None and distributed.is_primary() else None
         self.progress = metrics_lib.Progress(
             self.total_updates * algorithm.steps_per_update,
@@ -288,6 +288,7 @@ class _Loop:
         if shapes is not None and not self.overlaps:  # nothing may compile while Warp runs: init first, then
             jax.block_until_ready(state)  # the evaluation's compile and the chunk's, each alone
             self.compile_evaluation_ahead(shapes)
+        ran = self.clock()  # the chunk compiled: what follows is (mostly) training
         state, chunk_metrics = self.chunk(self.task, state)
         if shapes is not None and self.overlaps and self.ahead is None:  # while the first chunk runs, not while it
             self.compile_evaluation_ahead(shapes)  # traces: beside a cached chunk's load it slowed the first update
@@ -304,11 +305,13 @@ class _Loop:
         if not self.history:  # this launch's first chunk: compile (and init) included
             metrics["perf/first_update_s"] = self.pending["perf/first_update_s"] = end - self.launched
             self.shown["first"] = f"{end - self.launched:.1f}s"
+            if self.settings.progress and distributed.is_primary() and jax.default_backend() == "cpu":
+                self.progress.note(_cpu_note(per_chunk * self.algorithm.steps_per_update / max(end - ran, 1e-9), self))
         with self.progress.paused():  # the bar's steps/s is the training rate
             final = updates >= self.total_updates
             compiled = not compilation.still_compiling(self.ahead, 0.0)  # else the budget puts the evaluation off
             due = (
-                self.schedule.due(number, final, end, compiled),
+                self.schedule.due(number, final, end, compiled, (updates - per_chunk, updates)),
                 checkpoint_due(self.settings, number, final, end - self.saved),
             )
             evaluated, save = (bool(x) for x in distributed.agree(due))  # process 0's clock: one collective for both
@@ -470,8 +473,13 @@ def run(
 
 
 def _per_chunk(algorithm: Algorithm, settings: Settings) -> int:
-    """Updates per chunk; a run shorter than one chunk is one chunk of its own length."""
-    return min(settings.updates_per_chunk, max(1, algorithm.num_updates))
+    """Updates per chunk: `updates_per_chunk`, fewer where the default schedule's
+    `eval_count` evaluations need more chunks than that gives (a chunk boundary costs a
+    host sync, milliseconds); a run shorter than one chunk is one chunk of its length."""
+    per_chunk = settings.updates_per_chunk
+    if settings.eval_every is None and settings.eval_count:
+        per_chunk = min(per_chunk, max(1, algorithm.num_updates // settings.eval_count))
+    return min(per_chunk, max(1, algorithm.num_updates))
 
 
 def _compile_chunk_ahead(
@@ -497,6 +505,24 @@ def _compile_chunk_ahead(
         return compile_ahead(chunk.lower(replicate(task), state))
     except Exception:  # noqa: BLE001 (the chunk's own call raises it where it belongs)
         return None
+
+
+def _cpu_note(rate: float, loop: _Loop) -> str:
+    """The line a run on a CPU prints after its first chunk: its rate, how long it will
+    take at that rate, and where training belongs."""
+    total = loop.total_updates * loop.algorithm.steps_per_update
+    return (
+        f"training on a CPU: {rate:,.0f} env-steps/s, so {total:,} steps take about {_about(total / rate)}; "
+        "training belongs on a GPU (mjzoo uses one wherever JAX finds it)"
+    )
+
+
+def _about(seconds: float) -> str:
+    """A duration as a person reads it: 40 s, 12 min, 3 h 05 min."""
+    if seconds < 60:
+        return f"{seconds:.0f} s"
+    minutes = round(seconds / 60)
+    return f"{minutes} min" if minutes < 60 else f"{minutes // 60} h {minutes % 60:02d} min"
 
 
 def _diagnose(algorithm: Algorithm, history: list[dict[str, float]], warned: str | None) -> str | None:
