@@ -79,6 +79,8 @@ def test_new_refuses_to_overwrite_unless_forced(written, monkeypatch, capsys):
 def test_a_bad_name_or_model_is_one_line(tmp_path, monkeypatch, capsys, argv, words):
     monkeypatch.chdir(tmp_path)
     (tmp_path / "broken.xml").write_text("<mujoco><worldbody><body>")
-    (tmp_path / "still.xml").write_text("<mujoco><worldbody><body><freejoint/><geom size='1'/></body></worldbody></mujoco>")
+    (tmp_path / "still.xml").write_text(
+        "<mujoco><worldbody><body><freejoint/><geom size='1'/></body></worldbody></mujoco>"
+    )
     assert_usage_error(capsys, argv, *words)
     assert not (tmp_path / "task.py").exists()

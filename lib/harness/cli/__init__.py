@@ -48,7 +48,20 @@ from mjzoo.harness.cli.scaffolding import new
 from mjzoo.harness.cli.trajectories import collect
 from mjzoo.harness.cli.viewing import view
 
-__all__ = ["main", "demo", "envs", "train", "evaluate", "plan", "collect", "view", "export", "sim2sim", "new", "UsageError"]
+__all__ = [
+    "main",
+    "demo",
+    "envs",
+    "train",
+    "evaluate",
+    "plan",
+    "collect",
+    "view",
+    "export",
+    "sim2sim",
+    "new",
+    "UsageError",
+]
 
 COMMANDS = {
     "demo": demo,

@@ -27,7 +27,9 @@ __all__ = ["UsageError", "as_usage_errors"]
 # Flags several commands share, each with its line of --help (`mjzoo COMMAND --help`).
 ConfigFields = Annotated[
     tuple[str, ...],
-    tyro.conf.arg(help="NAME=VALUE fields of the algorithm's (or planner's) Config and Hyperparams, over the env's defaults"),
+    tyro.conf.arg(
+        help="NAME=VALUE fields of the algorithm's (or planner's) Config and Hyperparams, over the env's defaults"
+    ),
 ]
 EnvOverrides = Annotated[
     tuple[str, ...],
@@ -39,7 +41,9 @@ RunTask = Annotated[
 ]
 Impl = Annotated[
     Literal["jax", "warp"] | None,
-    tyro.conf.arg(help="physics: MJX's JAX implementation or MuJoCo Warp; default: Warp with a CUDA GPU, where installed"),
+    tyro.conf.arg(
+        help="physics: MJX's JAX implementation or MuJoCo Warp; default: Warp with a CUDA GPU, where installed"
+    ),
 ]
 Overwrite = Annotated[bool, tyro.conf.arg(help="replace what --out already holds")]
 
