@@ -53,9 +53,7 @@ class Settings:
     eval_envs: int = 16  # envs per evaluation, one deterministic episode each
     eval_steps: int | None = None  # evaluation length in control steps; None: eval_seconds, else the episode's
     eval_seconds: float | None = None  # [rollout_length_seconds] episode length in seconds (/ mjzoo.control_dt)
-    eval_every: int | None = (
-        None  # [valid_every_n_steps] chunks between evaluations; 0: none; None: eval_count, eval_budget
-    )
+    eval_every: int | None = None  # [valid_every_n_steps] chunks between evaluations; 0: none; None: eval_count
     eval_count: int = 20  # with eval_every=None: at least this many evaluations, evenly spaced; 0: by eval_budget
     eval_budget: float = 0.05  # with eval_every=None: more evaluations while they take at most this share of time
     eval_every_seconds: float | None = None  # [valid_every_n_seconds] wall-clock trigger
