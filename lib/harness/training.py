@@ -265,6 +265,7 @@ class _Loop:
         self.pending: dict[str, float] = {}  # once-only metrics waiting for the next metrics line
         self.ahead: threading.Thread | None = None  # the evaluation compiling in the background
         self.overlaps = compilation.overlaps_safely(getattr(task, "model", None))  # not Warp on a GPU
+        self.noted = False  # whether a CPU run has said how long it will take
         self.saved = launched  # when the last checkpoint was written
         if settings.profile_memory and (silent := metrics_lib.device_memory()[1]):
             warnings.warn(
@@ -288,7 +289,8 @@ class _Loop:
         if shapes is not None and not self.overlaps:  # nothing may compile while Warp runs: init first, then
             jax.block_until_ready(state)  # the evaluation's compile and the chunk's, each alone
             self.compile_evaluation_ahead(shapes)
-        ran = self.clock()  # the chunk compiled: what follows is (mostly) training
+        # A CPU run's forecast is timed on a chunk that neither compiles nor runs beside a compile.
+        timed = not self.noted and bool(self.history) and not compilation.still_compiling(self.ahead, 0.0)
         state, chunk_metrics = self.chunk(self.task, state)
         if shapes is not None and self.overlaps and self.ahead is None:  # while the first chunk runs, not while it
             self.compile_evaluation_ahead(shapes)  # traces: beside a cached chunk's load it slowed the first update
@@ -305,8 +307,10 @@ class _Loop:
         if not self.history:  # this launch's first chunk: compile (and init) included
             metrics["perf/first_update_s"] = self.pending["perf/first_update_s"] = end - self.launched
             self.shown["first"] = f"{end - self.launched:.1f}s"
-            if self.settings.progress and distributed.is_primary() and jax.default_backend() == "cpu":
-                self.progress.note(_cpu_note(per_chunk * self.algorithm.steps_per_update / max(end - ran, 1e-9), self))
+        timed = timed and updates < self.total_updates and self.settings.progress and distributed.is_primary()
+        if timed and jax.default_backend() == "cpu":
+            self.progress.note(_cpu_note(metrics["perf/steps_per_s"], self))
+            self.noted = True
         with self.progress.paused():  # the bar's steps/s is the training rate
             final = updates >= self.total_updates
             compiled = not compilation.still_compiling(self.ahead, 0.0)  # else the budget puts the evaluation off
@@ -508,8 +512,9 @@ def _compile_chunk_ahead(
 
 
 def _cpu_note(rate: float, loop: _Loop) -> str:
-    """The line a run on a CPU prints after its first chunk: its rate, how long it will
-    take at that rate, and where training belongs."""
+    """The line a run on a CPU prints after its first chunk that ran alone (the first
+    compiles; one beside the evaluation's compile ran at a 14th of the later rate on a
+    busy 2-core CPU): its rate, how long the run takes at it, and where training belongs."""
     total = loop.total_updates * loop.algorithm.steps_per_update
     return (
         f"training on a CPU: {rate:,.0f} env-steps/s, so {total:,} steps take about {_about(total / rate)}; "

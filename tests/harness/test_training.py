@@ -446,8 +446,9 @@ def test_video_every_writes_a_video_every_n_evaluations(tmp_path):
 
 
 def test_a_run_on_a_cpu_says_its_rate_and_how_long_it_will_take(tmp_path, capsys):
-    """One printed line (not a warning) after the first chunk: the chunk's rate (1 update
-    of 10 env steps in the fake clock's 10 s) and the whole run's 40 steps at that rate."""
+    """One printed line (not a warning) after the first chunk that ran without compiling
+    (the second): its rate (1 update of 10 env steps in the fake clock's 10 s) and the
+    whole run's 40 steps at that rate."""
     clock = FakeClock()
     settings = dataclasses.replace(SETTINGS, progress=True, eval_every=0, checkpoint_every=0)
     with warnings.catch_warnings():

@@ -160,14 +160,15 @@ def train(
     overrides of the env, as `mjzoo envs` lists them, or a factory's keyword arguments.
     --impl picks the physics (MJX's JAX implementation or MuJoCo Warp; default Warp
     where it is installed and a CUDA GPU is present). Evaluation runs the task's
-    episode length unless --eval-steps or --eval-seconds say otherwise; --eval-every,
-    --log-every and the rest schedule it; --render.NAME VALUE sets how the videos and
-    curves are drawn.
+    episode length unless --eval-steps or --eval-seconds say otherwise, by default at
+    least --eval-count times, evenly spaced; --eval-every, --log-every and the rest
+    schedule it otherwise; --render.NAME VALUE sets how the videos and curves are drawn.
+    On a CPU, the run says early how long it will take at the rate it measures.
 
     --resume DIR continues the run in DIR from its newest intact checkpoint with its
     saved settings, --seed, --eval-envs and --updates-per-chunk included unless given
     again, for the same result as an uninterrupted run. A new run's defaults: seed 0,
-    eval envs 16, updates per chunk 10.
+    eval envs 16, updates per chunk at most 10.
 
     On several hosts, start the same command on each with --coordinator HOST:PORT (process
     0's address), --num-processes N and --process-id I, or set JAX_COORDINATOR_ADDRESS,
