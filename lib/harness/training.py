@@ -289,8 +289,11 @@ class _Loop:
         if shapes is not None and not self.overlaps:  # nothing may compile while Warp runs: init first, then
             jax.block_until_ready(state)  # the evaluation's compile and the chunk's, each alone
             self.compile_evaluation_ahead(shapes)
-        # A CPU run's forecast is timed on a chunk that neither compiles nor runs beside a compile.
-        timed = not self.noted and bool(self.history) and not compilation.still_compiling(self.ahead, 0.0)
+        # A CPU run's forecast is timed on a chunk that neither compiles nor runs beside a compile
+        # (or, should the evaluation's compile outlast 5% of the run, on one beside it).
+        late = 20 * int(state.updates) >= self.total_updates
+        alone = not compilation.still_compiling(self.ahead, 0.0)
+        timed = not self.noted and bool(self.history) and (alone or late)
         state, chunk_metrics = self.chunk(self.task, state)
         if shapes is not None and self.overlaps and self.ahead is None:  # while the first chunk runs, not while it
             self.compile_evaluation_ahead(shapes)  # traces: beside a cached chunk's load it slowed the first update
