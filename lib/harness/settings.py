@@ -28,15 +28,17 @@ class Settings:
     multiple of `eval_every` (counted over the whole run, so a resumed run evaluates at
     the same steps); with `eval_every=None` (the default), it passes one of `eval_count`
     marks evenly spaced over the run's updates (chunks are cut shorter where a run would
-    have fewer, so a curve has at least that many points: 20 evaluations of 0.85 s each
-    are 6% of a 5-minute cart-pole run on an H200, where evaluating costs the same for 4
-    or 64 envs), or the evaluations so far and one more at the last one's cost stay
-    within `eval_budget` of the wall-clock time since launch (the first chance
-    evaluates, to learn that cost), so evaluations the budget allows come on top; either
-    waits for the evaluation to compile (one still compiling in the background is put
-    off, rather than stopping training for its compile); `eval_every_seconds` have
-    passed since the last evaluation began (or since the launch); or it is the first
-    chance after `eval_first_seconds` (KSim's "first validation after M seconds").
+    have fewer), so a curve has that many points whatever they cost (the first waits
+    for the evaluation's compile, as the last evaluation would: once), or the
+    evaluations so far and one more at the last one's cost stay within `eval_budget` of
+    the wall-clock time since launch and the evaluation has compiled (the first chance
+    evaluates, to learn that cost; one still compiling in the background is put off,
+    rather than stopping training for its compile), so the budget adds evaluations where
+    they are cheap; `eval_every_seconds` have passed since the last evaluation began (or
+    since the launch); or it is the first chance after `eval_first_seconds` (KSim's
+    "first validation after M seconds"). On an H200 a cart-pole evaluation (500 steps)
+    takes 0.85 s for 4 or 64 envs alike: 20 of them are 6% of a 5-minute run, and more
+    than the budget of a shorter one (`eval_count=0`: the budget alone).
     Metrics lines of chunks that do not evaluate lack eval/*. Evaluating with
     `eval_every=0` and no seconds: only at the end.
 
@@ -158,7 +160,6 @@ class EvalSchedule:
         self.settings, self.launched, self.total_updates = settings, launched, total_updates
         self.last: float | None = None  # when the last evaluation of this launch began
         self.total, self.latest = 0.0, 0.0  # seconds of all evaluations so far, and of the latest
-        self.owed = False  # an eval_count mark passed while the evaluation compiled: the next chance takes it
 
     def due(
         self, chunk: int, final: bool, now: float, compiled: bool = True, updates: tuple[int, int] = (0, 0)
@@ -166,22 +167,23 @@ class EvalSchedule:
         """Whether chunk number `chunk` (1-based), ending at `now`, evaluates; if so,
         the clock trigger counts from now. `compiled`: whether the evaluation's program
         is ready. `updates`: the run's updates before and after the chunk, for
-        `eval_count`'s marks. The marks and the budget fire only once it is compiled (a
-        mark passed before waits for it); the other triggers fire anyway, and the
-        evaluation then waits for its compile."""
+        `eval_count`'s marks. The budget fires only once it is; the other triggers fire
+        anyway, and the evaluation then waits for its compile (which the run's last
+        evaluation waits for in any case)."""
         s = self.settings
         waiting = s.eval_first_seconds is not None and now - self.launched < s.eval_first_seconds
         since = now - (self.launched if self.last is None else self.last)
         affordable = self.total + self.latest <= s.eval_budget * (now - self.launched)
-        self.owed = self.owed or (s.eval_every is None and self._marks(updates[1]) > self._marks(updates[0]))
+        marked = s.eval_every is None and self._marks(updates[1]) > self._marks(updates[0])
         fires = (
-            (s.eval_every is None and (affordable or self.owed) and compiled)
+            (s.eval_every is None and affordable and compiled)
+            or marked
             or (bool(s.eval_every) and chunk % s.eval_every == 0)
             or (s.eval_every_seconds is not None and since >= s.eval_every_seconds)
             or (s.eval_first_seconds is not None and self.last is None)
         )
         if final or (fires and not waiting):
-            self.last, self.owed = now, False
+            self.last = now
             return True
         return False
 

@@ -244,9 +244,9 @@ def test_the_default_schedule_cuts_chunks_so_a_short_run_evaluates_20_times(tmp_
         # By the budget, training goes on meanwhile: chunks 1 and 2 do not evaluate, chunk 3
         # (t=30) does, 2 s; then 2 + 2 <= 0.05 x 82 (chunk 8), 6 <= 0.05 x 124 (the last).
         ({"eval_count": 0}, [3, 8, 12], 2.0),
-        # By eval_count's marks (every chunk of 12 passes one): those of chunks 1 and 2 wait
-        # for the compile, then every chunk evaluates.
-        ({}, list(range(3, 13)), 2.0),
+        # By eval_count's marks (every chunk of 12 passes one): the first waits for the
+        # compile (as the last evaluation would), so the curve has its 12 points.
+        ({}, list(range(1, 13)), 22.0),
         # Asked for every chunk: the first evaluation waits from t=10 to t=30 (reported as it
         # was), not charged to a budget: charged, it held off every later evaluation.
         ({"eval_every": 1}, list(range(1, 13)), 22.0),
