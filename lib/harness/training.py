@@ -265,7 +265,9 @@ class _Loop:
         self.pending: dict[str, float] = {}  # once-only metrics waiting for the next metrics line
         self.ahead: threading.Thread | None = None  # the evaluation compiling in the background
         self.overlaps = compilation.overlaps_safely(getattr(task, "model", None))  # not Warp on a GPU
-        self.noted = False  # whether a CPU run has said how long it will take
+        # Whether the run has said how long it will take (only a CPU run, showing progress, does).
+        self.noted = not (settings.progress and distributed.is_primary() and jax.default_backend() == "cpu")
+        self.timed = (0, 0.0)  # env steps and seconds of the chunks timed for that forecast
         self.saved = launched  # when the last checkpoint was written
         if settings.profile_memory and (silent := metrics_lib.device_memory()[1]):
             warnings.warn(
@@ -289,11 +291,10 @@ class _Loop:
         if shapes is not None and not self.overlaps:  # nothing may compile while Warp runs: init first, then
             jax.block_until_ready(state)  # the evaluation's compile and the chunk's, each alone
             self.compile_evaluation_ahead(shapes)
-        # A CPU run's forecast is timed on a chunk that neither compiles nor runs beside a compile
-        # (or, should the evaluation's compile outlast 5% of the run, on one beside it).
-        late = 20 * int(state.updates) >= self.total_updates
-        alone = not compilation.still_compiling(self.ahead, 0.0)
-        timed = not self.noted and bool(self.history) and (alone or late)
+        # A CPU run's forecast is timed on chunks that neither compile nor run beside a compile
+        # (or, should the evaluation's compile outlast 5% of the run, beside it), a second of them.
+        late = not self.noted and 20 * int(state.updates) >= self.total_updates
+        timed = not self.noted and bool(self.history) and (late or not compilation.still_compiling(self.ahead, 0.0))
         state, chunk_metrics = self.chunk(self.task, state)
         if shapes is not None and self.overlaps and self.ahead is None:  # while the first chunk runs, not while it
             self.compile_evaluation_ahead(shapes)  # traces: beside a cached chunk's load it slowed the first update
@@ -310,10 +311,8 @@ class _Loop:
         if not self.history:  # this launch's first chunk: compile (and init) included
             metrics["perf/first_update_s"] = self.pending["perf/first_update_s"] = end - self.launched
             self.shown["first"] = f"{end - self.launched:.1f}s"
-        timed = timed and updates < self.total_updates and self.settings.progress and distributed.is_primary()
-        if timed and jax.default_backend() == "cpu":
-            self.progress.note(_cpu_note(metrics["perf/steps_per_s"], self))
-            self.noted = True
+        if timed and updates < self.total_updates:
+            self._forecast(per_chunk * self.algorithm.steps_per_update, end - start, late)
         with self.progress.paused():  # the bar's steps/s is the training rate
             final = updates >= self.total_updates
             compiled = not compilation.still_compiling(self.ahead, 0.0)  # else the budget puts the evaluation off
@@ -336,6 +335,14 @@ class _Loop:
         _check_capacity(self.task, metrics)
         self.warned = _diagnose(self.algorithm, self.history, self.warned) if distributed.is_primary() else None
         return state
+
+    def _forecast(self, steps: int, seconds: float, late: bool) -> None:
+        """Adds a timed chunk; after a second of them (or 5% of the run), prints the rate
+        and how long the run takes at it."""
+        steps, seconds = self.timed[0] + steps, self.timed[1] + seconds
+        self.timed, self.noted = (steps, seconds), seconds >= 1.0 or late
+        if self.noted:
+            self.progress.note(_cpu_note(steps / max(seconds, 1e-9), self))
 
     def compile_evaluation_ahead(self, state: Any) -> None:
         """Compiles the evaluation on a background thread while the first chunk runs
