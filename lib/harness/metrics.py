@@ -254,6 +254,13 @@ class Progress:
         else:
             self._pending = line
 
+    def note(self, text: str) -> None:
+        """Prints one line of news (above the live bar, if there is one)."""
+        if self._bar is not None:
+            self._bar.console.print(text, markup=False, highlight=False)
+        else:
+            self._print(text)
+
     @contextlib.contextmanager
     def paused(self) -> Iterator[None]:
         """Time spent inside is no training: steps/s leaves it out."""

@@ -5,7 +5,9 @@
 
 A key names one metric (``"eval/return"``) or, ending in ``/``, a group drawn together
 in one subplot (``"reward/"``: every ``"reward/<term>"``); a key that is no metric but
-the prefix of some (``"reward"``) is a group too. A group draws at most
+the prefix of some (``"reward"``) is a group too; a tuple of metric names is drawn in
+one subplot (`RETURNS`: the evaluations' return beside the training episodes', whose
+points come with every chunk, so the evaluation is read against a dense curve). A group draws at most
 ``config.max_series_per_plot`` series: those of largest mean magnitude, the ones that
 move the total, and its title says how many were left out.
 
@@ -25,16 +27,17 @@ import numpy as np
 from mjzoo.harness.metrics import read_metrics
 from mjzoo.harness.render_config import RenderConfig
 
-__all__ = ["DEFAULT_KEYS", "plot_curves"]
+__all__ = ["DEFAULT_KEYS", "RETURNS", "plot_curves"]
 
-DEFAULT_KEYS = ("eval/return", "train/episode_return", "reward/")  # then every "loss/..." key
+RETURNS = ("eval/return", "train/episode_return")  # one subplot: deterministic evaluations, training episodes
+DEFAULT_KEYS = (RETURNS, "reward/")  # then every "loss/..." key
 _COLUMNS = 3
 
 
 def plot_curves(
     metrics_path: str | Path,
     out_path: str | Path,
-    keys: Sequence[str] | None = None,
+    keys: Sequence[str | tuple[str, ...]] | None = None,
     config: RenderConfig = RenderConfig(),  # noqa: B008 - frozen: one shared default is safe
 ) -> Path:
     """Plots metrics against "step", one subplot per key (or group of keys), and writes a PNG.
@@ -80,11 +83,16 @@ def plot_curves(
 
 
 def _panels(
-    records: list[dict[str, float]], present: list[str], keys: Sequence[str], cap: int
+    records: list[dict[str, float]], present: list[str], keys: Sequence[str | tuple[str, ...]], cap: int
 ) -> list[tuple[str, list[str]]]:
     """(title, metric names) per subplot, in the order of `keys`; at most `cap` names each."""
     panels = []
     for key in dict.fromkeys(keys):
+        if isinstance(key, tuple):  # named metrics side by side: those present
+            members = [k for k in key if k in present]
+            if members:
+                panels.append((" and ".join(members) if len(members) > 1 else members[0], members))
+            continue
         if key in present:
             panels.append((key, [key]))
             continue
@@ -102,11 +110,13 @@ def _panels(
 
 
 def _draw(ax, records: list[dict[str, float]], title: str, series: list[str]) -> None:
-    """One subplot: each metric against step, a legend when there are several."""
+    """One subplot: each metric against step, a legend when there are several (named
+    in full where they come from several groups)."""
+    grouped = len({name.rpartition("/")[0] for name in series}) == 1
     for name in series:
         points = [(r["step"], r[name]) for r in records if name in r]  # e.g. eval runs only every N steps
         steps, values = zip(*points, strict=True)
-        label = name.rsplit("/", 1)[-1] if len(series) > 1 else None
+        label = (name.rsplit("/", 1)[-1] if grouped else name) if len(series) > 1 else None
         ax.plot(steps, values, marker="o" if len(points) < 30 else None, markersize=3, linewidth=1.2, label=label)
     if len(series) > 1:
         ax.legend(fontsize="x-small", ncols=2 if len(series) > 4 else 1)

@@ -244,12 +244,12 @@ class _Loop:
         self.algorithm, self.settings, self.clock, self.hooks = algorithm, settings, clock, hooks
         self.task, self.host_task = replicate(task), task  # videos are drawn by one process, from its own copy
         self.out, self.key, self.launched, self.shown = out, key, launched, shown
-        self.schedule = EvalSchedule(settings, launched)
         self.per_chunk = _per_chunk(algorithm, settings)
         self.chunk = _chunk_fn(algorithm.update, self.per_chunk)
         self.chunk_ahead = chunk_ahead  # the chunk compiling while init ran (`_compile_chunk_ahead`)
         self.evaluate, self.eval_steps = _evaluate_fn(algorithm.evaluate), eval_steps
         self.total_updates = -(-algorithm.num_updates // self.per_chunk) * self.per_chunk
+        self.schedule = EvalSchedule(settings, launched, self.total_updates)
         self.writer = metrics_lib.MetricsWriter(out) if out is not None and distributed.is_primary() else None
         self.progress = metrics_lib.Progress(
             self.total_updates * algorithm.steps_per_update,
@@ -265,6 +265,9 @@ class _Loop:
         self.pending: dict[str, float] = {}  # once-only metrics waiting for the next metrics line
         self.ahead: threading.Thread | None = None  # the evaluation compiling in the background
         self.overlaps = compilation.overlaps_safely(getattr(task, "model", None))  # not Warp on a GPU
+        # Whether the run has said how long it will take (only a CPU run, showing progress, does).
+        self.noted = not (settings.progress and distributed.is_primary() and jax.default_backend() == "cpu")
+        self.timed = (0, 0.0)  # env steps and seconds of the chunks timed for that forecast
         self.saved = launched  # when the last checkpoint was written
         if settings.profile_memory and (silent := metrics_lib.device_memory()[1]):
             warnings.warn(
@@ -288,6 +291,10 @@ class _Loop:
         if shapes is not None and not self.overlaps:  # nothing may compile while Warp runs: init first, then
             jax.block_until_ready(state)  # the evaluation's compile and the chunk's, each alone
             self.compile_evaluation_ahead(shapes)
+        # A CPU run's forecast is timed on chunks that neither compile nor run beside a compile
+        # (or, should the evaluation's compile outlast 5% of the run, beside it), a second of them.
+        late = not self.noted and 20 * int(state.updates) >= self.total_updates
+        timed = not self.noted and bool(self.history) and (late or not compilation.still_compiling(self.ahead, 0.0))
         state, chunk_metrics = self.chunk(self.task, state)
         if shapes is not None and self.overlaps and self.ahead is None:  # while the first chunk runs, not while it
             self.compile_evaluation_ahead(shapes)  # traces: beside a cached chunk's load it slowed the first update
@@ -304,11 +311,13 @@ class _Loop:
         if not self.history:  # this launch's first chunk: compile (and init) included
             metrics["perf/first_update_s"] = self.pending["perf/first_update_s"] = end - self.launched
             self.shown["first"] = f"{end - self.launched:.1f}s"
+        if timed and updates < self.total_updates:
+            self._forecast(per_chunk * self.algorithm.steps_per_update, end - start, late)
         with self.progress.paused():  # the bar's steps/s is the training rate
             final = updates >= self.total_updates
             compiled = not compilation.still_compiling(self.ahead, 0.0)  # else the budget puts the evaluation off
             due = (
-                self.schedule.due(number, final, end, compiled),
+                self.schedule.due(number, final, end, compiled, (updates - per_chunk, updates)),
                 checkpoint_due(self.settings, number, final, end - self.saved),
             )
             evaluated, save = (bool(x) for x in distributed.agree(due))  # process 0's clock: one collective for both
@@ -326,6 +335,14 @@ class _Loop:
         _check_capacity(self.task, metrics)
         self.warned = _diagnose(self.algorithm, self.history, self.warned) if distributed.is_primary() else None
         return state
+
+    def _forecast(self, steps: int, seconds: float, late: bool) -> None:
+        """Adds a timed chunk; after a second of them (or 5% of the run), prints the rate
+        and how long the run takes at it."""
+        steps, seconds = self.timed[0] + steps, self.timed[1] + seconds
+        self.timed, self.noted = (steps, seconds), seconds >= 1.0 or late
+        if self.noted:
+            self.progress.note(_cpu_note(steps / max(seconds, 1e-9), self))
 
     def compile_evaluation_ahead(self, state: Any) -> None:
         """Compiles the evaluation on a background thread while the first chunk runs
@@ -470,8 +487,13 @@ def run(
 
 
 def _per_chunk(algorithm: Algorithm, settings: Settings) -> int:
-    """Updates per chunk; a run shorter than one chunk is one chunk of its own length."""
-    return min(settings.updates_per_chunk, max(1, algorithm.num_updates))
+    """Updates per chunk: `updates_per_chunk`, fewer where the default schedule's
+    `eval_count` evaluations need more chunks than that gives (a chunk boundary costs a
+    host sync, milliseconds); a run shorter than one chunk is one chunk of its length."""
+    per_chunk = settings.updates_per_chunk
+    if settings.eval_every is None and settings.eval_count:
+        per_chunk = min(per_chunk, max(1, algorithm.num_updates // settings.eval_count))
+    return min(per_chunk, max(1, algorithm.num_updates))
 
 
 def _compile_chunk_ahead(
@@ -497,6 +519,25 @@ def _compile_chunk_ahead(
         return compile_ahead(chunk.lower(replicate(task), state))
     except Exception:  # noqa: BLE001 (the chunk's own call raises it where it belongs)
         return None
+
+
+def _cpu_note(rate: float, loop: _Loop) -> str:
+    """The line a run on a CPU prints after its first chunk that ran alone (the first
+    compiles; one beside the evaluation's compile ran at a 14th of the later rate on a
+    busy 2-core CPU): its rate, how long the run takes at it, and where training belongs."""
+    total = loop.total_updates * loop.algorithm.steps_per_update
+    return (
+        f"training on a CPU: {rate:,.0f} env-steps/s, so {total:,} steps take about {_about(total / rate)}; "
+        "training belongs on a GPU (mjzoo uses one wherever JAX finds it)"
+    )
+
+
+def _about(seconds: float) -> str:
+    """A duration as a person reads it: 40 s, 12 min, 3 h 05 min."""
+    if seconds < 60:
+        return f"{seconds:.0f} s"
+    minutes = round(seconds / 60)
+    return f"{minutes} min" if minutes < 60 else f"{minutes // 60} h {minutes % 60:02d} min"
 
 
 def _diagnose(algorithm: Algorithm, history: list[dict[str, float]], warned: str | None) -> str | None:

@@ -5,16 +5,20 @@ is needed (PPO's init, compiled once for the module)."""
 
 from __future__ import annotations
 
+import argparse
 import dataclasses
 import glob
 import json
+import re
 import subprocess
 import sys
+import warnings
 from pathlib import Path
 
 import jax
 import jax.numpy as jnp
 import pytest
+import tyro
 
 import mjzoo.envs
 from mjzoo import learning
@@ -469,3 +473,21 @@ def test_training_refuses_a_directory_that_holds_a_run_unless_told(tmp_path):
     assert int(state.updates) == 1 and checkpoints.all_steps(tmp_path / "checkpoints") == [10]
     steps = [json.loads(line)["step"] for line in (tmp_path / "metrics.jsonl").read_text().splitlines()]
     assert steps == [10]
+
+
+def _own_help(action) -> str:
+    """An option's --help without what tyro adds to every one: its default (or
+    "required"), and a positional's bare name."""
+    text = re.sub(r"\s*\((default: .*|required|fixed to: .*)\)\s*$", "", action.help or "", flags=re.S).strip()
+    return "" if text == action.dest else text
+
+
+@pytest.mark.parametrize("command", sorted(set(cli.COMMANDS) - {"view"}))  # view's flags: viewing.py's own
+def test_every_option_of_every_command_has_a_line_of_help(command):
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore", DeprecationWarning)  # tyro's argparse parser: the one --help prints
+        parser = tyro.extras.get_parser(cli.COMMANDS[command])
+    actions = [a for a in parser._actions if not isinstance(a, argparse._HelpAction)]
+    assert actions or command == "envs"
+    bare = [a.option_strings[0] if a.option_strings else a.dest for a in actions if not _own_help(a)]
+    assert bare == [], f"mjzoo {command}: options without --help: {bare}"

@@ -231,6 +231,7 @@ def test_eval_of_a_run_trained_from_python_needs_task(capsys, in_user_dir, monke
     config, hyperparams = ppo.configure(**TINY)
     settings = training.Settings(out_dir=run, eval_envs=2, updates_per_chunk=2, video=False, progress=False)
     training.run(ppo.make(config), mjzoo.envs.make(SPEC, episode_steps=10), settings, hyperparams)
+    capsys.readouterr()  # training's own news (on a busy CPU: "still compiling ..."), not the command's
     assert not (run / "task.json").exists()
     assert_usage_error(capsys, ["eval", str(run)], f"{run}: has no task.json (trained from Python?)", "--task")
     seen = []

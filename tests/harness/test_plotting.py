@@ -10,6 +10,7 @@ import numpy as np
 
 from mjzoo.harness.metrics import MetricsWriter
 from mjzoo.harness.metrics import read_metrics
+from mjzoo.harness.plotting import DEFAULT_KEYS
 from mjzoo.harness.plotting import _panels
 from mjzoo.harness.plotting import plot_curves
 from mjzoo.harness.rendering import RenderConfig
@@ -41,8 +42,8 @@ def test_default_keys_make_a_grid_of_panels(tmp_path):
     write_run(tmp_path)
     out = plot_curves(tmp_path / "metrics.jsonl", tmp_path / "plots" / "curves.png")
     assert out == tmp_path / "plots" / "curves.png" and out.stat().st_size > 0
-    # eval/return, train/episode_return, loss/policy, loss/value: a 2 x 3 grid at 100 dpi.
-    assert image(out).shape[:2] == (600, 1350)
+    # eval/return beside train/episode_return, loss/policy, loss/value: 1 x 3 at 100 dpi.
+    assert image(out).shape[:2] == (300, 1350)
 
 
 def test_chosen_keys_and_missing_keys_are_skipped(tmp_path):
@@ -80,8 +81,8 @@ def test_figsize_is_per_subplot(tmp_path):
     write_run(tmp_path)
     one = plot_curves(tmp_path, tmp_path / "one.png", keys=["other"], config=RenderConfig(plot_figsize=(2.0, 1.5)))
     assert image(one).shape[:2] == (150, 200)  # at 100 dpi
-    four = plot_curves(tmp_path, tmp_path / "four.png", config=RenderConfig(plot_figsize=(2.0, 1.5)))
-    assert image(four).shape[:2] == (300, 600)  # 2 x 3 subplots
+    three = plot_curves(tmp_path, tmp_path / "three.png", config=RenderConfig(plot_figsize=(2.0, 1.5)))
+    assert image(three).shape[:2] == (150, 600)  # 1 x 3 subplots
 
 
 def test_a_group_draws_its_largest_series_up_to_the_cap(tmp_path):
@@ -108,3 +109,18 @@ def test_a_group_draws_its_largest_series_up_to_the_cap(tmp_path):
 def test_default_keys_include_the_reward_terms(tmp_path):
     write_terms(tmp_path, terms=2)
     assert image(plot_curves(tmp_path, tmp_path / "curves.png")).shape[:2] == (300, 450)  # one subplot: reward/
+
+
+def test_the_evaluation_return_is_drawn_beside_the_training_return(tmp_path):
+    """One subplot holds both: the evaluations' few points read against the training
+    episodes' return of every chunk (matplotlib's first two colours)."""
+    write_run(tmp_path)
+    records = read_metrics(tmp_path)
+    present = sorted({k for r in records for k in r if k != "step"})
+    assert _panels(records, present, DEFAULT_KEYS, cap=8)[0] == (
+        "eval/return and train/episode_return",
+        ["eval/return", "train/episode_return"],
+    )
+    picture = image(plot_curves(tmp_path, tmp_path / "curves.png", keys=DEFAULT_KEYS))
+    assert picture.shape[:2] == (300, 450)  # one subplot: write_run has no reward/ terms
+    assert has_colour(picture, "#1f77b4") and has_colour(picture, "#ff7f0e")

@@ -13,6 +13,7 @@ import re
 import subprocess
 import sys
 import types
+import warnings
 from pathlib import Path
 
 import jax
@@ -204,10 +205,37 @@ def test_evaluation_schedule(tmp_path, settings, chunks):
     ],
 )
 def test_evaluation_by_budget_keeps_its_share_of_the_wall_clock(tmp_path, budget, chunks):
-    records = lines(tmp_path, 12, FakeClock(eval_s=2.0), log_every=1, eval_budget=budget)
+    records = lines(tmp_path, 12, FakeClock(eval_s=2.0), log_every=1, eval_budget=budget, eval_count=0)
     assert evaluated(records) == chunks
     before_last = records[-2]  # the last chunk always evaluates, whatever the budget
     assert sum(r["perf/eval_s"] for r in records[:-1]) <= budget * before_last["perf/elapsed_s"] + 1e-9
+
+
+def test_the_default_schedule_evaluates_20_times_where_the_budget_alone_gave_4(tmp_path):
+    """A 5-minute run of 30 chunks of 10 s whose evaluations take 3.75 s (a GPU run's,
+    latency-bound): the 5% budget alone affords 4 and the last, eval_count's marks 20
+    evenly spaced (and the budget's first, to learn the cost)."""
+    by_budget = evaluated(lines(tmp_path / "budget", 30, FakeClock(eval_s=3.75), eval_count=0))
+    assert by_budget == [1, 15, 22, 29, 30]
+    counted = evaluated(lines(tmp_path / "count", 30, FakeClock(eval_s=3.75)))
+    assert len(counted) == 21 and counted[-1] == 30
+    assert max(np.diff(counted)) <= 2  # evenly spaced: every 1.5 chunks
+
+
+def test_the_default_schedule_cuts_chunks_so_a_short_run_evaluates_20_times(tmp_path):
+    """60 updates at updates_per_chunk=10 were 6 chunks, so at most 6 evaluations: by
+    default they become 20 chunks of 3, each passing a mark; eval_every keeps the
+    chunks as asked."""
+    clock = FakeClock(eval_s=5.0)
+    settings = dataclasses.replace(SETTINGS, out_dir=tmp_path, updates_per_chunk=10, checkpoint_every=0)
+    training.run(logging(60), TASK, settings, clock=clock, hooks=clock.hooks)
+    records = metrics.read_metrics(tmp_path)
+    assert [r["step"] for r in records] == [30 * c for c in range(1, 21)]  # 3 updates of 10 steps a chunk
+    assert sum("eval/return" in r for r in records) == 20
+    clock = FakeClock(eval_s=5.0)
+    every = dataclasses.replace(settings, eval_every=2, overwrite=True)
+    training.run(logging(60), TASK, every, clock=clock, hooks=clock.hooks)
+    assert [r["step"] for r in metrics.read_metrics(tmp_path)] == [100 * c for c in range(1, 7)]
 
 
 @pytest.mark.parametrize(
@@ -215,7 +243,10 @@ def test_evaluation_by_budget_keeps_its_share_of_the_wall_clock(tmp_path, budget
     [
         # By the budget, training goes on meanwhile: chunks 1 and 2 do not evaluate, chunk 3
         # (t=30) does, 2 s; then 2 + 2 <= 0.05 x 82 (chunk 8), 6 <= 0.05 x 124 (the last).
-        ({}, [3, 8, 12], 2.0),
+        ({"eval_count": 0}, [3, 8, 12], 2.0),
+        # By eval_count's marks (every chunk of 12 passes one): the first waits for the
+        # compile (as the last evaluation would), so the curve has its 12 points.
+        ({}, list(range(1, 13)), 22.0),
         # Asked for every chunk: the first evaluation waits from t=10 to t=30 (reported as it
         # was), not charged to a budget: charged, it held off every later evaluation.
         ({"eval_every": 1}, list(range(1, 13)), 22.0),
@@ -412,3 +443,22 @@ def test_video_every_writes_a_video_every_n_evaluations(tmp_path):
     ]
     assert (tmp_path / "4/eval.mp4").read_bytes() == (tmp_path / "4/videos/eval_40.mp4").read_bytes()  # a copy
     assert (tmp_path / "5/eval.mp4").read_bytes() != (tmp_path / "5/videos/eval_40.mp4").read_bytes()
+
+
+def test_a_run_on_a_cpu_says_its_rate_and_how_long_it_will_take(tmp_path, capsys):
+    """One printed line (not a warning) after the first chunk that ran without compiling
+    (the second): its rate (1 update of 10 env steps in the fake clock's 10 s) and the
+    whole run's 40 steps at that rate."""
+    clock = FakeClock()
+    settings = dataclasses.replace(SETTINGS, progress=True, eval_every=0, checkpoint_every=0)
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")
+        training.run(logging(4), TASK, settings, clock=clock, hooks=clock.hooks)
+    notes = [line for line in capsys.readouterr().out.splitlines() if line.startswith("training on a CPU")]
+    assert notes == [
+        "training on a CPU: 1 env-steps/s, so 40 steps take about 40 s; "
+        "training belongs on a GPU (mjzoo uses one wherever JAX finds it)"
+    ]
+    quiet, clock = dataclasses.replace(settings, progress=False), FakeClock()
+    training.run(logging(4), TASK, quiet, clock=clock, hooks=clock.hooks)
+    assert "training on a CPU" not in capsys.readouterr().out

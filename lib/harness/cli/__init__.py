@@ -12,6 +12,7 @@
     mjzoo view pendulum_swingup --controls sliders --num-envs 4  # a live browser viewer (also runs, planners, datasets)
     mjzoo export runs/cb --format onnx   # the policy as ONNX (or a jax.export artifact) with its deployment contract
     mjzoo sim2sim runs/g1 --timestep 0.002 --latency 1   # the exported joystick in C MuJoCo: tracking and falls
+    mjzoo new my_task --mjcf robot.xml   # my_task.py: a task on your model to start from (my_task:make_task)
 
 Wherever a task is named, ``package.module:factory`` names a function returning a
 `mjzoo.Task` (importable from the current directory, as with ``python -m``), and
@@ -43,10 +44,24 @@ from mjzoo.harness.cli.commands import plan
 from mjzoo.harness.cli.commands import train
 from mjzoo.harness.cli.deploying import sim2sim
 from mjzoo.harness.cli.exporting import export
+from mjzoo.harness.cli.scaffolding import new
 from mjzoo.harness.cli.trajectories import collect
 from mjzoo.harness.cli.viewing import view
 
-__all__ = ["main", "demo", "envs", "train", "evaluate", "plan", "collect", "view", "export", "sim2sim", "UsageError"]
+__all__ = [
+    "main",
+    "demo",
+    "envs",
+    "train",
+    "evaluate",
+    "plan",
+    "collect",
+    "view",
+    "export",
+    "sim2sim",
+    "new",
+    "UsageError",
+]
 
 COMMANDS = {
     "demo": demo,
@@ -58,6 +73,7 @@ COMMANDS = {
     "view": view,
     "export": export,
     "sim2sim": sim2sim,
+    "new": new,
 }
 
 

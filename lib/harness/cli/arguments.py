@@ -24,6 +24,29 @@ from mjzoo import checks
 
 __all__ = ["UsageError", "as_usage_errors"]
 
+# Flags several commands share, each with its line of --help (`mjzoo COMMAND --help`).
+ConfigFields = Annotated[
+    tuple[str, ...],
+    tyro.conf.arg(
+        help="NAME=VALUE fields of the algorithm's (or planner's) Config and Hyperparams, over the env's defaults"
+    ),
+]
+EnvOverrides = Annotated[
+    tuple[str, ...],
+    tyro.conf.arg(help="NAME=VALUE overrides of the env (as `mjzoo envs` lists them) or a factory's keywords"),
+]
+RunTask = Annotated[
+    str | None,
+    tyro.conf.arg(help="the task, a registered env or package.module:factory; default: the one RUN/task.json names"),
+]
+Impl = Annotated[
+    Literal["jax", "warp"] | None,
+    tyro.conf.arg(
+        help="physics: MJX's JAX implementation or MuJoCo Warp; default: Warp with a CUDA GPU, where installed"
+    ),
+]
+Overwrite = Annotated[bool, tyro.conf.arg(help="replace what --out already holds")]
+
 ALGORITHMS = ("ppo", "amp")
 PLANNERS = ("predictive_sampling", "cem", "mppi")
 _MISMATCH = object()  # what _as_type returns for a value of another type

@@ -20,6 +20,10 @@ import tyro
 import mjzoo
 from mjzoo.harness.cli import runs
 from mjzoo.harness.cli.arguments import PLANNERS
+from mjzoo.harness.cli.arguments import ConfigFields
+from mjzoo.harness.cli.arguments import EnvOverrides
+from mjzoo.harness.cli.arguments import Impl
+from mjzoo.harness.cli.arguments import RunTask
 from mjzoo.harness.cli.arguments import UsageError
 from mjzoo.harness.cli.arguments import algorithm_module
 from mjzoo.harness.cli.arguments import as_usage_errors
@@ -49,6 +53,7 @@ Schedule = settings_flags(
     "left at its default keeps a new run's default, or what a resumed run was started with.",
     (
         "eval_every",
+        "eval_count",
         "eval_budget",
         "eval_every_seconds",
         "eval_first_seconds",
@@ -75,7 +80,14 @@ def envs() -> None:
 def demo(env: tuple[str, ...] = (), num_envs: int = 32, steps: int = 250, seed: int = 0) -> None:
     """Roll out a uniformly random policy on each env (all registered ones by default)
     in a vmapped batch of --num-envs envs and print the return of each first episode,
-    up to --steps steps."""
+    up to --steps steps.
+
+    Args:
+      env: the registered envs to roll out; default: all of them.
+      num_envs: envs per batch, each with its own reset.
+      steps: control steps per env, at most.
+      seed: the random seed of the resets and actions.
+    """
     names = env or tuple(mjzoo.envs.names())
     with as_usage_errors():
         at_least_one(num_envs=num_envs, steps=steps)
@@ -121,8 +133,8 @@ def train(
     algorithm: Annotated[Literal["ppo", "amp"], tyro.conf.Positional],
     env: Annotated[str, tyro.conf.Positional],
     out: Path | None = None,
-    config: tuple[str, ...] = (),
-    env_overrides: tuple[str, ...] = (),
+    config: ConfigFields = (),
+    env_overrides: EnvOverrides = (),
     total_steps: int | None = None,
     rollout_seconds: float | None = None,
     resume: Path | None = None,
@@ -130,7 +142,7 @@ def train(
     eval_envs: int | None = None,
     updates_per_chunk: int | None = None,
     video: bool = True,
-    impl: Literal["jax", "warp"] | None = None,
+    impl: Impl = None,
     schedule: Annotated[Schedule, tyro.conf.OmitArgPrefixes] = SCHEDULE_DEFAULTS,
     render: RenderConfig = RenderConfig(),
     coordinator: str | None = None,
@@ -148,20 +160,38 @@ def train(
     overrides of the env, as `mjzoo envs` lists them, or a factory's keyword arguments.
     --impl picks the physics (MJX's JAX implementation or MuJoCo Warp; default Warp
     where it is installed and a CUDA GPU is present). Evaluation runs the task's
-    episode length unless --eval-steps or --eval-seconds say otherwise; --eval-every,
-    --log-every and the rest schedule it; --render.NAME VALUE sets how the videos and
-    curves are drawn.
+    episode length unless --eval-steps or --eval-seconds say otherwise, by default at
+    least --eval-count times, evenly spaced; --eval-every, --log-every and the rest
+    schedule it otherwise; --render.NAME VALUE sets how the videos and curves are drawn.
+    On a CPU, the run says early how long it will take at the rate it measures.
 
     --resume DIR continues the run in DIR from its newest intact checkpoint with its
     saved settings, --seed, --eval-envs and --updates-per-chunk included unless given
     again, for the same result as an uninterrupted run. A new run's defaults: seed 0,
-    eval envs 16, updates per chunk 10.
+    eval envs 16, updates per chunk at most 10.
 
     On several hosts, start the same command on each with --coordinator HOST:PORT (process
     0's address), --num-processes N and --process-id I, or set JAX_COORDINATOR_ADDRESS,
     JAX_NUM_PROCESSES and JAX_PROCESS_ID (SLURM's srun and Open MPI's mpirun need none):
     each process trains its share of the envs, and process 0 writes --out, which every
     process must reach.
+
+    Args:
+      algorithm: the learner, ppo or amp.
+      env: the task, a registered env or package.module:factory.
+      out: the run's directory; default runs/ENV-ALGORITHM.
+      total_steps: env steps to train for; default: the env's (or the Config's).
+      rollout_seconds: each update's unroll length in simulated seconds (sets unroll_length).
+      resume: continue the run in this directory from its newest intact checkpoint.
+      seed: the run's random seed; default 0 (a resumed run: its own).
+      eval_envs: envs per evaluation; default 16 (a resumed run: its own).
+      updates_per_chunk: updates per jitted chunk, at most; default 10 (a resumed run: its own).
+      video: write eval.mp4 of the final evaluation.
+      schedule: when the run evaluates, records and logs.
+      render: how the videos and curves are drawn.
+      coordinator: several hosts: process 0's HOST:PORT.
+      num_processes: several hosts: how many processes train together.
+      process_id: several hosts: this process's number, 0 to num_processes - 1.
     """
     from mjzoo.harness import checkpoints
     from mjzoo.harness import devices
@@ -277,8 +307,8 @@ def _resumed(
 
 def evaluate(
     run: Annotated[Path, tyro.conf.Positional],
-    task: str | None = None,
-    env_overrides: tuple[str, ...] = (),
+    task: RunTask = None,
+    env_overrides: EnvOverrides = (),
     episodes: int = 16,
     steps: int | None = None,
     seed: int = 1,
@@ -293,6 +323,14 @@ def evaluate(
     a registered env or package.module:factory; a run trained from Python has no
     task.json and needs it. --env-overrides NAME=VALUE go on top, e.g. to evaluate
     under other physics. --render.NAME VALUE sets how the video is drawn.
+
+    Args:
+      run: the run's directory (`mjzoo train --out`).
+      episodes: deterministic episodes, one env each.
+      steps: control steps per episode; default: the task's episode length.
+      seed: the random seed of the resets.
+      video: where to write the video of the first episode; default RUN/eval.mp4.
+      render: how the video is drawn.
     """
     from mjzoo.harness import training
 
@@ -319,11 +357,11 @@ def plan(
     seconds: float | None = None,
     offline: bool = False,
     plan_hz: float | None = None,
-    config: tuple[str, ...] = (),
-    env_overrides: tuple[str, ...] = (),
+    config: ConfigFields = (),
+    env_overrides: EnvOverrides = (),
     seed: int = 0,
     video: bool = True,
-    impl: Literal["jax", "warp"] | None = None,
+    impl: Impl = None,
     backend: Literal["auto", "mjx", "native"] = "auto",
     render: RenderConfig = RenderConfig(),
 ) -> None:
@@ -342,6 +380,18 @@ def plan(
     test and length (--seconds) are the env's,
     from mjzoo.envs.planning: for a factory its module's PLANNING, else one episode,
     replanning every step, with no success test (final_cost tells).
+
+    Args:
+      algorithm: the sampling planner.
+      env: the task, a registered env or package.module:factory.
+      out: the run's directory; default runs/ENV-ALGORITHM-plan.
+      seconds: simulated seconds to run; default: the env's planning setup (or one episode).
+      offline: run the whole episode as one jitted scan, not in wall-clock time.
+      plan_hz: replans per wall-clock second; default: the env's replanning period.
+      seed: the random seed of the reset and the planner's samples.
+      video: write plan.mp4.
+      backend: where rollouts run: mjx, native (C MuJoCo), or auto (native on a CPU).
+      render: how the video is drawn.
     """
     from mjzoo.harness import plan_report
     from mjzoo.planning import realtime

@@ -11,6 +11,9 @@ from typing import Annotated
 import jax
 import tyro
 
+from mjzoo.harness.cli.arguments import EnvOverrides
+from mjzoo.harness.cli.arguments import Overwrite
+from mjzoo.harness.cli.arguments import RunTask
 from mjzoo.harness.cli.arguments import UsageError
 from mjzoo.harness.cli.arguments import as_usage_errors
 from mjzoo.harness.cli.exporting import load_run
@@ -31,9 +34,9 @@ def sim2sim(
     push: float = 0.5,
     seed: int = 0,
     out: Path | None = None,
-    overwrite: bool = False,
-    task: str | None = None,
-    env_overrides: tuple[str, ...] = (),
+    overwrite: Overwrite = False,
+    task: RunTask = None,
+    env_overrides: EnvOverrides = (),
 ) -> None:
     """Drive RUN's exported ONNX policy (--policy, default RUN/policy.onnx: `mjzoo export
     RUN` writes it) in C MuJoCo for --episodes episodes of --seconds, its observation
@@ -45,6 +48,19 @@ def sim2sim(
     pushes). Prints the tracking errors and falls of both and writes them to --out
     (default RUN/sim2sim.json; an existing file only with --overwrite). For tasks with a
     velocity command (the joysticks).
+
+    Args:
+      run: the run's directory (`mjzoo train --out`).
+      policy_file: the exported ONNX policy; default RUN/policy.onnx.
+      episodes: episodes in each simulator.
+      seconds: simulated seconds per episode.
+      timestep: C MuJoCo's physics step in seconds; default: the task's.
+      iterations: C MuJoCo's solver iterations; default: the task's.
+      ls_iterations: C MuJoCo's line-search iterations; default: the task's.
+      latency: control steps between an observation and its action.
+      push: largest velocity push, in m/s.
+      seed: the random seed of the commands and pushes.
+      out: the JSON report; default RUN/sim2sim.json.
     """
     from mjzoo.interop import tracking
 

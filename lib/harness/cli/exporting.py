@@ -18,6 +18,9 @@ import tyro
 
 import mjzoo
 from mjzoo.harness.cli import runs
+from mjzoo.harness.cli.arguments import EnvOverrides
+from mjzoo.harness.cli.arguments import Overwrite
+from mjzoo.harness.cli.arguments import RunTask
 from mjzoo.harness.cli.arguments import UsageError
 from mjzoo.harness.cli.arguments import as_usage_errors
 
@@ -72,9 +75,9 @@ def export(
     run: Annotated[Path, tyro.conf.Positional],
     format: Literal["onnx", "jax"] = "onnx",
     out: Path | None = None,
-    task: str | None = None,
-    env_overrides: tuple[str, ...] = (),
-    overwrite: bool = False,
+    task: RunTask = None,
+    env_overrides: EnvOverrides = (),
+    overwrite: Overwrite = False,
 ) -> None:
     """Export RUN's deterministic policy (PPO or AMP, recurrent ones included) to --out
     (default RUN/policy.onnx or RUN/policy.jaxexport).
@@ -91,6 +94,11 @@ def export(
     its inputs and outputs described in OUT.json. --task and --env-overrides as for
     `mjzoo eval`. An existing file is replaced only with --overwrite. Needs `pip install
     'mjzoo[export]'` for ONNX.
+
+    Args:
+      run: the run's directory (`mjzoo train --out`).
+      format: onnx (an ONNX model) or jax (a jax.export artifact).
+      out: the file to write; default RUN/policy.onnx or RUN/policy.jaxexport.
     """
     from mjzoo.interop import deployment
     from mjzoo.interop import export as exporting

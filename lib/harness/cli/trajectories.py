@@ -16,6 +16,9 @@ import mjzoo
 from mjzoo.harness import datasets
 from mjzoo.harness.cli import runs
 from mjzoo.harness.cli.arguments import PLANNERS
+from mjzoo.harness.cli.arguments import ConfigFields
+from mjzoo.harness.cli.arguments import EnvOverrides
+from mjzoo.harness.cli.arguments import Overwrite
 from mjzoo.harness.cli.arguments import UsageError
 from mjzoo.harness.cli.arguments import algorithm_module
 from mjzoo.harness.cli.arguments import as_usage_errors
@@ -36,13 +39,13 @@ def collect(
     source: Annotated[str, tyro.conf.Positional],
     out: Path,
     task: str | None = None,
-    env_overrides: tuple[str, ...] = (),
+    env_overrides: EnvOverrides = (),
     episodes: int = 16,
     steps: int | None = None,
-    config: tuple[str, ...] = (),
+    config: ConfigFields = (),
     seed: int = 0,
     sampled: bool = False,
-    overwrite: bool = False,
+    overwrite: Overwrite = False,
 ) -> None:
     """Roll out SOURCE for --episodes episodes and write them as a dataset to the
     directory --out, which must not hold one unless --overwrite (other files stay).
@@ -60,6 +63,16 @@ def collect(
     xpos and xquat, obs [N, T+1, ...]; action, ctrl, reward, reward/TERM, terminated,
     truncated [N, T]; length [N]), meta.json (names, shapes, dt, the source, the seed)
     and motions/episode_NNN.npz, one mjzoo.motion clip per episode, cut at its length.
+
+    Args:
+      source: a run directory, or a planner: predictive_sampling, cem or mppi.
+      out: the dataset's directory.
+      task: the task, a registered env or package.module:factory; a planner's is required,
+        a run's defaults to its task.json's.
+      episodes: episodes to record, one env each.
+      steps: control steps per episode; default: the task's episode length.
+      seed: the random seed of the resets and the policy's (or planner's) samples.
+      sampled: a run's policy acts with sampled actions, not the mean.
     """
     with as_usage_errors():
         at_least_one(episodes=episodes)
