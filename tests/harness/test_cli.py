@@ -482,7 +482,7 @@ def _own_help(action) -> str:
     return "" if text == action.dest else text
 
 
-@pytest.mark.parametrize("command", sorted(set(cli.COMMANDS) - {"view"}))  # view's flags: viewing.py's own
+@pytest.mark.parametrize("command", sorted(cli.COMMANDS))
 def test_every_option_of_every_command_has_a_line_of_help(command):
     with warnings.catch_warnings():
         warnings.simplefilter("ignore", DeprecationWarning)  # tyro's argparse parser: the one --help prints

@@ -75,6 +75,27 @@ def view(
     --save-frames DIR writes each displayed frame as DIR/frame_NNNNN.png, and
     --save-video PATH (.mp4 or .gif) a video of them, when the viewer ends, drawn
     offscreen as --render.NAME VALUE says; existing files are kept unless --overwrite.
+
+    Args:
+      target: a run directory, a dataset, a motion clip (.npz) or a task spec.
+      task: the task to show a run, dataset or clip on, instead of the one it names.
+      env_overrides: NAME=VALUE changes to the task's factory arguments.
+      controls: the actions of a task spec without --planner: zero, random or sliders.
+      planner: solve the task live with this sampling planner.
+      config: NAME=VALUE fields of the planner's Config.
+      sampled: a run's policy samples its actions instead of taking the mean.
+      num_envs: envs (or a dataset's episodes) shown side by side.
+      seconds: stop after this many simulated seconds; default: run until Ctrl-C.
+      speed: playback speed, 0.25 to 4 times real time.
+      port: the port the viewer's page is served on.
+      host: the address the viewer listens on.
+      track_body: a body the camera follows.
+      trace: the body or site whose path the planner's samples and plan draw.
+      seed: the random seed of resets, random controls and the planner.
+      save_frames: write each displayed frame to this directory as PNG.
+      save_video: write a video of the displayed frames (.mp4 or .gif) when the viewer ends.
+      overwrite: replace existing frames or video.
+      render: how saved frames and videos are drawn.
     """
     from mjzoo.harness import viewer
 
