@@ -238,7 +238,13 @@ def test_train_writes_the_discriminators_diagnostics_and_warns_once(swing, sway,
         diagnose=lambda history: "amp: the discriminator has won" if len(history) >= 1 else None
     )
     settings = training.Settings(
-        out_dir=tmp_path / "run", updates_per_chunk=2, eval_envs=2, eval_steps=20, video=False, progress=False
+        out_dir=tmp_path / "run",
+        updates_per_chunk=2,
+        eval_count=0,  # two chunks of 2 updates: two metrics lines
+        eval_envs=2,
+        eval_steps=20,
+        video=False,
+        progress=False,
     )
     with pytest.warns(learning.TrainingWarning, match="the discriminator has won") as caught:
         training.run(algorithm, swing, settings, HP.replace(disc_learning_rate=3e-4))

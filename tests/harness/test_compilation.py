@@ -191,7 +191,7 @@ def test_the_chunk_compiled_ahead_from_inits_shapes_serves_every_chunk(monkeypat
             {},
         ),
     )
-    settings = training.Settings(updates_per_chunk=2, video=False, progress=False)
+    settings = training.Settings(updates_per_chunk=2, eval_count=0, video=False, progress=False)  # chunks of 2
     task, key = {"gain": jnp.ones(3)}, jax.random.key(0)
     monkeypatch.setattr(compilation, "overlaps_safely", lambda model: False)  # as on Warp's GPU physics
     assert training._compile_chunk_ahead(algorithm, task, None, settings, key) is None  # the chunk compiles first
@@ -229,7 +229,7 @@ algorithm = types.SimpleNamespace(
     init=lambda task, hyperparams, key: State(jnp.zeros((), jnp.int32), jnp.zeros((4, 3)), key),
     update=lambda task, s: (State(s.updates + 1, s.per_env + task["gain"], jax.random.fold_in(s.key, 1)), {}),
 )
-settings = training.Settings(updates_per_chunk=2, video=False, progress=False)
+settings = training.Settings(updates_per_chunk=2, eval_count=0, video=False, progress=False)  # chunks of 2
 task, key = {"gain": jnp.ones(3)}, jax.random.key(0)
 training._compile_chunk_ahead(algorithm, task, None, settings, key).join()
 state = devices.shard_envs(training._owned(training._init_fn(algorithm.init)(task, None, key)), algorithm.per_env_fields)
