@@ -7,8 +7,9 @@ first chunk ended (its clock's ``perf/elapsed_s`` minus ``perf/first_update_s``:
 final evaluation, when the first chunk is also the last; that evaluation's end is recorded
 too, as ``*_first_evaluation_s``: its compile waits behind the chunk's or runs beside
 it). Then one run with the default
-evaluation schedule (`Settings.eval_budget`, 5% of the wall-clock) reports the share of
-its wall-clock spent evaluating, and its overall rate against the training rate.
+evaluation schedule (`Settings.eval_count` points, 20, evenly spaced, plus what
+`Settings.eval_budget`'s 5% of the wall-clock affords) reports the share of its wall-clock
+spent evaluating, and its overall rate against the training rate.
 
     python benchmarks/startup.py --envs cartpole_balance humanoid_walk
     python benchmarks/startup.py --envs cartpole_balance --steps 20000 --smoke   # on a CPU
