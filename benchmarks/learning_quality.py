@@ -44,11 +44,15 @@ Brax: on the env), and the evaluations' returns are divided by S, so a run at S 
 plots beside the run at S = 1 (a learner robust to the reward's scale draws the same curve).
 
 The JSON (``learning_quality_<card>.json``) is merged with the one already there: each
-wave of GPU time adds envs, and re-running an env at a reward scale replaces the
+wave of GPU time adds envs (a row per env, reward scale and budget: an env run at two
+budgets has two rows), and re-running an env at a reward scale and budget replaces the
 trainers it ran (its other trainers stay); a trainer re-run at the same budget and
 hyperparameters on other seeds (``--first-seed``) adds them, so one env's seeds can be
 split over GPUs or waves. Plots beside it: the normalized final returns per env and
 trainer, and per-env learning curves (mean and std band over seeds).
+
+The waves compare at ``--steps 30000000`` (39.3M after Brax's rounding); a wave run at
+the default budget gets rows of its own (CheetahRun and FingerTurnHard at 78.6M).
 
 Waves of ~30 minutes, each command under the device's 10 minutes. Measured on H200s at
 39.3M steps, 3 seeds in one program, compile included: mjzoo-defaults alone on a GPU
@@ -328,9 +332,9 @@ def summarize(row: dict) -> dict:
     return row
 
 
-def merged(rows: list[dict], row: dict, fields: tuple[str, ...] = ("env", "reward_scale")) -> list[dict]:
-    """`rows` with `row` in place of the one that has its `fields` (its env and reward
-    scale). A trainer `row` did not run keeps its old runs; one it ran again at the same
+def merged(rows: list[dict], row: dict, fields: tuple[str, ...] = ("env", "reward_scale", "steps")) -> list[dict]:
+    """`rows` with `row` in place of the one that has its `fields` (its env, reward scale
+    and env-step budget: trainers are compared only at one budget). A trainer `row` did not run keeps its old runs; one it ran again at the same
     budget and hyperparameters (a wave that split an env's seeds over GPUs) keeps the old
     runs of the seeds it did not run."""
     key = lambda r: tuple(r[f] for f in fields)  # noqa: E731
@@ -340,11 +344,7 @@ def merged(rows: list[dict], row: dict, fields: tuple[str, ...] = ("env", "rewar
     trainers = dict(old["trainers"])
     for name, t in row["trainers"].items():
         before = trainers.get(name)
-        if (
-            before
-            and old.get("steps") == row.get("steps")
-            and before.get("hyperparameters") == t.get("hyperparameters")
-        ):
+        if before and before.get("hyperparameters") == t.get("hyperparameters"):
             seeds = {r["seed"] for r in t["runs"]}
             runs = [r for r in before["runs"] if r["seed"] not in seeds] + t["runs"]
             t = {**t, "runs": sorted(runs, key=lambda r: r["seed"])}
@@ -385,6 +385,12 @@ def save(path: Path, rows: list[dict], device: str) -> None:
     )
 
 
+def label(row: dict, rows: list[dict]) -> str:
+    """The env's name, with its budget where the env was also run at another."""
+    budgets = {r["steps"] for r in rows if r["env"] == row["env"]}
+    return row["env"] if len(budgets) == 1 else f"{row['env']} ({row['steps'] / 1e6:.1f}M)"
+
+
 def plot(rows: list[dict], out: Path, card: str) -> list[Path]:
     """One figure of normalized final returns per env and trainer, one of learning curves
     (mean and std band over seeds), per reward scale."""
@@ -396,7 +402,7 @@ def plot(rows: list[dict], out: Path, card: str) -> list[Path]:
     paths = []
     colors = dict(zip(TRAINERS, ["tab:blue", "tab:cyan", "tab:orange"]))
     for scale in sorted({r["reward_scale"] for r in rows}):
-        at = sorted((r for r in rows if r["reward_scale"] == scale), key=lambda r: r["env"])
+        at = sorted((r for r in rows if r["reward_scale"] == scale), key=lambda r: (r["env"], r["steps"]))
         suffix = "" if scale == 1 else f"_scale{scale:g}"
         figure, axes = plt.subplots(figsize=(max(6, 0.7 * len(at) + 2), 4))
         width = 0.8 / len(TRAINERS)
@@ -413,7 +419,7 @@ def plot(rows: list[dict], out: Path, card: str) -> list[Path]:
                     color=colors[name],
                 )
         axes.axhline(THRESHOLD, color="gray", lw=0.8, ls="--")
-        axes.set_xticks(range(len(at)), [r["env"] for r in at], rotation=60, ha="right")
+        axes.set_xticks(range(len(at)), [label(r, rows) for r in at], rotation=60, ha="right")
         axes.set(ylabel="final return / better trainer's", title=f"PPO final returns, {card}, reward x{scale:g}")
         axes.legend(fontsize=8)
         figure.tight_layout()
@@ -432,7 +438,7 @@ def plot(rows: list[dict], out: Path, card: str) -> list[Path]:
                 mean, std = returns.mean(axis=0), returns.std(axis=0)
                 axes.plot(steps, mean, color=colors[name], label=name)
                 axes.fill_between(steps, mean - std, mean + std, color=colors[name], alpha=0.25)
-            axes.set_title(r["env"], fontsize=9)
+            axes.set_title(label(r, rows), fontsize=9)
             axes.tick_params(labelsize=7)
         for axes in np.ravel(grid)[len(at) :]:
             axes.axis("off")
@@ -449,7 +455,7 @@ def plot(rows: list[dict], out: Path, card: str) -> list[Path]:
 
 def print_table(rows: list[dict]) -> None:
     print(
-        f"\n{'env':<22} {'scale':>6} {'trainer':<17} {'seeds':>5} {'final':>17} {'best':>8} {'kept':>5} "
+        f"\n{'env':<22} {'steps':>6} {'scale':>6} {'trainer':<17} {'seeds':>5} {'final':>17} {'best':>8} {'kept':>5} "
         f"{'collapsed':>9} {'to 90% (s)':>10} {'steps/s':>11}"
     )
     for r in rows:
@@ -457,7 +463,7 @@ def print_table(rows: list[dict]) -> None:
             ttt = "never" if t["time_to_threshold_s"] is None else f"{t['time_to_threshold_s']:.0f}"
             kept = "-" if t["kept_fraction"] is None else f"{t['kept_fraction']:.2f}"
             print(
-                f"{r['env']:<22} {r['reward_scale']:>6g} {name:<17} {t['seeds']:>5} "
+                f"{r['env']:<22} {r['steps'] / 1e6:>5.1f}M {r['reward_scale']:>6g} {name:<17} {t['seeds']:>5} "
                 f"{t['final_return']:>8.1f} ± {t['final_return_std']:<6.1f} {t['best_return']:>8.1f} {kept:>5} "
                 f"{t['collapsed_runs']:>9} {ttt:>10} {t['steps_per_s'] or 0:>11,.0f}"
             )

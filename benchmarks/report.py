@@ -37,15 +37,15 @@ def _trainer_table(rows: list[dict]) -> list[str]:
     best, the lowest kept fraction of a seed, collapsed seeds, time to 90% of the better
     final return, steps/s, and how many processes shared the GPU."""
     lines = [
-        "| env | reward x | trainer | seeds | final (mean ± std) | best | lowest kept | collapsed | "
+        "| env | env steps | reward x | trainer | seeds | final (mean ± std) | best | lowest kept | collapsed | "
         "to 90% (s) | steps/s | GPU shared by |",
-        "| --- | ---: | --- | ---: | ---: | ---: | ---: | ---: | ---: | ---: | ---: |",
+        "| --- | ---: | ---: | --- | ---: | ---: | ---: | ---: | ---: | ---: | ---: | ---: |",
     ]
-    for row in sorted(rows, key=lambda r: (r["env"], r["reward_scale"])):
+    for row in sorted(rows, key=lambda r: (r["env"], r["steps"], r["reward_scale"])):
         for name, t in row["trainers"].items():
             to_90 = "never" if t["time_to_threshold_s"] is None else f"{t['time_to_threshold_s']:.0f}"
             lines.append(
-                f"| {row['env']} | {row['reward_scale']:g} | {name} | {t['seeds']} | "
+                f"| {row['env']} | {row['steps'] / 1e6:.1f}M | {row['reward_scale']:g} | {name} | {t['seeds']} | "
                 f"{t['final_return']:,.1f} ± {t['final_return_std']:,.1f} | {t['best_return']:,.1f} | "
                 f"{_number(t.get('min_kept_fraction'), 2)} | {t['collapsed_runs']} | {to_90} | "
                 f"{_number(t.get('steps_per_s'), 0)} | {t.get('gpu_shared_by', 1)} |"
