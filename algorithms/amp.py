@@ -97,8 +97,9 @@ class Config(ppo.Config):
 
         counts = ("num_frames", "disc_epochs", "disc_minibatches", "replay_size")
         checks.fields("amp.Config", self, {f: (checks.is_count(getattr(self, f)), "an integer >= 1") for f in counts})
-        # AMP feeds PPO a dict observation {"policy", "motion"}; the keys are its own.
-        own_keys = "None: AMP's networks see the task's observation"
+        # AMP feeds PPO a dict observation {"policy": the task's, "motion"}; the keys name
+        # entries of the task's own observation (None: it is an array).
+        own_keys = "an entry of the task's own observation (None: the whole of it); AMP adds its own"
         checks.fields(
             "amp.Config",
             self,
@@ -110,8 +111,8 @@ class Config(ppo.Config):
                 ),
                 "disc_loss": (self.disc_loss in ("least_squares", "logistic"), "least_squares or logistic"),
                 "key_bodies": (isinstance(self.key_bodies, tuple), "a tuple of body names"),
-                "policy_obs_key": (self.policy_obs_key in (None, "policy"), own_keys),
-                "value_obs_key": (self.value_obs_key in (None, "policy"), own_keys),
+                "policy_obs_key": (self.policy_obs_key is None or "/" not in self.policy_obs_key, own_keys),
+                "value_obs_key": (self.value_obs_key is None or "/" not in self.value_obs_key, own_keys),
             },
         )
 
@@ -215,9 +216,17 @@ PER_ENV_FIELDS = tuple(
 # --- the pieces AMP wires -----------------------------------------------------------
 
 
-def _ppo(config: Config) -> Config:
-    """The config PPO's functions get: the networks see the "policy" entry."""
-    return dataclasses.replace(config, policy_obs_key="policy", value_obs_key="policy")
+def _ppo(config: Config) -> ppo.Config:
+    """The config PPO's functions get: the networks see the "policy" entry (the task's
+    observation), or the entries of it that the config names."""
+
+    def inside(key: str | None) -> str:
+        return "policy" if key is None else f"policy/{key}"
+
+    fields = {f.name: getattr(config, f.name) for f in dataclasses.fields(ppo.Config)}
+    return ppo.Config(
+        **{**fields, "policy_obs_key": inside(config.policy_obs_key), "value_obs_key": inside(config.value_obs_key)}
+    )
 
 
 def _features(config: Config, task: Task) -> jax.tree_util.Partial:
@@ -415,8 +424,7 @@ def policy(
 ) -> Callable[[Any, Any, Array], Array]:
     """A deployable policy ``(policy_params, obs, key) -> ctrl`` on the task's own
     observation: PPO's, with no motion window (the discriminator is for training only)."""
-    own = dataclasses.replace(config, policy_obs_key=None, value_obs_key=None)
-    return ppo.policy(own, task, deterministic, components)
+    return ppo.policy(config, task, deterministic, components)  # its obs keys name the task's entries
 
 
 def evaluate(

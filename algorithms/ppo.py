@@ -130,7 +130,8 @@ class Config:
     recurrent: bool = False
     gru_hidden_size: int = 64
     # A dict observation: the entry each network sees (Brax's names; e.g. the value
-    # function on privileged state). None: the whole observation, which must be an array.
+    # function on privileged state; "outer/inner" for an entry of a nested dict). None:
+    # the whole observation, which must be an array.
     policy_obs_key: str | None = None
     value_obs_key: str | None = None
     total_steps: int = 1_000_000
@@ -381,10 +382,13 @@ def _view(obs: Any, key: str | None, field: str) -> Any:
                 "the entry the network sees"
             )
         return obs
-    if not isinstance(obs, dict) or key not in obs:
-        found = sorted(obs) if isinstance(obs, dict) else f"an array of shape {jnp.shape(obs)}"
-        raise ValueError(f"ppo.Config: {field}={key!r}, but the observation is {found}")
-    return obs[key]
+    entry = obs
+    for part in key.split("/"):  # "outer/inner": a nested dict's entry
+        if not isinstance(entry, dict) or part not in entry:
+            found = sorted(entry) if isinstance(entry, dict) else f"an array of shape {jnp.shape(entry)}"
+            raise ValueError(f"ppo.Config: {field}={key!r}, but the observation is {found}")
+        entry = entry[part]
+    return entry
 
 
 def _inputs(config: Config, stats: normalization.RunningStats, obs: Any) -> tuple[Any, Any]:

@@ -100,7 +100,7 @@ def sway(swing):
         (dict(task_weight=0.0, style_weight=0.0), "style_weight=0.0 is invalid; expected > 0 where task_weight is 0"),
         (dict(disc_loss="wasserstein"), "disc_loss='wasserstein' is invalid"),
         (dict(replay_keep_probability=1.5), "replay_keep_probability=1.5 is invalid; expected in \\[0.0, 1.0\\]"),
-        (dict(policy_obs_key="state"), "policy_obs_key='state' is invalid"),
+        (dict(policy_obs_key="policy/state"), "policy_obs_key='policy/state' is invalid"),
         (dict(num_envs=0), "num_envs=0 is invalid"),  # PPO's own checks hold too
         (dict(discount=2.0), "ppo.Hyperparams: discount=2.0 is invalid"),
         (dict(disc_learning_rate=0.0), "amp.Hyperparams: disc_learning_rate=0.0 is invalid"),
@@ -192,6 +192,26 @@ def test_the_policy_sees_the_tasks_observation_and_the_discriminator_the_window(
     act = amp.policy(SMALL, swing)  # deployable on the task's own observation
     action = act(amp.policy_params(started), mjzoo.reset(swing, jax.random.key(1)).obs, jax.random.key(2))
     assert action.shape == (1,) and -1.0 <= float(action[0]) <= 1.0
+
+
+def test_an_asymmetric_observation_feeds_each_network_its_entry(swing, sway):
+    """A task observing {"state", "privileged_state"} (a robot's joystick): the policy sees
+    the state, the critic the privileged view, the discriminator the window, and the
+    deployable policy acts on the task's own dict observation."""
+    asymmetric = mjzoo.catalog.observations.with_privileged_observation(
+        swing, mjzoo.catalog.observations.joint_velocities
+    )
+    config = dataclasses.replace(SMALL, policy_obs_key="state", value_obs_key="privileged_state")
+    state = amp.init(config, asymmetric, sway, HP, jax.random.key(0))
+    obs = state.ppo.collector.env_state.obs
+    assert set(obs) == {"policy", "motion"} and set(obs["policy"]) == {"state", "privileged_state"}
+    assert state.ppo.params["policy"][0]["kernel"].shape[0] == 3  # the pendulum's own 3
+    assert state.ppo.params["value"][0]["kernel"].shape[0] == 4  # and its joint velocity
+    state, metrics = jax.jit(amp.update, static_argnums=0)(config, asymmetric, state)
+    assert np.isfinite(float(metrics["loss/value"]))
+    act = amp.policy(config, asymmetric)
+    action = act(amp.policy_params(state), mjzoo.reset(asymmetric, jax.random.key(1)).obs, jax.random.key(2))
+    assert action.shape == (1,) and np.isfinite(float(action[0]))
 
 
 def test_reference_windows_are_consecutive_frames_featurized_like_the_simulation(swing, sway, started):
