@@ -36,7 +36,8 @@ ENV = "pendulum_swingup"
 CLIP = ROOT / "envs" / "assets" / "cartpole_swingup_mppi.npz"
 
 # `mjzoo view` with --seconds, --save-frames and --save-video (and the same frames as a
-# GIF), in a fresh process: MuJoCo reads MUJOCO_GL once, at import.
+# GIF; and a clip beside itself, as panes), in a fresh process: MuJoCo reads MUJOCO_GL
+# once, at import.
 SAVE_SCRIPT = textwrap.dedent(
     """
     import sys
@@ -50,6 +51,9 @@ SAVE_SCRIPT = textwrap.dedent(
     viewing.view("pendulum_swingup", seconds=0.4, port=0, host="127.0.0.1", save_frames=out / "frames",
                  save_video=out / "view.mp4", render=config)
     write(seen["shown"], None, out / "view.gif", config)
+    clip = "envs/assets/cartpole_swingup_mppi.npz"
+    viewing.view(clip, source=clip, seconds=0.2, port=0, host="127.0.0.1", save_frames=out / "pairs",
+                 save_video=out / "pairs.mp4", render=config)
     print(len(seen["shown"].recorded))
     """
 )
@@ -321,6 +325,9 @@ def test_save_frames_and_video(background):
         else (out / "view.mp4").stat().st_size > 0
     )
     assert 2 <= len(iio.imread(out / "view.gif", index=None)) <= count  # Pillow merges repeated frames
+    pairs = sorted((out / "pairs").glob("frame_*.png"))
+    assert len(pairs) >= 2 and iio.imread(pairs[0]).shape == (72, 2 * 96, 3)  # the two clips' panes
+    assert (out / "pairs.mp4").stat().st_size > 0
 
 
 def _has_pyav() -> bool:

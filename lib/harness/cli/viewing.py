@@ -5,6 +5,7 @@ KSim's viewer options (a duration, frames or a video of what was shown)."""
 from __future__ import annotations
 
 import dataclasses
+import warnings
 from pathlib import Path
 from typing import Annotated
 from typing import Any
@@ -386,5 +387,8 @@ def _write_side_by_side(shown: Any, frames: Path | None, video: Path | None, ren
         if video.suffix.lower() == ".gif":
             iio.imwrite(video, images, duration=1000 * dt * render.slowdown, loop=0)
         else:
-            iio.imwrite(video, images, extension=".mp4", fps=1 / (dt * render.slowdown), codec="libx264")
+            with warnings.catch_warnings():  # JAX warns at every fork; imageio-ffmpeg forks only to exec ffmpeg
+                warnings.filterwarnings("ignore", r"os\.fork\(\) was called", RuntimeWarning)
+                fps = 1 / (dt * render.slowdown)  # macro_block_size=2: even sizes kept, not rescaled to 16s
+                iio.imwrite(video, images, extension=".mp4", fps=fps, codec="libx264", macro_block_size=2)
         print(f"video: {video}")
