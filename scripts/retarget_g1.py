@@ -2,12 +2,13 @@
 onto Playground's Unitree G1 (`mjzoo.motion.retarget`, on the CPU).
 
     python scripts/retarget_g1.py                          # prints the quality table, writes the clips that pass
+    mjzoo view envs/assets/motions/g1/walk.npz --source walk         # a written clip beside its source, live
     MUJOCO_GL=egl python scripts/retarget_g1.py --pictures /tmp/g1   # and a picture per clip: source | G1
 
 Each clip of `CLIPS` is retargeted with `retarget.DEEPMIMIC_TO_G1` (pelvis and feet held
-in place and orientation; knees steering; elbows and hands following the human arm
-from the shoulder, relative to the torso; the chest turning the torso) at the ratio of
-the two pelvis heights. A clip is written (``<clip>.npz``, a `mjzoo.motion` clip of
+in place and orientation; knees steering along the human leg from the hip, relative to
+the pelvis; elbows and hands following the human arm from the shoulder, relative to the
+torso; the chest turning the torso) at the ratio of the two pelvis heights. A clip is written (``<clip>.npz``, a `mjzoo.motion` clip of
 ``scenes.spec("g1")``, loaded with ``motion.load(path, model)``) when it passes
 `THRESHOLDS`: foot skating, ground penetration, the share of joint values at a limit,
 the mean IK residual of the bodies held in place (pelvis, feet) and of the hands. The

@@ -24,9 +24,10 @@ source is posed (`mj_kinematics`) and turned into targets for those robot bodies
   and its horizontal speed under `Config.contact_speed`) stays put: over each contact
   phase its target is one place, the phase's mean, on the floor, flat, at the phase's
   mean heading.
-- a limb's bodies (`Link.limb`: the G1's elbows and hands) are targeted relative to an
-  anchor (the torso), not the world: from the robot's shoulder, along the human's upper
-  arm and forearm as the human's chest sees them, each scaled to the robot's segment;
+- a limb's bodies (`Link.limb`: the G1's knees, elbows and hands) are targeted relative
+  to an anchor (the pelvis, the torso), not the world: e.g. from the robot's shoulder,
+  along the human's upper arm and forearm as the human's chest sees them, each scaled
+  to the robot's segment;
   a world target after one global scale asks arms of another length for the human's
   reach (8-20 cm misses, and a bent arm where the human's is straight).
 
@@ -92,7 +93,7 @@ class Link:
     `limb` = (anchor, root), two keys of the body map (e.g. ``("chest", "right_shoulder")``),
     makes the target one of a limb held relative to the anchor's robot body (mink's
     `RelativeFrameTask`) instead of the world: the robot root's place in the anchor's
-    frame (a shoulder's, fixed in the torso) plus the source's segments from the root to
+    frame as it stands (a shoulder, which moves a cm or two in the torso) plus the source's segments from the root to
     this body through the mapped bodies between them, each scaled to the length of the
     robot's, as seen from the source's anchor. A hand so follows the human arm's shape
     with the robot's arm lengths, wherever the robot's torso ends up."""
@@ -104,18 +105,21 @@ class Link:
 
 
 # The DeepMimic humanoid (`mjzoo.envs.deepmimic.humanoid_model`) onto Playground's G1
-# (`mjzoo.robots.scenes.spec("g1")`). The G1 has no head: the chest turns its torso. Its
-# shins are shorter than the scaled human's, so knees only steer (low costs); the pelvis
-# and feet are held in place and orientation. Its arms are 0.7 of the human's, not 0.9:
-# elbows and wrists follow the human arm from the shoulder, relative to the torso.
+# (`mjzoo.robots.scenes.spec("g1")`). The G1 has no head: the chest turns its torso. The
+# pelvis and feet are held in place and orientation. Its limbs have other proportions
+# than the scaled human's (arms 0.7 of the human's, not 0.9): knees follow the human leg
+# from the hip, relative to the pelvis, and elbows and wrists the arm from the shoulder,
+# relative to the torso; knees only steer (a low cost: the feet and pelvis decide).
 _RIGHT_ARM, _LEFT_ARM = ("chest", "right_shoulder"), ("chest", "left_shoulder")
 DEEPMIMIC_TO_G1: dict[str, Link] = {
     "root": Link("pelvis", 2.0, 2.0),
     "chest": Link("torso_link", 0.0, 0.5),
     "right_ankle": Link("right_ankle_roll_link", 10.0, 2.5),
     "left_ankle": Link("left_ankle_roll_link", 10.0, 2.5),
-    "right_knee": Link("right_knee_link", 0.1),
-    "left_knee": Link("left_knee_link", 0.1),
+    "right_hip": Link("right_hip_roll_link", 0.0),
+    "left_hip": Link("left_hip_roll_link", 0.0),
+    "right_knee": Link("right_knee_link", 0.5, limb=("root", "right_hip")),
+    "left_knee": Link("left_knee_link", 0.5, limb=("root", "left_hip")),
     "right_shoulder": Link("right_shoulder_roll_link", 0.0),  # the arms' roots: no cost of their own
     "left_shoulder": Link("left_shoulder_roll_link", 0.0),
     "right_elbow": Link("right_elbow_link", 0.5, limb=_RIGHT_ARM),
