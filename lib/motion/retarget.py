@@ -24,18 +24,24 @@ source is posed (`mj_kinematics`) and turned into targets for those robot bodies
   and its horizontal speed under `Config.contact_speed`) stays put: over each contact
   phase its target is one place, the phase's mean, on the floor, flat, at the phase's
   mean heading.
+- a limb's bodies (`Link.limb`: the G1's knees, elbows and hands) are targeted relative
+  to an anchor (the pelvis, the torso), not the world: e.g. from the robot's shoulder,
+  along the human's upper arm and forearm as the human's chest sees them, each scaled
+  to the robot's segment;
+  a world target after one global scale asks arms of another length for the human's
+  reach (8-20 cm misses, and a bent arm where the human's is straight).
 
 mink then solves each frame (quadratic programs under the robot's joint limits, a small
 posture cost pulling unmapped joints to the standing pose), warm-started from the
-previous frame's solution; a frame whose lowest sole ends below the floor is lifted by
-that depth. Velocities come from the positions by backward differences
+previous frame's solution (the first frame from the standing pose, every step taken); a
+frame whose lowest sole ends below the floor is lifted by that depth. Velocities come from the positions by backward differences
 (`motion.velocities_from_positions`, ``mj_differentiatePos``, as the source clips'), and the clip is checked against the robot (`motion.check`).
 
 Quality (`Quality`, per clip): foot skating (the longest horizontal travel of one foot
 during one source contact phase, cm), ground penetration (the deepest sole below the
 floor, cm), joint-limit hits (frames x joints within `LIMIT_MARGIN` of a limit: count and
 fraction) and the IK residuals (mean and max distance from target, cm, per body whose
-position is tracked). `foot_skating`, `penetration` and `limit_hits` compute them from
+position is tracked; a limb's target placed by its anchor's reached pose). `foot_skating`, `penetration` and `limit_hits` compute them from
 arrays.
 """
 
@@ -82,28 +88,44 @@ _SOLES |= {int(_G.mjGEOM_BOX)}
 @dataclasses.dataclass(frozen=True)
 class Link:
     """The robot body that follows one source body: `position_cost` and
-    `orientation_cost` weigh its position (per m) and orientation (per rad) errors."""
+    `orientation_cost` weigh its position (per m) and orientation (per rad) errors.
+
+    `limb` = (anchor, root), two keys of the body map (e.g. ``("chest", "right_shoulder")``),
+    makes the target one of a limb held relative to the anchor's robot body (mink's
+    `RelativeFrameTask`) instead of the world: the robot root's place in the anchor's
+    frame as it stands (a shoulder, which moves a cm or two in the torso) plus the source's segments from the root to
+    this body through the mapped bodies between them, each scaled to the length of the
+    robot's, as seen from the source's anchor. A hand so follows the human arm's shape
+    with the robot's arm lengths, wherever the robot's torso ends up."""
 
     body: str
     position_cost: float = 1.0
     orientation_cost: float = 0.0
+    limb: tuple[str, str] | None = None
 
 
 # The DeepMimic humanoid (`mjzoo.envs.deepmimic.humanoid_model`) onto Playground's G1
-# (`mjzoo.robots.scenes.spec("g1")`). The G1 has no head: the chest turns its torso. Its
-# arms and shins are shorter than the scaled human's, so elbows, wrists and knees only
-# steer (low costs); the pelvis and feet are held in place and orientation.
+# (`mjzoo.robots.scenes.spec("g1")`). The G1 has no head: the chest turns its torso. The
+# pelvis and feet are held in place and orientation. Its limbs have other proportions
+# than the scaled human's (arms 0.7 of the human's, not 0.9): knees follow the human leg
+# from the hip, relative to the pelvis, and elbows and wrists the arm from the shoulder,
+# relative to the torso; knees only steer (a low cost: the feet and pelvis decide).
+_RIGHT_ARM, _LEFT_ARM = ("chest", "right_shoulder"), ("chest", "left_shoulder")
 DEEPMIMIC_TO_G1: dict[str, Link] = {
     "root": Link("pelvis", 2.0, 2.0),
     "chest": Link("torso_link", 0.0, 0.5),
-    "right_ankle": Link("right_ankle_roll_link", 5.0, 2.5),
-    "left_ankle": Link("left_ankle_roll_link", 5.0, 2.5),
-    "right_knee": Link("right_knee_link", 0.1),
-    "left_knee": Link("left_knee_link", 0.1),
-    "right_elbow": Link("right_elbow_link", 0.3),
-    "left_elbow": Link("left_elbow_link", 0.3),
-    "right_wrist": Link("right_wrist_yaw_link", 0.5),
-    "left_wrist": Link("left_wrist_yaw_link", 0.5),
+    "right_ankle": Link("right_ankle_roll_link", 10.0, 2.5),
+    "left_ankle": Link("left_ankle_roll_link", 10.0, 2.5),
+    "right_hip": Link("right_hip_roll_link", 0.0),
+    "left_hip": Link("left_hip_roll_link", 0.0),
+    "right_knee": Link("right_knee_link", 0.5, limb=("root", "right_hip")),
+    "left_knee": Link("left_knee_link", 0.5, limb=("root", "left_hip")),
+    "right_shoulder": Link("right_shoulder_roll_link", 0.0),  # the arms' roots: no cost of their own
+    "left_shoulder": Link("left_shoulder_roll_link", 0.0),
+    "right_elbow": Link("right_elbow_link", 0.5, limb=_RIGHT_ARM),
+    "left_elbow": Link("left_elbow_link", 0.5, limb=_LEFT_ARM),
+    "right_wrist": Link("right_wrist_yaw_link", 1.0, limb=_RIGHT_ARM),
+    "left_wrist": Link("left_wrist_yaw_link", 1.0, limb=_LEFT_ARM),
 }
 DEEPMIMIC_FEET = ("right_ankle", "left_ankle")
 
@@ -195,7 +217,7 @@ def retarget(
     links = {k: v if isinstance(v, Link) else Link(v) for k, v in body_map.items()}
     src_ids = _body_ids(source, "source", list(links), "body_map's keys")
     rob_ids = _body_ids(robot, "robot", [link.body for link in links.values()], "body_map's values")
-    foot_index = [_index_of(list(links), f) for f in config.feet]
+    foot_index = [_index_of(list(links), f, "Config.feet") for f in config.feet]
     src_feet, rob_feet = [src_ids[i] for i in foot_index], [rob_ids[i] for i in foot_index]
     src_soles, rob_soles = _sole_geoms(source, src_feet), _sole_geoms(robot, rob_feet)
     src_root, rob_root = _root_body(source, "source"), _root_body(robot, "robot")
@@ -233,8 +255,20 @@ def retarget(
                 target_pos[a:b, k, :2] = target_pos[a:b, k, :2].mean(axis=0)
                 target_pos[a:b, k, 2] = rest_z[f]
                 target_rot[a:b, k] = _yaw(yaw) @ rest
+    # Limbs: targets in their anchor's frame (Link.limb), orientations relative to the anchor's target.
+    anchors = {}
+    for k, link in enumerate(links.values()):
+        if link.limb is not None:
+            anchor, root = (_index_of(list(links), b, f"{list(links)[k]}'s Link.limb") for b in link.limb)
+            path = _limb_path(source, src_ids, root, k)
+            frames = (src_rest, rob_rest, src_ids, rob_ids)
+            anchors[k] = anchor
+            target_pos[:, k] = _limb_target(pos, rot, frames, anchor, path)
+            target_rot[:, k] = np.swapaxes(target_rot[:, anchor], -1, -2) @ target_rot[:, k]
 
-    qpos, reached = _solve(robot, rob_rest.qpos, rob_ids, links, target_pos, target_rot, rob_soles, config)
+    qpos, reached, goal = _solve(
+        robot, rob_rest.qpos, rob_ids, links, anchors, target_pos, target_rot, rob_soles, config
+    )
     qvel = velocities_from_positions(qpos, clip.fps, robot, backward=True)
 
     rob = mujoco.MjData(robot)
@@ -259,7 +293,7 @@ def retarget(
     check(out, robot)
 
     tracked = [k for k, link in enumerate(links.values()) if link.position_cost > 0]
-    error = 100 * np.linalg.norm(reached[:, tracked] - target_pos[:, tracked], axis=-1)  # [T, K'] cm
+    error = 100 * np.linalg.norm(reached[:, tracked] - goal[:, tracked], axis=-1)  # [T, K'] cm
     hits, fraction = limit_hits(qpos, robot)
     quality = Quality(
         clip=out.name,
@@ -312,20 +346,60 @@ def contact_phases(contact: np.ndarray) -> list[tuple[int, int]]:
     return list(zip(np.flatnonzero(edges == 1).tolist(), np.flatnonzero(edges == -1).tolist()))
 
 
-def _solve(robot, rest_qpos, body_ids, links, target_pos, target_rot, soles, config):
-    """qpos [T, nq] and the reached body positions [T, K, 3], frame by frame (module docstring)."""
+def _limb_target(pos, rot, frames, anchor: int, path: list[int]) -> np.ndarray:
+    """[T, 3] a limb body's targets in its anchor's robot frame (`Link.limb`): the robot's
+    limb root where it stands, plus the source's segments along `path` (map indices, the
+    root first) turned from the source anchor's frame into the robot's and scaled.
+    `pos` [T, K, 3], `rot` [T, K, 3, 3]: the source's mapped bodies in the world."""
+    src_rest, rob_rest, src_ids, rob_ids = frames
+    src_a, rob_a = (rest.xmat[ids[anchor]].reshape(3, 3) for rest, ids in ((src_rest, src_ids), (rob_rest, rob_ids)))
+    turn = rob_a.T @ src_a  # source anchor coordinates -> robot anchor coordinates (both standing)
+    root = path[0]
+    out = np.broadcast_to(rob_a.T @ (rob_rest.xpos[rob_ids[root]] - rob_rest.xpos[rob_ids[anchor]]), pos[:, 0].shape)
+    for a, b in zip(path[:-1], path[1:]):
+        src_len = np.linalg.norm(src_rest.xpos[src_ids[b]] - src_rest.xpos[src_ids[a]])
+        rob_len = np.linalg.norm(rob_rest.xpos[rob_ids[b]] - rob_rest.xpos[rob_ids[a]])
+        local = np.einsum("tji,tj->ti", rot[:, anchor], pos[:, b] - pos[:, a])  # in the source anchor's frame
+        out = out + (rob_len / src_len) * local @ turn.T
+    return out
+
+
+def _limb_path(source: mujoco.MjModel, src_ids: list[int], root: int, k: int) -> list[int]:
+    """Map indices of the mapped source bodies from `root` down to `k` (both included)."""
+    index = {b: i for i, b in enumerate(src_ids)}
+    path, body = [k], src_ids[k]
+    while body != src_ids[root]:
+        body = int(source.body_parentid[body])
+        if body == 0:
+            raise ValueError(
+                f"retarget: Link.limb's root {source.body(src_ids[root]).name!r} is not above "
+                f"{source.body(src_ids[k]).name!r} in the source model"
+            )
+        if body in index:
+            path.append(index[body])
+    return path[::-1]
+
+
+def _solve(robot, rest_qpos, body_ids, links, anchors, target_pos, target_rot, soles, config):
+    """qpos [T, nq], the reached body positions [T, K, 3] and their targets in the world
+    [T, K, 3] (a limb's: where its anchor's reached pose puts it), frame by frame; the
+    targets of the bodies in `anchors` (map index -> its anchor's) are in that anchor's frame."""
     configuration = mink.Configuration(robot)
-    tasks = [
-        mink.FrameTask(robot.body(b).name, "body", link.position_cost, link.orientation_cost, lm_damping=1.0)
-        for b, link in zip(body_ids, links.values())
-    ]
+    tasks = []
+    for k, (b, link) in enumerate(zip(body_ids, links.values())):
+        costs = (link.position_cost, link.orientation_cost)
+        if k in anchors:
+            root = robot.body(body_ids[anchors[k]]).name
+            tasks.append(mink.RelativeFrameTask(robot.body(b).name, "body", root, "body", *costs, lm_damping=1.0))
+        else:
+            tasks.append(mink.FrameTask(robot.body(b).name, "body", *costs, lm_damping=1.0))
     posture = mink.PostureTask(robot, cost=config.posture_cost)
     limits = [mink.ConfigurationLimit(robot)]
     q = rest_qpos.copy()
     configuration.update(q)
     posture.set_target(rest_qpos)
     qpos = np.zeros((target_pos.shape[0], robot.nq))
-    reached = np.zeros_like(target_pos)
+    reached, goal = np.zeros_like(target_pos), target_pos.copy()
     for t in range(target_pos.shape[0]):
         for task, p, r in zip(tasks, target_pos[t], target_rot[t]):
             task.set_target(mink.SE3.from_rotation_and_translation(mink.SO3.from_matrix(r), p))
@@ -335,7 +409,7 @@ def _solve(robot, rest_qpos, body_ids, links, target_pos, target_rot, soles, con
             step = mink.solve_ik(configuration, every, 1.0, config.solver, config.damping, limits=limits)
             configuration.integrate_inplace(step, 1.0)
             error = sum(float(np.sum(task.compute_error(configuration) ** 2)) for task in tasks)
-            if previous - error < config.tolerance:
+            if previous - error < config.tolerance and t > 0:  # the first frame: every step (from rest, far)
                 break
             previous = error
         q = configuration.q.copy()
@@ -344,8 +418,12 @@ def _solve(robot, rest_qpos, body_ids, links, target_pos, target_rot, soles, con
             q[2] += depth
             configuration.update(q)
         qpos[t] = q
-        reached[t] = configuration.data.xpos[body_ids]
-    return qpos, reached
+        data = configuration.data
+        reached[t] = data.xpos[body_ids]
+        for k, anchor in anchors.items():
+            a = body_ids[anchor]
+            goal[t, k] = data.xpos[a] + data.xmat[a].reshape(3, 3) @ target_pos[t, k]
+    return qpos, reached, goal
 
 
 def _body_ids(m: mujoco.MjModel, who: str, wanted: Sequence[str], where: str) -> list[int]:
@@ -358,12 +436,12 @@ def _body_ids(m: mujoco.MjModel, who: str, wanted: Sequence[str], where: str) ->
     return [known.index(body) for body in wanted]
 
 
-def _index_of(keys: list[str], foot: str) -> int:
-    if foot not in keys:
+def _index_of(keys: list[str], body: str, where: str) -> int:
+    if body not in keys:
         raise ValueError(
-            f"retarget: Config.feet names {foot!r}, which the body map does not map{checks.did_you_mean([foot], keys)}"
+            f"retarget: {where} names {body!r}, which the body map does not map{checks.did_you_mean([body], keys)}"
         )
-    return keys.index(foot)
+    return keys.index(body)
 
 
 def _root_body(m: mujoco.MjModel, who: str) -> int:

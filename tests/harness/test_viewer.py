@@ -36,7 +36,8 @@ ENV = "pendulum_swingup"
 CLIP = ROOT / "envs" / "assets" / "cartpole_swingup_mppi.npz"
 
 # `mjzoo view` with --seconds, --save-frames and --save-video (and the same frames as a
-# GIF), in a fresh process: MuJoCo reads MUJOCO_GL once, at import.
+# GIF; and a clip beside itself, as panes), in a fresh process: MuJoCo reads MUJOCO_GL
+# once, at import.
 SAVE_SCRIPT = textwrap.dedent(
     """
     import sys
@@ -50,6 +51,9 @@ SAVE_SCRIPT = textwrap.dedent(
     viewing.view("pendulum_swingup", seconds=0.4, port=0, host="127.0.0.1", save_frames=out / "frames",
                  save_video=out / "view.mp4", render=config)
     write(seen["shown"], None, out / "view.gif", config)
+    clip = "envs/assets/cartpole_swingup_mppi.npz"
+    viewing.view(clip, source=clip, seconds=0.2, port=0, host="127.0.0.1", save_frames=out / "pairs",
+                 save_video=out / "pairs.mp4", render=config)
     print(len(seen["shown"].recorded))
     """
 )
@@ -229,9 +233,62 @@ def test_a_clip_plays_on_the_env_its_name_starts_with():
         shown.stop()
 
 
+def _root_positions(m: mujoco.MjModel, qpos: np.ndarray) -> np.ndarray:
+    """[nbody, 3] body positions of one frame."""
+    d = mujoco.MjData(m)
+    d.qpos[:] = qpos
+    mujoco.mj_kinematics(m, d)
+    return d.xpos.copy()
+
+
+def test_clips_of_other_frame_rates_play_in_step_side_by_side():
+    model = mjzoo.envs.make("cartpole_swingup").mj_model
+    clip = mjzoo.motion.load(CLIP, model)
+    fast = mjzoo.motion.resample(clip, 2 * clip.fps, model)
+    side = viewer.side_by_side([(model, clip), (model, fast)], spacing=1.5)
+    assert side.num_frames == clip.num_frames and side.dt == pytest.approx(1 / clip.fps)
+    shown = viewer.serve(side, port=0, host="127.0.0.1", playing=False)
+    try:
+        np.testing.assert_allclose(shown.scene.offsets[:, 0], [-0.75, 0.75])
+        shown.controls["scrubber"].value = 10
+        shown.step(5)  # five frames of the first clip: ten of the second
+        assert side.indices() == [15, 30]
+        pole = model.body("pole").id
+        for e, frame in ((0, clip.qpos[15]), (1, fast.qpos[30])):
+            drawn = shown.scene.handles[(e, "pole")].position - shown.scene.offsets[e]
+            np.testing.assert_allclose(drawn, _root_positions(model, frame)[pole], atol=1e-6)
+        shown.controls["scrubber"].value = clip.num_frames - 1
+        shown.controls["loop"].value = False
+        shown.step(3)
+        assert side.indices() == [clip.num_frames - 1, fast.num_frames - 1]  # both at their ends
+    finally:
+        shown.stop()
+
+
+def test_a_retargeted_clip_plays_beside_its_source_in_one_scene():
+    # what `mjzoo view envs/assets/motions/g1/walk.npz --source humanoid3d_walk` shows
+    g1, clip = viewing._target_clip(ROOT / "envs" / "assets" / "motions" / "g1" / "walk.npz", None, ())
+    human, walk = viewing._source_clip("humanoid3d_walk", None)
+    assert g1.nq == 36 and human.nq == 43 and clip.fps == walk.fps
+    shown = viewer.serve(viewer.side_by_side([(g1, clip), (human, walk)]), port=0, host="127.0.0.1", playing=False)
+    try:
+        bodies = [{name for env, name in shown.scene.handles if env == e} for e in (0, 1)]
+        assert {"pelvis", "left_wrist_yaw_link"} <= bodies[0] and {"root", "left_wrist"} <= bodies[1]
+        assert shown.scene.offsets[1, 0] - shown.scene.offsets[0, 0] > 1.0  # apart, not overlapping
+        shown.controls["scrubber"].value = 20
+        for e, model, qpos, root in ((0, g1, clip.qpos[20], "pelvis"), (1, human, walk.qpos[20], "root")):
+            drawn = shown.scene.handles[(e, root)].position - shown.scene.offsets[e]
+            np.testing.assert_allclose(drawn, _root_positions(model, qpos)[model.body(root).id], atol=1e-6)
+    finally:
+        shown.stop()
+
+
 @pytest.mark.parametrize(
     "target, flags, message",
     [
+        (ENV, {"source": "walk"}, "--source: only beside a motion clip"),
+        (str(CLIP), {"source": "no_such_clip"}, "no clip 'no_such_clip'"),
+        (str(CLIP), {"source": "walk", "source_task": ENV}, "--source-task: only for a .npz --source"),
         ("no_such_env", {}, "no_such_env"),
         ("missing.npz", {}, "missing.npz: no such file"),
         ("runs/missing", {}, "runs/missing: no such run directory"),
@@ -268,6 +325,9 @@ def test_save_frames_and_video(background):
         else (out / "view.mp4").stat().st_size > 0
     )
     assert 2 <= len(iio.imread(out / "view.gif", index=None)) <= count  # Pillow merges repeated frames
+    pairs = sorted((out / "pairs").glob("frame_*.png"))
+    assert len(pairs) >= 2 and iio.imread(pairs[0]).shape == (72, 2 * 96, 3)  # the two clips' panes
+    assert (out / "pairs.mp4").stat().st_size > 0
 
 
 def _has_pyav() -> bool:

@@ -39,6 +39,11 @@ def walk(human) -> motion.Clip:
     return motion.deepmimic_format.load(deepmimic.motion_path("walk"), human, deepmimic.character_joints())
 
 
+@pytest.fixture(scope="module")
+def g1_walk(human, g1, walk) -> retarget.Retargeted:
+    return retarget.retarget(walk, human, g1, retarget.DEEPMIMIC_TO_G1, retarget.Config(feet=FEET))
+
+
 def _poses(m: mujoco.MjModel, qpos: np.ndarray) -> np.ndarray:
     d = mujoco.MjData(m)
     out = []
@@ -74,8 +79,8 @@ def test_the_humanoid_retargeted_onto_itself_gives_its_own_clip_back(human, walk
     assert out.quality.penetration_cm < 1e-6
 
 
-def test_the_walk_on_the_g1_keeps_its_feet_planted_and_above_the_floor(human, g1, walk):
-    locked = retarget.retarget(walk, human, g1, retarget.DEEPMIMIC_TO_G1, retarget.Config(feet=FEET))
+def test_the_walk_on_the_g1_keeps_its_feet_planted_and_above_the_floor(human, g1, walk, g1_walk):
+    locked = g1_walk
     free = retarget.retarget(walk, human, g1, retarget.DEEPMIMIC_TO_G1, retarget.Config(feet=FEET, lock_contacts=False))
     motion.check(locked.clip, g1)
     assert locked.contacts.any(axis=0).all()  # each foot stands on the floor at some frame
@@ -85,6 +90,44 @@ def test_the_walk_on_the_g1_keeps_its_feet_planted_and_above_the_floor(human, g1
     ankles = [locked.clip.body_names.index(f"{side}_ankle_roll_link") for side in ("right", "left")]
     heights = locked.clip.body_pos[:, ankles, 2][locked.contacts]
     np.testing.assert_allclose(heights, heights.mean(), atol=0.01)
+
+
+def _segments(m: mujoco.MjModel, qpos: np.ndarray, anchor: str, chain: list[str]) -> np.ndarray:
+    """[T, len(chain) - 1, 3] unit vectors along the chain's segments, in the anchor's frame."""
+    d, out = mujoco.MjData(m), []
+    for q in qpos:
+        d.qpos[:] = q
+        mujoco.mj_kinematics(m, d)
+        points = d.xpos[[m.body(b).id for b in chain]]
+        local = np.diff(points, axis=0) @ d.xmat[m.body(anchor).id].reshape(3, 3)
+        out.append(local / np.linalg.norm(local, axis=-1, keepdims=True))
+    return np.array(out)
+
+
+def test_the_g1s_arms_take_the_human_arms_shape(human, g1, walk, g1_walk):
+    # Upper arm and forearm point where the human's do, seen from the torso (the chest),
+    # though the G1's arms are 0.7 of the human's length and its torso another shape.
+    turn = _rest_rotation(g1, "torso_link").T @ _rest_rotation(human, "chest")  # chest axes -> torso axes
+    for side in ("right", "left"):
+        person = _segments(human, walk.qpos, "chest", [f"{side}_shoulder", f"{side}_elbow", f"{side}_wrist"]) @ turn.T
+        links = [f"{side}_shoulder_roll_link", f"{side}_elbow_link", f"{side}_wrist_yaw_link"]
+        robot = _segments(g1, g1_walk.clip.qpos, "torso_link", links)
+        degrees = np.degrees(np.arccos(np.clip(np.sum(person * robot, axis=-1), -1.0, 1.0)))  # [T, 2]
+        assert degrees.mean() < 3.0 and degrees.max() < 6.0, (side, degrees.mean(), degrees.max())
+        assert g1_walk.quality.residual_mean_cm[f"{side}_wrist_yaw_link"] < 1.0
+
+
+def _rest_rotation(m: mujoco.MjModel, body: str) -> np.ndarray:
+    d = mujoco.MjData(m)
+    mujoco.mj_kinematics(m, d)
+    return d.xmat[m.body(body).id].reshape(3, 3)
+
+
+def test_a_limb_whose_root_is_not_above_it_is_one_clear_error(human, g1, walk):
+    body_map = {"chest": "torso_link", "left_shoulder": "left_shoulder_roll_link"}
+    body_map["right_wrist"] = Link("right_wrist_yaw_link", limb=("chest", "left_shoulder"))
+    with pytest.raises(ValueError, match=r"root 'left_shoulder' is not above 'right_wrist'"):
+        retarget.retarget(walk, human, g1, body_map)
 
 
 def test_foot_skating_is_the_path_of_a_foot_in_contact():

@@ -1,9 +1,11 @@
 """`mjzoo view`: a live browser viewer (`mjzoo.harness.viewer`) of a task, a trained run,
-a sampling planner or a recording, with KSim's viewer options (a duration, frames or a
-video of what was shown)."""
+a sampling planner or a recording (a motion clip beside its source clip too), with
+KSim's viewer options (a duration, frames or a video of what was shown)."""
 
 from __future__ import annotations
 
+import dataclasses
+import warnings
 from pathlib import Path
 from typing import Annotated
 from typing import Any
@@ -49,6 +51,8 @@ def view(
     host: str = "0.0.0.0",
     track_body: str | None = None,
     trace: str | None = None,
+    source: str | None = None,
+    source_task: str | None = None,
     seed: int = 0,
     save_frames: Path | None = None,
     save_video: Path | None = None,
@@ -64,13 +68,23 @@ def view(
     a `mjzoo collect` dataset, played back with a timeline (--num-envs episodes side
     by side; its task from meta.json, or --task); another .npz file is a motion clip
     (mjzoo.motion), on the model of --task, by default the registered env its file
-    name starts with (cartpole_swingup_mppi.npz: cartpole_swingup); anything else is a
+    name starts with (cartpole_swingup_mppi.npz: cartpole_swingup), or else the
+    Playground scene of the robot its folder names (envs/assets/motions/g1/walk.npz:
+    the G1's, as mjzoo.motion.retarget made it); anything else is a
     task spec, a registered env or package.module:factory, run under --controls (zero,
     uniform random, or a slider per actuator), or solved live by --planner with
     --config NAME=VALUE fields of its Config, drawing its sampled rollouts and plan as
     paths of --trace (a body or site). --env-overrides NAME=VALUE change the task;
     --num-envs runs a batch side by side; --speed 0.25-4 sets the playback speed;
     --track-body makes the camera follow a body.
+
+    --source CLIP plays a clip beside a motion clip TARGET, in step, in one scene: the
+    human clip a robot's clip was retargeted from. CLIP is a DeepMimic clip (a name of
+    pybullet's, walk or humanoid3d_walk, or a .txt file) on DeepMimic's humanoid, or a
+    .npz clip (mjzoo.motion's or IsaacLab's humanoid-AMP layout) on --source-task's
+    model, found from its name and folder as TARGET's is:
+
+        mjzoo view envs/assets/motions/g1/walk.npz --source humanoid3d_walk
 
     --save-frames DIR writes each displayed frame as DIR/frame_NNNNN.png, and
     --save-video PATH (.mp4 or .gif) a video of them, when the viewer ends, drawn
@@ -91,6 +105,8 @@ def view(
       host: the address the viewer listens on.
       track_body: a body the camera follows.
       trace: the body or site whose path the planner's samples and plan draw.
+      source: a clip played beside a clip TARGET: a DeepMimic clip name or .txt file, or a .npz clip.
+      source_task: the task whose model a .npz --source is on, instead of the one its name gives.
       seed: the random seed of resets, random controls and the planner.
       save_frames: write each displayed frame to this directory as PNG.
       save_video: write a video of the displayed frames (.mp4 or .gif) when the viewer ends.
@@ -101,11 +117,17 @@ def view(
 
     with as_usage_errors():
         kind = _check_flags(target, controls, planner, config, sampled, num_envs, seconds, speed, port)
+        _check_source_flags(target, kind, source, source_task, num_envs)
         _check_outputs(save_frames, save_video, overwrite)
-        source = _source(kind, target, task, env_overrides, controls, planner, config, sampled, num_envs, seed, trace)
-        _check_body(source.mj_model, track_body)
+        if source is None:
+            flags = (controls, planner, config, sampled, num_envs, seed, trace)
+            shown_source = _source(kind, target, task, env_overrides, *flags)
+        else:
+            pair = [_target_clip(Path(target), task, env_overrides), _source_clip(source, source_task)]
+            shown_source = viewer.side_by_side(pair)
+        _check_body(shown_source.mj_model, track_body)
     shown = viewer.serve(
-        source,
+        shown_source,
         port,
         host=host,
         speed=speed,
@@ -171,6 +193,35 @@ def _check_flags(
     if planner is not None and (controls != "zero" or num_envs > 1):
         raise UsageError("--planner: plans one env; --controls and --num-envs do not apply")
     return kind
+
+
+def _check_source_flags(target: str, kind: Kind, source: str | None, source_task: str | None, num_envs: int) -> None:
+    if source is not None and kind != "clip":
+        raise UsageError(f"--source: only beside a motion clip (.npz); {target} is a {kind}")
+    if source is not None and num_envs > 1:
+        raise UsageError("--source: plays one clip beside TARGET; --num-envs does not apply")
+    if source_task is not None and not (source or "").endswith(".npz"):
+        raise UsageError("--source-task: only for a .npz --source (a DeepMimic clip plays on DeepMimic's humanoid)")
+
+
+def _source_clip(source: str, task: str | None) -> tuple[mujoco.MjModel, mjzoo.motion.Clip]:
+    """The --source clip and its model: a DeepMimic clip on the DeepMimic humanoid, or a
+    .npz clip (mjzoo.motion's or IsaacLab's) on --source-task's model."""
+    from mjzoo.envs import deepmimic
+
+    path = Path(source)
+    if path.suffix == ".npz":
+        if not path.is_file():
+            raise UsageError(f"--source {source}: no such file")
+        model = _clip_model(path, task, {}, "--source-task")
+        with np.load(path, allow_pickle=False) as f:
+            isaaclab = "dof_names" in f
+        return model, (mjzoo.motion.isaaclab_npz(path, model) if isaaclab else mjzoo.motion.load(path, model))
+    if path.suffix == ".txt" and not path.is_file():
+        raise UsageError(f"--source {source}: no such file")
+    file = path if path.suffix == ".txt" else deepmimic.motion_path(source.removeprefix("humanoid3d_"))
+    human = deepmimic.humanoid_model()
+    return human, mjzoo.motion.deepmimic_format.load(file, human, deepmimic.character_joints())
 
 
 def _check_outputs(frames: Path | None, video: Path | None, overwrite: bool) -> None:
@@ -249,27 +300,48 @@ def _recording(kind: Kind, path: Path, task: str | None, env_overrides: tuple[st
         own = data.source.get("env_overrides", {}) if spec == data.source.get("task") else {}
         model = mjzoo.envs.make(spec, **{**own, **overrides}).mj_model
         return viewer.recording(model, data, episodes=num_envs)
-    clip = mjzoo.motion.load_file(path)
+    return viewer.recording(*_target_clip(path, task, env_overrides))
+
+
+def _target_clip(path: Path, task: str | None, env_overrides: tuple[str, ...]) -> tuple[mujoco.MjModel, Any]:
+    """A motion clip TARGET and the model of --task (or of the env its name gives)."""
+    if not path.is_file():
+        raise UsageError(f"{path}: no such file")
+    overrides = parse_assignments(env_overrides, "--env-overrides")
+    return _clip_model(path, task, overrides, "--task"), mjzoo.motion.load_file(path)
+
+
+def _clip_model(path: Path, task: str | None, overrides: dict[str, Any], flag: str) -> mujoco.MjModel:
+    """The model a clip file is on: `task`'s, the env its name starts with, or the
+    Playground scene of the robot its folder is named after."""
+    from mjzoo.robots import models
+    from mjzoo.robots import scenes
+
     spec = task or _env_of_clip(path)
-    return viewer.recording(mjzoo.envs.make(spec, **overrides).mj_model, clip)
+    if spec is not None:
+        return mjzoo.envs.make(spec, **overrides).mj_model
+    if models.canonical(path.parent.name) in models.PLAYGROUND_FOLDERS:
+        return scenes.spec(path.parent.name).compile()
+    raise UsageError(f"{path}: a motion clip holds no model; name its task with {flag} ENV")
 
 
-def _env_of_clip(path: Path) -> str:
-    """The registered env a clip's file name starts with (the longest such name)."""
+def _env_of_clip(path: Path) -> str | None:
+    """The registered env a clip's file name starts with (the longest such name), if any."""
     found = [n for n in mjzoo.envs.names() if path.stem == n or path.stem.startswith(n + "_")]
-    if not found:
-        raise UsageError(f"{path}: a motion clip holds no model; name its task with --task ENV")
-    return max(found, key=len)
+    return max(found, key=len) if found else None
 
 
 def _write(shown: Any, frames: Path | None, video: Path | None, render: RenderConfig) -> None:
     """The displayed frames as PNGs and/or a video, drawn offscreen."""
     if not (frames or video) or not shown.recorded:
         return
+    dt = 1.0 / shown.display_hz  # a frame per display: the video runs as the viewer did
+    if hasattr(shown.source, "models"):
+        _write_side_by_side(shown, frames, video, render, dt)
+        return
     model = shown.source.mj_model
     qpos, mocap_pos, mocap_quat = (np.stack(x) for x in zip(*shown.recorded))
     config = rendering.with_model_camera(render, model)
-    dt = 1.0 / shown.display_hz  # a frame per display: the video runs as the viewer did
     drawn = {"mocap_pos": mocap_pos, "mocap_quat": mocap_quat, "dt": dt, "config": config}
     images = None
     if frames is not None or (video is not None and video.suffix.lower() == ".gif"):
@@ -284,4 +356,39 @@ def _write(shown: Any, frames: Path | None, video: Path | None, render: RenderCo
         iio.imwrite(video, images, duration=1000 * dt * render.slowdown, loop=0)
         print(f"video: {video}")
     elif video is not None and rendering.render_video(model, qpos, video, **drawn) is not None:
+        print(f"video: {video}")
+
+
+def _write_side_by_side(shown: Any, frames: Path | None, video: Path | None, render: RenderConfig, dt: float) -> None:
+    """Models side by side as panes side by side: each drawn by itself (a renderer holds
+    one model's meshes), all from one free camera that follows each one's root body
+    (3 m away, from the front-left, unless --render says otherwise)."""
+    if render.camera is None and render.track_body is None and render.lookat is None:
+        seen = {"distance": 3.0, "azimuth": 135.0, "elevation": -15.0}
+        seen = {k: v if getattr(render, k) is None else getattr(render, k) for k, v in seen.items()}
+        render = dataclasses.replace(render, track_body=1, **seen)
+    panes = []
+    for e, model in enumerate(shown.source.models):
+        qpos, mocap_pos, mocap_quat = (np.stack(x) for x in zip(*(entry[e] for entry in shown.recorded)))
+        config = render
+        drawn = {"mocap_pos": mocap_pos, "mocap_quat": mocap_quat, "dt": dt, "config": config}
+        pane = rendering.render_frames(model, qpos, **drawn)
+        if pane is None:
+            return
+        panes.append(pane)
+    images = np.concatenate(panes, axis=2)  # [T, H, W * models, 3]
+    if frames is not None:
+        frames.mkdir(parents=True, exist_ok=True)
+        for i, image in enumerate(images):
+            iio.imwrite(frames / _FRAME.format(i), image)
+        print(f"frames: {len(images)} in {frames}")
+    if video is not None:
+        video.parent.mkdir(parents=True, exist_ok=True)
+        if video.suffix.lower() == ".gif":
+            iio.imwrite(video, images, duration=1000 * dt * render.slowdown, loop=0)
+        else:
+            with warnings.catch_warnings():  # JAX warns at every fork; imageio-ffmpeg forks only to exec ffmpeg
+                warnings.filterwarnings("ignore", r"os\.fork\(\) was called", RuntimeWarning)
+                fps = 1 / (dt * render.slowdown)  # macro_block_size=2: even sizes kept, not rescaled to 16s
+                iio.imwrite(video, images, extension=".mp4", fps=fps, codec="libx264", macro_block_size=2)
         print(f"video: {video}")

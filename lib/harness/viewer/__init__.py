@@ -10,6 +10,7 @@ recordings: `mjzoo view` from the command line.
     viewer.serve(viewer.policy(task, ppo.policy(config, task), params))           # a trained policy
     viewer.serve(viewer.planner(mjzoo.envs.closed_loop_problem("pendulum_swingup", mppi, mppi.Config())))
     viewer.serve(viewer.recording(task.mj_model, datasets.load("data/walk"), episodes=4))
+    viewer.serve(viewer.side_by_side([(g1, g1_walk), (human, walk)]))             # a retargeted clip beside its source
 
 The browser gets each body's meshes once (MuJoCo geoms grouped per body) and then, at
 most 30 times a second, only body poses. The simulation runs in a background thread,
@@ -20,7 +21,9 @@ camera that tracks a body, a live plot of each weighted reward term, a slider fo
 float the task names (`mjzoo.params`; applied with `Task.with_params`, so nothing
 compiles again; an infinite bound is shown as text), one slider per actuator (``controls="sliders"``), a planner's Config
 floats (a separate folder: they are static, so a change compiles the planner again,
-keeping its state), and a recording's timeline, loop switch and speed.
+keeping its state), and a recording's timeline, loop switch and speed. Clips of
+different models (a robot's retargeted clip and the human clip it came from) play in
+step in one scene, side by side.
 
 `mjzoo.harness.viewer.browser` opens a viewer's page in headless Chromium and clicks
 it as a user would (the browser check in the tests; ``scripts/viewer_screenshot.py``).
@@ -32,12 +35,14 @@ directories into these calls.
 
 from __future__ import annotations
 
+from collections.abc import Sequence
 from typing import Any
 
 from mjzoo import motion
 from mjzoo.harness.viewer.app import Viewer
 from mjzoo.harness.viewer.planning import Planning
 from mjzoo.harness.viewer.recording import Recording
+from mjzoo.harness.viewer.recording import SideBySide
 from mjzoo.harness.viewer.recording import from_clip
 from mjzoo.harness.viewer.recording import from_dataset
 from mjzoo.harness.viewer.sources import Simulation
@@ -45,7 +50,7 @@ from mjzoo.harness.viewer.sources import controls as make_controls
 from mjzoo.planning.realtime import Problem
 from mjzoo.types import Task
 
-__all__ = ["serve", "env", "policy", "planner", "recording", "Viewer"]
+__all__ = ["serve", "env", "policy", "planner", "recording", "side_by_side", "Viewer"]
 
 
 def env(task: Task, controls: str = "zero", num_envs: int = 1, seed: int = 0) -> Simulation:
@@ -77,7 +82,15 @@ def recording(mj_model: Any, data: Any, episodes: int = 1) -> Recording:
     return from_dataset(mj_model, data, episodes)
 
 
-def serve(source: Task | Simulation | Planning | Recording, port: int = 8080, **options: Any) -> Viewer:
+def side_by_side(clips: Sequence[tuple[Any, motion.Clip]], spacing: float = 0.0) -> SideBySide:
+    """Motion clips of different models, ``[(mj_model, clip), ...]``, played in step in one
+    scene, each beside the one before along x, `spacing` metres apart (0: about a body's
+    height): a retargeted clip beside the clip it came from. Each clip is checked against
+    its model's joints; the first clip's frame rate sets the timeline."""
+    return SideBySide([from_clip(m, clip) for m, clip in clips], spacing)
+
+
+def serve(source: Task | Simulation | Planning | Recording | SideBySide, port: int = 8080, **options: Any) -> Viewer:
     """Starts a viewer of `source` (a `Task` means `env(task)`) on `port` (0: any free
     port) and returns its handle: ``.step()``, ``.stop()``, ``.wait(seconds)``,
     ``.controls``, ``.scene``, ``.stats()``. Options: host, display_hz (30), speed

@@ -37,7 +37,7 @@ class Viewer:
       server: the viser server; scene: the bodies (`Scene.handles`); controls: the GUI
       handles by name (`gui.Controls`); frames_shown: displayed frames so far;
       recorded: (qpos [nq], mocap_pos, mocap_quat) of environment `shown` per displayed
-      frame, when `record`.
+      frame, when `record` (models side by side: a tuple of them, one per model).
     """
 
     def __init__(
@@ -56,7 +56,8 @@ class Viewer:
         self.source, self.display_hz, self.record = source, display_hz, record
         self.server = viser.ViserServer(host=host, port=port or free_port(), label=label, verbose=False)
         self.lock = threading.RLock()
-        self.scene = Scene(self.server, source.mj_model, source.num_envs)
+        models = getattr(source, "models", source.mj_model)  # several: a side by side of different models
+        self.scene = Scene(self.server, models, source.num_envs, getattr(source, "spacing", 0.0))
         self.speed, self.playing, self.shown, self.track = speed, playing, None, None
         self.frames_shown, self.recorded, self.sim_seconds = 0, [], 0.0
         self.history: collections.deque = collections.deque(maxlen=300)
@@ -164,7 +165,9 @@ class Viewer:
             env = self.shown or 0
             self.history.append((self.sim_seconds, {k: float(v[env]) for k, v in frame.terms.items()}))
             if self.record:
-                self.recorded.append((frame.qpos[env], frame.mocap_pos[env], frame.mocap_quat[env]))
+                shown = range(self.source.num_envs) if hasattr(self.source, "models") else [env]
+                entries = [(frame.qpos[e], frame.mocap_pos[e], frame.mocap_quat[e]) for e in shown]
+                self.recorded.append(entries[0] if len(entries) == 1 else tuple(entries))
             self._follow(frame, env)
             now = time.perf_counter()
             if now - self._last_plot >= _PLOT_PERIOD_S:
@@ -194,7 +197,9 @@ class Viewer:
         """Keeps each client's camera at its offset from the tracked body."""
         if self.track is None:
             return
-        target = frame.xpos[env, self.track] + self.scene.offsets[env]
+        if hasattr(self.source, "models"):
+            env = 0  # models side by side: the tracked body is the first model's
+        target = frame.xpos[env][self.track] + self.scene.offsets[env]
         for client in self.server.get_clients().values():
             camera = client.camera
             offset = np.asarray(camera.position) - np.asarray(camera.look_at)

@@ -3,12 +3,14 @@
 Each body with visible geoms becomes one viser frame ``/env{E}/{body}`` whose children
 are its geoms' meshes in the body's own frame; a displayed frame then sends only each
 body's position and orientation (wxyz), never a vertex. Several environments of a
-batch are drawn side by side, each shifted along x by `spacing`.
+batch are drawn side by side, each shifted along x by `spacing`, and so are several
+models (a retargeted clip beside its source): environment e is then model e.
 """
 
 from __future__ import annotations
 
 import dataclasses
+from collections.abc import Sequence
 
 import mujoco
 import numpy as np
@@ -114,23 +116,38 @@ def _body_name(mj_model: mujoco.MjModel, b: int) -> str:
 
 
 class Scene:
-    """The bodies of `num_envs` environments in a viser scene.
+    """The bodies of `num_envs` environments in a viser scene: of one model, or of
+    `mj_model[e]` for environment e when given a sequence of models.
 
     Attributes:
       handles: {(env, body name): viser frame} one per body group per environment.
       offsets: [E, 3] where each environment's origin is drawn.
+      groups: the first model's body groups; `slots`: [E] each environment's.
     """
 
-    def __init__(self, server: viser.ViserServer, mj_model: mujoco.MjModel, num_envs: int, spacing: float = 0.0):
-        self.server, self.groups = server, body_groups(mj_model)
-        self.spacing = spacing or _spacing(mj_model)
+    def __init__(
+        self,
+        server: viser.ViserServer,
+        mj_model: mujoco.MjModel | Sequence[mujoco.MjModel],
+        num_envs: int,
+        spacing: float = 0.0,
+    ):
+        models = list(mj_model) if isinstance(mj_model, Sequence) else [mj_model] * num_envs
+        if len(models) != num_envs:
+            raise ValueError(f"Scene: {len(models)} models for {num_envs} environments")
+        built = {id(m): body_groups(m) for m in models}  # one model's meshes are made once
+        self.server, self.slots = server, [built[id(m)] for m in models]
+        self.groups = self.slots[0]
+        self.spacing = spacing or max(_spacing(m) for m in models)
         self.offsets = np.zeros((num_envs, 3), np.float32)
         self.offsets[:, 0] = self.spacing * (np.arange(num_envs) - (num_envs - 1) / 2)
-        _stage(server, mj_model, float(self.offsets[-1, 0] - self.offsets[0, 0]))
-        self.ids = {g.name: g.body_id for g in self.groups}
+        centre = np.mean([np.asarray(m.stat.center) + o for m, o in zip(models, self.offsets)], axis=0)
+        extent = max(float(m.stat.extent) for m in models)
+        _stage(server, centre, extent, float(self.offsets[-1, 0] - self.offsets[0, 0]))
+        self.ids = {(e, g.name): g.body_id for e, groups in enumerate(self.slots) for g in groups}
         self.handles: dict[tuple[int, str], viser.FrameHandle] = {}
-        for env in range(num_envs):
-            for group in self.groups:
+        for env, groups in enumerate(self.slots):
+            for group in groups:
                 self.handles[(env, group.name)] = self._add(env, group)
 
     def _add(self, env: int, group: BodyGroup) -> viser.FrameHandle:
@@ -147,14 +164,15 @@ class Scene:
             )
         return frame
 
-    def update(self, xpos: np.ndarray, xquat: np.ndarray) -> None:
-        """Moves every body: xpos [E, nbody, 3], xquat [E, nbody, 4] (wxyz), world frame.
-        One batch of pose messages (`server.atomic`), so a client never draws half a frame."""
+    def update(self, xpos: np.ndarray | Sequence[np.ndarray], xquat: np.ndarray | Sequence[np.ndarray]) -> None:
+        """Moves every body: xpos [E, nbody, 3], xquat [E, nbody, 4] (wxyz), world frame
+        (or lists of E such [nbody_e, ...] arrays for several models). One batch of pose
+        messages (`server.atomic`), so a client never draws half a frame."""
         with self.server.atomic():
             for (env, name), handle in self.handles.items():
-                body = self.ids[name]
-                handle.position = xpos[env, body] + self.offsets[env]
-                handle.wxyz = xquat[env, body]
+                body = self.ids[(env, name)]
+                handle.position = xpos[env][body] + self.offsets[env]
+                handle.wxyz = xquat[env][body]
 
 
 def _is_plane(geom: Geom) -> bool:
@@ -167,9 +185,11 @@ def _spacing(mj_model: mujoco.MjModel) -> float:
     return float(max(1.0, 2.5 * mj_model.stat.extent))
 
 
-def _stage(server: viser.ViserServer, mj_model: mujoco.MjModel, width: float) -> None:
+def _stage(server: viser.ViserServer, centre: np.ndarray, extent: float, width: float) -> None:
     """MuJoCo's z up, plain lights (no image-based lighting: its HDRI comes from the
-    internet, and washes colours out), and a first camera framing every environment."""
+    internet, and washes colours out), and a first camera framing every environment:
+    looking at `centre`, the middle of them all, from far enough for a model `extent`
+    across and `width` metres of environments side by side."""
     server.scene.set_up_direction("+z")
     server.scene.configure_environment_map(None)
     server.scene.configure_default_lights(enabled=False)
@@ -177,7 +197,6 @@ def _stage(server: viser.ViserServer, mj_model: mujoco.MjModel, width: float) ->
         "/lights/sky", sky_color=(255, 255, 255), ground_color=(90, 90, 100), intensity=1.2
     )
     server.scene.add_light_directional("/lights/sun", intensity=1.8, wxyz=(0.92, 0.2, -0.2, 0.25), position=(0, 0, 5))
-    centre, extent = np.asarray(mj_model.stat.center, float), float(mj_model.stat.extent)
     distance = 1.0 * extent + 0.45 * width
     server.initial_camera.look_at = centre
     server.initial_camera.position = centre + distance * np.array([0.0, -1.0, 0.35])

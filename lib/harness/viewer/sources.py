@@ -44,7 +44,8 @@ CONTROLS = ("zero", "random", "sliders")
 
 @dataclasses.dataclass
 class Frame:
-    """What one displayed frame draws (host arrays, E environments shown).
+    """What one displayed frame draws (host arrays, E environments shown; for models side
+    by side, `recording.SideBySide`, each per-environment field is a list of E arrays).
 
     Attributes:
       qpos: [E, nq]; mocap_pos [E, nmocap, 3], mocap_quat [E, nmocap, 4].
