@@ -48,6 +48,7 @@ from mjzoo.envs import joystick
 from mjzoo.envs import locomotion
 from mjzoo.envs import pendulum
 from mjzoo.envs import point_mass
+from mjzoo.envs import robot_amp
 from mjzoo.envs import robot_joystick
 from mjzoo.envs import teachers
 from mjzoo.running import control_dt
@@ -99,6 +100,7 @@ _REGISTRY: dict[str, base.EnvSpec] = {
     "t1_joystick": robot_joystick.T1,
     "berkeley_humanoid_joystick": robot_joystick.BERKELEY_HUMANOID,
     "go1_joystick": robot_joystick.GO1,
+    "g1_amp_joystick": robot_amp.G1_AMP_JOYSTICK,  # AMP from retargeted human motion (envs/robot_amp.py)
     # AMP: move like a reference motion (envs/humanoid_amp.py)
     "humanoid_amp_walk": humanoid_amp.WALK,
     "humanoid_amp_joystick": humanoid_amp.JOYSTICK,

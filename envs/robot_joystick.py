@@ -47,6 +47,7 @@ import jax.numpy as jnp
 from jax.tree_util import Partial
 
 import mjzoo
+from mjzoo import motion
 from mjzoo import physics as physics_lib
 from mjzoo.builder import named
 from mjzoo.catalog import actuators
@@ -127,14 +128,26 @@ def robot_joystick(
     push: float = 0.5,
     noise: float = 0.02,
     max_action_latency: int = 1,
+    vx: tuple[float, float] = (-1.0, 1.0),
+    vy: tuple[float, float] = (-0.5, 0.5),
+    yaw_rate: tuple[float, float] = (-1.0, 1.0),
+    reference: motion.Reference | None = None,
+    reference_probability: float = 0.5,
     **physics_options: Any,
 ) -> Task:
     """`robot`'s joystick (one of `ROBOTS`) on `terrain` (one of `TERRAINS`); on a
-    terrain, starting on row ``round(level * 5)`` (a curriculum moves `level`)."""
+    terrain, starting on row ``round(level * 5)`` (a curriculum moves `level`). The
+    command [`vx`, `vy`, `yaw_rate`] is drawn from those ranges (m/s, rad/s). With a
+    `reference` (motion of this robot's model, at its control step), an episode starts at
+    one of its frames with `reference_probability` (reference-state initialization)."""
     if robot not in ROBOTS:
         raise ValueError(f"robot_joystick: robot={robot!r} is unknown; the robots: {sorted(ROBOTS)}")
     if terrain not in TERRAINS:
         raise ValueError(f"robot_joystick: terrain={terrain!r} is unknown; the terrains: {sorted(TERRAINS)}")
+    if reference is not None and TERRAINS[terrain] is not None:
+        raise ValueError(
+            f"robot_joystick: a reference starts episodes where its clip's root was: flat terrain only, not {terrain!r}"
+        )
     spec = ROBOTS[robot]
     physics, grid = _scene(robot, terrain, tuple(sorted(physics_options.items())))
     m = physics.mj_model
@@ -152,6 +165,8 @@ def robot_joystick(
     if grid is not None:
         privileged += (terrain_lib.height_scan(m),)
     start = (terrain_lib.start_on_tile(m, grid, level=level),) if grid is not None else ()
+    if reference is not None:  # after the noise and heading: a reference frame replaces the state
+        start += (resets.reference_state(reference, reference_probability),)
     physics_draw = randomizers.combine(
         randomizers.scale_friction(m, 0.4, 1.25),
         randomizers.scale_masses(m, 0.9, 1.1),
@@ -167,9 +182,9 @@ def robot_joystick(
         functools.partial(trackers.with_feet, feet=spec.feet, floor="floor"),
         functools.partial(
             commands.with_velocity_command,
-            vx=(-1.0, 1.0),
-            vy=(-0.5, 0.5),
-            yaw_rate=(-1.0, 1.0),
+            vx=vx,
+            vy=vy,
+            yaw_rate=yaw_rate,
             resample_interval=(5.0, 10.0),
             stand_probability=0.1,
         ),
