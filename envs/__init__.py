@@ -46,6 +46,7 @@ from mjzoo.envs import cylinder_push
 from mjzoo.envs import humanoid_amp
 from mjzoo.envs import joystick
 from mjzoo.envs import locomotion
+from mjzoo.envs import motion_tracking
 from mjzoo.envs import pendulum
 from mjzoo.envs import point_mass
 from mjzoo.envs import robot_joystick
@@ -99,6 +100,8 @@ _REGISTRY: dict[str, base.EnvSpec] = {
     "t1_joystick": robot_joystick.T1,
     "berkeley_humanoid_joystick": robot_joystick.BERKELEY_HUMANOID,
     "go1_joystick": robot_joystick.GO1,
+    # Whole-body motion tracking of retargeted clips (envs/motion_tracking.py; mjzoo[robots])
+    "g1_track": motion_tracking.G1_TRACK,
     # AMP: move like a reference motion (envs/humanoid_amp.py)
     "humanoid_amp_walk": humanoid_amp.WALK,
     "humanoid_amp_joystick": humanoid_amp.JOYSTICK,
