@@ -96,9 +96,9 @@ def start_probabilities(
     [C, K] (>= 0), `valid` [C, K] bool, clip `weight` [C], the floor `uniform` in [0, 1],
     `smoothing` >= 0 and `kernel` (static int >= 0) bins looked ahead."""
     floor = uniform_probabilities(valid, weight)
-    smoothed = sum(
-        smoothing**k * jnp.pad(failures, ((0, 0), (0, k)))[:, k:] for k in range(kernel + 1)
-    ) * jnp.asarray(valid, failures.dtype)
+    smoothed = sum(smoothing**k * jnp.pad(failures, ((0, 0), (0, k)))[:, k:] for k in range(kernel + 1)) * jnp.asarray(
+        valid, failures.dtype
+    )
     total = jnp.sum(smoothed)
     adapted = (1.0 - uniform) * smoothed / jnp.maximum(total, 1e-30) + uniform * floor
     return jnp.where(total > 0, adapted, floor).astype(jnp.float32)

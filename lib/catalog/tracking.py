@@ -139,7 +139,7 @@ def motion(
         mujoco.mj_comVel(mj_model, data)
         velocity = np.zeros((len(ids), 6))
         for k, body in enumerate(ids):  # (angular, linear) at the body's origin, world frame
-            mujoco.mj_objectVelocity(mj_model, data, mujoco.mjtObj.mjOBJ_BODY, int(body), velocity[k], 0)
+            mujoco.mj_objectVelocity(mj_model, data, mujoco.mjtObj.mjOBJ_XBODY, int(body), velocity[k], 0)
         frames.append((data.xpos[ids].copy(), data.xquat[ids].copy(), velocity[:, 3:], velocity[:, :3]))
     pos, quat, linvel, angvel = (jnp.asarray(np.stack(x), jnp.float32) for x in zip(*frames))
     return Motion(
