@@ -41,8 +41,8 @@ from mjzoo.catalog import actuators
 from mjzoo.catalog import observations
 from mjzoo.catalog import rewards
 from mjzoo.catalog import start_sampling
-from mjzoo.catalog import tracking
 from mjzoo.catalog import trackers
+from mjzoo.catalog import tracking
 from mjzoo.combinators import with_auto_reset
 from mjzoo.envs import base
 from mjzoo.robots import scenes

@@ -238,6 +238,7 @@ def summary(metrics: Mapping[str, Any]) -> dict[str, dict[str, float]]:
             continue
         prefix, clip = found.groups()
         ended = float(value)
-        ratio = lambda name: float(metrics[f"{prefix}tracking/{clip}/{name}"]) / ended if ended > 0 else math.nan  # noqa: E731
-        out[clip] = {"episodes": ended, "success": ratio("succeeded"), "mpjpe_mm": ratio("episode_mpjpe_mm")}
+        rates = [float(metrics[f"{prefix}tracking/{clip}/{name}"]) for name in ("succeeded", "episode_mpjpe_mm")]
+        success, mpjpe = (rate / ended if ended > 0 else math.nan for rate in rates)
+        out[clip] = {"episodes": ended, "success": success, "mpjpe_mm": mpjpe}
     return out

@@ -290,3 +290,19 @@ def test_tracking_task_starts_on_the_reference_and_adapts_where_it_fails():
     # The sampler's failures rose exactly in the envs where an episode failed.
     failures = np.asarray(mjzoo.find(last, start_sampling.AdaptiveStartState).failures)
     np.testing.assert_array_equal(failures.sum(axis=(1, 2)) > 0, terminated.any(axis=0))
+
+
+def test_summary_turns_batch_means_into_per_clip_rates():
+    metrics = {
+        "env/tracking/walk/ended": 0.04,
+        "env/tracking/walk/succeeded": 0.03,
+        "env/tracking/walk/episode_mpjpe_mm": 1.2,
+        "env/tracking/run/ended": 0.0,
+        "env/tracking/run/succeeded": 0.0,
+        "env/tracking/run/episode_mpjpe_mm": 0.0,
+        "env/tracking/mpjpe_mm": 25.0,
+    }
+    out = start_sampling.summary(metrics)
+    assert set(out) == {"walk", "run"}
+    assert out["walk"] == pytest.approx({"episodes": 0.04, "success": 0.75, "mpjpe_mm": 30.0})
+    assert np.isnan(out["run"]["success"]) and np.isnan(out["run"]["mpjpe_mm"])
