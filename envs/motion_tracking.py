@@ -170,16 +170,17 @@ def motion_tracking(
 
 def g1_track(
     *,
-    clips: Sequence[str] = G1_CLIPS,
+    clips: Sequence[str] | str | None = None,
     action_scale: float = 0.5,
     episode_steps: int = 500,
     bin_seconds: float = 0.25,
     adaptive_uniform: float = 0.1,
     **physics_options: Any,
 ) -> Task:
-    """The Unitree G1 tracking its committed clips `clips` (default: all of `G1_CLIPS`)
-    at a 0.02 s control step (`motion_tracking`); physics options override the scene's."""
-    clips = (clips,) if isinstance(clips, str) else tuple(clips)
+    """The Unitree G1 tracking its committed clips `clips` (names, or one string of them
+    separated by commas; default: all of `G1_CLIPS`) at a 0.02 s control step
+    (`motion_tracking`); physics options override the scene's."""
+    clips = G1_CLIPS if clips is None else tuple(clips.split(",")) if isinstance(clips, str) else tuple(clips)
     physics = _g1(tuple(sorted(physics_options.items())))
     return motion_tracking(
         physics,
@@ -196,6 +197,6 @@ def g1_track(
 
 G1_TRACK = base.EnvSpec(
     make=g1_track,
-    description="Unitree G1 tracking its retargeted motion clips (clips=('walk', 'run', 'jump'))",
+    description="Unitree G1 tracking its retargeted motion clips, all or some (clips=walk,run)",
     ppo=PPO,
 )

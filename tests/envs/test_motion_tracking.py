@@ -34,7 +34,7 @@ def test_g1_track_tracks_every_committed_clip_or_those_picked():
     table = mjzoo.params(task)[start_sampling.PARAMETER]
     assert table.shape[0] == clips and np.isclose(float(np.sum(table)), 1.0)
 
-    walk = mjzoo.envs.make("g1_track", clips=("walk",))
+    walk = mjzoo.envs.make("g1_track", clips="walk")  # as --env-overrides clips=walk gives it
     metrics = jax.eval_shape(lambda k: mjzoo.reset(walk, k), jax.random.key(0)).metrics
     assert {k for k in metrics if k.endswith("/ended")} == {"tracking/walk/ended"}
     with pytest.raises(ValueError, match="must be a non-empty list of"):
