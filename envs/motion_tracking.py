@@ -5,7 +5,7 @@ clips (``envs/assets/motions/g1/*.npz``, retargeted from DeepMimic's by
 
     task = motion_tracking.g1_track()                        # every committed clip
     task = motion_tracking.g1_track(clips=("walk",))         # one
-    task = motion_tracking.motion_tracking(physics, clips, bodies=..., anchor=...)   # any robot
+    task = motion_tracking.motion_tracking(physics, clips, motion_tracking.Tracked(bodies, anchor))  # any robot
 
 One `mjzoo.task` of catalog items (`mjzoo.catalog.tracking`, `start_sampling`), innermost
 first: the robot put on the reference at a start drawn from the adaptive table
@@ -28,6 +28,7 @@ rate (0.1), joint limits past 90% (10.0).
 
 from __future__ import annotations
 
+import dataclasses
 import functools
 from typing import Any
 from typing import Sequence
@@ -48,28 +49,42 @@ from mjzoo.envs import base
 from mjzoo.robots import scenes
 from mjzoo.types import Task
 
-__all__ = ["motion_tracking", "g1_track", "g1_clips", "G1_CLIPS", "G1_BODIES", "G1_TRACK", "PPO"]
+__all__ = ["Tracked", "motion_tracking", "g1_track", "g1_clips", "G1", "G1_CLIPS", "G1_TRACK", "PPO"]
 
 MOTIONS = base.ASSETS / "motions" / "g1"
 G1_CLIPS = tuple(sorted(p.stem for p in MOTIONS.glob("*.npz")))  # the committed clips
-# BeyondMimic's G1 bodies: pelvis, legs, torso (the anchor), arms.
-G1_BODIES = (
-    "pelvis",
-    "left_hip_roll_link",
-    "left_knee_link",
-    "left_ankle_roll_link",
-    "right_hip_roll_link",
-    "right_knee_link",
-    "right_ankle_roll_link",
-    "torso_link",
-    "left_shoulder_roll_link",
-    "left_elbow_link",
-    "left_wrist_yaw_link",
-    "right_shoulder_roll_link",
-    "right_elbow_link",
-    "right_wrist_yaw_link",
+
+
+@dataclasses.dataclass(frozen=True)
+class Tracked:
+    """What tracking needs to know of a robot besides its model."""
+
+    bodies: tuple[str, ...]  # the tracked bodies
+    anchor: str  # one of them: the reference is moved onto it
+    end_effectors: tuple[str, ...] = ()  # some of them: terminated 0.25 m off their reference height
+
+
+# BeyondMimic's G1 bodies: pelvis, legs, torso (the anchor), arms; its end effectors the feet and hands.
+G1 = Tracked(
+    bodies=(
+        "pelvis",
+        "left_hip_roll_link",
+        "left_knee_link",
+        "left_ankle_roll_link",
+        "right_hip_roll_link",
+        "right_knee_link",
+        "right_ankle_roll_link",
+        "torso_link",
+        "left_shoulder_roll_link",
+        "left_elbow_link",
+        "left_wrist_yaw_link",
+        "right_shoulder_roll_link",
+        "right_elbow_link",
+        "right_wrist_yaw_link",
+    ),
+    anchor="torso_link",
+    end_effectors=("left_ankle_roll_link", "right_ankle_roll_link", "left_wrist_yaw_link", "right_wrist_yaw_link"),
 )
-G1_END_EFFECTORS = ("left_ankle_roll_link", "right_ankle_roll_link", "left_wrist_yaw_link", "right_wrist_yaw_link")
 # PPO after BeyondMimic's (4096 envs, 24-step rollouts, 4 minibatches x 5 epochs, 512-256-128 ELU networks,
 # learning rate 1e-3 with the KL-adaptive schedule at 0.01, entropy 5e-3, discount 0.99, lambda 0.95).
 PPO = dict(
@@ -108,27 +123,23 @@ def g1_clips(names: Sequence[str] = G1_CLIPS) -> list[motion.Clip]:
 def motion_tracking(
     physics: physics_lib.Physics,
     clips: Sequence[motion.Clip],
+    robot: Tracked,
     *,
-    bodies: Sequence[str],
-    anchor: str,
-    end_effectors: Sequence[str] = (),
     action_scale: float = 0.5,
     episode_steps: int = 500,
     bin_seconds: float = 0.25,
     adaptive_uniform: float = 0.1,
 ) -> Task:
     """Tracking of `clips` (of `physics`'s model, each played once) by a robot with
-    ``<position>`` servos: the module docstring's task, auto-resetting, with the
-    adaptive sampler outside. `bodies` are tracked, `anchor` one of them, `end_effectors`
-    (some of them) terminate more than 0.25 m off their reference height;
-    `episode_steps` caps an episode (a long clip's), `bin_seconds` and
+    ``<position>`` servos whose bodies `robot` names: the module docstring's task,
+    auto-resetting, with the adaptive sampler outside; `episode_steps` caps an episode (a long clip's), `bin_seconds` and
     `adaptive_uniform` are the sampler's bin width and floor."""
     m = physics.mj_model
     ctrl_dt = float(m.opt.timestep) * physics.n_substeps
-    ref = tracking.motion(motion.reference(clips, m, dt=ctrl_dt, loop=False), m, bodies, anchor)
+    ref = tracking.motion(motion.reference(clips, m, dt=ctrl_dt, loop=False), m, robot.bodies, robot.anchor)
     ends = {}
-    if end_effectors:
-        ends["end_effector_height"] = tracking.body_height_deviation(ref, m, end_effectors, 0.25)
+    if robot.end_effectors:
+        ends["end_effector_height"] = tracking.body_height_deviation(ref, m, robot.end_effectors, 0.25)
     task = mjzoo.task(
         physics,
         observe=observations.concat(
@@ -182,21 +193,10 @@ def g1_track(
     (`motion_tracking`); physics options override the scene's."""
     clips = G1_CLIPS if clips is None else tuple(clips.split(",")) if isinstance(clips, str) else tuple(clips)
     physics = _g1(tuple(sorted(physics_options.items())))
-    return motion_tracking(
-        physics,
-        g1_clips(clips),
-        bodies=G1_BODIES,
-        anchor="torso_link",
-        end_effectors=G1_END_EFFECTORS,
-        action_scale=action_scale,
-        episode_steps=episode_steps,
-        bin_seconds=bin_seconds,
-        adaptive_uniform=adaptive_uniform,
-    )
+    settings = dict(action_scale=action_scale, episode_steps=episode_steps, bin_seconds=bin_seconds)
+    return motion_tracking(physics, g1_clips(clips), G1, adaptive_uniform=adaptive_uniform, **settings)
 
 
 G1_TRACK = base.EnvSpec(
-    make=g1_track,
-    description="Unitree G1 tracking its retargeted motion clips, all or some (clips=walk,run)",
-    ppo=PPO,
+    make=g1_track, description="Unitree G1 tracking its motion clips (clips=walk,run: some)", ppo=PPO
 )

@@ -249,7 +249,7 @@ def test_tracking_task_starts_on_the_reference_and_adapts_where_it_fails():
     falls (its anchor 0.25 m under the reference's after ~0.2 s) unless its clip ends first."""
     clips = sway_clips()
     task = motion_tracking.motion_tracking(
-        robot(), clips, bodies=BODIES, anchor="torso", end_effectors=("arm",), bin_seconds=0.1
+        robot(), clips, motion_tracking.Tracked(BODIES, "torso", ("arm",)), bin_seconds=0.1
     )
     m = robot().mj_model
     ref = tracking.motion(motion.reference(clips, m, dt=0.02, loop=False), m, BODIES, anchor="torso")
