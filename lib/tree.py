@@ -114,7 +114,7 @@ def with_named(
         new = values[name]  # np.shape, not np.asarray: a traced value works too (inside jit)
         if np.shape(new) != shape:
             raise ValueError(
-                f"{who}: {name}={values[name]!r} has shape {new.shape}, but the task's "
+                f"{who}: {name}={values[name]!r} has shape {np.shape(new)}, but the task's "
                 f"{name} has shape {shape} ({jax.tree_util.keystr(path)})"
             )
         return jnp.asarray(new, dtype)
