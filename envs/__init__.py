@@ -46,6 +46,7 @@ from mjzoo.envs import cylinder_push
 from mjzoo.envs import humanoid_amp
 from mjzoo.envs import joystick
 from mjzoo.envs import locomotion
+from mjzoo.envs import motion_tracking
 from mjzoo.envs import pendulum
 from mjzoo.envs import point_mass
 from mjzoo.envs import robot_amp
@@ -101,6 +102,8 @@ _REGISTRY: dict[str, base.EnvSpec] = {
     "berkeley_humanoid_joystick": robot_joystick.BERKELEY_HUMANOID,
     "go1_joystick": robot_joystick.GO1,
     "g1_amp_joystick": robot_amp.G1_AMP_JOYSTICK,  # AMP from retargeted human motion (envs/robot_amp.py)
+    # Whole-body motion tracking of retargeted clips (envs/motion_tracking.py; mjzoo[robots])
+    "g1_track": motion_tracking.G1_TRACK,
     # AMP: move like a reference motion (envs/humanoid_amp.py)
     "humanoid_amp_walk": humanoid_amp.WALK,
     "humanoid_amp_joystick": humanoid_amp.JOYSTICK,

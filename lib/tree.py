@@ -111,10 +111,10 @@ def with_named(
         if name not in values or isinstance(leaf, skip):
             return leaf
         shape, dtype = np.shape(leaf), getattr(leaf, "dtype", None) or np.asarray(leaf).dtype
-        new = np.asarray(values[name])
-        if new.shape != shape:
+        new = values[name]  # np.shape, not np.asarray: a traced value works too (inside jit)
+        if np.shape(new) != shape:
             raise ValueError(
-                f"{who}: {name}={values[name]!r} has shape {new.shape}, but the task's "
+                f"{who}: {name}={values[name]!r} has shape {np.shape(new)}, but the task's "
                 f"{name} has shape {shape} ({jax.tree_util.keystr(path)})"
             )
         return jnp.asarray(new, dtype)

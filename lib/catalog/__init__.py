@@ -13,6 +13,7 @@ docs/catalog.md lists every item and how they nest.
     curriculum     difficulty levels           randomizers   per-episode physics draws
     actuators      torque, PD, latency, drops  trackers      action history, feet
     contacts       contact queries             shaping       `tolerance`, `wrap_angle`
+    tracking       following motion clips      start_sampling  reference starts, adaptive
 """
 
 from mjzoo.catalog import actuators
@@ -25,8 +26,10 @@ from mjzoo.catalog import randomizers
 from mjzoo.catalog import resets
 from mjzoo.catalog import rewards
 from mjzoo.catalog import shaping
+from mjzoo.catalog import start_sampling
 from mjzoo.catalog import terminations
 from mjzoo.catalog import trackers
+from mjzoo.catalog import tracking
 from mjzoo.catalog.shaping import tolerance
 from mjzoo.catalog.shaping import wrap_angle
 
@@ -43,6 +46,8 @@ __all__ = [
     "actuators",
     "trackers",
     "contacts",
+    "tracking",
+    "start_sampling",
     "tolerance",
     "wrap_angle",
 ]

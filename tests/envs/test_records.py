@@ -44,7 +44,14 @@ NAMED = {
 # The robot joysticks are one factory (envs/robot_joystick.py) on four models (and the G1 AMP one on it): one
 # name stands for all in the parameter check (building a robot task takes ~7 s here).
 ROBOT_JOYSTICK = {"tracking_weight", "yaw_tracking_weight", "air_time_weight", "foot_slip_weight", "stand_still_weight"}
-ROBOTS = ("g1_joystick", "t1_joystick", "berkeley_humanoid_joystick", "go1_joystick", "g1_amp_joystick")
+ROBOTS = (
+    "g1_joystick",
+    "t1_joystick",
+    "berkeley_humanoid_joystick",
+    "go1_joystick",
+    "g1_amp_joystick",
+    "g1_track",
+)
 
 
 def test_every_registered_env_has_a_record_and_a_listed_expectation():
