@@ -79,7 +79,9 @@ def test_recurrent_gru_policy_learns_a_partially_observed_task():
         recurrent=True,
         total_steps=163_840,
     )
-    settings = training.Settings(updates_per_chunk=20, eval_envs=16, eval_steps=500, progress=False)
+    settings = training.Settings(  # one evaluation, at the end: the only one asserted
+        updates_per_chunk=20, eval_envs=16, eval_steps=500, eval_every=0, video=False, progress=False
+    )
     state, last = training.run(ppo.make(config), task, settings, hp)
     assert jax.tree.leaves(state.collector.carry)[0].shape == (64, config.gru_hidden_size)
     assert last["eval/return"] > 450
