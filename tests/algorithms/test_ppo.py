@@ -305,9 +305,10 @@ TWO_DEVICES = textwrap.dedent(
         np.testing.assert_allclose(one.collector.env_state.obs, other.collector.env_state.obs, atol=1e-4)
         assert diff < 1e-4
 
+    state, task_ = results[1], devices.replicate(task, jax.devices())
+    data = jax.jit(lambda t, s: ppo.collect(config, t, s, jax.random.key(1))[1])(task_, state)  # either config's
+
     def loop_collectives(config_):  # all-reduces in the minibatch loop's body, the busiest computation
-        state, task_ = results[1], devices.replicate(task, jax.devices())
-        data = jax.jit(lambda t, s: ppo.collect(config_, t, s, jax.random.key(1))[1])(task_, state)
         learn = jax.jit(lambda t, s, d: ppo.improve(config_, t, s, d, jax.random.key(2)))
         with devices.env_mesh_scope():
             hlo = learn.lower(task_, state, data).compile().as_text()
