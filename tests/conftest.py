@@ -57,19 +57,19 @@ _RUN_CACHE = "MJZOO_TEST_RUN_COMPILE_CACHE"
 HEAVY_FIRST = (
     "tests/conformance/test_conformance.py",  # 419
     "tests/algorithms/test_planners.py",  # 319
-    "tests/algorithms/test_ppo.py",  # 311
-    "tests/algorithms/test_ppo_learning.py",  # ~282
+    "tests/algorithms/test_ppo.py",  # ~289 (the resume test on the block since)
     "tests/test_docs.py",  # 279
     "tests/conformance/test_conformance_locomotion.py",  # ~250
+    "tests/algorithms/test_ppo_learning.py",  # ~246 (the GRU's run shortened since)
     "tests/harness/test_distributed.py",  # ~180
     "tests/conformance/test_conformance_locomotion_stacked.py",  # ~165
-    "tests/algorithms/test_amp.py",  # ~150
-    "tests/learning/test_a2c_doc.py",  # 139
+    "tests/algorithms/test_amp.py",  # ~135 (the two-device check on the block since)
+    "tests/learning/test_a2c_doc.py",  # ~120 (one evaluation since)
     "tests/envs/test_locomotion.py",  # ~120
     "tests/interop/test_joystick_export.py",  # 115
     "tests/envs/test_robot_joystick.py",  # ~105
     "tests/algorithms/test_amp_learning.py",  # ~96
-    "tests/algorithms/test_sweeps.py",  # ~95
+    "tests/algorithms/test_sweeps.py",  # ~57 (on the block since)
 )
 
 

@@ -3,7 +3,8 @@ the harness), the style reward wiring, reference windows through the simulation'
 feature function, the discriminator-has-won warning, and sharding over devices.
 
 The task throughout is the pendulum with a reference of a slow sway 0.2-0.4 rad off
-hanging (`sway_clip`), recorded in C MuJoCo.
+hanging (`sway_clip`), recorded in C MuJoCo; the two-device check, which holds of any
+task, runs the block on a rail of tests/harness/test_distributed.py, quicker to compile.
 """
 
 from __future__ import annotations
@@ -298,13 +299,13 @@ def test_two_devices_give_one_devices_result(cpu_devices_env):
     minibatch step (PPO's two-device test also runs the unsplit steps)."""
     code = textwrap.dedent(
         """
-        import jax, numpy as np, mjzoo, mjzoo.envs
-        from mjzoo import motion
+        import jax, numpy as np
         from mjzoo.algorithms import amp
-        from mjzoo.harness import devices, training
-        from tests.algorithms.test_amp import HP, SMALL, sway_clip
-        task = mjzoo.envs.make("pendulum_swingup")
-        ref = motion.reference(sway_clip(task), task.mj_model, mjzoo.control_dt(task))
+        from mjzoo.harness import devices
+        from tests.algorithms.test_amp import HP, SMALL
+        from tests.harness.test_distributed import REFERENCE, block_task
+        task = block_task()  # any task shards alike: the block on a rail compiles fastest
+        ref = REFERENCE(task)
         state = amp.init(SMALL, task, ref, HP, jax.random.key(0))
         one = jax.jit(amp.update, static_argnums=0)(SMALL, task, jax.device_put(state, jax.devices()[0]))[0]
         sharded = devices.shard_envs(state, amp.PER_ENV_FIELDS)
