@@ -94,12 +94,8 @@ KEY_BODIES = ("left_foot", "right_foot", "left_lower_arm", "right_lower_arm")
 # costs little beside the physics (2 x 256, one epoch over each update's windows: 3.7% over
 # PPO's time per step on an H100). The joystick's are the walk's with the task reward
 # weighted as much as the style; they have not been trained on a GPU yet.
-_AMP = dict(
-    PPO["humanoid_walk"],
-    reward_scaling=1.0,
-    total_steps=40_000_000,
+DISCRIMINATOR = dict(
     num_frames=2,
-    key_bodies=KEY_BODIES,
     disc_hidden_sizes=(256, 256),
     disc_epochs=1,
     disc_minibatches=8,
@@ -107,6 +103,7 @@ _AMP = dict(
     gradient_penalty_weight=5.0,
     replay_size=200_000,
 )
+_AMP = dict(PPO["humanoid_walk"], reward_scaling=1.0, total_steps=40_000_000, key_bodies=KEY_BODIES, **DISCRIMINATOR)
 AMP = dict(_AMP, task_weight=0.1, style_weight=1.0)  # alive keeps it up while the style reward is ~0
 JOYSTICK_AMP = dict(_AMP, task_weight=0.5, style_weight=0.5, total_steps=100_000_000)
 

@@ -30,6 +30,7 @@ import numpy as np
 from mjzoo import motion
 from mjzoo import physics as physics_lib
 from mjzoo.envs import base
+from mjzoo.envs import humanoid_amp
 from mjzoo.envs import robot_joystick as joystick
 from mjzoo.types import Task
 
@@ -40,22 +41,10 @@ CLIP_NAMES = ("walk", "run")
 STYLE_WINDOW = 8  # frames (0.16 s at the control step)
 KEY_BODIES = ("left_ankle_roll_link", "right_ankle_roll_link", "left_wrist_yaw_link", "right_wrist_yaw_link")
 
-# The joystick's PPO (Playground's, 8192 envs, asymmetric critic) with AMP's pieces: the
-# discriminator sees transitions of the joints, root velocities and the feet and hands
-# (root-relative); the task's reward and the style count alike.
-AMP = dict(
-    joystick.PPO,
-    num_frames=2,
-    key_bodies=KEY_BODIES,
-    disc_hidden_sizes=(256, 256),
-    disc_epochs=1,
-    disc_minibatches=8,
-    disc_learning_rate=1e-4,
-    gradient_penalty_weight=5.0,
-    replay_size=200_000,
-    task_weight=0.5,
-    style_weight=0.5,
-)
+# The joystick's PPO (Playground's, 8192 envs, asymmetric critic) with the humanoid's
+# discriminator, seeing transitions of the joints, root velocities and the feet and
+# hands (root-relative); the task's reward and the style count alike.
+AMP = dict(joystick.PPO, key_bodies=KEY_BODIES, **humanoid_amp.DISCRIMINATOR, task_weight=0.5, style_weight=0.5)
 
 
 def g1_reference(mj_model: mujoco.MjModel, dt: float, clips: str | tuple[str, ...] = CLIP_NAMES) -> motion.Reference:
