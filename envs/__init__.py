@@ -123,6 +123,8 @@ PLAYGROUND_PLANNING = base.PlanningSetup(
         "predictive_sampling": _PLAYGROUND_SAMPLING,
         "mppi": dict(_PLAYGROUND_SAMPLING, temperature=0.1),
         "cem": dict(_PLAYGROUND_SAMPLING, num_elites=8, sigma_min=0.1),
+        "dial": dict(_PLAYGROUND_SAMPLING, iterations=2, temperature=0.1),
+        "cma_es": _PLAYGROUND_SAMPLING,
     },
 )
 # Per env where the shared setup fails: Playground's pendulum pays reward only within ~8
