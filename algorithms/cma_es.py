@@ -10,7 +10,7 @@ positive recombination weights) over the D = K nu knots, in units of each actuat
 control range. The search distribution N(m, sigma^2 C) and its evolution paths carry over
 from replan to replan (m shifted to the current time, as every planner's nominal is), and
 each replan runs `iterations` generations of lambda = num_samples plans:
-    x_i = clip(m + sigma B diag(d) z_i),  z_i ~ N(0, I),  C = B diag(d^2) B^T   (x_0 = m)
+    x_i = clip(m + sigma L z_i),  z_i ~ N(0, I),  C = L L^T   (x_0 = m)
     y_i = (x_i - m) / sigma,  y_w = sum_{i<=mu} w_i y_{i:lambda}  (ranked by cost J)
     m' = m + sigma y_w
     p_s' = (1 - c_s) p_s + sqrt(c_s (2 - c_s) mu_eff) C^{-1/2} y_w
@@ -177,11 +177,13 @@ def update(
 
 
 def sample(key: Array, mean: Array, sigma: Array, cov: Array, num_samples: int, low: Array, high: Array) -> Array:
-    """[lambda, D] points clip(mean + sigma C^{1/2} z_i), z_i ~ N(0, I), the first = `mean`
-    (mean, low, high: [D]; sigma: []; cov: [D, D])."""
-    vectors, d = _eigen(cov)
+    """[lambda, D] points clip(mean + sigma L z_i), z_i ~ N(0, I), L L^T = C, the first =
+    `mean` (mean, low, high: [D]; sigma: []; cov: [D, D]). Cholesky's factor, unlike an
+    eigenbasis (any basis of I is one), is unique: the same draws alone and under vmap."""
+    jitter = 1e-7 * jnp.max(jnp.diagonal(cov)) * jnp.eye(cov.shape[0], dtype=cov.dtype)
+    factor = jnp.linalg.cholesky((cov + cov.T) / 2 + jitter)
     z = jax.random.normal(key, (num_samples, mean.shape[0]), mean.dtype).at[0].set(0.0)
-    return jnp.clip(mean + sigma * (z * d) @ vectors.T, low, high)
+    return jnp.clip(mean + sigma * z @ factor.T, low, high)
 
 
 def init(

@@ -201,6 +201,7 @@ def test_a_vmapped_sweep_is_one_program_with_each_members_own_plan(planner):
     def replan(hyperparams):
         return planner.plan(config, task, planner.init(config, task, hyperparams), env_state, key)[1]
 
+    chex.clear_trace_counter()  # each parametrized case counts its own traces
     members = [planner.Hyperparams(**{field: v}) for v in values]
     batch = jax.tree.map(lambda *x: jnp.stack(x), *members)
     together = jax.jit(jax.vmap(replan))(batch)
