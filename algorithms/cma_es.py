@@ -191,9 +191,7 @@ def init(
 ) -> CMAState:
     """Mean = a zero plan or the warm-start `knots` [K, nu], C = I, sigma = noise_scale,
     zero paths, holding `hyperparams` (default `Hyperparams()`)."""
-    hyperparams = Hyperparams() if hyperparams is None else hyperparams
-    planning.sampling.check_hyperparams(hyperparams, Hyperparams)
-    base = planning.initial_state(config, task, hyperparams, knots)
+    base = planning.sampling.planner_init(Hyperparams, config, task, hyperparams, knots)
     dim = base.knots.size
     zeros = jnp.zeros((dim,), jnp.float32)
     fields = {f.name: getattr(base, f.name) for f in dataclasses.fields(PlannerState)}

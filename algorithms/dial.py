@@ -40,6 +40,8 @@ from mjzoo.planning import TerminalValue
 from mjzoo.types import State
 from mjzoo.types import Task
 
+Array = jax.Array
+
 __all__ = ["Config", "Hyperparams", "init", "plan", "noise_schedule", "normalized_weights", "anneal"]
 
 
@@ -97,13 +99,11 @@ def normalized_weights(costs: jax.Array, temperature: float | jax.Array) -> jax.
 
 
 def init(
-    config: Config, task: Task | Ensemble, hyperparams: Hyperparams | None = None, *, knots: jax.Array | None = None
+    config: Config, task: Task | Ensemble, hyperparams: Hyperparams | None = None, *, knots: Array | None = None
 ) -> PlannerState:
-    """A zero plan, or the warm-start `knots` [K, nu], holding `hyperparams` (default
-    `Hyperparams()`)."""
-    hyperparams = Hyperparams() if hyperparams is None else hyperparams
-    planning.sampling.check_hyperparams(hyperparams, Hyperparams)
-    return planning.initial_state(config, task, hyperparams, knots)
+    """The first `PlannerState`: knots [K, nu] from `knots` (default zero), holding
+    `hyperparams` (default `Hyperparams()`)."""
+    return planning.sampling.planner_init(Hyperparams, config, task, hyperparams, knots)
 
 
 def anneal(
@@ -114,8 +114,8 @@ def anneal(
     high: jax.Array,
     num_samples: int,
     temperature: float | jax.Array,
-    key: jax.Array,
-) -> tuple[jax.Array, jax.Array, jax.Array]:
+    key: Array,
+) -> tuple[Array, Array, Array]:
     """DIAL's inner loop, for any cost: an MPPI step per noise level.
 
     Args:
@@ -147,12 +147,12 @@ def plan(
     task: Task | Ensemble,
     state: PlannerState,
     env_state: State,
-    key: jax.Array,
+    key: Array,
     terminal_value: TerminalValue | None = None,
-) -> tuple[PlannerState, jax.Array]:
-    """One replan from `env_state` (N annealed MPPI iterations, `anneal`): returns the new
-    planner state and the plan's [H, nu] controls. `terminal_value` (model, state) -> []
-    values each rollout's final state (`planning.as_terminal_value`)."""
+) -> tuple[PlannerState, Array]:
+    """One replan from `env_state`, N annealed MPPI iterations (`anneal`): (the new
+    planner state, [H, nu] controls of its plan). `terminal_value`: None, or a
+    `planning.TerminalValue` valuing each rollout's final state."""
     hp = state.hyperparams
     schedule = noise_schedule(hp.noise_scale, hp.beta_iterations, hp.beta_horizon, config.iterations, config.num_knots)
     stds = schedule[:, :, None] * planning.half_range(task)  # [N, K, nu]

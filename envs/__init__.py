@@ -124,7 +124,7 @@ PLAYGROUND_PLANNING = base.PlanningSetup(
         "mppi": dict(_PLAYGROUND_SAMPLING, temperature=0.1),
         "cem": dict(_PLAYGROUND_SAMPLING, num_elites=8, sigma_min=0.1),
         "dial": dict(_PLAYGROUND_SAMPLING, iterations=2, temperature=0.1),
-        "cma_es": _PLAYGROUND_SAMPLING,
+        "cma_es": dict(_PLAYGROUND_SAMPLING, num_elites=8),
     },
 )
 # Per env where the shared setup fails: Playground's pendulum pays reward only within ~8

@@ -77,7 +77,7 @@ SWINGUP_PLANNING = base.PlanningSetup(
         "mppi": dict(_SAMPLING, temperature=0.05),
         "cem": dict(_SAMPLING, num_elites=8, sigma_min=0.1),
         "dial": dict(_SAMPLING, iterations=2, temperature=0.1),
-        "cma_es": _SAMPLING,
+        "cma_es": dict(_SAMPLING, num_elites=8),
     },
 )
 

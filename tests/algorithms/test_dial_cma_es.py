@@ -83,15 +83,14 @@ def test_dial_converges_on_a_quadratic_and_annealing_refines_it():
 def _numpy_update(samples, costs, mean, sigma, cov, ps, pc, g, lam, mu):
     """Hansen's tutorial, written out in float64 numpy."""
     n = mean.size
-    w = np.log((lam + 1) / 2) - np.log(np.arange(1, mu + 1))
-    w /= w.sum()
-    mueff = 1 / np.sum(w**2)
-    cs = (mueff + 2) / (n + mueff + 5)
-    ds = 1 + 2 * max(0, np.sqrt((mueff - 1) / (n + 1)) - 1) + cs
-    cc = (4 + mueff / n) / (n + 4 + 2 * mueff / n)
-    c1 = 2 / ((n + 1.3) ** 2 + mueff)
-    cmu = min(1 - c1, 2 * (mueff - 2 + 1 / mueff) / ((n + 2) ** 2 + mueff))
-    chin = np.sqrt(n) * (1 - 1 / (4 * n) + 1 / (21 * n**2))
+    w = np.array([np.log((lam + 1) / 2 / i) for i in range(1, mu + 1)])
+    w, mueff = w / w.sum(), w.sum() ** 2 / np.sum(w**2)
+    cs, c1 = (mueff + 2) / (n + mueff + 5), 2 / ((n + 1.3) ** 2 + mueff)
+    ds, cc = 1 + cs + 2 * max(0, np.sqrt((mueff - 1) / (n + 1)) - 1), (4 + mueff / n) / (n + 4 + 2 * mueff / n)
+    cmu, chin = (
+        min(1 - c1, 2 * (mueff - 2 + 1 / mueff) / ((n + 2) ** 2 + mueff)),
+        np.sqrt(n) * (1 - 1 / (4 * n) + 1 / (21 * n**2)),
+    )
     ys = (samples[np.argsort(costs)[:mu]] - mean) / sigma
     yw = w @ ys
     vals, vecs = np.linalg.eigh(cov)
@@ -222,3 +221,10 @@ def test_configs_and_hyperparams_name_a_bad_field():
     with pytest.raises(ValueError, match=r"sigma_max"):
         cma_es.Hyperparams(sigma_min=0.5, sigma_max=0.1)
     assert cma_es.Config(num_samples=10).parents == 5
+
+
+def test_every_env_planning_setup_configures_both():
+    for name in ("pendulum_swingup", "cartpole_swingup", "point_mass", "cylinder_push"):
+        for planner in (dial, cma_es):
+            config, hyperparams = planning.configure(planner, envs.hyperparameters(name, NAMES(planner)))
+            assert isinstance(config, planner.Config) and isinstance(hyperparams, planner.Hyperparams)

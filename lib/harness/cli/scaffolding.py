@@ -102,7 +102,7 @@ PLANNING = base.PlanningSetup(
         "mppi": dict(_SAMPLING, temperature=0.1),
         "cem": dict(_SAMPLING, num_elites=8, sigma_min=0.1),
         "dial": dict(_SAMPLING, iterations=2, temperature=0.1),
-        "cma_es": _SAMPLING,
+        "cma_es": dict(_SAMPLING, num_elites=8),
     },
     success=None,
 )
