@@ -7,6 +7,8 @@
     mppi                  model-predictive path integral control  (Config, init, plan)
     cem                   the cross-entropy method                  (Config, init, plan)
     predictive_sampling   keep the best of samples around the plan  (Config, init, plan)
+    dial                  DIAL-MPC: MPPI iterated with annealed noise (Config, init, plan)
+    cma_es                CMA-ES over the plan's knots              (Config, init, plan)
 
 Each is assembled from `mjzoo.learning` or `mjzoo.planning` pieces; docs/design.md
 gives the contract a new algorithm follows. Modules load on first use.
@@ -14,7 +16,7 @@ gives the contract a new algorithm follows. Modules load on first use.
 
 from mjzoo import lazy
 
-MODULES = ("ppo", "amp", "mppi", "cem", "predictive_sampling")
+MODULES = ("ppo", "amp", "mppi", "cem", "predictive_sampling", "dial", "cma_es")
 
 __all__ = list(MODULES)
 

@@ -126,6 +126,8 @@ PLAYGROUND_PLANNING = base.PlanningSetup(
         "predictive_sampling": _PLAYGROUND_SAMPLING,
         "mppi": dict(_PLAYGROUND_SAMPLING, temperature=0.1),
         "cem": dict(_PLAYGROUND_SAMPLING, num_elites=8, sigma_min=0.1),
+        "dial": dict(_PLAYGROUND_SAMPLING, iterations=2, temperature=1.0, beta_horizon=4.0),
+        "cma_es": dict(_PLAYGROUND_SAMPLING, num_elites=8),
     },
 )
 # Per env where the shared setup fails: Playground's pendulum pays reward only within ~8

@@ -84,6 +84,8 @@ PLANNING = base.PlanningSetup(
         "predictive_sampling": _SAMPLING,
         "mppi": dict(_SAMPLING, temperature=0.1),
         "cem": dict(_SAMPLING, num_elites=8, sigma_min=0.1),
+        "dial": dict(_SAMPLING, iterations=2, temperature=1.0, beta_horizon=4.0),
+        "cma_es": dict(_SAMPLING, num_elites=8),
     },
     plan_view=precise_upright,
 )

@@ -179,7 +179,7 @@ def run(
     hyperparams: Any | None = None,
 ) -> Result:
     """Simulates `sim_task` from `sim_state` for `num_replans x replan_every` control
-    steps, replanning with `planner` (a module: `predictive_sampling`, `cem`, `mppi`)
+    steps, replanning with `planner` (a module: `predictive_sampling`, `cem`, `mppi`, `dial`, `cma_es`)
     on `plan_task` every `replan_every` steps (either may be `Native`: its physics in C
     MuJoCo, `mjzoo.planning.native`). One jit; `planner`, `config` and the
     counts are static. `terminal_value`: None or a `jax.tree_util.Partial`

@@ -280,7 +280,9 @@ def split(fn: Callable) -> Callable:
     more than a whole replan's work besides physics. The first jit computes C's inputs
     (its trace of `fn` hands them out; XLA drops the rest), the host runs C, and the
     second jit computes `fn` with C's outputs passed in. Same result, same key use.
-    Raises if `fn` runs C more than once (a planner that costs samples iteratively).
+    A function that runs C more than once (a planner that iterates: `dial`, `cma_es`
+    with several generations), each call needing the last one's result, or never, runs
+    as one jit instead, C through `jax.pure_callback`.
     """
     engines: list[Engine] = []
 
@@ -292,10 +294,7 @@ def split(fn: Callable) -> Callable:
         finally:
             _HOST.reset(token)
         if len(calls) != 1:
-            raise NotImplementedError(
-                f"native.split: the function ran C MuJoCo {len(calls)} times; it must run it "
-                "once (jit it whole instead: C is then called through jax.pure_callback)"
-            )
+            return None  # `run` jits the function whole instead
         engines[:] = [calls[0][0]]
         return calls[0][1]
 
@@ -317,7 +316,11 @@ def split(fn: Callable) -> Callable:
                 jax.jit(lambda c, ls: outputs(c, *jax.tree.unflatten(treedef, ls))),
             )
         first, second = treedefs[treedef]
-        c_inputs = first(leaves)
+        c_inputs = first(leaves) if first is not None else None
+        if c_inputs is None:
+            if first is not None:
+                treedefs[treedef] = (None, jax.jit(lambda ls: fn(*jax.tree.unflatten(treedef, ls))))
+            return treedefs[treedef][1](leaves)
         c_states = engines[0](*jax.tree.map(np.asarray, c_inputs))
         return second(c_states, leaves)
 

@@ -253,6 +253,16 @@ def check_hyperparams(hyperparams: Any, expected: type) -> None:
         )
 
 
+def planner_init(
+    expected: type, config: SamplingConfig, task: Any, hyperparams: Any = None, knots: Array | None = None
+) -> PlannerState:
+    """What a planner's `init` does with its own `Hyperparams` class `expected`: the
+    default `expected()` for None, `check_hyperparams`, then `initial_state`."""
+    hyperparams = expected() if hyperparams is None else hyperparams
+    check_hyperparams(hyperparams, expected)
+    return initial_state(config, task, hyperparams, knots)
+
+
 def configure(planner: ModuleType, fields: Mapping[str, Any]) -> tuple[SamplingConfig, SamplingHyperparams]:
     """`planner`'s (Config, Hyperparams) from one flat dict of their fields, the form env
     registries and ``--config NAME=VALUE`` give: ``{"num_samples": 128, "temperature": 0.1}``.

@@ -18,6 +18,8 @@ import mjzoo
 import mjzoo.envs
 from mjzoo import planning
 from mjzoo.algorithms import cem
+from mjzoo.algorithms import cma_es
+from mjzoo.algorithms import dial
 from mjzoo.algorithms import mppi
 from mjzoo.algorithms import predictive_sampling
 from mjzoo.envs import cylinder_push
@@ -28,7 +30,7 @@ from mjzoo.planning import realtime
 # The suite compiles at XLA -O0 (conftest) for short tests; a closed-loop run is long,
 # and at -O3 it runs about 6x faster for the same compile time.
 OPTIMIZED = {"xla_backend_optimization_level": 3}
-PLANNERS = {"predictive_sampling": predictive_sampling, "cem": cem, "mppi": mppi}
+PLANNERS = {"predictive_sampling": predictive_sampling, "cem": cem, "mppi": mppi, "dial": dial, "cma_es": cma_es}
 
 
 def setup_for(env: str, planner: str, backend: str = "auto") -> realtime.Problem:
@@ -43,9 +45,11 @@ def setup_for(env: str, planner: str, backend: str = "auto") -> realtime.Problem
 # and envs share everything above the rollouts; benchmarks/planner_cpu.py runs every
 # planner on the cart-pole and the push, over seeds). MJX's own physics with one planner on
 # the pendulum (its contact rollouts match C MuJoCo's in tests/planning/test_native.py).
-CASES = [("cylinder_push", planner, "native") for planner in PLANNERS]
+CASES = [("cylinder_push", planner, "native") for planner in ("predictive_sampling", "cem", "mppi")]
 CASES += [("pendulum_swingup", "predictive_sampling", "native"), ("cartpole_swingup", "cem", "native")]
 CASES += [("point_mass", "mppi", "native"), ("pendulum_swingup", "mppi", "mjx")]
+# The iterating planners on the pendulum, C MuJoCo called from inside their one jit.
+CASES += [("pendulum_swingup", "dial", "native"), ("pendulum_swingup", "cma_es", "native")]
 
 
 @functools.cache

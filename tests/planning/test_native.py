@@ -19,6 +19,7 @@ import mjzoo
 import mjzoo.envs
 from mjzoo import physics
 from mjzoo import planning
+from mjzoo.algorithms import dial
 from mjzoo.algorithms import mppi
 from mjzoo.catalog import actuators
 from mjzoo.planning import closed_loop
@@ -231,6 +232,21 @@ def test_split_replan_equals_the_one_jit_replan():
     key = jax.random.key(1)
     one, two = jax.jit(replan)(plan, state, key), native.split(replan)(plan, state, key)
     np.testing.assert_array_equal(one.knots, two.knots)
+    assert float(one.cost) == float(two.cost) and np.isfinite(float(one.cost))
+
+
+def test_split_runs_an_iterating_replan_as_one_jit():
+    """A replan that runs C twice (DIAL's two iterations, the second sampling around the
+    first's result) cannot be split around one host call: `split` jits it whole, the
+    same plan as `jax.jit`, where it used to raise."""
+    task = mjzoo.envs.make("pendulum_swingup", episode_steps=10**9)
+    nat = native.wrap(task)
+    config = dial.Config(num_samples=8, horizon_steps=10, num_knots=3, iterations=2)
+    state = mjzoo.fill_transition_entries(task, jax.jit(mjzoo.reset)(task, jax.random.key(0)))
+    replan = lambda p, s, k: closed_loop.replan(dial, config, nat, p, s, k)  # noqa: E731
+    plan, key = dial.init(config, nat), jax.random.key(1)
+    one, two = jax.jit(replan)(plan, state, key), native.split(replan)(plan, state, key)
+    np.testing.assert_allclose(one.knots, two.knots, rtol=1e-6, atol=1e-7)
     assert float(one.cost) == float(two.cost) and np.isfinite(float(one.cost))
 
 

@@ -351,7 +351,7 @@ def evaluate(
 
 
 def plan(
-    algorithm: Annotated[Literal["predictive_sampling", "cem", "mppi"], tyro.conf.Positional],
+    algorithm: Annotated[Literal["predictive_sampling", "cem", "mppi", "dial", "cma_es"], tyro.conf.Positional],
     env: Annotated[str, tyro.conf.Positional],
     out: Path | None = None,
     seconds: float | None = None,
