@@ -51,6 +51,7 @@ from cards import card_name  # noqa: E402
 
 import mjzoo  # noqa: E402
 import mjzoo.envs  # noqa: E402
+from mjzoo import names  # noqa: E402
 from mjzoo import running  # noqa: E402
 from mjzoo.algorithms import amp  # noqa: E402
 from mjzoo.algorithms import cem  # noqa: E402
@@ -59,6 +60,7 @@ from mjzoo.algorithms import ppo  # noqa: E402
 from mjzoo.catalog import commands  # noqa: E402
 from mjzoo.envs import motion_tracking  # noqa: E402
 from mjzoo.envs import robot_amp  # noqa: E402
+from mjzoo.interop import tracking  # noqa: E402
 from mjzoo.layers import find  # noqa: E402
 from mjzoo.learning.actions import to_controls  # noqa: E402
 from mjzoo.planning import closed_loop  # noqa: E402
@@ -81,6 +83,8 @@ def episodes(task: mjzoo.Task, act: Callable, keys: jax.Array, steps: int) -> di
     end): per step [E, T], whether it was lived, ended by a termination, and its metrics;
     qpos [E, T, nq]; the command error (m/s) where the task has a velocity command."""
 
+    address = tuple(int(a[0]) for a in names.free_joint_addresses(task.mj_model, None, "motion"))  # the base
+
     def one(key):
         state = running.reset(task, jax.random.split(key)[0])
 
@@ -90,22 +94,14 @@ def episodes(task: mjzoo.Task, act: Callable, keys: jax.Array, steps: int) -> di
             lived = ~done
             out = {"lived": lived, "fell": lived & after.terminated, "qpos": state.data.qpos, **after.metrics}
             command = find(state, commands.VelocityCommandState, None)
-            if command is not None:  # the base's planar speed against the command, in its heading frame
-                out["command_error"] = jnp.linalg.norm(_planar_velocity(after) - command.command[:2])
+            if command is not None:  # the base's planar velocity against the command, as robots.py measures it
+                v_xy, _ = tracking.base_velocities(after.data.qpos, after.data.qvel, address)
+                out["command_error"] = jnp.linalg.norm(v_xy - command.command[:2])
             return (after, done | after.terminated | after.truncated), out
 
         return jax.lax.scan(body, (state, jnp.zeros((), bool)), jax.random.split(jax.random.split(key)[1], steps))[1]
 
     return jax.vmap(one)(keys)
-
-
-def _planar_velocity(state) -> jax.Array:
-    """The free base's (vx, vy) in its heading frame (qvel's first 3 are world linear)."""
-    q = state.data.qpos[3:7]
-    yaw = jnp.arctan2(2 * (q[0] * q[3] + q[1] * q[2]), 1 - 2 * (q[2] ** 2 + q[3] ** 2))
-    c, s = jnp.cos(yaw), jnp.sin(yaw)
-    vx, vy = state.data.qvel[0], state.data.qvel[1]
-    return jnp.stack([c * vx + s * vy, -s * vx + c * vy])
 
 
 def per_clip_tasks(task: mjzoo.Task) -> list[mjzoo.Task]:

@@ -21,7 +21,6 @@ nearest stretch of either clip. Tracking is the joystick's (`mjzoo.interop.track
 
 from __future__ import annotations
 
-from pathlib import Path
 from typing import Any
 
 import mujoco
@@ -31,12 +30,13 @@ from mjzoo import motion
 from mjzoo import physics as physics_lib
 from mjzoo.envs import base
 from mjzoo.envs import humanoid_amp
+from mjzoo.envs import motion_tracking
 from mjzoo.envs import robot_joystick as joystick
 from mjzoo.types import Task
 
 __all__ = ["g1_amp_joystick", "reference", "g1_reference", "style_error", "G1_AMP_JOYSTICK", "AMP"]
 
-CLIPS = Path(__file__).parent / "assets" / "motions" / "g1"
+CLIPS = motion_tracking.MOTIONS  # the committed G1 clips (scripts/retarget_g1.py)
 CLIP_NAMES = ("walk", "run")
 STYLE_WINDOW = 8  # frames (0.16 s at the control step)
 KEY_BODIES = ("left_ankle_roll_link", "right_ankle_roll_link", "left_wrist_yaw_link", "right_wrist_yaw_link")
@@ -52,7 +52,7 @@ def g1_reference(mj_model: mujoco.MjModel, dt: float, clips: str | tuple[str, ..
     `mj_model` (the G1's Playground scene) and resampled to a frame every `dt` s, looping,
     equally likely."""
     clips = (clips,) if isinstance(clips, str) else tuple(clips)  # one name, as the CLI's overrides give it
-    known = sorted(p.stem for p in CLIPS.glob("*.npz"))
+    known = list(motion_tracking.G1_CLIPS)
     unknown = [c for c in clips if c not in known]
     if unknown or not clips:
         raise ValueError(f"robot_amp.g1_reference: clips {list(clips)} unknown or empty; the G1's clips: {known}")
@@ -113,13 +113,10 @@ def style_error(reference: motion.Reference, qpos, window: int = STYLE_WINDOW) -
     """The mean joint-angle error (rad) of `qpos` [T >= `window`, nq] (an episode of the
     G1) to the nearest `window`-frame stretches of `reference`'s clips: columns 7.., the
     joints past the free root (`motion.nearest_window_error`)."""
-    ref = np.asarray(reference.qpos)
-    qpos = np.asarray(qpos, np.float64)
-    if qpos.ndim != 2 or qpos.shape[1] != ref.shape[1] or qpos.shape[0] < window:
-        raise ValueError(
-            f"robot_amp.style_error: qpos has shape {qpos.shape}; expected [T >= {window}, {ref.shape[1]}]"
-        )
-    return motion.nearest_window_error(ref, qpos, np.arange(7, ref.shape[1]), window)
+    nq = np.shape(reference.qpos)[-1]
+    if np.ndim(qpos) != 2 or np.shape(qpos)[1] != nq or np.shape(qpos)[0] < window:
+        raise ValueError(f"robot_amp.style_error: qpos has shape {np.shape(qpos)}; expected [T >= {window}, {nq}]")
+    return humanoid_amp.style_error(reference, qpos, window)  # the same measure: past any free root
 
 
 G1_AMP_JOYSTICK = base.EnvSpec(
