@@ -189,11 +189,26 @@ class Page:
         self.click(box["x"] + box["width"] / 2, box["y"] + box["height"] / 2)
 
     def move_slider(self, label: str, fraction: float) -> None:
-        """Clicks the track of the slider labelled `label` at `fraction` (0: its left
-        end, its minimum; 1: its right end, its maximum) of its length."""
+        """Drags the slider labelled `label` to `fraction` of its track (0: its left end,
+        its minimum; 1: its right end, its maximum), as a hand does: press inside the
+        track, move, release. An end is dragged past, so the slider's clamp, not a
+        pixel's rounding at the track's edge, decides the value."""
         slider = f"document.getElementById([...document.querySelectorAll('label')].find(l => l.textContent.trim() === {json.dumps(label)}).htmlFor)"
         box = self.rect(f"{slider}.querySelector('.mantine-Slider-track')")
-        self.click(box["x"] + fraction * box["width"], box["y"] + box["height"] / 2)
+        y, overshoot = box["y"] + box["height"] / 2, 20.0 * ((fraction >= 1) - (fraction <= 0))
+        x = box["x"] + fraction * box["width"] + overshoot
+        self.call("Input.dispatchMouseEvent", type="mouseMoved", x=box["x"] + box["width"] / 2, y=y, buttons=0)
+        self.call(
+            "Input.dispatchMouseEvent",
+            type="mousePressed",
+            x=box["x"] + box["width"] / 2,
+            y=y,
+            button="left",
+            buttons=1,
+            clickCount=1,
+        )
+        self.call("Input.dispatchMouseEvent", type="mouseMoved", x=x, y=y, button="left", buttons=1)
+        self.call("Input.dispatchMouseEvent", type="mouseReleased", x=x, y=y, button="left", buttons=1, clickCount=1)
 
     def dismiss_notices(self) -> None:
         """Closes viser's notifications (e.g. "Software WebGL rendering detected"), which cover the scene."""
