@@ -294,6 +294,7 @@ def test_a_retargeted_clip_plays_beside_its_source_in_one_scene():
         ("runs/missing", {}, "runs/missing: no such run directory"),
         (ENV, {"sampled": True}, "--sampled: only for a run"),
         (ENV, {"config": ("temperature=1.0",)}, "--config: only for --planner"),
+        (ENV, {"trace": ("pole",)}, "--trace: only for --planner"),
         (ENV, {"speed": 3.0}, "--speed must be one of"),
         (str(CLIP), {"controls": "random"}, "--controls: only for a task"),
         (ENV, {"save_video": "EXISTING"}, "already exists: give --overwrite"),
@@ -410,6 +411,21 @@ def test_a_slider_moved_in_the_browser_changes_the_scene(sim, page, tmp_path):
     assert [len(s) for s in shots] == [2, 2]
     for pushed, pulled in zip(*shots):
         assert np.linalg.norm(pushed - pulled) > 5  # pixels
+
+
+def test_a_planner_traces_several_points_each_along_its_own_path():
+    """A humanoid's planned motion is the paths of several bodies: here the pole's centre
+    of mass (its radius from the pivot is fixed) and the world body (still at the origin)."""
+    config = mppi.Config(num_samples=8, horizon_steps=20, num_knots=2)
+    source = viewer.planner(mjzoo.envs.closed_loop_problem(ENV, mppi, config), trace=("pole", "world"))
+    source.advance()
+    paths = source.frame().traces
+    assert paths.shape == (8, 20, 2, 3)  # 7 samples and the plan, 20 steps, 2 points
+    np.testing.assert_allclose(np.linalg.norm(paths[:, :, 0], axis=-1), 0.4975, atol=1e-3)
+    assert np.ptp(paths[:, :, 0, 0]) > 0  # the pole swings along the plan
+    np.testing.assert_array_equal(paths[:, :, 1], 0.0)
+    with pytest.raises(KeyError, match="no body or site"):
+        viewer.planner(mjzoo.envs.closed_loop_problem(ENV, mppi, config), trace=("pole", "tip"))
 
 
 def test_the_browser_draws_the_planners_traces(planned, page, tmp_path):

@@ -50,7 +50,7 @@ def view(
     port: int = 8080,
     host: str = "0.0.0.0",
     track_body: str | None = None,
-    trace: str | None = None,
+    trace: tuple[str, ...] = (),
     source: str | None = None,
     source_task: str | None = None,
     seed: int = 0,
@@ -74,7 +74,7 @@ def view(
     task spec, a registered env or package.module:factory, run under --controls (zero,
     uniform random, or a slider per actuator), or solved live by --planner with
     --config NAME=VALUE fields of its Config, drawing its sampled rollouts and plan as
-    paths of --trace (a body or site). --env-overrides NAME=VALUE change the task;
+    paths of --trace (bodies or sites). --env-overrides NAME=VALUE change the task;
     --num-envs runs a batch side by side; --speed 0.25-4 sets the playback speed;
     --track-body makes the camera follow a body.
 
@@ -104,7 +104,7 @@ def view(
       port: the port the viewer's page is served on.
       host: the address the viewer listens on.
       track_body: a body the camera follows.
-      trace: the body or site whose path the planner's samples and plan draw.
+      trace: the bodies or sites whose paths the planner's samples and plan draw (a humanoid's: pelvis, feet, hands).
       source: a clip played beside a clip TARGET: a DeepMimic clip name or .txt file, or a .npz clip.
       source_task: the task whose model a .npz --source is on, instead of the one its name gives.
       seed: the random seed of resets, random controls and the planner.
@@ -116,7 +116,7 @@ def view(
     from mjzoo.harness import viewer
 
     with as_usage_errors():
-        kind = _check_flags(target, controls, planner, config, sampled, num_envs, seconds, speed, port)
+        kind = _check_flags(target, controls, planner, config, sampled, num_envs, seconds, speed, port, trace)
         _check_source_flags(target, kind, source, source_task, num_envs)
         _check_outputs(save_frames, save_video, overwrite)
         if source is None:
@@ -170,6 +170,7 @@ def _check_flags(
     seconds: float | None,
     speed: float,
     port: int,
+    trace: tuple[str, ...] = (),
 ) -> Kind:
     """The flags that do not fit TARGET's kind, or are out of range."""
     kind = target_kind(target)
@@ -185,10 +186,11 @@ def _check_flags(
         "--planner": planner is not None and kind != "task",
         "--sampled": sampled and kind != "run",
         "--config": bool(config) and planner is None,
+        "--trace": bool(trace) and planner is None,
     }
     for flag, bad in wrong.items():
         if bad:
-            needs = {"--sampled": "a run", "--config": "--planner"}.get(flag, "a task")
+            needs = {"--sampled": "a run", "--config": "--planner", "--trace": "--planner"}.get(flag, "a task")
             raise UsageError(f"{flag}: only for {needs}; {target} is a {kind}")
     if planner is not None and (controls != "zero" or num_envs > 1):
         raise UsageError("--planner: plans one env; --controls and --num-envs do not apply")
@@ -255,7 +257,7 @@ def _source(
     sampled: bool,
     num_envs: int,
     seed: int,
-    trace: str | None,
+    trace: tuple[str, ...],
 ) -> Any:
     """The viewer source TARGET names."""
     from mjzoo.harness import viewer
@@ -272,7 +274,7 @@ def _source(
     module = algorithm_module(planner, PLANNERS)
     cfg, hyperparams = build_planner(module, target, parse_assignments(config, "--config"))
     problem = mjzoo.envs.closed_loop_problem(target, module, cfg, hyperparams=hyperparams, **overrides)
-    return viewer.planner(problem, seed, trace=trace)
+    return viewer.planner(problem, seed, trace=trace or None)
 
 
 def _run(run: Path, task: str | None, env_overrides: tuple[str, ...], sampled: bool, num_envs: int, seed: int) -> Any:

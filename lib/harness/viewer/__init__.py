@@ -69,9 +69,12 @@ def policy(task: Task, act: Any, params: Any, num_envs: int = 1, seed: int = 0) 
     return Simulation(task, act, params, num_envs, seed)
 
 
-def planner(problem: Problem, seed: int = 0, num_traces: int = 16, trace: str | None = None) -> Planning:
+def planner(
+    problem: Problem, seed: int = 0, num_traces: int = 16, trace: str | Sequence[str] | None = None
+) -> Planning:
     """`problem`'s sampling planner closed loop, drawing `num_traces` of its samples and
-    its plan as the path of body or site `trace` (default: the first site, else the last body)."""
+    its plan as the paths of the bodies or sites `trace` names (default: the first site,
+    else the last body)."""
     return Planning(problem, seed, num_traces, trace)
 
 

@@ -179,10 +179,10 @@ class Viewer:
 
     def _draw_traces(self, points: np.ndarray, offset: np.ndarray) -> None:
         """Sampled rollouts (grey) and the chosen plan (red) as line segments of a
-        fixed width on screen (a robot seen from afar keeps them): points [S + 1, H, 3],
-        the plan last."""
+        fixed width on screen (a robot seen from afar keeps them): points [S + 1, H, P, 3]
+        of P traced points, the plan last."""
         for name, part, color in (("samples", points[:-1], SAMPLES_RGB), ("plan", points[-1:], PLAN_RGB)):
-            segments = np.stack([part[:, :-1], part[:, 1:]], axis=2).reshape(-1, 2, 3) + offset
+            segments = np.stack([part[:, :-1], part[:, 1:]], axis=-2).reshape(-1, 2, 3) + offset
             colors = np.broadcast_to(np.array(color, np.uint8), segments.shape)
             handle = self.trace_handles.get(name)
             if handle is None:

@@ -5,8 +5,9 @@ then steps the simulation `replan_every` control steps under the new plan, as
 `mjzoo.planning.closed_loop.run` does, one jitted call each. The traces drawn are a
 subset of the replan's own samples (the same key, so the same knots: exact for
 predictive sampling and MPPI, CEM's explore samples aside) and the chosen plan, rolled
-out in the planning task, as positions of one site or body (its centre of mass) over
-the horizon.
+out in the planning task, as positions of one or more sites or bodies (a body by its
+centre of mass) over the horizon: a humanoid's planned motion shows as the paths of its
+pelvis, feet and hands.
 
 The planner's `Config` is a static argument of these jitted functions: a new value
 (`set_config`) compiles them again, keeping the simulated and the planner's state. Its
@@ -18,6 +19,7 @@ from __future__ import annotations
 
 import dataclasses
 import time
+from collections.abc import Sequence
 from typing import Any
 
 import jax
@@ -66,12 +68,18 @@ class Planning:
 
     num_envs = 1
 
-    def __init__(self, problem: Problem, seed: int = 0, num_traces: int = 16, point: str | None = None):
+    def __init__(
+        self, problem: Problem, seed: int = 0, num_traces: int = 16, points: str | Sequence[str] | None = None
+    ):
         self.problem, self.config = problem, problem.config
         defaults = problem.planner.Hyperparams()
         self.hyperparams = defaults if problem.hyperparams is None else problem.hyperparams
         self.mj_model, self.dt = problem.sim_task.mj_model, problem.sim_dt
-        self.point = trace_point(base_task(problem.plan_task).mj_model, point)
+        names = [points] if points is None or isinstance(points, str) else list(points)
+        if not names:
+            raise ValueError("Planning: name at least one body or site to trace, or None for the default")
+        plan_model = base_task(problem.plan_task).mj_model
+        self.points = [trace_point(plan_model, name) for name in names]
         self.num_traces = min(num_traces, problem.config.num_samples - 1)
         self.traces, self.compiles, self.steps, self.latencies = 0, 0, 0, []
         self._compile()
@@ -97,7 +105,7 @@ class Planning:
             self.problem.hooks,
             self.hyperparams,
         )
-        self.points, self.latencies, self.steps = None, [], 0
+        self.paths, self.latencies, self.steps = None, [], 0
 
     def advance(self) -> int:
         """One replan (timed), then `replan_every` simulation steps; returns the steps."""
@@ -108,7 +116,7 @@ class Planning:
             self._replan(p.plan_task, self.planner_state, self.sim_state, plan_key, p.terminal_value)
         )
         self.latencies = (self.latencies + [time.perf_counter() - tick])[-50:]
-        self.points, self.sim_state = self._after(
+        self.paths, self.sim_state = self._after(
             p.plan_task, p.sim_task, self.planner_state, new, self.sim_state, plan_key, sim_key
         )
         self.planner_state = new
@@ -155,8 +163,8 @@ class Planning:
         )
         xpos, xquat = host_poses(self.mj_model, qpos, mocap_pos, mocap_quat)
         terms = {k[len("reward/") :]: np.asarray(v)[None] for k, v in metrics.items() if k.startswith("reward/")}
-        points = None if self.points is None else np.asarray(self.points)
-        return Frame(qpos, mocap_pos, mocap_quat, xpos, xquat, float(t), terms, points)
+        paths = None if self.paths is None else np.asarray(self.paths)
+        return Frame(qpos, mocap_pos, mocap_quat, xpos, xquat, float(t), terms, paths)
 
     # --- jitted (self.config and the problem's hooks are constants of the trace) -----
 
@@ -181,8 +189,8 @@ class Planning:
         return jax.lax.scan(body, sim_state, jax.random.split(key, self.problem.replan_every))[0]
 
     def _traces_fn(self, plan_task, old, new, sim_state: State, key: jax.Array) -> jax.Array:
-        """[S + 1, H, 3] positions of the trace point along S of the replan's samples and
-        along the chosen plan (last)."""
+        """[S + 1, H, P, 3] positions of the P trace points along S of the replan's
+        samples and along the chosen plan (last)."""
         hooks, config = self.problem.hooks, self.config
         start = hooks.to_planner(sim_state) if hooks.to_planner else sim_state
         task = base_task(plan_task)
@@ -195,11 +203,10 @@ class Planning:
         return jax.vmap(lambda c: self._follow(task, fill_transition_entries(task, start), c))(sequences)
 
     def _follow(self, task: Task, start: State, sequence: jax.Array) -> jax.Array:
-        kind, index = self.point
-
         def body(state: State, action: jax.Array) -> tuple[State, jax.Array]:
             state = transition(task, state, action, jax.random.key(0))
-            where = state.data.site_xpos if kind == "site" else state.data.xipos  # a hinge's body origin stays put
-            return state, where[index]
+            # A body by its centre of mass: a hinge's body origin stays put.
+            where = [(state.data.site_xpos if kind == "site" else state.data.xipos)[i] for kind, i in self.points]
+            return state, jnp.stack(where)
 
         return jax.lax.scan(body, start, sequence)[1]

@@ -52,7 +52,7 @@ class Frame:
       xpos: [E, nbody, 3] and xquat: [E, nbody, 4] (wxyz) body poses in the world.
       time: [] simulated seconds of environment 0.
       terms: {name: [E]} the last step's weighted reward terms (``reward/<name>``).
-      traces: None, or [S + 1, H, 3] a planner's sampled rollouts' points, its chosen plan last.
+      traces: None, or [S + 1, H, P, 3] a planner's sampled rollouts' P points, its chosen plan last.
     """
 
     qpos: np.ndarray
