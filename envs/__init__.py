@@ -51,6 +51,7 @@ from mjzoo.envs import pendulum
 from mjzoo.envs import point_mass
 from mjzoo.envs import robot_amp
 from mjzoo.envs import robot_joystick
+from mjzoo.envs import robot_planning
 from mjzoo.envs import teachers
 from mjzoo.running import control_dt
 from mjzoo.running import episode_steps
@@ -104,6 +105,9 @@ _REGISTRY: dict[str, base.EnvSpec] = {
     "g1_amp_joystick": robot_amp.G1_AMP_JOYSTICK,  # AMP from retargeted human motion (envs/robot_amp.py)
     # Whole-body motion tracking of retargeted clips (envs/motion_tracking.py; mjzoo[robots])
     "g1_track": motion_tracking.G1_TRACK,
+    # Whole-body MPC on real robots (envs/robot_planning.py; mjzoo[robots])
+    "g1_standup": robot_planning.G1_STANDUP,
+    "go1_trot": robot_planning.GO1_TROT,
     # AMP: move like a reference motion (envs/humanoid_amp.py)
     "humanoid_amp_walk": humanoid_amp.WALK,
     "humanoid_amp_joystick": humanoid_amp.JOYSTICK,
