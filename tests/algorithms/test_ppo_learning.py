@@ -20,19 +20,26 @@ from mjzoo.harness import training
 OPTIMIZED = {"xla_backend_optimization_level": 3}
 
 
-def _learned_returns(config: ppo.Config, task: mjzoo.Task, hp: ppo.Hyperparams, scales, seeds: int):
-    """Each reward scale's `seeds` runs, in one vmapped program: their deterministic
-    evaluation returns in the task's own units ([len(scales) * seeds], scale-major)."""
+def _returns(config: ppo.Config, task: mjzoo.Task, hp: ppo.Hyperparams, scales, seeds: int):
+    """Each reward scale's `seeds` runs, in one vmapped program: the deterministic
+    evaluation returns, in the task's own units, of each run's initial policy and of its
+    trained one (each [len(scales) * seeds], scale-major). Both evaluations are one
+    vmapped `evaluate` inside the run's program: the untrained policy costs no compile."""
     scales = np.repeat(np.asarray(scales, np.float32), seeds)
     hps = jax.tree.map(lambda x: jnp.full(len(scales), x, jnp.float32), hp).replace(reward_scaling=jnp.asarray(scales))
 
-    def run(hyperparams, key):
-        state, _ = ppo.train(config, task, hyperparams, key)
+    def evaluate(state):
         return ppo.evaluate(config, task, state, jax.random.key(1), 16, 500).returns.mean()
+
+    def run(hyperparams, key):
+        start = ppo.init(config, task, hyperparams, key)  # the state `ppo.train` starts from
+        state, _ = ppo.train(config, task, hyperparams, key)
+        return jax.vmap(evaluate)(jax.tree.map(lambda a, b: jnp.stack([a, b]), start, state))
 
     keys = jax.random.split(jax.random.key(0), len(scales))
     compiled = jax.jit(jax.vmap(run)).lower(hps, keys).compile(OPTIMIZED)  # a long run: worth XLA's optimizations
-    return np.asarray(compiled(hps, keys))
+    returns = np.asarray(compiled(hps, keys))
+    return returns[:, 0], returns[:, 1]
 
 
 def test_learns_cartpole_balance_at_any_reward_scale_with_normalization():
@@ -44,14 +51,13 @@ def test_learns_cartpole_balance_at_any_reward_scale_with_normalization():
     ~430-540 unscaled)."""
     task = mjzoo.envs.make("cartpole_balance")
     config, hp = ppo.configure(**{**mjzoo.envs.hyperparameters("cartpole_balance", "ppo"), "total_steps": 163_840})
-    before = ppo.evaluate(config, task, ppo.init(config, task, hp, jax.random.key(0)), jax.random.key(1), 16, 500)
-    assert float(before.returns.mean()) < 150
     config = dataclasses.replace(config, lr_schedule="constant")  # the normalizations at work alone
     normalized = dataclasses.replace(config, reward_normalization=True, value_normalization="popart")
-    both = _learned_returns(normalized, task, hp, [1.0, 100.0], seeds=2)
+    before, both = _returns(normalized, task, hp, [1.0, 100.0], seeds=2)
     unnormalized = dataclasses.replace(config, reward_normalization=False, value_normalization="none")
-    plain = _learned_returns(unnormalized, task, hp, [100.0], seeds=2)
-    print("normalized, x1 and x100:", both, "plain, x100:", plain)
+    plain_before, plain = _returns(unnormalized, task, hp, [100.0], seeds=2)
+    print("untrained:", before, plain_before, "normalized, x1 and x100:", both, "plain, x100:", plain)
+    assert max(before.max(), plain_before.max()) < 150  # every run starts from a random-like policy
     assert both.min() > 450
     assert plain.mean() < 300
 
