@@ -12,11 +12,14 @@ from __future__ import annotations
 import dataclasses
 from collections.abc import Callable
 from typing import Any
+from typing import ClassVar
+from typing import Literal
 
 import jax
 import jax.numpy as jnp
 import optax
 
+from mjzoo import checks
 from mjzoo import learning
 from mjzoo.algorithms.ppo import _view
 from mjzoo.learning import networks
@@ -28,6 +31,52 @@ from mjzoo.types import Task
 Array = jax.Array
 PyTree = Any
 ACTIVATIONS = {"relu": jax.nn.relu, "swish": jax.nn.swish, "elu": jax.nn.elu, "tanh": jnp.tanh}
+
+
+@dataclasses.dataclass(frozen=True, kw_only=True)
+class ReplayConfig:
+    """The structure every replay learner shares (its Config adds its own fields and
+    may change these defaults); static under jit, hashable."""
+
+    WHO: ClassVar[str] = "Config"  # the name its errors give
+    num_envs: int = 16
+    unroll_length: int = 1  # env steps of every env per update
+    gradient_steps: int = 1  # critic steps per update
+    batch_size: int = 256
+    buffer_size: int = 1_000_000  # transitions kept (rows of num_envs steps)
+    n_steps: int = 1  # the TD target's window (`replay.sample_n_step`)
+    learning_starts: int = 5_000  # env steps of uniform actions before learning
+    policy_hidden_sizes: tuple[int, ...] = (256, 256)
+    critic_hidden_sizes: tuple[int, ...] = (256, 256)
+    activation: Literal["relu", "swish", "elu", "tanh"] = "relu"
+    layer_norm: bool = False  # in the critics' hidden layers
+    normalize_observations: bool = False
+    # A dict observation: the entry each network sees ("outer/inner" nests); None: all of it.
+    policy_obs_key: str | None = None
+    critic_obs_key: str | None = None
+    total_steps: int = 1_000_000
+
+    def __post_init__(self):
+        counts = ("num_envs", "unroll_length", "gradient_steps", "batch_size", "buffer_size", "n_steps", "total_steps")
+        checks.fields(self.WHO, self, {f: (checks.is_count(getattr(self, f)), "an integer >= 1") for f in counts})
+        switches = ("layer_norm", "normalize_observations")
+        checks.fields(self.WHO, self, {f: (isinstance(getattr(self, f), bool), "True or False") for f in switches})
+        checks.fields(
+            self.WHO,
+            self,
+            {
+                "learning_starts": (checks.is_count(self.learning_starts + 1), "an integer >= 0"),
+                "activation": (self.activation in ACTIVATIONS, f"one of {sorted(ACTIVATIONS)}"),
+            },
+        )
+
+    @property
+    def steps_per_update(self) -> int:
+        return self.num_envs * self.unroll_length
+
+    @property
+    def num_updates(self) -> int:
+        return max(1, self.total_steps // self.steps_per_update)
 
 
 def twin(network: networks.Network) -> networks.Network:

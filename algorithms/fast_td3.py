@@ -22,7 +22,7 @@ import dataclasses
 import functools
 import sys
 from typing import Any
-from typing import Literal
+from typing import ClassVar
 
 import jax
 import jax.numpy as jnp
@@ -46,60 +46,35 @@ Array = jax.Array
 
 
 @dataclasses.dataclass(frozen=True, kw_only=True)
-class Config:
-    """FastTD3's structure (static under jit; hashable). The numbers are `Hyperparams`."""
+class Config(_offpolicy.ReplayConfig):
+    """FastTD3's structure (static under jit; hashable): `_offpolicy.ReplayConfig`'s
+    fields at the paper's defaults, and the policy delay and the critic's atoms. The
+    numbers are `Hyperparams`."""
 
+    WHO: ClassVar[str] = "fast_td3.Config"
     num_envs: int = 1024
-    unroll_length: int = 1  # env steps of every env per update
-    gradient_steps: int = 2  # critic steps per update
-    policy_delay: int = 2  # critic steps per policy step
+    gradient_steps: int = 2
     batch_size: int = 32_768
-    buffer_size: int = 1_048_576  # transitions kept (rows of num_envs steps)
+    buffer_size: int = 1_048_576
     n_steps: int = 3
-    num_atoms: int = 101
-    learning_starts: int = 10_240  # env steps of uniform actions before learning
+    learning_starts: int = 10_240
     policy_hidden_sizes: tuple[int, ...] = (512, 256, 128)
     critic_hidden_sizes: tuple[int, ...] = (1024, 512, 256)
-    activation: Literal["relu", "swish", "elu", "tanh"] = "relu"
-    layer_norm: bool = False  # in the critics' hidden layers
     normalize_observations: bool = True
-    policy_obs_key: str | None = None
-    critic_obs_key: str | None = None
     total_steps: int = 10_000_000
+    policy_delay: int = 2  # critic steps per policy step
+    num_atoms: int = 101
 
     def __post_init__(self):
-        counts = (
-            "num_envs",
-            "unroll_length",
-            "gradient_steps",
-            "policy_delay",
-            "batch_size",
-            "buffer_size",
-            "n_steps",
-            "total_steps",
-        )
+        super().__post_init__()
         checks.fields(
-            "fast_td3.Config", self, {f: (checks.is_count(getattr(self, f)), "an integer >= 1") for f in counts}
-        )
-        checks.fields(
-            "fast_td3.Config",
+            self.WHO,
             self,
             {
+                "policy_delay": (checks.is_count(self.policy_delay), "an integer >= 1"),
                 "num_atoms": (checks.is_count(self.num_atoms - 1), "an integer >= 2"),
-                "learning_starts": (checks.is_count(self.learning_starts + 1), "an integer >= 0"),
-                "activation": (self.activation in _offpolicy.ACTIVATIONS, f"one of {sorted(_offpolicy.ACTIVATIONS)}"),
-                "layer_norm": (isinstance(self.layer_norm, bool), "True or False"),
-                "normalize_observations": (isinstance(self.normalize_observations, bool), "True or False"),
             },
         )
-
-    @property
-    def steps_per_update(self) -> int:
-        return self.num_envs * self.unroll_length
-
-    @property
-    def num_updates(self) -> int:
-        return max(1, self.total_steps // self.steps_per_update)
 
 
 @jax.tree_util.register_dataclass

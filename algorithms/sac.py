@@ -21,7 +21,7 @@ import dataclasses
 import functools
 import sys
 from typing import Any
-from typing import Literal
+from typing import ClassVar
 
 import jax
 import jax.numpy as jnp
@@ -47,47 +47,12 @@ Array = jax.Array
 
 
 @dataclasses.dataclass(frozen=True, kw_only=True)
-class Config:
-    """SAC's structure (static under jit; hashable). The numbers are `Hyperparams`."""
+class Config(_offpolicy.ReplayConfig):
+    """SAC's structure (static under jit; hashable): `_offpolicy.ReplayConfig`'s fields
+    (envs, replay, batch, networks, warm-up), at SAC's usual defaults. The numbers are
+    `Hyperparams`."""
 
-    num_envs: int = 16
-    unroll_length: int = 1  # env steps of every env per update
-    gradient_steps: int = 1  # learning steps per update
-    batch_size: int = 256
-    buffer_size: int = 1_000_000  # transitions kept (rows of num_envs steps)
-    n_steps: int = 1  # the TD target's window (`replay.sample_n_step`)
-    learning_starts: int = 5_000  # env steps of uniform actions before learning
-    policy_hidden_sizes: tuple[int, ...] = (256, 256)
-    critic_hidden_sizes: tuple[int, ...] = (256, 256)
-    activation: Literal["relu", "swish", "elu", "tanh"] = "relu"
-    layer_norm: bool = False  # in the critics' hidden layers
-    normalize_observations: bool = False
-    # A dict observation: the entry each network sees ("outer/inner" nests); None: all of it.
-    policy_obs_key: str | None = None
-    critic_obs_key: str | None = None
-    total_steps: int = 1_000_000
-
-    def __post_init__(self):
-        counts = ("num_envs", "unroll_length", "gradient_steps", "batch_size", "buffer_size", "n_steps", "total_steps")
-        checks.fields("sac.Config", self, {f: (checks.is_count(getattr(self, f)), "an integer >= 1") for f in counts})
-        checks.fields(
-            "sac.Config",
-            self,
-            {
-                "learning_starts": (checks.is_count(self.learning_starts + 1), "an integer >= 0"),
-                "activation": (self.activation in _offpolicy.ACTIVATIONS, f"one of {sorted(_offpolicy.ACTIVATIONS)}"),
-                "layer_norm": (isinstance(self.layer_norm, bool), "True or False"),
-                "normalize_observations": (isinstance(self.normalize_observations, bool), "True or False"),
-            },
-        )
-
-    @property
-    def steps_per_update(self) -> int:
-        return self.num_envs * self.unroll_length
-
-    @property
-    def num_updates(self) -> int:
-        return max(1, self.total_steps // self.steps_per_update)
+    WHO: ClassVar[str] = "sac.Config"
 
 
 @jax.tree_util.register_dataclass
