@@ -46,5 +46,6 @@ def returns(request):
 def test_learns_pendulum_swing_up_far_better_than_untrained(returns):
     before, after = returns
     print("untrained", before, "trained", after)
-    # Untrained: 1.9 and 14.3 (seeds 0 and 1) when calibrated; SAC after 16k steps: 168 and 77.
-    assert after.min() > before.max() + 30.0
+    # When calibrated (seeds 0 and 1): SAC untrained 1.9 and 14.3, after 16k steps 168 and
+    # 77; FastTD3 untrained 0.4 and 3.5, after 16k steps 37.4 and 37.4 (spinning steadily).
+    assert after.min() > before.max() + 20.0
