@@ -4,6 +4,10 @@
                           policy, evaluate)
     amp                   adversarial motion priors: PPO with a discriminator's style
                           reward for moving like a reference motion (the same contract)
+    sac                   soft actor-critic: off-policy, a replay of parallel env steps,
+                          entropy tuned automatically (the same contract)
+    fast_td3              FastTD3: TD3 with a categorical critic, n-step returns, many
+                          envs and large batches (the same contract)
     mppi                  model-predictive path integral control  (Config, init, plan)
     cem                   the cross-entropy method                  (Config, init, plan)
     predictive_sampling   keep the best of samples around the plan  (Config, init, plan)
@@ -16,7 +20,7 @@ gives the contract a new algorithm follows. Modules load on first use.
 
 from mjzoo import lazy
 
-MODULES = ("ppo", "amp", "mppi", "cem", "predictive_sampling", "dial", "cma_es")
+MODULES = ("ppo", "amp", "sac", "fast_td3", "mppi", "cem", "predictive_sampling", "dial", "cma_es")
 
 __all__ = list(MODULES)
 

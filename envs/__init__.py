@@ -116,6 +116,7 @@ _REGISTRY: dict[str, base.EnvSpec] = {
 # A user's factory without `PLANNING`: one episode (`closed_loop_problem` measures it),
 # replanning every step, the planners' own default configs, no success criterion.
 _ONE_EPISODE = base.PlanningSetup(seconds=None, replan_every=1, plan_overrides={}, configs={}, success=None)
+_LEARNERS = ("ppo", "amp", "sac", "fast_td3")  # the RL algorithms an env records config fields for
 PLAYGROUND = "playground:"  # the spec prefix of MuJoCo Playground's envs
 # Playground's envs: one episode, replanning every control step, 1 s horizons at the
 # DM Control Suite's control steps (0.01-0.04 s: 25-100 steps); rewards are in [0, 1] per
@@ -158,7 +159,8 @@ def register(
 ) -> None:
     """Adds an env under `name`: its record (`base.EnvSpec`), or a task factory
     (keyword-only arguments, each an override) with optional default hyperparameters
-    ({"ppo": {...}, "amp": {...}}) and planning setup (which holds the planners')."""
+    ({"ppo": {...}, "amp": {...}, "sac": ..., "fast_td3": ...}) and planning setup (which
+    holds the planners')."""
     if name in _REGISTRY:
         raise ValueError(f"a task named {name!r} is already registered")
     if isinstance(factory, base.EnvSpec):
@@ -167,14 +169,13 @@ def register(
         _REGISTRY[name] = factory
         return
     learned = dict(hyperparameters or {})
-    others = sorted(set(learned) - {"ppo", "amp"})
+    others = sorted(set(learned) - set(_LEARNERS))
     if others:
         raise ValueError(f"register: hyperparameters for {others} belong in the planning setup's configs")
     _REGISTRY[name] = base.EnvSpec(
         make=factory,
         description=(factory.__doc__ or "").strip().partition("\n")[0],
-        ppo=learned.get("ppo"),
-        amp=learned.get("amp"),
+        **{name: learned.get(name) for name in _LEARNERS},
         planning=planning_setup,
     )
 

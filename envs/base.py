@@ -94,6 +94,7 @@ class EnvSpec:
       description: one line, for listings.
       ppo: PPO's config fields that solve it (`mjzoo train ppo NAME`); None: none tuned.
       amp: AMP's config fields (the envs with a motion reference).
+      sac, fast_td3: the off-policy learners' config fields; None: their Configs' defaults.
       planning: how the sampling planners solve it closed loop; None: not set up.
       reference: for an env AMP imitates with: ``reference(task, **overrides) ->
         mjzoo.motion.Reference``, called with the task `make(**overrides)` built and
@@ -105,6 +106,8 @@ class EnvSpec:
     description: str
     ppo: dict[str, Any] | None = None
     amp: dict[str, Any] | None = None
+    sac: dict[str, Any] | None = None
+    fast_td3: dict[str, Any] | None = None
     planning: PlanningSetup | None = None
     reference: Callable[..., Reference] | None = None
 
@@ -117,9 +120,9 @@ class EnvSpec:
             raise TypeError(f"EnvSpec: reference must be a function of the task, got {type(self.reference).__name__}")
 
     def hyperparameters(self, algorithm: str) -> dict[str, Any]:
-        """Config fields for `algorithm` ("ppo", "amp", or a planner module's name: its
-        planning config); empty if it has none."""
-        learned = {"ppo": self.ppo, "amp": self.amp}.get(algorithm)
+        """Config fields for `algorithm` ("ppo", "amp", "sac", "fast_td3", or a planner
+        module's name: its planning config); empty if it has none."""
+        learned = {"ppo": self.ppo, "amp": self.amp, "sac": self.sac, "fast_td3": self.fast_td3}.get(algorithm)
         if learned is not None:
             return dict(learned)
         return dict(self.planning.configs.get(algorithm, {})) if self.planning else {}

@@ -21,7 +21,10 @@ writes an A2C from them).
     networks            MLP and GRU policies/critics as (init, apply) pairs
     distributions       the tanh-squashed Gaussian policy head
     discriminators      AMP's least-squares and logistic losses, style rewards, gradient penalty
-    replay              a jit-able FIFO replay buffer of samples (`Replay`)
+    replay              a jit-able FIFO replay buffer of samples or of parallel env steps,
+                        n-step returns at sampling (`Replay`, `sample_n_step`)
+    targets             off-policy critic targets: twin TD, target-policy smoothing, C51's
+                        categorical projection, Polyak averaging
     motion_features     AMP's features of a frame, one function for simulation and reference
 """
 
@@ -42,6 +45,7 @@ from mjzoo.learning import normalization
 from mjzoo.learning import replay
 from mjzoo.learning import reward_scaling
 from mjzoo.learning import schedules
+from mjzoo.learning import targets
 from mjzoo.learning import value_normalization
 from mjzoo.learning.actions import to_controls
 from mjzoo.learning.advantages import gae
@@ -68,6 +72,7 @@ from mjzoo.learning.losses import clipped_surrogate_loss
 from mjzoo.learning.losses import kl_penalty_loss
 from mjzoo.learning.losses import normalize_advantages
 from mjzoo.learning.losses import policy_gradient_loss
+from mjzoo.learning.losses import temperature_loss
 from mjzoo.learning.losses import value_loss
 from mjzoo.learning.motion_features import FeatureWindowState
 from mjzoo.learning.motion_features import feature_layout
@@ -82,7 +87,9 @@ from mjzoo.learning.normalization import RunningStats
 from mjzoo.learning.normalization import init_stats
 from mjzoo.learning.normalization import normalize
 from mjzoo.learning.normalization import update_stats
+from mjzoo.learning.replay import NStep
 from mjzoo.learning.replay import Replay
+from mjzoo.learning.replay import sample_n_step
 from mjzoo.learning.reward_scaling import RewardScaling
 from mjzoo.learning.reward_scaling import init_reward_scaling
 from mjzoo.learning.reward_scaling import scale_rewards
@@ -92,6 +99,12 @@ from mjzoo.learning.schedules import entropy_coef_schedule
 from mjzoo.learning.schedules import kl_adaptive_lr
 from mjzoo.learning.schedules import kl_early_stop
 from mjzoo.learning.schedules import skip_when_stopped
+from mjzoo.learning.targets import categorical_projection
+from mjzoo.learning.targets import categorical_support
+from mjzoo.learning.targets import categorical_value
+from mjzoo.learning.targets import polyak
+from mjzoo.learning.targets import smoothed_action
+from mjzoo.learning.targets import twin_td_target
 from mjzoo.learning.value_normalization import denormalize_values
 from mjzoo.learning.value_normalization import init_value_stats
 from mjzoo.learning.value_normalization import normalize_values
@@ -105,6 +118,7 @@ __all__ = [
     "ENTROPY_SCHEDULES",
     "Evaluation",
     "FeatureWindowState",
+    "NStep",
     "Network",
     "RecurrentNetwork",
     "Replay",
@@ -115,8 +129,11 @@ __all__ = [
     "actions",
     "advantages",
     "algorithm",
-    "clipped_surrogate_loss",
+    "categorical_projection",
+    "categorical_support",
+    "categorical_value",
     "check_algorithm",
+    "clipped_surrogate_loss",
     "collect",
     "collection",
     "denormalize_values",
@@ -156,15 +173,21 @@ __all__ = [
     "normalize_advantages",
     "normalize_values",
     "policy_gradient_loss",
+    "polyak",
     "popart_rescale",
     "replay",
     "reward_scaling",
+    "sample_n_step",
     "scale_rewards",
     "schedules",
     "skip_non_finite_update",
     "skip_when_stopped",
+    "smoothed_action",
     "style_reward",
+    "targets",
+    "temperature_loss",
     "to_controls",
+    "twin_td_target",
     "update_reward_scaling",
     "update_stats",
     "update_value_stats",

@@ -14,7 +14,14 @@ import chex
 import jax
 import jax.numpy as jnp
 
-__all__ = ["clipped_surrogate_loss", "kl_penalty_loss", "normalize_advantages", "policy_gradient_loss", "value_loss"]
+__all__ = [
+    "clipped_surrogate_loss",
+    "kl_penalty_loss",
+    "normalize_advantages",
+    "policy_gradient_loss",
+    "temperature_loss",
+    "value_loss",
+]
 
 Array = jax.Array
 
@@ -185,3 +192,23 @@ def normalize_advantages(advantages: Array, eps: float = 1e-8) -> Array:
     mean = jnp.mean(advantages)
     std = jnp.std(advantages)
     return (advantages - mean) / (std + eps)
+
+
+def temperature_loss(log_alpha: Array, log_prob: Array, target_entropy: float | Array) -> Array:
+    """SAC's automatic entropy tuning: -mean(log_alpha * (log pi(a|s) + target_entropy)),
+    the log-probabilities held fixed.
+
+    Its gradient in log_alpha is -(target_entropy - H), H = -mean(log_prob) the policy's
+    entropy estimate: alpha grows while the entropy is below the target and shrinks
+    above it. (Learning log alpha keeps alpha > 0.)
+
+    Args:
+      log_alpha: [] the learned log-temperature.
+      log_prob: [B] log-probabilities of actions freshly sampled from the policy.
+      target_entropy: scalar, e.g. -action_size.
+
+    Returns:
+      [] the loss.
+    """
+    chex.assert_rank([log_alpha, log_prob], [0, 1])
+    return -jnp.mean(log_alpha * jax.lax.stop_gradient(log_prob + target_entropy))

@@ -65,6 +65,13 @@ def _dense(layer: dict[str, Array], x: Array) -> Array:
     return x @ layer["kernel"] + layer["bias"]
 
 
+def _layer_norm(x: Array, eps: float = 1e-5) -> Array:
+    """x normalized over its last axis, in float32 whatever its dtype."""
+    y = x.astype(jnp.float32)
+    y = (y - jnp.mean(y, axis=-1, keepdims=True)) * jax.lax.rsqrt(jnp.var(y, axis=-1, keepdims=True) + eps)
+    return y.astype(x.dtype)
+
+
 def _check_positive(name: str, field: str, values: Any) -> None:
     """Raises unless every one of `values` (an int or a sequence of ints) is an int >= 1."""
     items = tuple(values) if isinstance(values, Sequence) else (values,)
@@ -85,6 +92,7 @@ def mlp(
     activation: Callable[[Array], Array] = jax.nn.swish,
     output_scale: float = 1.0,
     compute_dtype: Any = jnp.float32,
+    layer_norm: bool = False,
 ) -> Network:
     """A multi-layer perceptron: dense layers with `activation` between them, none after
     the last.
@@ -101,6 +109,9 @@ def mlp(
         precision: params stay float32 (so do gradients and the optimizer), the input
         and hidden weights are cast, and the output layer runs in float32, so a value
         head of large returns keeps its resolution.
+      layer_norm: normalize each hidden layer's pre-activations to zero mean and unit
+        variance over its features (no learned scale, so the params are the same);
+        off-policy critics use it against value overestimation.
 
     Returns:
       A `Network` whose apply maps [..., in] -> [..., output_size] (float32), for any
@@ -124,7 +135,8 @@ def mlp(
             raise ValueError(f"mlp.apply: input shape {jnp.shape(x)} must end in the input size {expected}")
         x = x.astype(compute_dtype)
         for layer in params[:-1]:
-            x = activation(_dense(jax.tree.map(lambda p: p.astype(compute_dtype), layer), x))
+            x = _dense(jax.tree.map(lambda p: p.astype(compute_dtype), layer), x)
+            x = activation(_layer_norm(x) if layer_norm else x)
         return _dense(params[-1], x.astype(jnp.float32))
 
     return Network(init=init, apply=apply)

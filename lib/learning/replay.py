@@ -15,17 +15,27 @@ keeps a random subset through a mask, not a variable-length slice).
 
 Kept samples enter a ring in FIFO order: once full, each new sample overwrites the
 oldest one.
+
+Off-policy learners keep time-ordered rows of transitions instead: a "sample" is one
+step of every parallel env (a `learning.Transitions` with [num_envs] leaves), inserted
+with keep probability 1, so the ring's slots are consecutive env steps and
+`sample_n_step` draws (step, env) pairs with n-step returns summed at sampling time:
+
+    buffer = replay.create(capacity_steps, jax.tree.map(lambda x: x[0], transitions))  # one row
+    buffer = replay.insert(buffer, transitions, key)                 # [T, num_envs, ...] rows
+    batch = replay.sample_n_step(buffer, key, 256, n=3, discount=0.99)
 """
 
 from __future__ import annotations
 
 import dataclasses
 from typing import Any
+from typing import NamedTuple
 
 import jax
 import jax.numpy as jnp
 
-__all__ = ["Replay", "create", "insert", "sample"]
+__all__ = ["NStep", "Replay", "create", "insert", "sample", "sample_n_step"]
 
 Array = jax.Array
 PyTree = Any
@@ -156,3 +166,73 @@ def sample(buffer: Replay, key: Array, num: int) -> PyTree:
     index = jax.random.randint(key, (num,), 0, jnp.maximum(buffer.size, 1))
     filled = buffer.size > 0
     return jax.tree.map(lambda d: jnp.where(filled, d[index], jnp.zeros_like(d[index])), buffer.data)
+
+
+class NStep(NamedTuple):
+    """A batch of n-step transitions, leaves [num, ...].
+
+    Attributes:
+      obs: the observation the first action was chosen from.
+      action: that action.
+      reward: [num] sum_{j<m} discount^j r_{t+j} over the m <= n steps taken.
+      discount: [num] discount^m, 0 where step t+m-1 terminated: the factor of the
+        bootstrapped value of `next_obs`.
+      next_obs: the observation reached after the m steps (an episode's true final one
+        where it ended).
+    """
+
+    obs: PyTree
+    action: Array
+    reward: Array
+    discount: Array
+    next_obs: PyTree
+
+
+def sample_n_step(buffer: Replay, key: Array, num: int, n: int, discount: float | Array) -> NStep:
+    """`num` (step, env) pairs drawn uniformly from a buffer of time-ordered rows, with
+    n-step returns computed now (so n is a sampling choice, not a storage one).
+
+    From step t of env e the window runs m = min(n, steps to the end of the episode,
+    steps recorded so far) steps: it stops after the first terminated or truncated step
+    (a truncated one bootstraps, a terminated one does not) and at the newest row (a
+    shorter window is still a valid target).
+
+    Args:
+      buffer: a `Replay` whose data is a `learning.Transitions` of rows [capacity,
+        num_envs, ...] (`obs`, `action`, `reward`, `terminated`, `truncated`,
+        `next_obs` are read), inserted oldest first.
+      key: PRNG key.
+      num: int >= 1, the batch size (static).
+      n: int >= 1, the longest window (static).
+      discount: scalar in [0, 1].
+
+    Returns:
+      `NStep`, leaves [num, ...].
+    """
+    for name, value in (("num", num), ("n", n)):
+        if isinstance(value, bool) or not isinstance(value, int) or value < 1:
+            raise ValueError(f"replay.sample_n_step: {name}={value!r} must be an int >= 1")
+    data, capacity = buffer.data, buffer.capacity
+    num_envs = data.reward.shape[1]
+    step_key, env_key = jax.random.split(key)
+    t = jax.random.randint(step_key, (num,), 0, jnp.maximum(buffer.size, 1))
+    env = jax.random.randint(env_key, (num,), 0, num_envs)
+    available = (buffer.cursor - 1 - t) % capacity + 1  # rows from t to the newest, t's own included
+    rows = (t[:, None] + jnp.arange(n)) % capacity  # [num, n]
+    reward = data.reward[rows, env[:, None]]
+    ended = data.terminated[rows, env[:, None]] | data.truncated[rows, env[:, None]]
+    # Step j counts while no earlier step of the window ended and it has been recorded.
+    ended_before = jnp.cumsum(ended, axis=1) - ended > 0
+    taken = ~ended_before & (jnp.arange(n) < available[:, None])
+    powers = jnp.asarray(discount, jnp.float32) ** jnp.arange(n, dtype=jnp.float32)
+    m = jnp.sum(taken, axis=1)  # >= 1: step t itself always counts
+    last = (t + m - 1) % capacity
+    terminal = data.terminated[last, env]
+    gather = lambda x, i: x[i, env]
+    return NStep(
+        obs=jax.tree.map(lambda x: gather(x, t), data.obs),
+        action=gather(data.action, t),
+        reward=jnp.sum(jnp.where(taken, powers * reward, 0.0), axis=1),
+        discount=jnp.where(terminal, 0.0, jnp.asarray(discount, jnp.float32) ** m.astype(jnp.float32)),
+        next_obs=jax.tree.map(lambda x: gather(x, last), data.next_obs),
+    )

@@ -13,6 +13,7 @@ import jax.numpy as jnp
 import numpy as np
 import pytest
 
+from mjzoo import learning
 from mjzoo.learning import replay
 
 KEY = jax.random.key(0)
@@ -153,3 +154,76 @@ def test_errors():
         replay.insert(buffer, jnp.zeros((3, 2)), KEY, 1.5)
     with pytest.raises(ValueError, match="num=0 must be an int >= 1"):
         replay.sample(buffer, KEY, 0)
+
+
+# --- rows of parallel env steps, n-step returns ------------------------------------
+
+
+def steps(rewards, terminated, truncated):
+    """A buffer's rows [T, E]: obs [t, e] labels each step, next_obs is obs + 100."""
+    t_count, e_count = np.shape(rewards)
+    obs = np.stack(np.meshgrid(np.arange(t_count), np.arange(e_count), indexing="ij"), -1).astype(np.float32)
+    return learning.Transitions(
+        obs=jnp.asarray(obs),
+        action=jnp.asarray(obs[..., :1]),
+        extras=(),
+        reward=jnp.asarray(rewards, jnp.float32),
+        terminated=jnp.asarray(terminated, bool),
+        truncated=jnp.asarray(truncated, bool),
+        start=jnp.zeros((t_count, e_count), bool),
+        next_obs=jnp.asarray(obs + 100.0),
+    )
+
+
+def filled(capacity, rows):
+    buffer = replay.create(capacity, jax.tree.map(lambda x: x[0], rows))
+    return replay.insert(buffer, rows, KEY)
+
+
+def by_label(batch):
+    """{(t, e): (reward, discount, next t)} of every sampled pair."""
+    obs, next_obs = np.asarray(batch.obs), np.asarray(batch.next_obs)
+    return {
+        (int(o[0]), int(o[1])): (float(r), float(d), int(n[0]) - 100, int(n[1]) - 100)
+        for o, r, d, n in zip(obs, np.asarray(batch.reward), np.asarray(batch.discount), next_obs)
+    }
+
+
+def test_sample_n_step_stops_at_episode_ends_and_the_newest_row():
+    """Env 0: rewards 1, 2, 4, 8, truncated at step 1; env 1: rewards 1, terminated at
+    step 2; n = 3, discount 1/2, 4 rows recorded of 5."""
+    rows = steps(
+        [[1, 1], [2, 1], [4, 1], [8, 1]],
+        terminated=[[0, 0], [0, 0], [0, 1], [0, 0]],
+        truncated=[[0, 0], [1, 0], [0, 0], [0, 0]],
+    )
+    sample = jax.jit(replay.sample_n_step, static_argnums=(2, 3))
+    got = by_label(sample(filled(5, rows), KEY, 256, 3, 0.5))
+    expected = {
+        (0, 0): (1 + 0.5 * 2, 0.25, 1, 0),  # up to the truncation, which bootstraps
+        (1, 0): (2.0, 0.5, 1, 0),
+        (2, 0): (4 + 0.5 * 8, 0.25, 3, 0),  # the newest row ends the window
+        (3, 0): (8.0, 0.5, 3, 0),
+        (0, 1): (1.75, 0.0, 2, 1),  # terminated: no bootstrap
+        (1, 1): (1.5, 0.0, 2, 1),
+        (2, 1): (1.0, 0.0, 2, 1),
+        (3, 1): (1.0, 0.5, 3, 1),
+    }
+    assert got == expected  # every pair drawn (256 draws of 8), each as computed by hand
+    action = sample(filled(5, rows), KEY, 16, 3, 0.5)
+    np.testing.assert_array_equal(action.action[:, 0], action.obs[:, 0])
+
+
+def test_sample_n_step_across_the_ring_wrap_and_under_vmap():
+    """Capacity 3, 4 rows (rewards 1, 2, 4, 8): row 0 is overwritten by row 3, and a
+    window from row 1 runs on through slot 0."""
+    rows = steps([[1], [2], [4], [8]], terminated=np.zeros((4, 1)), truncated=np.zeros((4, 1)))
+    buffer = filled(3, rows)
+    got = by_label(replay.sample_n_step(buffer, KEY, 64, 3, 0.5))
+    assert got == {(1, 0): (6.0, 0.125, 3, 0), (2, 0): (8.0, 0.25, 3, 0), (3, 0): (8.0, 0.5, 3, 0)}
+    both = jax.tree.map(lambda x: jnp.stack([x, x]), buffer)
+    batch = jax.vmap(replay.sample_n_step, in_axes=(0, None, None, None, 0))(both, KEY, 8, 1, jnp.array([0.5, 0.9]))
+    np.testing.assert_allclose(batch.discount, [[0.5] * 8, [0.9] * 8])
+    np.testing.assert_allclose(batch.reward[0], batch.reward[1])
+    with pytest.raises(ValueError, match="n=0"):
+        replay.sample_n_step(buffer, KEY, 8, 0, 0.5)

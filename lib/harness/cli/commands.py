@@ -130,7 +130,7 @@ def _random_returns(task: mjzoo.Task, keys: jax.Array, steps: int, nu: int):
 
 
 def train(
-    algorithm: Annotated[Literal["ppo", "amp"], tyro.conf.Positional],
+    algorithm: Annotated[Literal["ppo", "amp", "sac", "fast_td3"], tyro.conf.Positional],
     env: Annotated[str, tyro.conf.Positional],
     out: Path | None = None,
     config: ConfigFields = (),
@@ -177,7 +177,7 @@ def train(
     process must reach.
 
     Args:
-      algorithm: the learner, ppo or amp.
+      algorithm: the learner, ppo, amp, sac or fast_td3.
       env: the task, a registered env or package.module:factory.
       out: the run's directory; default runs/ENV-ALGORITHM.
       total_steps: env steps to train for; default: the env's (or the Config's).
