@@ -351,7 +351,7 @@ def evaluate(
 
 
 def plan(
-    algorithm: Annotated[Literal["predictive_sampling", "cem", "mppi", "dial", "cma_es"], tyro.conf.Positional],
+    algorithm: Annotated[Literal["predictive_sampling", "cem", "mppi", "dial", "cma_es", "ilqr"], tyro.conf.Positional],
     env: Annotated[str, tyro.conf.Positional],
     out: Path | None = None,
     seconds: float | None = None,
@@ -382,7 +382,7 @@ def plan(
     replanning every step, with no success test (final_cost tells).
 
     Args:
-      algorithm: the sampling planner.
+      algorithm: the planner (ilqr: on MJX only, a CPU included).
       env: the task, a registered env or package.module:factory.
       out: the run's directory; default runs/ENV-ALGORITHM-plan.
       seconds: simulated seconds to run; default: the env's planning setup (or one episode).
