@@ -48,8 +48,6 @@ __all__ = [
     "guided",
 ]
 
-Array = jax.Array
-
 
 @jax.tree_util.register_dataclass
 @dataclasses.dataclass(frozen=True)
@@ -65,6 +63,9 @@ class PolicyPrior:
 
     act: jax.tree_util.Partial
     value: jax.tree_util.Partial | None = None
+
+
+Array = jax.Array
 
 
 def policy_prior(act: Callable[[Any], Array], value: Callable[[Any], Array] | None = None) -> PolicyPrior:

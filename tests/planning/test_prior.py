@@ -51,7 +51,9 @@ def test_the_nominal_plan_is_the_policys_rollout():
     every = mppi.Config(num_samples=4, horizon_steps=H, num_knots=H, interpolation="linear")
     np.testing.assert_allclose(prior.nominal_knots(every, guide, task, state, key), got, rtol=1e-5, atol=1e-6)
     ends = mppi.Config(num_samples=4, horizon_steps=H, num_knots=2)
-    np.testing.assert_allclose(prior.nominal_knots(ends, guide, task, state, key), np.asarray(got)[[0, -1]], rtol=1e-5, atol=1e-6)
+    np.testing.assert_allclose(
+        prior.nominal_knots(ends, guide, task, state, key), np.asarray(got)[[0, -1]], rtol=1e-5, atol=1e-6
+    )
     # The guide hook anchors that plan at the state's time.
     planner_state = mppi.init(every, task)
     guided = prior.guide(every, guide, task, state.replace(data=state.data.replace(time=0.7)), planner_state)
