@@ -1,4 +1,4 @@
-"""iLQR: Newton-like steps on the plan from the planning task's own MJX derivatives.
+"""iLQR: Newton-like steps on the plan from MJX's derivatives (jax.jacfwd), which C MuJoCo has not.
 
     config = ilqr.Config(horizon_steps=50, iterations=4)    # structure: static under jit
     hyperparams = ilqr.Hyperparams(regularization=1e-2)      # numbers: pytree leaves
