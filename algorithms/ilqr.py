@@ -1,4 +1,4 @@
-"""iLQR: Newton-like steps on the plan from MJX's derivatives (jax.jacfwd), which C MuJoCo has not.
+"""iLQR: Newton-like steps on the plan from MJX's derivatives (jax.jacfwd), which C MuJoCo's rollouts lack.
 
     config = ilqr.Config(horizon_steps=50, iterations=4)    # structure: static under jit
     hyperparams = ilqr.Hyperparams(regularization=1e-2)      # numbers: pytree leaves
@@ -22,14 +22,15 @@ Each iteration, around the nominal trajectory (x^, u^):
     backward, t = H-1 .. 0, from V_x = 0, V_xx = 0:
       Q_x = l_x + f_x' V_x,  Q_u = l_u + f_u' V_x
       Q_xx = l_xx + f_x' V_xx f_x,  Q_uu = l_uu + f_u' V_xx f_u,  Q_ux = l_ux + f_u' V_xx f_x
-      k = -(Q_uu + mu I)^-1 Q_u,  K = -(Q_uu + mu I)^-1 Q_ux      (over the free controls)
+      k = -(Q_uu+ + mu I)^-1 Q_u,  K = -(Q_uu+ + mu I)^-1 Q_ux    (free controls; Q_uu+: PSD part)
       V_x = Q_x + K' Q_uu k + K' Q_u + Q_ux' k,  V_xx = Q_xx + K' Q_uu K + K' Q_ux + Q_ux' K
     forward, for the step sizes alpha = 1, beta, .., beta^(L-1) at once (vmapped rollouts):
       u_t = clip(u^_t + alpha k_t + K_t (x_t - x^_t), low, high)
 
 The lowest-cost candidate replaces the plan if it costs less (so the cost never rises),
-and mu <- max(mu / Delta, mu_min); if none does (or Q_uu + mu I is not positive definite:
-its Cholesky factor is NaN, so are the candidates), the plan stays and mu <- mu Delta.
+and mu <- max(mu / Delta, mu_min); if none does, the plan and its derivatives stay and
+mu <- mu Delta (a shorter, more cautious step). Q_uu's negative eigenvalues are floored at
+0 before mu is added, so the step is always a descent direction.
 The loop (`lax.while_loop`) ends after `iterations`, once a step lowers the cost by less
 than `tolerance` x max(|cost|, 1), or when mu passes mu_max; mu carries over to the next
 replan, which starts from the last plan shifted to the current time.
@@ -339,7 +340,7 @@ def backward(
       controls: [H, nu] the nominal controls, for the clamped set.
 
     Returns:
-      (k [H, nu], K [H, nu, nx]); NaN where Q_uu + mu I is not positive definite.
+      (k [H, nu], K [H, nu, nx]); NaN only where mu = 0 meets a singular Q_uu.
     """
     nx = f_z.shape[1]
 
