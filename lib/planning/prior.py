@@ -82,15 +82,22 @@ def from_learner(learner: Any, config: Any, task: Task, train_state: Any) -> Pol
     """The prior of a trained learner: `learner` an algorithm module with `policy` and
     `policy_params` (`mjzoo.algorithms.ppo`, `amp`), and `value` and `value_params` for
     a critic (PPO's), its `config`, the `task` it trained on and its `train_state`."""
-    act = jax.tree_util.Partial(_deterministic, learner.policy(config, task), learner.policy_params(train_state))
+    act = jax.tree_util.Partial(_Deterministic(learner.policy(config, task)), learner.policy_params(train_state))
     value = None
     if hasattr(learner, "value_params"):
         value = jax.tree_util.Partial(learner.value(config, task), learner.value_params(config, train_state))
     return policy_prior(act, value)
 
 
-def _deterministic(policy: Callable, params: Any, obs: Any) -> Array:
-    return policy(params, obs, jax.random.key(0))  # a deterministic policy ignores its key
+@dataclasses.dataclass(frozen=True)
+class _Deterministic:
+    """A deployable ``(params, obs, key) -> action`` policy as ``(params, obs) -> action``
+    (the Partial's function: static, its params the leaves)."""
+
+    policy: Callable
+
+    def __call__(self, params: Any, obs: Any) -> Array:
+        return self.policy(params, obs, jax.random.key(0))  # a deterministic policy ignores its key
 
 
 def rollout_actions(prior: PolicyPrior, task: Task, state: State, horizon_steps: int, key: Array) -> Array:

@@ -1,6 +1,6 @@
 """A trained policy as a planner's prior (`mjzoo.planning.prior`): its nominal plan is its
 own rollout's actions, and on the point mass a briefly trained PPO policy and critic make
-MPPI with 4 samples reach its goals better than the same MPPI without them."""
+MPPI with 2 samples over 0.2 s reach its goals better than the same MPPI without them."""
 
 from __future__ import annotations
 
@@ -70,8 +70,13 @@ def _trained_prior() -> prior.PolicyPrior:
     return prior.from_learner(ppo, config, task, state)
 
 
+# Few samples over a short horizon (0.2 s): beyond the reward's 0.5 m margin a plain
+# planner sees no gradient; the prior's plan and critic point the way.
+FEW = mppi.Config(num_samples=2, horizon_steps=4, num_knots=2)
+
+
 def _closed_loop_return(hooks, terminal_value, seed) -> float:
-    task, config = _task(), mppi.Config(num_samples=4, horizon_steps=H, num_knots=3)
+    task, config = _task(), FEW
     state = mjzoo.reset(task, jax.random.key(seed))
     result = closed_loop.run(
         mppi, config, task, task, state, jax.random.key(seed + 100), 40, 1, hooks, terminal_value, mppi.Hyperparams()
@@ -81,7 +86,7 @@ def _closed_loop_return(hooks, terminal_value, seed) -> float:
 
 def test_a_trained_policy_prior_makes_few_samples_do_better():
     guide = _trained_prior()
-    hooks = prior.guided(closed_loop.Hooks(), mppi.Config(num_samples=4, horizon_steps=H, num_knots=3), guide)
+    hooks = prior.guided(closed_loop.Hooks(), FEW, guide)
     seeds = range(4)
     with_prior = [_closed_loop_return(hooks, prior.terminal_value(guide), s) for s in seeds]
     without = [_closed_loop_return(closed_loop.Hooks(), None, s) for s in seeds]
