@@ -13,6 +13,7 @@
     predictive_sampling   keep the best of samples around the plan  (Config, init, plan)
     dial                  DIAL-MPC: MPPI iterated with annealed noise (Config, init, plan)
     cma_es                CMA-ES over the plan's knots              (Config, init, plan)
+    ilqr                  iLQR on MJX's derivatives (MJX only)     (Config, init, plan)
 
 Each is assembled from `mjzoo.learning` or `mjzoo.planning` pieces; docs/design.md
 gives the contract a new algorithm follows. Modules load on first use.
@@ -20,7 +21,7 @@ gives the contract a new algorithm follows. Modules load on first use.
 
 from mjzoo import lazy
 
-MODULES = ("ppo", "amp", "sac", "fast_td3", "mppi", "cem", "predictive_sampling", "dial", "cma_es")
+MODULES = ("ppo", "amp", "sac", "fast_td3", "mppi", "cem", "predictive_sampling", "dial", "cma_es", "ilqr")
 
 __all__ = list(MODULES)
 

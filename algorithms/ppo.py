@@ -66,6 +66,8 @@ __all__ = [
     "TrainState",
     "acting",
     "configure",
+    "value",
+    "value_params",
     "evaluate",
     "improve",
     "init",
@@ -502,6 +504,38 @@ def policy(
         return acting(config, task, params, deterministic, components)((), obs, jnp.ones((), bool), key)[1]
 
     return act
+
+
+def value_params(config: Config, train_state: TrainState) -> dict[str, Any]:
+    """What `value` needs: the value network, the observation and value statistics, and
+    `scale` [], the factor from the learner's reward units back to the task's (1 /
+    reward_scaling, x the running std of returns that reward normalization divided by)."""
+    scale = 1.0 / train_state.hyperparams.reward_scaling
+    if config.reward_normalization:
+        scale = scale * jnp.sqrt(train_state.reward_scaling.return_stats.var + reward_scaling_lib.VAR_EPS)
+    return {
+        "value": train_state.params["value"],
+        "obs_stats": train_state.obs_stats,
+        "value_stats": train_state.value_stats,
+        "scale": jnp.asarray(scale, jnp.float32),
+    }
+
+
+def value(
+    config: Config, task: Task, components: Components = NO_COMPONENTS
+) -> Callable[[dict[str, Any], Any], jax.Array]:
+    """The learned value ``(value_params, obs) -> []`` of one observation, in the task's
+    reward units: the discounted return the critic expects from there (a planner's
+    terminal value, `mjzoo.planning.prior`)."""
+    _, value_net = _networks(config, task, components)
+
+    def value_of(params, obs):
+        out = value_net.apply(params["value"], _inputs(config, params["obs_stats"], obs)[1])[..., 0]
+        if config.value_normalization != "none":
+            out = value_norm.denormalize_values(params["value_stats"], out)
+        return out * params["scale"]
+
+    return value_of
 
 
 # --- update -------------------------------------------------------------------------

@@ -133,6 +133,7 @@ PLAYGROUND_PLANNING = base.PlanningSetup(
         "cem": dict(_PLAYGROUND_SAMPLING, num_elites=8, sigma_min=0.1),
         "dial": dict(_PLAYGROUND_SAMPLING, iterations=2, temperature=1.0, beta_horizon=4.0),
         "cma_es": dict(_PLAYGROUND_SAMPLING, num_elites=8),
+        "ilqr": dict(horizon_steps=_PLAYGROUND_SAMPLING["horizon_steps"], iterations=3),
     },
 )
 # Per env where the shared setup fails: Playground's pendulum pays reward only within ~8

@@ -112,6 +112,7 @@ PLANNING = base.PlanningSetup(
         "cem": dict(_SAMPLING, num_elites=4, sigma_min=0.2),
         "dial": dict(_SAMPLING, iterations=2, temperature=1.0, beta_horizon=4.0),
         "cma_es": dict(_SAMPLING, num_elites=4),
+        "ilqr": dict(horizon_steps=_SAMPLING["horizon_steps"], iterations=3),
     },
 )
 

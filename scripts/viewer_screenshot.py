@@ -27,7 +27,9 @@ def main() -> int:
     parser.add_argument("--env", default="pendulum_swingup")
     parser.add_argument("--num-envs", type=int, default=3)
     parser.add_argument(
-        "--planner", choices=("predictive_sampling", "cem", "mppi", "dial", "cma_es"), help="plan the env live instead"
+        "--planner",
+        choices=("predictive_sampling", "cem", "mppi", "dial", "cma_es", "ilqr"),
+        help="plan the env live instead",
     )
     parser.add_argument("--timeout", type=float, default=60.0)
     args = parser.parse_args()

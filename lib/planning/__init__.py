@@ -13,6 +13,8 @@
     learned       learned pieces planners call at run time (a terminal value), as
                   pytrees whose weights are leaves, and committed host-loop arguments
     closed_loop   simulate one task while planning with another, as one jit; Judo's hooks
+    prior         a trained policy as any planner's prior: its plan to search around, its
+                  critic as the terminal value
     realtime      the same closed loop against the wall clock, or timed offline (loads on
                   first use: the env registry needs the closed loop's hooks, not the clock)
 
@@ -26,6 +28,7 @@ from mjzoo.planning import closed_loop
 from mjzoo.planning import ensembles
 from mjzoo.planning import learned
 from mjzoo.planning import native
+from mjzoo.planning import prior
 from mjzoo.planning import sampling
 from mjzoo.planning import splines
 from mjzoo.planning.ensembles import RISKS
@@ -61,6 +64,7 @@ __all__ = [
     "ensembles",
     "learned",
     "closed_loop",
+    "prior",
     "native",
     "Native",
     "realtime",

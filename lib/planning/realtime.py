@@ -46,7 +46,7 @@ from mjzoo.running import reset
 from mjzoo.tree import Packing
 from mjzoo.types import Task
 
-__all__ = ["Problem", "offline", "realtime", "BACKENDS", "default_backend"]
+__all__ = ["Problem", "offline", "realtime", "BACKENDS", "default_backend", "planner_backends"]
 
 BACKENDS = ("auto", "mjx", "native")
 
@@ -54,6 +54,12 @@ BACKENDS = ("auto", "mjx", "native")
 def default_backend() -> str:
     """ "native" (C MuJoCo rollouts) where JAX computes on a CPU, "mjx" on a GPU or TPU."""
     return "native" if jax.default_backend() == "cpu" else "mjx"
+
+
+def planner_backends(planner: ModuleType) -> tuple[str, ...]:
+    """Where `planner` plans: its module's ``BACKENDS`` (a planner that differentiates
+    MJX, `ilqr`, has only "mjx"), by default both."""
+    return tuple(getattr(planner, "BACKENDS", ("mjx", "native")))
 
 
 @dataclasses.dataclass(frozen=True)
@@ -94,11 +100,22 @@ class Problem:
         object.__setattr__(self, "terminal_value", as_terminal_value(self.terminal_value))
         if self.backend not in BACKENDS:
             raise ValueError(f"Problem: unknown backend {self.backend!r}; choose one of {BACKENDS}")
+        supported = planner_backends(self.planner)
+        if self.backend != "auto" and self.backend not in supported:
+            name = self.planner.__name__.rsplit(".", 1)[-1]
+            raise ValueError(
+                f"Problem: {name} plans on {' or '.join(supported)} only, not {self.backend!r}: "
+                f"{(self.planner.__doc__ or '').strip().splitlines()[0]}"
+            )
 
     @property
     def physics(self) -> str:
-        """The backend in use: "mjx" or "native"."""
-        return default_backend() if self.backend == "auto" else self.backend
+        """The backend in use: "mjx" or "native" ("auto": native on a CPU where the
+        planner runs there, else mjx)."""
+        if self.backend != "auto":
+            return self.backend
+        preferred = default_backend()
+        return preferred if preferred in planner_backends(self.planner) else "mjx"
 
     @functools.cached_property
     def tasks(self) -> tuple[Task | Native, Task | Ensemble | Native]:

@@ -48,7 +48,7 @@ Impl = Annotated[
 Overwrite = Annotated[bool, tyro.conf.arg(help="replace what --out already holds")]
 
 ALGORITHMS = ("ppo", "amp", "sac", "fast_td3")
-PLANNERS = ("predictive_sampling", "cem", "mppi", "dial", "cma_es")
+PLANNERS = ("predictive_sampling", "cem", "mppi", "dial", "cma_es", "ilqr")
 _MISMATCH = object()  # what _as_type returns for a value of another type
 _USERS_ERRORS = (ValueError, TypeError, KeyError, FileNotFoundError, FileExistsError, NotADirectoryError)
 

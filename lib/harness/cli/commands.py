@@ -351,7 +351,7 @@ def evaluate(
 
 
 def plan(
-    algorithm: Annotated[Literal["predictive_sampling", "cem", "mppi", "dial", "cma_es"], tyro.conf.Positional],
+    algorithm: Annotated[Literal["predictive_sampling", "cem", "mppi", "dial", "cma_es", "ilqr"], tyro.conf.Positional],
     env: Annotated[str, tyro.conf.Positional],
     out: Path | None = None,
     seconds: float | None = None,
@@ -363,9 +363,10 @@ def plan(
     video: bool = True,
     impl: Impl = None,
     backend: Literal["auto", "mjx", "native"] = "auto",
+    prior: Path | None = None,
     render: RenderConfig = RenderConfig(),
 ) -> None:
-    """Solve ENV (a registered env or package.module:factory) closed loop with a sampling
+    """Solve ENV (a registered env or package.module:factory) closed loop with a
     planner and write summary.json (success, final_cost, plan_hz, plan_latency_ms),
     plan.png and plan.mp4 to --out (default runs/ENV-ALGORITHM-plan).
 
@@ -382,7 +383,7 @@ def plan(
     replanning every step, with no success test (final_cost tells).
 
     Args:
-      algorithm: the sampling planner.
+      algorithm: the planner (ilqr: on MJX only, a CPU included).
       env: the task, a registered env or package.module:factory.
       out: the run's directory; default runs/ENV-ALGORITHM-plan.
       seconds: simulated seconds to run; default: the env's planning setup (or one episode).
@@ -391,9 +392,12 @@ def plan(
       seed: the random seed of the reset and the planner's samples.
       video: write plan.mp4.
       backend: where rollouts run: mjx, native (C MuJoCo), or auto (native on a CPU).
+      prior: a PPO or AMP run directory trained on ENV: every replan starts from its
+        policy's plan and values the horizon's end by its critic (PPO's).
       render: how the video is drawn.
     """
     from mjzoo.harness import plan_report
+    from mjzoo.planning import prior as planning_prior
     from mjzoo.planning import realtime
 
     with as_usage_errors():
@@ -410,6 +414,13 @@ def plan(
             env, module, cfg, seconds, backend=backend, hyperparams=hyperparams, **overrides
         )
         problem.tasks  # noqa: B018 (native tasks are checked here: a refusal is one line)
+        if prior is not None:
+            guide = runs.policy_prior(prior, problem.sim_task)
+            problem = dataclasses.replace(
+                problem,
+                hooks=planning_prior.guided(problem.hooks, cfg, guide),
+                terminal_value=planning_prior.terminal_value(guide),
+            )
     key = jax.random.key(seed)
     result, stats = realtime.offline(problem, key) if offline else realtime.realtime(problem, key, plan_hz)
     summary = plan_report.write(

@@ -21,7 +21,7 @@ from mjzoo.harness.cli.arguments import build_algorithm
 from mjzoo.harness.cli.arguments import imitated
 from mjzoo.harness.cli.arguments import parse_assignments
 
-__all__ = ["Trained", "refuse_existing", "read_run", "load", "restore"]
+__all__ = ["Trained", "refuse_existing", "read_run", "load", "restore", "policy_prior"]
 
 # What each file of a run must hold (config.json is `training.run`'s, task.json `mjzoo train`'s).
 _KEYS = {"config.json": ("algorithm", "config"), "task.json": ("env", "overrides")}
@@ -103,3 +103,19 @@ def restore(run: Path, trained: Trained) -> Any:
     with as_usage_errors(checkpoints.CheckpointError):
         state, _, _ = checkpoints.restore_newest_intact(run / "checkpoints", like=template)
     return state
+
+
+def policy_prior(run: Path, task: mjzoo.Task) -> Any:
+    """RUN's trained policy (deterministic) and, for PPO, its critic in the task's reward
+    units, as a `mjzoo.planning.prior.PolicyPrior` for planning on `task` (whose
+    observation the run's networks must take). Raises a `UsageError`."""
+    from mjzoo.planning import prior
+
+    trained = load(run, None, ())
+    guide = prior.from_learner(trained.module, trained.cfg, trained.task, restore(run, trained))
+    obs = jax.eval_shape(lambda: mjzoo.reset(task, jax.random.key(0)).obs)
+    try:
+        jax.eval_shape(guide.act, obs)
+    except (ValueError, TypeError) as e:
+        raise UsageError(f"--prior {run}: its policy does not take this task's observation ({e})") from None
+    return guide

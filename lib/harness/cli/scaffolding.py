@@ -103,6 +103,7 @@ PLANNING = base.PlanningSetup(
         "cem": dict(_SAMPLING, num_elites=8, sigma_min=0.1),
         "dial": dict(_SAMPLING, iterations=2, temperature=1.0, beta_horizon=4.0),
         "cma_es": dict(_SAMPLING, num_elites=8),
+        "ilqr": dict(horizon_steps=$horizon, iterations=3),
     },
     success=None,
 )

@@ -52,7 +52,7 @@ def collect(
 
     SOURCE is a run directory: its policy on the task of its task.json or of --task,
     as in `mjzoo eval`, with deterministic actions (the mean), or with sampled ones
-    given --sampled. Or a planner, predictive_sampling, cem, mppi, dial or cma_es, closed loop on
+    given --sampled. Or a planner, predictive_sampling, cem, mppi, dial, cma_es or ilqr, closed loop on
     the task that --task names, with --config NAME=VALUE fields of its Config, as
     in `mjzoo plan`. Each of --env-overrides NAME=VALUE changes the task. Each
     episode runs for --steps control steps, by default the task's episode length (a
@@ -65,7 +65,7 @@ def collect(
     and motions/episode_NNN.npz, one mjzoo.motion clip per episode, cut at its length.
 
     Args:
-      source: a run directory, or a planner: predictive_sampling, cem, mppi, dial or cma_es.
+      source: a run directory, or a planner: predictive_sampling, cem, mppi, dial, cma_es or ilqr.
       out: the dataset's directory.
       task: the task, a registered env or package.module:factory; a planner's is required,
         a run's defaults to its task.json's.

@@ -41,7 +41,7 @@ def view(
     task: str | None = None,
     env_overrides: tuple[str, ...] = (),
     controls: Literal["zero", "random", "sliders"] = "zero",
-    planner: Literal["predictive_sampling", "cem", "mppi", "dial", "cma_es"] | None = None,
+    planner: Literal["predictive_sampling", "cem", "mppi", "dial", "cma_es", "ilqr"] | None = None,
     config: tuple[str, ...] = (),
     sampled: bool = False,
     num_envs: int = 1,
