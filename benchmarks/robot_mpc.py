@@ -1,0 +1,108 @@
+"""Whole-body sampling MPC on real robots, in real time: replan latency and success.
+
+For each robot task (`g1_standup`, `go1_trot`, `g1_track` on its walk clip) and sampling
+planner, at 256, 1024 and 4096 samples over the task's 0.5 s horizon (its `PLANNING`
+setup otherwise), the real-time runner (`mjzoo.planning.realtime`, as `mjzoo plan` runs)
+simulates the task against the wall clock: the world does not wait for a replan, and a
+slow planner falls behind as it would on a robot. Per row: replan latency (median, p95),
+the achieved replan rate, the success rate over ``--episodes`` seeds by the task's own
+measure, and its mean score. iLQR is left out: its derivatives cost (2n + 1) n forward
+passes a planning step (n ~ 100 for the G1), a planner for small systems.
+
+    python benchmarks/robot_mpc.py                                   # one GPU, ~25 minutes
+    python benchmarks/robot_mpc.py --tasks go1_trot --planners mppi dial --samples 1024
+    python benchmarks/robot_mpc.py --smoke                           # tiny sizes, on a CPU: checks the script
+
+Results: ``benchmarks/results/robot_mpc/robot_mpc_<device>.json`` (each row as it finishes).
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import time
+from pathlib import Path
+
+import jax
+import numpy as np
+
+import mjzoo
+import mjzoo.envs
+from mjzoo.algorithms import cem
+from mjzoo.algorithms import cma_es
+from mjzoo.algorithms import dial
+from mjzoo.algorithms import mppi
+from mjzoo.algorithms import predictive_sampling
+from mjzoo.planning import realtime
+
+ROOT = Path(__file__).resolve().parent.parent
+PLANNERS = {m.__name__.rsplit(".", 1)[-1]: m for m in (predictive_sampling, mppi, cem, dial, cma_es)}
+TASKS = {"g1_standup": {}, "go1_trot": {}, "g1_track": {"clips": "walk"}}
+
+
+def measure(task: str, planner: str, samples: int, episodes: int, smoke: bool) -> dict:
+    """One row: `episodes` real-time closed loops of `planner` at `samples` on `task`."""
+    module = PLANNERS[planner]
+    fields = mjzoo.envs.hyperparameters(task, planner)
+    fields["num_samples"] = samples
+    if "num_elites" in fields:
+        fields["num_elites"] = max(2, samples // 16)
+    if smoke:
+        fields.update(horizon_steps=4, num_knots=2)
+    config, hyperparams = mjzoo.planning.configure(module, fields)
+    seconds = 0.1 if smoke else None
+    problem = mjzoo.envs.closed_loop_problem(
+        task, module, config, seconds=seconds, backend="mjx", hyperparams=hyperparams, **TASKS[task]
+    )
+    start = time.perf_counter()
+    runs = []
+    for seed in range(episodes):
+        result, stats = realtime.realtime(problem, jax.random.key(seed), clock="wall")
+        solved, score = problem.success(jax.device_get(result.states))
+        runs.append({**stats, "success": bool(solved), "score": float(score)})
+        print(
+            f"  {task} {planner} {samples} seed {seed}: {stats['plan_hz']:.1f} Hz, solved {solved}, score {score:.3g}"
+        )
+    mean = lambda k: float(np.mean([r[k] for r in runs]))  # noqa: E731
+    return {
+        "task": task,
+        "planner": planner,
+        "num_samples": samples,
+        "horizon_s": config.horizon_steps * problem.sim_dt,
+        "replan_ms": {"median": mean("plan_latency_ms"), "p95": mean("plan_latency_p95_ms")},
+        "plan_hz": mean("plan_hz"),
+        "success_rate": mean("success"),
+        "score": mean("score"),
+        "episodes": episodes,
+        "seconds_with_compile": time.perf_counter() - start,
+        "runs": runs,
+    }
+
+
+def main() -> None:
+    parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
+    parser.add_argument("--tasks", nargs="+", default=list(TASKS), choices=list(TASKS))
+    parser.add_argument("--planners", nargs="+", default=list(PLANNERS), choices=list(PLANNERS))
+    parser.add_argument("--samples", nargs="+", type=int, default=[256, 1024, 4096])
+    parser.add_argument("--episodes", type=int, default=10)
+    parser.add_argument("--smoke", action="store_true", help="8 samples, a 4-step horizon, 0.1 s, one episode")
+    parser.add_argument("--out", type=Path, default=ROOT / "benchmarks" / "results" / "robot_mpc")
+    args = parser.parse_args()
+    if args.smoke:
+        args.samples, args.episodes = [8], 1
+    device = jax.devices()[0]
+    name = device.device_kind.lower().replace(" ", "_") if device.platform == "gpu" else "cpu"
+    args.out.mkdir(parents=True, exist_ok=True)
+    path = args.out / f"robot_mpc_{name}{'_smoke' if args.smoke else ''}.json"
+    rows = []
+    for task in args.tasks:
+        for planner in args.planners:
+            for samples in args.samples:
+                rows.append(measure(task, planner, samples, args.episodes, args.smoke))
+                meta = {"device": str(device), "jax": jax.__version__, "smoke": args.smoke}
+                path.write_text(json.dumps({"meta": meta, "rows": rows}, indent=1))
+    print(f"wrote {path}")
+
+
+if __name__ == "__main__":
+    main()
