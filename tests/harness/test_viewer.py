@@ -399,6 +399,8 @@ def test_a_slider_moved_in_the_browser_changes_the_scene(sim, page, tmp_path):
     for end, torque in ((1.0, 1.0), (0.0, -1.0)):
         page.click_button("Reset")
         page.move_slider("torque", end)
+        # the slider's value reaches the server before the steps that should feel it
+        _wait_for(lambda torque=torque: np.array_equal(sim.source.act_params, [torque]), timeout=60.0)
         for _ in range(10):  # each click once the last one's step is done, as a user watching it would
             steps = sim.source.steps
             page.click_button("Step")
