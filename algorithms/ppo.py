@@ -507,9 +507,8 @@ def policy(
 
 
 def value_params(config: Config, train_state: TrainState) -> dict[str, Any]:
-    """What `value` needs: the value network, the observation and value statistics, and
-    `scale` [], the factor from the learner's reward units back to the task's (1 /
-    reward_scaling, x the running std of returns that reward normalization divided by)."""
+    """What `value` needs: the value network, observation and value statistics, and `scale` [],
+    learner reward units to the task's (1 / reward_scaling, x the return std normalization divided by)."""
     scale = 1.0 / train_state.hyperparams.reward_scaling
     if config.reward_normalization:
         scale = scale * jnp.sqrt(train_state.reward_scaling.return_stats.var + reward_scaling_lib.VAR_EPS)

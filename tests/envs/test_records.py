@@ -51,6 +51,8 @@ ROBOTS = (
     "go1_joystick",
     "g1_amp_joystick",
     "g1_track",
+    "g1_standup",
+    "go1_trot",
 )
 
 
