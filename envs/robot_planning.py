@@ -52,6 +52,7 @@ from mjzoo.catalog import rewards
 from mjzoo.catalog import terminations
 from mjzoo.catalog import trackers
 from mjzoo.envs import base
+from mjzoo.envs import robot_joystick
 from mjzoo.envs.locomotion import at_pose
 from mjzoo.layers import find
 from mjzoo.robots import models
@@ -72,7 +73,7 @@ def _g1_full_contact(options: tuple[tuple[str, Any], ...]) -> tuple[physics_lib.
     Playground's G1 keyframe: Menagerie's MJX model has none)."""
     path = models.menagerie("unitree_g1") / "scene_mjx.xml"
     physics = physics_lib.load(path, **{"ctrl_dt": 0.02, **dict(options)})
-    stand = scenes.load("g1", ctrl_dt=0.02).mj_model
+    stand = scenes.spec("g1").compile()  # its keyframe alone: no MJX model built
     if stand.nq != physics.mj_model.nq or stand.nu != physics.mj_model.nu:
         raise ValueError(f"g1_standup: {path} and Playground's G1 scene differ in their joints or actuators")
     return physics, np.asarray(stand.key_qpos[0], np.float32)
@@ -194,17 +195,12 @@ def _trot_gait(ids, period, clearance, ground, model, state: State, action: Arra
     return jnp.sum(jnp.square(next_state.data.geom_xpos[ids, 2] - target))
 
 
-@functools.lru_cache(maxsize=4)
-def _go1(options: tuple[tuple[str, Any], ...]) -> physics_lib.Physics:
-    return scenes.load("go1", **{"ctrl_dt": 0.02, **dict(options)})
-
-
 def go1_trot(*, speed: float = 0.5, episode_steps: int = 500, **physics_options: Any) -> Task:
     """The Unitree Go1 trotting forward at `speed` m/s (module docstring); physics options
     override the scene's."""
     if not math.isfinite(speed):
         raise ValueError(f"go1_trot: speed must be finite, got {speed!r}")
-    physics = _go1(tuple(sorted(physics_options.items())))
+    physics = robot_joystick._scene("go1", "flat", tuple(sorted(physics_options.items())))[0]  # the joystick's compile
     m = physics.mj_model
     command = functools.partial(commands.with_velocity_command, vx=(speed, speed), vy=(0.0, 0.0), yaw_rate=(0.0, 0.0))
     return mjzoo.task(

@@ -30,7 +30,7 @@ def test_a_trot_swings_each_diagonal_pair_in_turn():
 
 
 def test_the_trot_cost_is_the_feet_heights_squared_error():
-    m = robot_planning._go1(()).mj_model
+    m = mjzoo.envs.make("go1_trot").mj_model
     data = mujoco.MjData(m)
     mujoco.mj_resetDataKeyframe(m, data, 0)
     data.time = 0.125
