@@ -2,8 +2,10 @@
 
 For cart-pole and cylinder push, predictive sampling, CEM and MPPI plan at Judo's shipped
 settings (32 rollouts, 4 knots, a 1 s horizon of 25 steps of 0.04 s for the cart-pole
-and 50 of 0.02 s for the push, replanning at 20 Hz) and at 4x the rollouts. mjzoo runs
-its real-time runner (`mjzoo.planning.realtime`, as `mjzoo plan` does) on each backend:
+and 50 of 0.02 s for the push, replanning at 20 Hz) and at 4x the rollouts; DIAL and
+CMA-ES plan at the same settings (Judo has neither), iLQR over the same horizon on MJX
+alone (it differentiates JAX physics; its row has no sample count). mjzoo runs its
+real-time runner (`mjzoo.planning.realtime`, as `mjzoo plan` does) on each backend:
 native (C MuJoCo through `mujoco.rollout`) and MJX on the CPU; the planning model takes
 Judo's time step, the simulation is the env's own. Judo (PyPI `judo-rai`, in its own
 environment: ``bash benchmarks/judo_env.sh``) runs its own tasks in the same run, through
@@ -11,14 +13,18 @@ environment: ``bash benchmarks/judo_env.sh``) runs its own tasks in the same run
 
 Per row: replan latency (median, p95), the part spent in C MuJoCo's rollouts (native and
 Judo), the rest (the fixed overhead of a replan), the achieved rate and the closed-loop
-success over seeds. By default both peers replan every 0.05 s of *simulated* time in a
-busy loop (``--clock simulated``, as judo_peer.py runs Judo); ``--clock wall`` runs
-mjzoo's real-time runner against the wall clock instead, whose sleeps between replans
-leave the CPU to cool (measured: the same replan then takes ~1.5x longer) (cart-pole: within 0.2 rad of upright over the last second; push:
-cylinder within 0.05 m of its goal at the end).
+success over seeds (cart-pole: within 0.2 rad of upright over the last second; push:
+cylinder within 0.05 m of its goal at the end). By default both peers replan every
+0.05 s of *simulated* time in a busy loop (``--clock simulated``, as judo_peer.py runs
+Judo); ``--clock wall`` runs mjzoo's real-time runner against the wall clock instead:
+the simulation runs at wall-clock rate and waits for no planner, so a slow replan acts
+late (its sleeps between replans leave the CPU to cool: measured, the same replan then
+takes ~1.5x longer).
 
-    python benchmarks/planner_cpu.py                       # everything, ~15 minutes
+    python benchmarks/planner_cpu.py                       # everything, ~25 minutes
     python benchmarks/planner_cpu.py --tasks cartpole --planners mppi --backends native --no-judo
+    python benchmarks/planner_cpu.py --clock wall --planners dial cma_es ilqr --no-judo --seeds 3 \
+        --out benchmarks/results/planner_cpu/planner_cpu_wall.json
 """
 
 from __future__ import annotations
@@ -39,13 +45,18 @@ import numpy as np
 import mjzoo
 import mjzoo.envs
 from mjzoo.algorithms import cem
+from mjzoo.algorithms import cma_es
+from mjzoo.algorithms import dial
+from mjzoo.algorithms import ilqr
 from mjzoo.algorithms import mppi
 from mjzoo.algorithms import predictive_sampling
 from mjzoo.planning import native
 from mjzoo.planning import realtime
 
 ROOT = Path(__file__).resolve().parent.parent
-PLANNERS = {"ps": predictive_sampling, "cem": cem, "mppi": mppi}
+PLANNERS = {"ps": predictive_sampling, "cem": cem, "mppi": mppi, "dial": dial, "cma_es": cma_es, "ilqr": ilqr}
+JUDO_PLANNERS = ("ps", "cem", "mppi")  # the optimizers Judo ships, run beside ours
+GRADIENT = ("ilqr",)  # planners on MJX's derivatives: no samples, no knots, no native backend
 # Judo's shipped settings per task: its horizon in planning steps of its time step.
 TASKS = {
     "cartpole": dict(env="cartpole_swingup", plan_dt=0.04, horizon_steps=25),
@@ -60,7 +71,9 @@ def problem(task: str, planner: str, samples: int, backend: str, seconds: float)
     setup = mjzoo.envs.planning(spec["env"])
     module = PLANNERS[planner]
     fields = mjzoo.envs.hyperparameters(spec["env"], module.__name__.rsplit(".", 1)[-1])
-    fields.update(num_samples=samples, num_knots=JUDO_KNOTS, horizon_steps=spec["horizon_steps"])
+    fields["horizon_steps"] = spec["horizon_steps"]
+    if planner not in GRADIENT:
+        fields.update(num_samples=samples, num_knots=JUDO_KNOTS)
     if "num_elites" in fields:
         fields["num_elites"] = max(2, samples // 8)
     overrides = {**setup.plan_overrides, "dt": spec["plan_dt"], "ctrl_dt": spec["plan_dt"], "episode_steps": 10**9}
@@ -128,7 +141,7 @@ def judo(args, out: Path) -> dict | None:
         "--tasks",
         *args.tasks,
         "--optimizers",
-        *args.planners,
+        *[p for p in args.planners if p in JUDO_PLANNERS],
         "--sample-factors",
         *map(str, args.sample_factors),
         "--seconds",
@@ -185,9 +198,11 @@ def main() -> None:
     rows = []
     for task in args.tasks:
         for planner in args.planners:
-            for factor in args.sample_factors:
-                for backend in args.backends:
-                    row = measure(task, planner, JUDO_ROLLOUTS * factor, backend, args.seconds, args.seeds, args.clock)
+            gradient = planner in GRADIENT
+            for factor in [1] if gradient else args.sample_factors:
+                for backend in [b for b in args.backends if not (gradient and b == "native")]:
+                    samples = 0 if gradient else JUDO_ROLLOUTS * factor
+                    row = measure(task, planner, samples, backend, args.seconds, args.seeds, args.clock)
                     rows.append(row)
                     print(table([row]).splitlines()[-1], flush=True)
     judo_rows = []

@@ -17,6 +17,7 @@ from pathlib import Path
 
 import jax
 import jax.numpy as jnp
+import numpy as np
 import pytest
 import tyro
 
@@ -262,6 +263,20 @@ def test_only_damaged_checkpoints_is_status_2_and_touches_nothing(capsys, tmp_pa
     )
     assert "; checkpoint 64 is damaged (" in line
     assert snapshot(run) == before
+
+
+def test_plan_takes_a_trained_runs_policy_as_its_prior(capsys, tmp_path, ppo_state):
+    """`--prior RUN` restores RUN's newest checkpoint into every replan (its effect on
+    planning is tests/planning/test_prior.py's) and the summary names the run."""
+    run = write_run(tmp_path / "run")
+    checkpoints.save(run / "checkpoints", 128, ppo_state)
+    out = tmp_path / "plan"
+    argv = ["plan", "mppi", ENV, "--prior", str(run), "--offline", "--seconds", "0.4", "--no-video", "--out", str(out)]
+    cli.main([*argv, "--config", "num_samples=4", "horizon_steps=4"])
+    capsys.readouterr()
+    summary = json.loads((out / "summary.json").read_text())
+    assert summary["prior"] == str(run) and np.isfinite(summary["final_cost"])
+    assert_usage_error(capsys, [*argv[:4], str(tmp_path / "none"), *argv[5:-1], str(tmp_path / "p2")], "none")
 
 
 def test_resuming_a_checkpoint_of_another_state_is_status_2(capsys, tmp_path, ppo_state):

@@ -432,6 +432,7 @@ def plan(
         env=env,
         algorithm=algorithm,
         mode="offline" if offline else "realtime",
+        prior=None if prior is None else str(prior),
         render=render,
     )
     print(json.dumps(summary, indent=2))
