@@ -37,7 +37,7 @@ from mjzoo.planning import realtime
 
 ROOT = Path(__file__).resolve().parent.parent
 PLANNERS = {m.__name__.rsplit(".", 1)[-1]: m for m in (predictive_sampling, mppi, cem, dial, cma_es)}
-TASKS = {"g1_standup": {}, "go1_trot": {}, "g1_track": {"clips": "walk"}}
+TASKS = {"g1_standup": {}, "go1_trot": {}, "g1_track": {"clips": "walk"}, "leap_cube_rotate": {}}
 
 
 def measure(task: str, planner: str, samples: int, episodes: int, smoke: bool) -> dict:
