@@ -60,7 +60,7 @@ from mjzoo import robots
 from mjzoo.interop import _foreign
 from mjzoo.types import Task
 
-__all__ = ["task", "load", "names", "NAME"]
+__all__ = ["task", "load", "names", "brax_ppo_config", "NAME"]
 
 NAME = "playground"  # the reward term's name, the info key and the metrics prefix
 DEFAULT_IMPL = "jax"  # runs on any device; Playground's DM Control configs default to Warp
@@ -227,13 +227,9 @@ def task(env_or_name: str | MjxEnv, **config_overrides: Any) -> Task:
 # --- Playground's tuned PPO, in mjzoo's terms ------------------------------------------------
 
 
-def ppo_hyperparameters(name: str) -> dict[str, Any]:
-    """Playground's tuned Brax PPO config for `name` as `mjzoo.algorithms.ppo.Config` fields.
-
-    Brax collects ``batch_size * num_minibatches / num_envs`` unrolls per env per update;
-    mjzoo collects one unroll that long. Networks default to Brax's (policy 4x32, value
-    5x256, swish); dict observations keep Playground's `policy_obs_key` / `value_obs_key`.
-    """
+def brax_ppo_config(name: str) -> Any:
+    """Playground's tuned Brax PPO config for `name` (an ``ml_collections.ConfigDict``),
+    from its suite's module: DM Control's, locomotion's or manipulation's params."""
     _checked_name(name)
     from mujoco_playground.config import dm_control_suite_params
     from mujoco_playground.config import locomotion_params
@@ -244,7 +240,17 @@ def ppo_hyperparameters(name: str) -> dict[str, Any]:
         params = locomotion_params
     elif name in manipulation.ALL_ENVS:
         params = manipulation_params
-    rl = params.brax_ppo_config(name)
+    return params.brax_ppo_config(name)
+
+
+def ppo_hyperparameters(name: str) -> dict[str, Any]:
+    """Playground's tuned Brax PPO config for `name` as `mjzoo.algorithms.ppo.Config` fields.
+
+    Brax collects ``batch_size * num_minibatches / num_envs`` unrolls per env per update;
+    mjzoo collects one unroll that long. Networks default to Brax's (policy 4x32, value
+    5x256, swish); dict observations keep Playground's `policy_obs_key` / `value_obs_key`.
+    """
+    rl = brax_ppo_config(name)
     unrolls = max(1, rl.batch_size * rl.num_minibatches // rl.num_envs)
     network = rl.get("network_factory", {})
     config = dict(
