@@ -42,12 +42,14 @@ from __future__ import annotations
 import atexit
 import difflib
 import functools
+import inspect
 import shutil
 import subprocess
 import tempfile
 from pathlib import Path
 from typing import Any
 
+import jax.numpy as jnp
 from mujoco_playground import MjxEnv
 from mujoco_playground import registry
 from mujoco_playground._src import dm_control_suite
@@ -181,7 +183,25 @@ def load(name: str, **config_overrides: Any) -> MjxEnv:
     except (TypeError, ValueError) as error:  # ConfigDict's type check names the field
         raise TypeError(f"playground:{name}: config override rejected: {error}") from error
     env._mjx_model = physics.quiet(env._mjx_model)  # for whoever steps it: mjzoo, Brax
+    _fit_to_current_jax(env)
     return env
+
+
+def _fit_to_current_jax(env: MjxEnv) -> None:
+    """Playground's LEAP cube envs measure the cube's orientation error with
+    ``jnp.clip(x, a_max=1.0)``, a keyword JAX 0.10 removed: this env object (not its class)
+    gets the same error written for today's JAX, for whoever steps it (mjzoo, Brax)."""
+    if hasattr(env, "_cube_orientation_error") and "a_max" not in inspect.signature(jnp.clip).parameters:
+        env._cube_orientation_error = functools.partial(_cube_orientation_error, env)
+
+
+def _cube_orientation_error(env: MjxEnv, data: Any) -> Any:
+    """[] rad: Playground's ``_cube_orientation_error`` of its LEAP hand envs, 2 asin(|v|)
+    of the normalized quaternion difference q g^-1 = (w, v) of the cube from its goal."""
+    q, g = env.get_cube_orientation(data), env.get_cube_goal_orientation(data)
+    v = g[0] * q[1:] - q[0] * g[1:] - jnp.cross(q[1:], g[1:])
+    norm = jnp.sqrt(jnp.square(jnp.dot(q, g)) + jnp.sum(jnp.square(v)))
+    return 2.0 * jnp.arcsin(jnp.minimum(jnp.linalg.norm(v) / norm, 1.0))
 
 
 # --- the adapter --------------------------------------------------------------------------
