@@ -26,7 +26,6 @@ at random inside the horizon would teach them to stop short of reaching one.
 
 from __future__ import annotations
 
-import dataclasses
 import functools
 import math
 from typing import Any
@@ -122,12 +121,6 @@ class CubeGoalState(NamedTuple):
     inner: Any = ()
 
 
-@jax.tree_util.register_dataclass
-@dataclasses.dataclass(frozen=True)
-class _Goal:
-    goal_tolerance: Array  # rad: reached when the error is below it (a named parameter)
-
-
 def with_cube_goal(task: Task, mj_model: mujoco.MjModel, tolerance: float = 0.4, body: str = "cube") -> Task:
     """`task` with a goal orientation for `body`'s free joint, drawn uniformly at reset
     and again at the end of any step that leaves the body within `tolerance` rad of it
@@ -137,7 +130,8 @@ def with_cube_goal(task: Task, mj_model: mujoco.MjModel, tolerance: float = 0.4,
     that reached one). Rewards read the goal an action was for from `state`."""
     tolerance = checks.number("with_cube_goal", "tolerance", tolerance, 0.0, math.pi)
     quat = names.free_joint_addresses(mj_model, body, "with_cube_goal")[0][3:]
-    step = Partial(_goal_step, task.step, jnp.asarray(quat), _Goal(jnp.float32(tolerance)))
+    numbers = {"goal_tolerance": jnp.float32(tolerance)}  # a dict key names it: `with_params` reaches it
+    step = Partial(_goal_step, task.step, jnp.asarray(quat), numbers)
     return layered(task, CubeGoalState, Partial(_goal_reset, task.start), step)
 
 
@@ -155,10 +149,10 @@ def _goal_reset(reset_fn, model, key) -> State:
     return _publish(state, state.obs, CubeGoalState(goal, jnp.int32(0)))
 
 
-def _goal_step(step_fn, quat, g: _Goal, model, state: State, action, key) -> State:
+def _goal_step(step_fn, quat, numbers: dict, model, state: State, action, key) -> State:
     record, inner = peel(state, CubeGoalState)
     next_state = step_fn(model, inner.replace(obs=state.obs[:-4]), action, key)
-    hit = orientation_error(next_state.data.qpos[quat], record.goal) < g.goal_tolerance
+    hit = orientation_error(next_state.data.qpos[quat], record.goal) < numbers["goal_tolerance"]
     goal = jnp.where(hit, random_orientation(jax.random.fold_in(key, GOAL_STREAM)), record.goal)
     next_state = next_state.replace(metrics={**next_state.metrics, "goal/reached": hit.astype(jnp.float32)})
     return _publish(next_state, next_state.obs, CubeGoalState(goal, record.reached + hit.astype(jnp.int32)))
