@@ -62,22 +62,15 @@ PUBLISHED = {
     # Playground's paper: Brax PPO trains LeapCubeReorient (200M steps) in about 33 min on an RTX 4090.
     "LeapCubeReorient": {"brax_train_minutes_rtx_4090": 33},
 }
-# num_timesteps=1: Brax rounds it up to one epoch between evaluations (`brax_env_steps`).
-SMOKE = dict(
-    num_envs=16,
-    batch_size=16,
-    num_minibatches=4,
-    num_updates_per_batch=2,
-    num_evals=3,
-    episode_length=50,
-    num_timesteps=1,
-)
+SMOKE = dict(num_envs=16, batch_size=16, num_minibatches=4, num_updates_per_batch=2, num_evals=3, episode_length=50)
+SMOKE_STEPS = 1  # Brax rounds it up to one epoch between evaluations (`brax_env_steps`)
 
 
 def brax_config(name: str, steps: int | None, smoke: bool, evals: int | None = None) -> dict:
     """Playground's tuned Brax PPO config for `name` (its suite's: DM Control, locomotion
     or manipulation), `steps` long (None: its own length), `evals` evaluations."""
     config = {**playground.brax_ppo_config(name).to_dict(), **(SMOKE if smoke else {})}
+    steps = steps or (SMOKE_STEPS if smoke else None)
     config.update(**({"num_timesteps": steps} if steps else {}), **({"num_evals": evals} if evals else {}))
     return config
 
