@@ -3,7 +3,8 @@
 For each Playground env and physics implementation: (a) raw batched stepping of the env
 (`jax.vmap(env.step)` in a `lax.scan`), (b) Brax PPO as Playground trains it
 (`brax.training.agents.ppo.train` on the env, `mujoco_playground.wrapper.wrap_for_brax_training`,
-Playground's tuned `dm_control_suite_params.brax_ppo_config`), (c) mjzoo PPO on the same env
+Playground's tuned config from its suite's params: DM Control's, locomotion's or
+manipulation's, `playground.brax_ppo_config`), (c) mjzoo PPO on the same env
 object through `mjzoo.interop.playground.task`, with the same hyperparameters in mjzoo's
 terms (`playground.ppo_hyperparameters`), evaluated as often as Brax. Reported, per seed
 and measured the same way for both: steps/s over the wall-clock from the first to the
@@ -17,6 +18,7 @@ the issue quotes one, is printed beside them.
     python benchmarks/playground.py --envs CheetahRun --trainers brax      # merges into the JSON
     python benchmarks/playground.py --envs CheetahRun --first-seed 1      # a second seed beside the first
     python benchmarks/playground.py --envs CartpoleBalance --smoke       # tiny sizes, on a CPU
+    python benchmarks/playground.py --envs LeapCubeReorient              # manipulation's tuned config, 200M steps
 """
 
 from __future__ import annotations
@@ -56,17 +58,20 @@ PUBLISHED = {
         "brax_steps_per_s_warp": 995_000,
         "return": 993.0,
         "at_steps": 9_800_000,
-    }
+    },
+    # Playground's paper: Brax PPO trains LeapCubeReorient (200M steps) in about 33 min on an RTX 4090.
+    "LeapCubeReorient": {"brax_train_minutes_rtx_4090": 33},
 }
 SMOKE = dict(num_envs=16, batch_size=16, num_minibatches=4, num_updates_per_batch=2, num_evals=3, episode_length=50)
+SMOKE_STEPS = 1  # Brax rounds it up to one epoch between evaluations (`brax_env_steps`)
 
 
-def brax_config(name: str, steps: int, smoke: bool, evals: int | None = None) -> dict:
-    """Playground's tuned Brax PPO config for `name`, `steps` long (`evals` evaluations)."""
-    from mujoco_playground.config import dm_control_suite_params
-
-    config = dm_control_suite_params.brax_ppo_config(name).to_dict()
-    config.update(num_timesteps=steps, **({"num_evals": evals} if evals else {}), **(SMOKE if smoke else {}))
+def brax_config(name: str, steps: int | None, smoke: bool, evals: int | None = None) -> dict:
+    """Playground's tuned Brax PPO config for `name` (its suite's: DM Control, locomotion
+    or manipulation), `steps` long (None: its own length), `evals` evaluations."""
+    config = {**playground.brax_ppo_config(name).to_dict(), **(SMOKE if smoke else {})}
+    steps = steps or (SMOKE_STEPS if smoke else None)
+    config.update(**({"num_timesteps": steps} if steps else {}), **({"num_evals": evals} if evals else {}))
     return config
 
 
@@ -202,7 +207,7 @@ TRAINERS = {
 def measure(
     name: str,
     impl: str,
-    steps: int,
+    steps: int | None,
     seeds: range,
     trainers: list[str],
     smoke: bool,
@@ -332,9 +337,9 @@ def main() -> None:
     parser.add_argument(
         "--steps",
         type=int,
-        default=60_000_000,
-        help="Brax's num_timesteps (Playground's: 60M, which Brax rounds up to 88.5M); mjzoo trains "
-        "as many env steps as Brax does",
+        default=None,
+        help="Brax's num_timesteps (default: Playground's for the env, 60M for DM Control, which Brax "
+        "rounds up to 88.5M, 200M for LeapCubeReorient); mjzoo trains as many env steps as Brax does",
     )
     parser.add_argument(
         "--evals",
@@ -369,7 +374,8 @@ def main() -> None:
     args = parser.parse_args()
     overrides = arguments.parse_assignments(tuple(args.set), "--set")
     device = jax.devices()[0].device_kind
-    print(f"device: {device}, jax {jax.__version__}, Brax's num_timesteps {args.steps:,}", flush=True)
+    steps = "Playground's" if args.steps is None else f"{args.steps:,}"
+    print(f"device: {device}, jax {jax.__version__}, Brax's num_timesteps {steps}", flush=True)
     args.out.mkdir(parents=True, exist_ok=True)
     path = args.out / (args.name or f"playground_{jax.default_backend()}.json")
     rows = json.loads(path.read_text())["rows"] if path.exists() else []

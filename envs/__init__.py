@@ -45,6 +45,7 @@ from mjzoo.envs import cartpole
 from mjzoo.envs import cylinder_push
 from mjzoo.envs import humanoid_amp
 from mjzoo.envs import joystick
+from mjzoo.envs import leap_cube
 from mjzoo.envs import locomotion
 from mjzoo.envs import motion_tracking
 from mjzoo.envs import pendulum
@@ -108,6 +109,7 @@ _REGISTRY: dict[str, base.EnvSpec] = {
     # Whole-body MPC on real robots (envs/robot_planning.py; mjzoo[robots])
     "g1_standup": robot_planning.G1_STANDUP,
     "go1_trot": robot_planning.GO1_TROT,
+    "leap_cube_rotate": leap_cube.LEAP_CUBE_ROTATE,  # dexterous manipulation (envs/leap_cube.py)
     # AMP: move like a reference motion (envs/humanoid_amp.py)
     "humanoid_amp_walk": humanoid_amp.WALK,
     "humanoid_amp_joystick": humanoid_amp.JOYSTICK,

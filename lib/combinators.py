@@ -483,7 +483,8 @@ def _guard_step(max_qvel, inner: Task, model, state: State, action: Array, key: 
         info=tree.where(ok, next_state.info, state.info),
         layers=tree.where(ok, next_state.layers, state.layers),
     )
-    metrics = jax.tree.map(lambda v: jnp.where(jnp.isfinite(v), v, 0.0), next_state.metrics)
+    # zeros_like, not 0.0: an integer metric (a count) keeps its dtype, as a rollout's carry must
+    metrics = jax.tree.map(lambda v: jnp.where(jnp.isfinite(v), v, jnp.zeros_like(v)), next_state.metrics)
     metrics = {**metrics, "diverged": (~ok).astype(jnp.float32), **batching.overflow_metrics(data)}
     safe = safe.replace(metrics=metrics)
     terms = {k: jnp.where(ok, v, 0.0) for k, v in terms.items()}

@@ -503,6 +503,22 @@ def test_divergence_guard_qvel_explosion():
     np.testing.assert_allclose(loose.data.qvel[:, 0], [500.0, 2000.0], rtol=1e-5)
 
 
+def _counting(step_fn, model, state, action, key):
+    next_state = step_fn(model, state, action, key)
+    return next_state.replace(metrics={**next_state.metrics, "count": jnp.int32(1)})
+
+
+def test_divergence_guard_keeps_an_integer_metric_an_integer():
+    """A count in metrics (goals reached, say) stays int32: a float would change the type of
+    a rollout's carry, which a scan refuses. Traced only."""
+    inner = make_task()
+    task = mjzoo.with_divergence_guard(inner.replace(step=Partial(_counting, inner.step)))
+    state = jax.eval_shape(task.reset, task.model, KEY)
+    state = state.replace(metrics={**state.metrics, "count": jax.ShapeDtypeStruct((), jnp.int32)})
+    after = jax.eval_shape(lambda s: mjzoo.transition(task, s, jnp.ones(1), KEY), state)
+    assert after.metrics["count"].dtype == jnp.int32
+
+
 @pytest.mark.parametrize("max_qvel", [0.0, -1.0, float("nan")])
 def test_divergence_guard_invalid_max_qvel(max_qvel):
     with pytest.raises(ValueError, match="max_qvel"):

@@ -42,12 +42,14 @@ from __future__ import annotations
 import atexit
 import difflib
 import functools
+import inspect
 import shutil
 import subprocess
 import tempfile
 from pathlib import Path
 from typing import Any
 
+import jax.numpy as jnp
 from mujoco_playground import MjxEnv
 from mujoco_playground import registry
 from mujoco_playground._src import dm_control_suite
@@ -60,7 +62,7 @@ from mjzoo import robots
 from mjzoo.interop import _foreign
 from mjzoo.types import Task
 
-__all__ = ["task", "load", "names", "NAME"]
+__all__ = ["task", "load", "names", "brax_ppo_config", "NAME"]
 
 NAME = "playground"  # the reward term's name, the info key and the metrics prefix
 DEFAULT_IMPL = "jax"  # runs on any device; Playground's DM Control configs default to Warp
@@ -181,7 +183,25 @@ def load(name: str, **config_overrides: Any) -> MjxEnv:
     except (TypeError, ValueError) as error:  # ConfigDict's type check names the field
         raise TypeError(f"playground:{name}: config override rejected: {error}") from error
     env._mjx_model = physics.quiet(env._mjx_model)  # for whoever steps it: mjzoo, Brax
+    _fit_to_current_jax(env)
     return env
+
+
+def _fit_to_current_jax(env: MjxEnv) -> None:
+    """Playground's LEAP cube envs measure the cube's orientation error with
+    ``jnp.clip(x, a_max=1.0)``, a keyword JAX 0.10 removed: this env object (not its class)
+    gets the same error written for today's JAX, for whoever steps it (mjzoo, Brax)."""
+    if hasattr(env, "_cube_orientation_error") and "a_max" not in inspect.signature(jnp.clip).parameters:
+        env._cube_orientation_error = functools.partial(_cube_orientation_error, env)
+
+
+def _cube_orientation_error(env: MjxEnv, data: Any) -> Any:
+    """[] rad: Playground's ``_cube_orientation_error`` of its LEAP hand envs, 2 asin(|v|)
+    of the normalized quaternion difference q g^-1 = (w, v) of the cube from its goal."""
+    q, g = env.get_cube_orientation(data), env.get_cube_goal_orientation(data)
+    v = g[0] * q[1:] - q[0] * g[1:] - jnp.cross(q[1:], g[1:])
+    norm = jnp.sqrt(jnp.square(jnp.dot(q, g)) + jnp.sum(jnp.square(v)))
+    return 2.0 * jnp.arcsin(jnp.minimum(jnp.linalg.norm(v) / norm, 1.0))
 
 
 # --- the adapter --------------------------------------------------------------------------
@@ -227,13 +247,9 @@ def task(env_or_name: str | MjxEnv, **config_overrides: Any) -> Task:
 # --- Playground's tuned PPO, in mjzoo's terms ------------------------------------------------
 
 
-def ppo_hyperparameters(name: str) -> dict[str, Any]:
-    """Playground's tuned Brax PPO config for `name` as `mjzoo.algorithms.ppo.Config` fields.
-
-    Brax collects ``batch_size * num_minibatches / num_envs`` unrolls per env per update;
-    mjzoo collects one unroll that long. Networks default to Brax's (policy 4x32, value
-    5x256, swish); dict observations keep Playground's `policy_obs_key` / `value_obs_key`.
-    """
+def brax_ppo_config(name: str) -> Any:
+    """Playground's tuned Brax PPO config for `name` (an ``ml_collections.ConfigDict``),
+    from its suite's module: DM Control's, locomotion's or manipulation's params."""
     _checked_name(name)
     from mujoco_playground.config import dm_control_suite_params
     from mujoco_playground.config import locomotion_params
@@ -244,7 +260,17 @@ def ppo_hyperparameters(name: str) -> dict[str, Any]:
         params = locomotion_params
     elif name in manipulation.ALL_ENVS:
         params = manipulation_params
-    rl = params.brax_ppo_config(name)
+    return params.brax_ppo_config(name)
+
+
+def ppo_hyperparameters(name: str) -> dict[str, Any]:
+    """Playground's tuned Brax PPO config for `name` as `mjzoo.algorithms.ppo.Config` fields.
+
+    Brax collects ``batch_size * num_minibatches / num_envs`` unrolls per env per update;
+    mjzoo collects one unroll that long. Networks default to Brax's (policy 4x32, value
+    5x256, swish); dict observations keep Playground's `policy_obs_key` / `value_obs_key`.
+    """
+    rl = brax_ppo_config(name)
     unrolls = max(1, rl.batch_size * rl.num_minibatches // rl.num_envs)
     network = rl.get("network_factory", {})
     config = dict(

@@ -181,3 +181,22 @@ def test_a_reset_is_strongly_typed_as_a_step_returns_it():
     compiled again (49 s of an H100 run). Traced only: no compile."""
     first = jax.eval_shape(lambda key: mjzoo.reset(playground.task("CheetahRun"), key), jax.random.key(0))
     assert [jax.tree_util.keystr(p) for p, x in jax.tree_util.tree_flatten_with_path(first)[0] if x.weak_type] == []
+
+
+def test_the_leap_cube_error_runs_on_current_jax():
+    """LeapCubeReorient measures its cube's orientation error with a keyword JAX 0.10
+    removed; the env `load` returns measures it: the cube turned 0.5 rad about z from its
+    goal. Eager, on the host state: no compile of the hand."""
+    import mujoco
+    from mujoco import mjx
+
+    if playground.needs_network("LeapCubeReorient"):
+        pytest.skip("the LEAP hand's model is not here")
+    env = playground.load("LeapCubeReorient")
+    m = env.mj_model
+    data = mujoco.MjData(m)
+    mujoco.mj_resetDataKeyframe(m, data, 0)
+    data.mocap_quat[0] = [1.0, 0.0, 0.0, 0.0]
+    data.qpos[19:23] = [np.cos(0.25), 0.0, 0.0, np.sin(0.25)]
+    mujoco.mj_forward(m, data)
+    assert float(env._cube_orientation_error(mjx.put_data(m, data))) == pytest.approx(0.5, abs=1e-4)
