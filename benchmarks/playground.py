@@ -3,7 +3,7 @@
 For each Playground env and physics implementation: (a) raw batched stepping of the env
 (`jax.vmap(env.step)` in a `lax.scan`), (b) Brax PPO as Playground trains it
 (`brax.training.agents.ppo.train` on the env, `mujoco_playground.wrapper.wrap_for_brax_training`,
-Playground's tuned `dm_control_suite_params.brax_ppo_config`), (c) mjzoo PPO on the same env
+Playground's tuned config of the env's suite, `playground.brax_ppo_config`), (c) mjzoo PPO on the same env
 object through `mjzoo.interop.playground.task`, with the same hyperparameters in mjzoo's
 terms (`playground.ppo_hyperparameters`), evaluated as often as Brax. Reported, per seed
 and measured the same way for both: steps/s over the wall-clock from the first to the
@@ -17,6 +17,7 @@ the issue quotes one, is printed beside them.
     python benchmarks/playground.py --envs CheetahRun --trainers brax      # merges into the JSON
     python benchmarks/playground.py --envs CheetahRun --first-seed 1      # a second seed beside the first
     python benchmarks/playground.py --envs CartpoleBalance --smoke       # tiny sizes, on a CPU
+    python benchmarks/playground.py --envs PandaPickCube                 # manipulation: its tuned 20M steps
 """
 
 from __future__ import annotations
@@ -61,12 +62,12 @@ PUBLISHED = {
 SMOKE = dict(num_envs=16, batch_size=16, num_minibatches=4, num_updates_per_batch=2, num_evals=3, episode_length=50)
 
 
-def brax_config(name: str, steps: int, smoke: bool, evals: int | None = None) -> dict:
-    """Playground's tuned Brax PPO config for `name`, `steps` long (`evals` evaluations)."""
-    from mujoco_playground.config import dm_control_suite_params
-
-    config = dm_control_suite_params.brax_ppo_config(name).to_dict()
-    config.update(num_timesteps=steps, **({"num_evals": evals} if evals else {}), **(SMOKE if smoke else {}))
+def brax_config(name: str, steps: int | None, smoke: bool, evals: int | None = None) -> dict:
+    """Playground's tuned Brax PPO config for `name` (its suite's), `steps` long (`evals`
+    evaluations; None: Playground's)."""
+    config = playground.brax_ppo_config(name).to_dict()
+    config.update(**({"num_timesteps": steps} if steps else {}), **({"num_evals": evals} if evals else {}))
+    config.update(SMOKE if smoke else {})
     return config
 
 
@@ -332,9 +333,9 @@ def main() -> None:
     parser.add_argument(
         "--steps",
         type=int,
-        default=60_000_000,
-        help="Brax's num_timesteps (Playground's: 60M, which Brax rounds up to 88.5M); mjzoo trains "
-        "as many env steps as Brax does",
+        default=None,
+        help="Brax's num_timesteps (default: Playground's for the env, 60M for DM Control, which Brax "
+        "rounds up to 88.5M; 20M for PandaPickCube); mjzoo trains as many env steps as Brax does",
     )
     parser.add_argument(
         "--evals",
@@ -369,7 +370,8 @@ def main() -> None:
     args = parser.parse_args()
     overrides = arguments.parse_assignments(tuple(args.set), "--set")
     device = jax.devices()[0].device_kind
-    print(f"device: {device}, jax {jax.__version__}, Brax's num_timesteps {args.steps:,}", flush=True)
+    steps = f"{args.steps:,}" if args.steps else "Playground's"
+    print(f"device: {device}, jax {jax.__version__}, Brax's num_timesteps {steps}", flush=True)
     args.out.mkdir(parents=True, exist_ok=True)
     path = args.out / (args.name or f"playground_{jax.default_backend()}.json")
     rows = json.loads(path.read_text())["rows"] if path.exists() else []

