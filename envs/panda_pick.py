@@ -42,6 +42,7 @@ from mjzoo.catalog import actuators
 from mjzoo.catalog import rewards
 from mjzoo.catalog import trackers
 from mjzoo.envs import base
+from mjzoo.envs import robot_planning
 from mjzoo.robots import models
 from mjzoo.types import State
 from mjzoo.types import Task
@@ -167,22 +168,9 @@ def _held_at_target(states) -> tuple[bool, float]:
     return base.held_near(states, lambda s: np.linalg.norm(cube - np.asarray(s.info["target"]), axis=-1), 0.05)
 
 
-# Sampling planners (`mjzoo plan mppi panda_pick`): 1024 samples over 0.5 s (25 control
-# steps), replanning every step.
-_SAMPLING = dict(num_samples=1024, horizon_steps=25, num_knots=4, noise_scale=0.3)
-PLANNING = base.PlanningSetup(
-    seconds=5.0,
-    replan_every=1,
-    plan_overrides={},
-    success=_held_at_target,
-    configs={
-        "predictive_sampling": _SAMPLING,
-        "mppi": dict(_SAMPLING, temperature=0.1),
-        "cem": dict(_SAMPLING, num_elites=64),
-        "dial": dict(_SAMPLING, iterations=2),
-        "cma_es": dict(_SAMPLING, num_elites=64),
-    },
-)
+# Sampling planners (`mjzoo plan mppi panda_pick`): as the whole-body robots, 1024 samples
+# over 0.5 s replanning every step, with a narrower search (0.3 rad) for the grasp.
+PLANNING = robot_planning._planning(5.0, _held_at_target, num_knots=4, dial_iterations=2, noise_scale=0.3)
 PANDA_PICK = base.EnvSpec(
     make=panda_pick, description="Franka Panda lifting a cube to a target (MPC-friendly)", planning=PLANNING
 )
