@@ -19,6 +19,7 @@ the issue quotes one, is printed beside them.
     python benchmarks/playground.py --envs CheetahRun --first-seed 1      # a second seed beside the first
     python benchmarks/playground.py --envs CartpoleBalance --smoke       # tiny sizes, on a CPU
     python benchmarks/playground.py --envs LeapCubeReorient              # manipulation's tuned config, 200M steps
+    python benchmarks/playground.py --envs PandaPickCube                 # manipulation: its tuned 20M steps
 """
 
 from __future__ import annotations
@@ -339,7 +340,7 @@ def main() -> None:
         type=int,
         default=None,
         help="Brax's num_timesteps (default: Playground's for the env, 60M for DM Control, which Brax "
-        "rounds up to 88.5M, 200M for LeapCubeReorient); mjzoo trains as many env steps as Brax does",
+        "rounds up to 88.5M, 200M for LeapCubeReorient, 20M for PandaPickCube); mjzoo trains as many env steps as Brax does",
     )
     parser.add_argument(
         "--evals",

@@ -1,7 +1,7 @@
 """Whole-body sampling MPC on real robots, in real time: replan latency and success.
 
-For each robot task (`g1_standup`, `go1_trot`, `g1_track` on its walk clip, `leap_cube_rotate`) and sampling
-planner, at 256, 1024 and 4096 samples over the task's 0.5 s horizon (its `PLANNING`
+For each robot task (`g1_standup`, `go1_trot`, `g1_track` on its walk clip,
+`leap_cube_rotate`, `panda_pick`) and sampling planner, at 256, 1024 and 4096 samples over the task's 0.5 s horizon (its `PLANNING`
 setup otherwise), the real-time runner (`mjzoo.planning.realtime`, as `mjzoo plan` runs)
 simulates the task against the wall clock: the world does not wait for a replan, and a
 slow planner falls behind as it would on a robot. Per row: replan latency (median, p95),
@@ -37,7 +37,7 @@ from mjzoo.planning import realtime
 
 ROOT = Path(__file__).resolve().parent.parent
 PLANNERS = {m.__name__.rsplit(".", 1)[-1]: m for m in (predictive_sampling, mppi, cem, dial, cma_es)}
-TASKS = {"g1_standup": {}, "go1_trot": {}, "g1_track": {"clips": "walk"}, "leap_cube_rotate": {}}
+TASKS = {"g1_standup": {}, "go1_trot": {}, "g1_track": {"clips": "walk"}, "leap_cube_rotate": {}, "panda_pick": {}}
 
 
 def measure(task: str, planner: str, samples: int, episodes: int, smoke: bool) -> dict:

@@ -48,6 +48,7 @@ from mjzoo.envs import joystick
 from mjzoo.envs import leap_cube
 from mjzoo.envs import locomotion
 from mjzoo.envs import motion_tracking
+from mjzoo.envs import panda_pick
 from mjzoo.envs import pendulum
 from mjzoo.envs import point_mass
 from mjzoo.envs import robot_amp
@@ -110,6 +111,7 @@ _REGISTRY: dict[str, base.EnvSpec] = {
     "g1_standup": robot_planning.G1_STANDUP,
     "go1_trot": robot_planning.GO1_TROT,
     "leap_cube_rotate": leap_cube.LEAP_CUBE_ROTATE,  # dexterous manipulation (envs/leap_cube.py)
+    "panda_pick": panda_pick.PANDA_PICK,  # a Panda lifts a cube (envs/panda_pick.py)
     # AMP: move like a reference motion (envs/humanoid_amp.py)
     "humanoid_amp_walk": humanoid_amp.WALK,
     "humanoid_amp_joystick": humanoid_amp.JOYSTICK,

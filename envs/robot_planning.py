@@ -142,10 +142,12 @@ def _stood_up(states) -> tuple[bool, float]:
     return base.held_near(states, lambda s: np.asarray(s.data.qpos[..., 2]) - stand_z, 0.1)
 
 
-def _planning(seconds: float, success, num_knots: int, dial_iterations: int) -> base.PlanningSetup:
+def _planning(
+    seconds: float, success, num_knots: int, dial_iterations: int, noise_scale: float = 0.5
+) -> base.PlanningSetup:
     """Every sampling planner at 1024 samples over 0.5 s (25 control steps), replanning
-    every step; the elites and DIAL's iterations as the robots need them."""
-    sampling = dict(num_samples=1024, horizon_steps=25, num_knots=num_knots, noise_scale=0.5)
+    every step; the knots, noise and DIAL's iterations as the robots need them."""
+    sampling = dict(num_samples=1024, horizon_steps=25, num_knots=num_knots, noise_scale=noise_scale)
     return base.PlanningSetup(
         seconds=seconds,
         replan_every=1,

@@ -46,9 +46,11 @@ import inspect
 import shutil
 import subprocess
 import tempfile
+from collections.abc import Mapping
 from pathlib import Path
 from typing import Any
 
+import jax
 import jax.numpy as jnp
 from mujoco_playground import MjxEnv
 from mujoco_playground import registry
@@ -268,7 +270,8 @@ def ppo_hyperparameters(name: str) -> dict[str, Any]:
 
     Brax collects ``batch_size * num_minibatches / num_envs`` unrolls per env per update;
     mjzoo collects one unroll that long. Networks default to Brax's (policy 4x32, value
-    5x256, swish); dict observations keep Playground's `policy_obs_key` / `value_obs_key`.
+    5x256, swish); Playground's `policy_obs_key` / `value_obs_key` are kept for an env that
+    observes a dict (whose observation is then traced once), dropped for a flat one.
     """
     rl = brax_ppo_config(name)
     unrolls = max(1, rl.batch_size * rl.num_minibatches // rl.num_envs)
@@ -296,7 +299,14 @@ def ppo_hyperparameters(name: str) -> dict[str, Any]:
         reward_normalization=False,
         total_steps=rl.num_timesteps,
     )
-    for key in ("policy_obs_key", "value_obs_key"):
-        if key in network:
-            config[key] = network[key]
+    keys = {key: network[key] for key in ("policy_obs_key", "value_obs_key") if key in network}
+    if keys and _observes_dict(name):  # Brax reads them from a dict observation alone (PandaPickCube's is flat)
+        config.update(keys)
     return config
+
+
+@functools.lru_cache(maxsize=None)
+def _observes_dict(name: str) -> bool:
+    """Whether Playground's env `name` observes a dict (loads it and traces a reset)."""
+    env = load(name)
+    return isinstance(jax.eval_shape(env.reset, jax.random.key_data(jax.random.key(0))).obs, Mapping)

