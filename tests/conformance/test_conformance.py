@@ -195,12 +195,19 @@ LOCOMOTION = [
 # The real robots' joysticks (mjzoo[robots]) run check_task in tests/envs/test_robot_joystick.py:
 # a robot's compile costs minutes of the suite's CPU.
 # So do the tracking envs' (tests/envs/test_motion_tracking.py, tests/catalog/test_tracking.py)
-# and the robot MPC tasks' (tests/envs/test_robot_planning.py).
+# and the robot MPC tasks' (tests/envs/test_robot_planning.py, test_leap_cube.py, test_panda_pick.py).
 ROBOTS = [
     e
     for e in mjzoo.envs.names()
     if mjzoo.envs.factory(e).__module__
-    in ("mjzoo.envs.robot_joystick", "mjzoo.envs.motion_tracking", "mjzoo.envs.robot_amp", "mjzoo.envs.robot_planning")
+    in (
+        "mjzoo.envs.robot_joystick",
+        "mjzoo.envs.motion_tracking",
+        "mjzoo.envs.robot_amp",
+        "mjzoo.envs.robot_planning",
+        "mjzoo.envs.leap_cube",
+        "mjzoo.envs.panda_pick",
+    )
 ]
 ENVS = [e for e in mjzoo.envs.names() if e not in LOCOMOTION + ROBOTS]
 # The stack runs on one env per model: cartpole_swingup and cartpole_amp_swingup are
