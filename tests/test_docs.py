@@ -94,13 +94,6 @@ SHRUNK = {
             "masses, cost ~9 s more of -O0 CPU on a 2-core CPU",
         ),
     },
-    "docs/own-task.md": {
-        "for i in range(50):  # 1 s": (
-            "for i in range(5):  # 1 s",
-            "5 replans, not 50: the planner compiles the same, and 45 more replans cost ~14 s of -O0 CPU on a "
-            "2-core CPU (the block asserts nothing on the distance it prints)",
-        ),
-    },
     "docs/sweeps.md": {
         "total_steps=327_680": (
             "total_steps=2 * 64 * 32",
