@@ -1,8 +1,8 @@
 """Whole-body sampling MPC on real robots, in real time: replan latency and success.
 
 For each robot task (`g1_standup`, `go1_trot`, `g1_track` on its walk clip,
-`leap_cube_rotate`, `panda_pick`) and sampling planner, at 256, 1024 and 4096 samples over the task's 0.5 s horizon (its `PLANNING`
-setup otherwise), the real-time runner (`mjzoo.planning.realtime`, as `mjzoo plan` runs)
+`leap_cube_rotate`, `panda_pick`) and sampling planner, at 256, 1024 and 4096 samples
+over the task's 0.5 s horizon (its `PLANNING` setup otherwise), the real-time runner (`mjzoo.planning.realtime`, as `mjzoo plan` runs)
 simulates the task against the wall clock: the world does not wait for a replan, and a
 slow planner falls behind as it would on a robot. Per row: replan latency (median, p95),
 the achieved replan rate, the success rate over ``--episodes`` seeds by the task's own

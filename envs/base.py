@@ -75,6 +75,35 @@ class PlanningSetup:
         return self.plan_view(task) if self.plan_view else task
 
 
+def sampling_setup(
+    seconds: float,
+    success: Callable[[Any], tuple[bool, float]],
+    *,
+    horizon_steps: int,
+    num_knots: int,
+    noise_scale: float,
+    dial_iterations: int = 2,
+    plan_overrides: dict[str, Any] | None = None,
+) -> PlanningSetup:
+    """The real robots' setup: every sampling planner at 1024 samples over `horizon_steps`
+    control steps, replanning every step; MPPI at temperature 0.1, CEM and CMA-ES keeping
+    64 elites, DIAL annealing over `dial_iterations`."""
+    sampling = dict(num_samples=1024, horizon_steps=horizon_steps, num_knots=num_knots, noise_scale=noise_scale)
+    return PlanningSetup(
+        seconds=seconds,
+        replan_every=1,
+        plan_overrides=plan_overrides or {},
+        success=success,
+        configs={
+            "predictive_sampling": sampling,
+            "mppi": dict(sampling, temperature=0.1),
+            "cem": dict(sampling, num_elites=64),
+            "dial": dict(sampling, iterations=dial_iterations),
+            "cma_es": dict(sampling, num_elites=64),
+        },
+    )
+
+
 def held_near(
     states, value_fn: Callable[[Any], np.ndarray], tolerance: float, seconds: float = 1.0
 ) -> tuple[bool, float]:

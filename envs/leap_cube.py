@@ -47,6 +47,7 @@ from mjzoo.catalog import observations
 from mjzoo.catalog import resets
 from mjzoo.catalog import rewards
 from mjzoo.catalog import trackers
+from mjzoo.catalog import tracking
 from mjzoo.envs import base
 from mjzoo.envs.locomotion import at_pose
 from mjzoo.layers import find
@@ -60,7 +61,6 @@ from mjzoo.types import Task
 __all__ = [
     "leap_cube_rotate",
     "with_cube_goal",
-    "orientation_error",
     "orientation_cost",
     "hold_cost",
     "cube_dropped",
@@ -83,16 +83,6 @@ def _scene(options: tuple[tuple[str, Any], ...]) -> physics_lib.Physics:
 
 
 # --- orientations -------------------------------------------------------------------------
-
-
-def orientation_error(quat: Array, goal: Array) -> Array:
-    """[] the angle (rad, in [0, pi]) of the rotation taking unit quaternion `goal` [4]
-    to `quat` [4] (wxyz; either sign of each is the same rotation)."""
-    w = jnp.abs(jnp.dot(quat, goal))  # |cos(angle / 2)|
-    cross = quat[0] * goal[1:] - goal[0] * quat[1:] + jnp.cross(goal[1:], quat[1:])
-    sin_sq = jnp.sum(jnp.square(cross))
-    sin = jnp.sqrt(jnp.where(sin_sq > 0, sin_sq, 1.0)) * (sin_sq > 0)  # no NaN gradient at 0
-    return 2.0 * jnp.arctan2(sin, w)
 
 
 def random_orientation(key: Array) -> Array:
@@ -152,7 +142,7 @@ def _goal_reset(reset_fn, model, key) -> State:
 def _goal_step(step_fn, quat, numbers: dict, model, state: State, action, key) -> State:
     record, inner = peel(state, CubeGoalState)
     next_state = step_fn(model, inner.replace(obs=state.obs[:-4]), action, key)
-    hit = orientation_error(next_state.data.qpos[quat], record.goal) < numbers["goal_tolerance"]
+    hit = tracking.quat_angle(next_state.data.qpos[quat], record.goal) < numbers["goal_tolerance"]
     goal = jnp.where(hit, random_orientation(jax.random.fold_in(key, GOAL_STREAM)), record.goal)
     next_state = next_state.replace(metrics={**next_state.metrics, "goal/reached": hit.astype(jnp.float32)})
     return _publish(next_state, next_state.obs, CubeGoalState(goal, record.reached + hit.astype(jnp.int32)))
@@ -173,7 +163,7 @@ def orientation_cost(mj_model: mujoco.MjModel, body: str = "cube") -> Partial:
 
 
 def _orientation(quat, model, state: State, action: Array, next_state: State) -> Array:
-    return jnp.square(orientation_error(next_state.data.qpos[quat], find(state, CubeGoalState).goal))
+    return jnp.square(tracking.quat_angle(next_state.data.qpos[quat], find(state, CubeGoalState).goal))
 
 
 def hold_cost(mj_model: mujoco.MjModel, position: Array, body: str = "cube") -> Partial:
@@ -209,11 +199,6 @@ def _hand_velocity(dofs, model, state: State, action: Array, next_state: State) 
 def _cube_pose(qpos_idx, qvel_idx, model, state: State) -> Array:
     """Observation: the cube's position (m), orientation (wxyz) and velocities [13]."""
     return jnp.concatenate([state.data.qpos[qpos_idx], state.data.qvel[qvel_idx]]).astype(jnp.float32)
-
-
-def _hand_velocity(dofs, model, state: State, action: Array, next_state: State) -> Array:
-    """Cost: the hand's joint velocities squared, (rad/s)^2 summed."""
-    return jnp.sum(jnp.square(next_state.data.qvel[dofs]))
 
 
 def leap_cube_rotate(
@@ -272,26 +257,16 @@ def goals_in_a_row(states, goals: int = GOALS_TO_SOLVE) -> tuple[bool, float]:
     return in_a_row >= goals, float(in_a_row)
 
 
-def _planning(seconds: float, goals: int) -> base.PlanningSetup:
-    """Every sampling planner at 1024 samples over 0.5 s (10 control steps), replanning
-    every step (20 Hz); their model never reaches a goal (module docstring)."""
-    sampling = dict(num_samples=1024, horizon_steps=10, num_knots=4, noise_scale=0.3)
-    return base.PlanningSetup(
-        seconds=seconds,
-        replan_every=1,
-        plan_overrides={"goal_tolerance": 0.0},
-        success=functools.partial(goals_in_a_row, goals=goals),
-        configs={
-            "predictive_sampling": sampling,
-            "mppi": dict(sampling, temperature=0.1),
-            "cem": dict(sampling, num_elites=64),
-            "dial": dict(sampling, iterations=2),
-            "cma_es": dict(sampling, num_elites=64),
-        },
-    )
-
-
-PLANNING = _planning(40.0, GOALS_TO_SOLVE)
+# Every sampling planner at 1024 samples over 0.5 s (10 control steps), replanning every
+# step (20 Hz); their model never reaches a goal (module docstring).
+PLANNING = base.sampling_setup(
+    40.0,
+    functools.partial(goals_in_a_row, goals=GOALS_TO_SOLVE),
+    horizon_steps=10,
+    num_knots=4,
+    noise_scale=0.3,
+    plan_overrides={"goal_tolerance": 0.0},
+)
 LEAP_CUBE_ROTATE = base.EnvSpec(
     make=leap_cube_rotate,
     description="LEAP hand turning a cube to goal orientations, one after another (MPC-friendly)",

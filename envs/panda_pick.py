@@ -42,7 +42,6 @@ from mjzoo.catalog import actuators
 from mjzoo.catalog import rewards
 from mjzoo.catalog import trackers
 from mjzoo.envs import base
-from mjzoo.envs import robot_planning
 from mjzoo.robots import models
 from mjzoo.types import State
 from mjzoo.types import Task
@@ -170,7 +169,7 @@ def _held_at_target(states) -> tuple[bool, float]:
 
 # Sampling planners (`mjzoo plan mppi panda_pick`): as the whole-body robots, 1024 samples
 # over 0.5 s replanning every step, with a narrower search (0.3 rad) for the grasp.
-PLANNING = robot_planning._planning(5.0, _held_at_target, num_knots=4, dial_iterations=2, noise_scale=0.3)
+PLANNING = base.sampling_setup(5.0, _held_at_target, horizon_steps=25, num_knots=4, noise_scale=0.3)
 PANDA_PICK = base.EnvSpec(
     make=panda_pick, description="Franka Panda lifting a cube to a target (MPC-friendly)", planning=PLANNING
 )

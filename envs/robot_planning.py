@@ -142,28 +142,8 @@ def _stood_up(states) -> tuple[bool, float]:
     return base.held_near(states, lambda s: np.asarray(s.data.qpos[..., 2]) - stand_z, 0.1)
 
 
-def _planning(
-    seconds: float, success, num_knots: int, dial_iterations: int, noise_scale: float = 0.5
-) -> base.PlanningSetup:
-    """Every sampling planner at 1024 samples over 0.5 s (25 control steps), replanning
-    every step; the knots, noise and DIAL's iterations as the robots need them."""
-    sampling = dict(num_samples=1024, horizon_steps=25, num_knots=num_knots, noise_scale=noise_scale)
-    return base.PlanningSetup(
-        seconds=seconds,
-        replan_every=1,
-        plan_overrides={},
-        success=success,
-        configs={
-            "predictive_sampling": sampling,
-            "mppi": dict(sampling, temperature=0.1),
-            "cem": dict(sampling, num_elites=64),
-            "dial": dict(sampling, iterations=dial_iterations),
-            "cma_es": dict(sampling, num_elites=64),
-        },
-    )
-
-
-G1_PLANNING = _planning(5.0, _stood_up, num_knots=4, dial_iterations=2)
+# Sampling planners: 1024 samples over 0.5 s (25 control steps), replanning every step.
+G1_PLANNING = base.sampling_setup(5.0, _stood_up, horizon_steps=25, num_knots=4, noise_scale=0.5)
 G1_STANDUP = base.EnvSpec(
     make=g1_standup, description="Unitree G1 standing up from lying on its back (MPC-friendly)", planning=G1_PLANNING
 )
@@ -248,7 +228,7 @@ def _trots(states) -> tuple[bool, float]:
     return (not bool(np.any(states.terminated))) and miss <= 0.15, miss
 
 
-GO1_PLANNING = _planning(6.0, _trots, num_knots=5, dial_iterations=4)
+GO1_PLANNING = base.sampling_setup(6.0, _trots, horizon_steps=25, num_knots=5, noise_scale=0.5, dial_iterations=4)
 GO1_TROT = base.EnvSpec(
     make=go1_trot, description="Unitree Go1 trotting at a commanded speed (MPC-friendly)", planning=GO1_PLANNING
 )

@@ -188,9 +188,11 @@ def _conjugate(q: Array) -> Array:
 
 def quat_angle(a: Array, b: Array) -> Array:
     """[...] the angle (rad, in [0, pi]) of the rotation between unit quaternions a and
-    b [..., 4]: 2 atan2(|v|, |w|) of conj(a) b."""
+    b [..., 4]: 2 atan2(|v|, |w|) of conj(a) b; its gradient is finite where a = b."""
     d = quat_multiply(_conjugate(a), b)
-    return 2.0 * jnp.arctan2(jnp.linalg.norm(d[..., 1:], axis=-1), jnp.abs(d[..., 0]))
+    sin_sq = jnp.sum(jnp.square(d[..., 1:]), axis=-1)
+    sin = jnp.sqrt(jnp.where(sin_sq > 0, sin_sq, 1.0)) * (sin_sq > 0)  # |v|, without sqrt's NaN slope at 0
+    return 2.0 * jnp.arctan2(sin, jnp.abs(d[..., 0]))
 
 
 def yaw_only(q: Array) -> Array:

