@@ -180,7 +180,7 @@ class _Compiled:
 
 
 def _compiled(problem: Problem, key: jax.Array, total_steps: int) -> _Compiled:
-    planner, config, hooks, value = problem.planner, problem.config, problem.hooks, problem.terminal_value
+    planner, config, hooks = problem.planner, problem.config, problem.hooks
     sim_task, plan_task = problem.tasks
     reset_key, plan_key, key = jax.random.split(key, 3)
     # Every argument committed to the device like the jit outputs it alternates with: an
@@ -188,17 +188,40 @@ def _compiled(problem: Problem, key: jax.Array, total_steps: int) -> _Compiled:
     step_keys = list(committed(jax.random.split(key, total_steps + 1)))
     plan_keys = list(committed(jax.random.split(plan_key, total_steps + 1)))
     sim_state = committed(reset(problem.sim_task, reset_key))
-    planner_state = committed(
-        jax.jit(lambda s, h: closed_loop.first_plan(planner, config, plan_task, s, hooks, h))(
-            sim_state, problem.hyperparams
-        )
+    first_plan = _functions(
+        problem,
+        "first_plan",
+        lambda: jax.jit(lambda s, h: closed_loop.first_plan(planner, config, plan_task, s, hooks, h)),
     )
+    planner_state = committed(first_plan(sim_state, problem.hyperparams))
     # The loop carries both states packed, a few arrays each (`mjzoo.tree.Packing`): a
     # simulation state's ~100 leaves cost more to pass through a jit than a small step.
     sims, plans = Packing.of(sim_state), Packing.of(planner_state)
-    # Native: two jits around a host call of C each (`native.split`), not one jit through
-    # `jax.pure_callback`, whose ~0.3 ms a call a replan and every simulation step would pay.
-    compile_ = native_split if problem.physics == "native" else jax.jit
+    replan, step, after_rollout, pack = _functions(problem, (sims, plans), lambda: _loop(problem, sims, plans))
+    sim_state, planner_state = pack(sim_state, planner_state)
+    # Compile before the clock starts (every argument committed, of fixed dtypes: once).
+    value = problem.terminal_value
+    jax.block_until_ready(
+        (replan(planner_state, sim_state, plan_keys[-1], value), step(planner_state, sim_state, step_keys[-1]))
+    )
+    if hooks.post_rollout is not None:
+        jax.block_until_ready(after_rollout(sim_state, planner_state))
+    return _Compiled(replan, step, after_rollout, sims, plans, sim_state, planner_state, step_keys, plan_keys)
+
+
+def _functions(problem: Problem, name: Any, make: Callable[[], Any]) -> Any:
+    """`make()`, made once per problem: a problem's later episodes call the jitted
+    functions of its first, so they compile once, not once an episode."""
+    made = problem.__dict__.setdefault("_jitted", {})  # a frozen dataclass's own cache
+    if name not in made:
+        made[name] = make()
+    return made[name]
+
+
+def _loop(problem: Problem, sims: Packing, plans: Packing) -> tuple[Callable, ...]:
+    """The real-time loop's jitted (replan, step, after_rollout, pack) over packed states."""
+    planner, config, hooks = problem.planner, problem.config, problem.hooks
+    sim_task, plan_task = problem.tasks
 
     def replan_packed(p, s, k, v):
         return plans.pack(closed_loop.replan(planner, config, plan_task, plans.unpack(p), sims.unpack(s), k, hooks, v))
@@ -207,16 +230,12 @@ def _compiled(problem: Problem, key: jax.Array, total_steps: int) -> _Compiled:
         state, control = closed_loop.sim_step(config, sim_task, plans.unpack(p), sims.unpack(s), k, hooks)
         return sims.pack(state), control
 
-    replan, step = compile_(replan_packed), compile_(step_packed)
+    # Native: two jits around a host call of C each (`native.split`), not one jit through
+    # `jax.pure_callback`, whose ~0.3 ms a call a replan and every simulation step would pay.
+    compile_ = native_split if problem.physics == "native" else jax.jit
     after_rollout = jax.jit(lambda s, p: sims.pack(closed_loop.after_rollout(hooks, sims.unpack(s), plans.unpack(p))))
-    sim_state, planner_state = jax.jit(lambda s, p: (sims.pack(s), plans.pack(p)))(sim_state, planner_state)
-    # Compile before the clock starts (every argument committed, of fixed dtypes: once).
-    jax.block_until_ready(
-        (replan(planner_state, sim_state, plan_keys[-1], value), step(planner_state, sim_state, step_keys[-1]))
-    )
-    if hooks.post_rollout is not None:
-        jax.block_until_ready(after_rollout(sim_state, planner_state))
-    return _Compiled(replan, step, after_rollout, sims, plans, sim_state, planner_state, step_keys, plan_keys)
+    pack = jax.jit(lambda s, p: (sims.pack(s), plans.pack(p)))
+    return compile_(replan_packed), compile_(step_packed), after_rollout, pack
 
 
 def _timings(wall: float, latencies: list, step_seconds: list, physics_seconds: list, simulated_s: float) -> dict:
@@ -289,7 +308,11 @@ def realtime(
             advance_to(due_at(tick + period), planner_state)
             time.sleep(max(0.0, tick + period - time.perf_counter()))
     wall = time.perf_counter() - begin
-    stack = lambda packing, xs: jax.jit(packing.unpack)(jax.tree.map(lambda *x: jnp.stack(x), *xs))  # noqa: E731
+
+    def stack(packing: Packing, xs: list) -> Any:
+        unpack = _functions(problem, ("unpack", packing), lambda: jax.jit(packing.unpack))
+        return unpack(jax.tree.map(lambda *x: jnp.stack(x), *xs))
+
     stacked, plan_states = stack(loop.sims, states), stack(loop.plans, plan_states)
     result = Result(stacked, jnp.stack(controls), -stacked.reward, plan_states.cost, loop.plans.unpack(planner_state))
     return result, _timings(wall, latencies, step_seconds, physics_seconds, total_steps * sim_dt)

@@ -165,3 +165,24 @@ def test_pre_sim_step_and_post_rollout_hooks_reach_the_simulation():
     assert np.abs(states["windy"].data.qpos - states["calm"].data.qpos).max() > 1e-4  # and it moves the mass
     plan_costs = states["windy"].info["plan_cost"]
     assert np.all(plan_costs[1:] < 0) and np.all(np.isfinite(plan_costs))  # predicted: rewards to come
+
+
+def test_a_problems_second_real_time_episode_compiles_nothing():
+    """`realtime` compiles its loop once per problem: a benchmark's episodes after the
+    first start at once (a G1's replan took ~40 s to compile on a GPU, each episode)."""
+    config, hyperparams = planning.configure(predictive_sampling, dict(num_samples=4, horizon_steps=3, num_knots=2))
+    problem = mjzoo.envs.closed_loop_problem(
+        "pendulum_swingup", predictive_sampling, config, seconds=0.1, backend="mjx", hyperparams=hyperparams
+    )
+    compiles = []
+    listener = lambda name, *_, **__: compiles.append(name) if name.endswith("backend_compile_duration") else None  # noqa: E731
+    jax.monitoring.register_event_duration_secs_listener(listener)
+    try:
+        first, _ = realtime.realtime(problem, jax.random.key(0), clock="simulated")
+        compiled = len(compiles)
+        second, _ = realtime.realtime(problem, jax.random.key(1), clock="simulated")
+    finally:
+        jax.monitoring.unregister_event_duration_listener(listener)
+    assert compiled > 0 and len(compiles) == compiled, compiles[compiled:]
+    assert first.states.data.qpos.shape == second.states.data.qpos.shape
+    assert not np.allclose(first.states.data.qpos, second.states.data.qpos)  # other keys: another run
