@@ -16,7 +16,7 @@ Parts (``--parts``, default all), each from the G1's retargeted clips
         task's, its reward the tracking reward).
 
 Training runs ``--evals`` chunks of updates (`lax.scan` of the algorithm's update, one
-jit, seeds vmapped) up to the registered budget or ``--budget`` seconds, each followed
+jit, seeds vmapped) up to the registered budget (or ``--steps``) or ``--budget`` seconds, each followed
 by a deterministic evaluation in the same program. A tracking evaluation starts
 ``--eval-envs`` episodes per clip at start frames drawn uniformly over that clip (the
 task's own start table with the other clips' rows zeroed) and runs each to the clip's
@@ -24,7 +24,7 @@ end: success is the share that got there without a termination, MPJPE (mm) the m
 over their steps. Times are wall-clock from the part's start, compile included.
 
     python benchmarks/motion.py                                   # everything, one H100/H200
-    python benchmarks/motion.py --parts walk --seeds 3 --budget 300
+    python benchmarks/motion.py --parts walk --seeds 3 --budget 300 --steps 40000000   # 2M-step chunks
     python benchmarks/motion.py --parts mpc --samples 256 1024
     python benchmarks/motion.py --smoke --parts walk amp mpc      # tiny sizes, on a CPU: checks the script
 
@@ -259,7 +259,7 @@ def tracking_part(name: str, clips: str | None, args, report) -> dict:
     overrides = {} if clips is None else {"clips": clips}
     task = mjzoo.envs.make("g1_track", **overrides)
     names = motion_tracking.G1_CLIPS if clips is None else tuple(clips.split(","))  # the start table's rows
-    fields = {**mjzoo.envs.hyperparameters("g1_track", "ppo"), **(SMOKE if args.smoke else {})}
+    fields = {**mjzoo.envs.hyperparameters("g1_track", "ppo"), **_steps(args), **(SMOKE if args.smoke else {})}
     steps = 10 if args.smoke else running.episode_steps(task)
     seeds = list(range(args.seeds if name == "walk" else 1))
 
@@ -271,10 +271,20 @@ def tracking_part(name: str, clips: str | None, args, report) -> dict:
     return train(name, ppo, task, fields, seeds, args.evals, budget, measure, tracking_judge(names, goal), report)
 
 
+def _steps(args) -> dict:
+    """The training budget's override: ``--steps`` sets the chunk between evaluations
+    (steps / evals), the resolution of a time to the goal."""
+    return {"total_steps": args.steps} if args.steps else {}
+
+
 def amp_part(args, report) -> dict:
     task = mjzoo.envs.make("g1_amp_joystick")
     reference = mjzoo.envs.reference("g1_amp_joystick", task)
-    fields = {**mjzoo.envs.hyperparameters("g1_amp_joystick", "amp"), **(SMOKE_AMP if args.smoke else {})}
+    fields = {
+        **mjzoo.envs.hyperparameters("g1_amp_joystick", "amp"),
+        **_steps(args),
+        **(SMOKE_AMP if args.smoke else {}),
+    }
     steps = 10 if args.smoke else running.episode_steps(task)
 
     def measure(act, key):
@@ -342,6 +352,12 @@ def main() -> None:
     parser.add_argument("--parts", nargs="+", default=list(PARTS), choices=PARTS)
     parser.add_argument("--seeds", type=int, default=3, help="seeds of the walk's tracking (the others: 1)")
     parser.add_argument("--evals", type=int, default=20)
+    parser.add_argument(
+        "--steps",
+        type=int,
+        default=None,
+        help="env steps per seed (default: the registered budget); chunks are steps/evals",
+    )
     parser.add_argument("--eval-envs", type=int, default=64)
     parser.add_argument("--budget", type=float, default=None, help="seconds per part (default: its goal)")
     parser.add_argument("--samples", type=int, nargs="+", default=[1024], help="the MPC's sample counts")

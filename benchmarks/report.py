@@ -209,7 +209,8 @@ def _notes(data: dict | list) -> list[str]:
 
 
 def _files(pattern: str) -> list[Path]:
-    return sorted(RESULTS.glob(pattern))
+    """The result files matching `pattern`, a script's ``--smoke`` output left out."""
+    return sorted(path for path in RESULTS.glob(pattern) if not path.stem.endswith("_smoke"))
 
 
 def _file_tables(pattern: str, columns: list[Column], rows: Callable[[dict], list[dict]] | None = None) -> list[str]:
@@ -538,6 +539,122 @@ rollouts are C MuJoCo's share, the rest everything but physics.
     )
 
 
+def robot_mpc() -> list[str]:
+    prose = """
+`benchmarks/robot_mpc.py`: sampling planners on the real robots in real time
+(`mjzoo.planning.realtime`, as `mjzoo plan` runs): the simulation advances with the wall
+clock and waits for no replan, so a slow planner acts late, as it would on a robot. The
+planner's model and the world are the task's own MJX physics, one GPU. Success is the
+task's own measure (G1 standup: the pelvis within 0.1 m of standing height over the
+last second); replan times are medians over each episode's replans, averaged over
+episodes.
+"""
+    columns = [
+        ("task", _at("task")),
+        ("planner", _at("planner")),
+        ("samples", _at("num_samples")),
+        ("horizon (s)", _at("horizon_s")),
+        ("replan (ms)", _at("replan_ms.median")),
+        ("p95 (ms)", _at("replan_ms.p95")),
+        ("replans/s", _at("plan_hz")),
+        ("success", _at("success_rate")),
+        ("score", _at("score")),
+        ("episodes", _at("episodes")),
+    ]
+    return _section("Whole-body MPC on the robots", prose, _file_tables("robot_mpc/robot_mpc_*.json", columns))
+
+
+def _motion_rows(data: dict) -> list[dict]:
+    """One row per part and seed of benchmarks/motion.py's JSON (its last evaluation; a
+    clip set's worst clip), one per planner and sample count for the MPC."""
+    out = []
+    for row in data["rows"]:
+        if row["part"] == "mpc":
+            out += [{"part": "mpc", **r, "seconds": r["steps"] / r["replan_hz"]} for r in row["rows"]]
+            continue
+        for run in row["runs"]:
+            final = run["final"]
+            success = [v for k, v in final.items() if k.endswith("/success")]
+            mpjpe = [v for k, v in final.items() if k.endswith("/mpjpe_mm")]
+            out.append(
+                {
+                    "part": row["part"],
+                    "seed": run["seed"],
+                    **final,
+                    "success": min(success) if success else None,
+                    "mpjpe_mm": max(mpjpe) if mpjpe else None,
+                    "seconds_to_goal": run["seconds_to_goal"],
+                }
+            )
+    return out
+
+
+def motion() -> list[str]:
+    prose = """
+`benchmarks/motion.py`: human motion on the G1 from its retargeted clips. *walk*: PPO on
+`g1_track(clips="walk")`, seeds vmapped in one program, until every seed tracks (success
+>= 0.95, MPJPE <= 50 mm); *all*: one policy on every committed clip (its worst clip
+shown); *amp*: AMP on `g1_amp_joystick` (style error against the clips' nearest window,
+command error, falls over 64 episodes); *mpc*: MPPI and CEM tracking the walk clip
+closed loop. Times are wall-clock from the part's start, compile included; a row is the
+part's last evaluation.
+"""
+    columns = [
+        ("part", _at("part")),
+        ("seed", _at("seed")),
+        ("planner", _at("planner")),
+        ("samples", _at("num_samples")),
+        ("env steps", _at("step")),
+        ("seconds", _at("seconds")),
+        ("success", _at("success")),
+        ("MPJPE (mm)", _at("mpjpe_mm")),
+        ("style error (rad)", _at("style_error")),
+        ("command error (m/s)", _at("command_error")),
+        ("falls", _at("falls")),
+        ("replans/s", _at("replan_hz")),
+        ("to goal (s)", _at("seconds_to_goal")),
+    ]
+    return _section("Human motion on the G1", prose, _file_tables("motion/motion_*.json", columns, _motion_rows))
+
+
+def _offpolicy_rows(data: dict) -> list[dict]:
+    """One row per task, algorithm and seed, with its steps and seconds to 95% of PPO's
+    mean final return in the same run."""
+    out = []
+    for task, entry in data["tasks"].items():
+        bar = 0.95 * entry["summary"]["ppo_return"]
+        for run in entry["runs"]:
+            hit = next(((step, sec) for step, sec, ret in run["curve"] if ret >= bar), (None, None))
+            best = max(ret for _, _, ret in run["curve"])
+            out.append({"task": task, **run, "best": best, "steps_to": hit[0], "seconds_to": hit[1]})
+    return out
+
+
+def offpolicy() -> list[str]:
+    prose = """
+`benchmarks/offpolicy.py`: SAC and FastTD3 beside PPO on the same task in one process,
+each run through the harness (compile included in its seconds). PPO trains its
+registered budget; the off-policy learners far fewer env steps. *To 95% of PPO*: env
+steps and seconds until a run's evaluation return first reaches 95% of PPO's mean
+final return.
+"""
+    columns = [
+        ("task", _at("task")),
+        ("learner", _at("algorithm")),
+        ("seed", _at("seed")),
+        ("env steps", _at("env_steps")),
+        ("seconds", _at("wall_s")),
+        ("env steps/s", _rate("steps_per_s")),
+        ("final return", _at("final_return")),
+        ("best return", _at("best")),
+        ("steps to 95% of PPO", _at("steps_to")),
+        ("seconds to 95% of PPO", _at("seconds_to")),
+    ]
+    return _section(
+        "Off-policy learners beside PPO", prose, _file_tables("offpolicy/offpolicy*.json", columns, _offpolicy_rows)
+    )
+
+
 def scaling() -> list[str]:
     prose = """
 `benchmarks/scaling.py`: PPO (and AMP) on several GPUs of one host, the env batch sharded
@@ -670,7 +787,10 @@ def render() -> str:
         *playground(),
         *locomotion(),
         *amp(),
+        *motion(),
+        *offpolicy(),
         *planning(),
+        *robot_mpc(),
         *scaling(),
         *startup(),
         *physics(),

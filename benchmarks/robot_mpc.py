@@ -99,7 +99,7 @@ def main() -> None:
         for planner in args.planners:
             for samples in args.samples:
                 rows.append(measure(task, planner, samples, args.episodes, args.smoke))
-                meta = {"device": str(device), "jax": jax.__version__, "smoke": args.smoke}
+                meta = {"device": device.device_kind, "jax": jax.__version__, "smoke": args.smoke}
                 path.write_text(json.dumps({"meta": meta, "rows": rows}, indent=1))
     print(f"wrote {path}")
 
