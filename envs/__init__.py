@@ -216,6 +216,7 @@ def closed_loop_problem(
     seconds: float | None = None,
     backend: str = "auto",
     hyperparams: Any | None = None,
+    sim_backend: str | None = None,
     **overrides: Any,
 ) -> Problem:
     """The task's closed-loop problem (its `planning` setup): the task as the world, its
@@ -224,7 +225,8 @@ def closed_loop_problem(
     "native": C MuJoCo; "auto": native on a CPU). Registered envs run with no episode
     limit; `overrides` go to both tasks. A Playground env steps MJX itself, so it plans
     on MJX ("auto": "mjx", with a warning on a CPU; "native" is refused). `hyperparams`:
-    the planner's numbers (None: its defaults; `mjzoo.planning.configure`)."""
+    the planner's numbers (None: its defaults; `mjzoo.planning.configure`). `sim_backend`:
+    where the world steps if not on `backend` ("native": C MuJoCo beside an MJX planner)."""
     # Imported here, not at the top: the registry is data (records of envs) and loads
     # nothing of the real-time machinery until a problem is asked for.
     from mjzoo.planning.realtime import Problem
@@ -260,6 +262,7 @@ def closed_loop_problem(
         success=setup.success,
         backend=backend,
         hyperparams=hyperparams,
+        sim_backend=sim_backend,
     )
 
 

@@ -49,6 +49,7 @@ def write(
         "final_cost": float(np.mean(costs[time_s >= time_s[-1] - 1.0 + 1e-6])),
         "physics": "c-mujoco" if problem.physics == "native" else problem.sim_task.model.impl.value,
         "backend": problem.physics,
+        "world": problem.sim_physics,
         **{k: float(np.mean(v)) for k, v in states.metrics.items() if k.startswith("physics/")},
         **{k: float(v) for k, v in stats.items()},
     }

@@ -80,6 +80,9 @@ class Problem:
       backend: where the physics runs, for planning and simulation alike: "mjx", or
         "native" (C MuJoCo, `mjzoo.planning.native`); "auto": native where JAX's
         default device is a CPU, MJX on a GPU.
+      sim_backend: where the simulated world steps, if not on `backend`: "native" runs
+        it in C MuJoCo beside an MJX planner, as a robot's world costs the planner
+        nothing (one G1 world's MJX step took 14 ms on a GPU, C's a fraction of one).
       hyperparams: the planner's `Hyperparams` (numbers); None: its defaults.
         `mjzoo.planning.configure` gives (config, hyperparams) from one dict of fields.
     """
@@ -95,11 +98,14 @@ class Problem:
     terminal_value: TerminalValue | None = None
     backend: str = "auto"
     hyperparams: Any | None = None
+    sim_backend: str | None = None
 
     def __post_init__(self) -> None:
         object.__setattr__(self, "terminal_value", as_terminal_value(self.terminal_value))
         if self.backend not in BACKENDS:
             raise ValueError(f"Problem: unknown backend {self.backend!r}; choose one of {BACKENDS}")
+        if self.sim_backend not in (None, "mjx", "native"):
+            raise ValueError(f"Problem: unknown sim_backend {self.sim_backend!r}; choose None, 'mjx' or 'native'")
         supported = planner_backends(self.planner)
         if self.backend != "auto" and self.backend not in supported:
             name = self.planner.__name__.rsplit(".", 1)[-1]
@@ -117,13 +123,17 @@ class Problem:
         preferred = default_backend()
         return preferred if preferred in planner_backends(self.planner) else "mjx"
 
+    @property
+    def sim_physics(self) -> str:
+        """Where the world steps: `sim_backend`, else where the planner's physics runs."""
+        return self.sim_backend or self.physics
+
     @functools.cached_property
     def tasks(self) -> tuple[Task | Native, Task | Ensemble | Native]:
-        """(simulation, planning task) on the backend: wrapped by `native.wrap` for C MuJoCo."""
-        if self.physics == "mjx":
-            return self.sim_task, self.plan_task
+        """(simulation, planning task) on their backends: wrapped by `native.wrap` for C MuJoCo."""
         # The simulation's single rollout runs on the calling thread (no pool hand-off).
-        return native_wrap(self.sim_task, num_threads=0), native_wrap(self.plan_task)
+        sim = native_wrap(self.sim_task, num_threads=0) if self.sim_physics == "native" else self.sim_task
+        return sim, native_wrap(self.plan_task) if self.physics == "native" else self.plan_task
 
     @functools.cached_property
     def sim_dt(self) -> float:
@@ -232,10 +242,10 @@ def _loop(problem: Problem, sims: Packing, plans: Packing) -> tuple[Callable, ..
 
     # Native: two jits around a host call of C each (`native.split`), not one jit through
     # `jax.pure_callback`, whose ~0.3 ms a call a replan and every simulation step would pay.
-    compile_ = native_split if problem.physics == "native" else jax.jit
+    compile_ = lambda physics: native_split if physics == "native" else jax.jit  # noqa: E731
     after_rollout = jax.jit(lambda s, p: sims.pack(closed_loop.after_rollout(hooks, sims.unpack(s), plans.unpack(p))))
     pack = jax.jit(lambda s, p: (sims.pack(s), plans.pack(p)))
-    return compile_(replan_packed), compile_(step_packed), after_rollout, pack
+    return compile_(problem.physics)(replan_packed), compile_(problem.sim_physics)(step_packed), after_rollout, pack
 
 
 def _timings(wall: float, latencies: list, step_seconds: list, physics_seconds: list, simulated_s: float) -> dict:

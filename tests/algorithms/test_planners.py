@@ -186,3 +186,32 @@ def test_a_problems_second_real_time_episode_compiles_nothing():
     assert compiled > 0 and len(compiles) == compiled, compiles[compiled:]
     assert first.states.data.qpos.shape == second.states.data.qpos.shape
     assert not np.allclose(first.states.data.qpos, second.states.data.qpos)  # other keys: another run
+
+
+def test_the_world_steps_in_c_mujoco_beside_an_mjx_planner():
+    """``sim_backend="native"``: the planner rolls out on MJX, the world steps in C
+    MuJoCo, and the closed loop follows the all-MJX one (the engines agree to float
+    rounding over a short run)."""
+    config, hyperparams = planning.configure(predictive_sampling, dict(num_samples=4, horizon_steps=3, num_knots=2))
+    problems = {
+        world: mjzoo.envs.closed_loop_problem(
+            "pendulum_swingup",
+            predictive_sampling,
+            config,
+            seconds=0.2,
+            backend="mjx",
+            hyperparams=hyperparams,
+            sim_backend=world,
+        )
+        for world in (None, "native")
+    }
+    sim, plan = problems["native"].tasks
+    assert isinstance(sim, planning.native.Native) and not isinstance(plan, planning.native.Native)
+    assert problems["native"].sim_physics == "native" and problems[None].sim_physics == "mjx"
+    runs = {w: realtime.realtime(p, jax.random.key(0), clock="simulated")[0] for w, p in problems.items()}
+    mjx_qpos, c_qpos = (np.asarray(runs[w].states.data.qpos) for w in (None, "native"))
+    assert c_qpos.shape == mjx_qpos.shape == (10, 1)
+    np.testing.assert_allclose(c_qpos, mjx_qpos, atol=1e-4)
+    assert np.abs(c_qpos - c_qpos[0]).max() > 1e-3  # it moved
+    with pytest.raises(ValueError, match="unknown sim_backend 'c'"):
+        dataclasses.replace(problems[None], sim_backend="c")
