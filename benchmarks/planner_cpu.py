@@ -25,6 +25,12 @@ takes ~1.5x longer).
     python benchmarks/planner_cpu.py --tasks cartpole --planners mppi --backends native --no-judo
     python benchmarks/planner_cpu.py --clock wall --planners dial cma_es ilqr --no-judo --seeds 3 \
         --out benchmarks/results/planner_cpu/planner_cpu_wall.json
+    python benchmarks/planner_cpu.py --tasks cartpole --backends native --no-judo --seeds 6 --clock wall \
+        --planners ps mppi cem --sample-factors 1 --config noise_scale=0.1 noise_ramp=2 \
+        --out benchmarks/results/planner_cpu/planner_cpu_cartpole_wall.json
+
+``--config NAME=VALUE`` sets planner fields after Judo's settings (each for the planners
+that have it); a row records them under "overrides".
 """
 
 from __future__ import annotations
