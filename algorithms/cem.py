@@ -7,10 +7,13 @@
 
 At every replan, with mean mu and std s shifted to the current time:
     theta_0 = mu
-    theta_i = clip(mu + s * eps_i)            for the first (1 - f) of the samples
+    theta_i = clip(mu + s_r * eps_i)          for the first (1 - f) of the samples
     theta_i = clip(mu + sigma_max * eps_i)    for an explore fraction f of them
     E = the num_elites samples of lowest cost J
     mu' = mean_{i in E} theta_i,   s' = clip(std_{i in E} theta_i, sigma_min, sigma_max)
+where s_r = min(s (1 + r k / (K - 1)), max(s, sigma_max)) at knot k widens the far knots
+by the noise ramp r (default 0: s_r = s) up to sigma_max, as the fit there is the last
+replan's.
 J is a rollout's cost (`mjzoo.planning.masked_cost`): minus its return up to and including
 its first terminated step (nothing after it), plus the `termination_cost` hyperparameter
 (default 0) if a step terminated.
@@ -99,7 +102,10 @@ def plan(
     # picked by a mask; the slack absorbs float32 rounding of f N (0.7 x 10 -> 6.9999995).
     num_explore = jnp.floor(hyperparams.explore_fraction * config.num_samples + 1e-4)
     explores = jnp.arange(config.num_samples) >= config.num_samples - num_explore  # [N]
-    stds = jnp.where(explores[:, None, None], hyperparams.sigma_max * half_range, state.std[None])  # [N, K, nu]
+    # The fit's far knots are stale after the shift: the ramp widens them, up to sigma_max.
+    ramp = planning.noise_ramp_profile(hyperparams.noise_ramp, config.num_knots)[:, None]
+    std = jnp.minimum(state.std * ramp, jnp.maximum(state.std, hyperparams.sigma_max * half_range))
+    stds = jnp.where(explores[:, None, None], hyperparams.sigma_max * half_range, std[None])  # [N, K, nu]
     state, samples, costs = planning.sample_around(config, task, state, env_state, key, stds, terminal_value)
     mean, std = planning.cem_update(
         samples, costs, config.num_elites, hyperparams.sigma_min * half_range, hyperparams.sigma_max * half_range

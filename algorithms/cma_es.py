@@ -74,7 +74,8 @@ class Config(planning.SamplingConfig):
 @dataclasses.dataclass(frozen=True, kw_only=True)
 class Hyperparams(planning.SamplingHyperparams):
     """`planning.SamplingHyperparams` (noise_scale: the initial step size sigma_0) plus
-    the bounds on sigma, all in units of half the control range."""
+    the bounds on sigma, all in units of half the control range. noise_ramp must stay 0:
+    the adapted covariance shapes the noise along the horizon."""
 
     sigma_min: float | Array = 0.02
     sigma_max: float | Array = 1.0
@@ -84,6 +85,7 @@ class Hyperparams(planning.SamplingHyperparams):
             **super()._checks(),
             "sigma_min": (np.greater_equal(self.sigma_min, 0), ">= 0"),
             "sigma_max": (np.less_equal(self.sigma_min, self.sigma_max), ">= sigma_min"),
+            "noise_ramp": (np.equal(self.noise_ramp, 0), "0 (the covariance adapts along the horizon)"),
         }
 
 

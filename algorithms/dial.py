@@ -17,7 +17,8 @@ already, growing to sigma_0 at its end, which is new (beta_2, larger flattens it
 temperature lambda is in units of the samples' cost spread (their std), as DIAL-MPC
 normalizes its rewards: one value serves every task and every iteration, whose cost
 spreads shrink with the noise. sigma_0 is the `noise_scale` fraction of each actuator's
-half control range. J is a rollout's cost (`mjzoo.planning.masked_cost`). Defaults: 128
+half control range; the shared noise_ramp r (default 0) widens knot k further by
+(1 + r k / (K - 1)). J is a rollout's cost (`mjzoo.planning.masked_cost`). Defaults: 128
 samples, 3 iterations, 25 planning steps, 4 cubic knots, sigma_0 = 0.5, beta_1 = beta_2
 = 1, lambda = 0.1. With one iteration and a flat horizon (beta_2 -> inf) it is MPPI
 with a normalized temperature.
@@ -155,7 +156,8 @@ def plan(
     `planning.TerminalValue` valuing each rollout's final state."""
     hp = state.hyperparams
     schedule = noise_schedule(hp.noise_scale, hp.beta_iterations, hp.beta_horizon, config.iterations, config.num_knots)
-    stds = schedule[:, :, None] * planning.half_range(task)  # [N, K, nu]
+    ramp = planning.noise_ramp_profile(hp.noise_ramp, config.num_knots)  # [K], 1 unless noise_ramp > 0
+    stds = (schedule * ramp)[:, :, None] * planning.half_range(task)  # [N, K, nu]
     state = planning.shift(config, state, env_state.data.time)
     low, high = planning.control_limits(task)
 

@@ -77,7 +77,9 @@ def plan(
     controls. `terminal_value` (model, state) -> [] values each rollout's final state
     (`planning.as_terminal_value`: a Partial whose weights are leaves, not recompiled)."""
     hyperparams = state.hyperparams
-    state = state.replace(std=planning.noise_std(hyperparams.noise_scale, task, state.knots.shape))
+    state = state.replace(
+        std=planning.noise_std(hyperparams.noise_scale, task, state.knots.shape, hyperparams.noise_ramp)
+    )
     state, samples, costs = planning.sample_around(config, task, state, env_state, key, terminal_value=terminal_value)
     weights = planning.mppi_weights(costs, hyperparams.temperature)
     knots = jnp.tensordot(weights, samples, axes=1)

@@ -65,7 +65,9 @@ def plan(
     """One replan from `env_state`: returns the new planner state and the plan's [H, nu]
     controls. `terminal_value` (model, state) -> [] values each rollout's final state
     (`planning.as_terminal_value`: a Partial whose weights are leaves, not recompiled)."""
-    state = state.replace(std=planning.noise_std(state.hyperparams.noise_scale, task, state.knots.shape))
+    hyperparams = state.hyperparams
+    std = planning.noise_std(hyperparams.noise_scale, task, state.knots.shape, hyperparams.noise_ramp)
+    state = state.replace(std=std)
     state, samples, costs = planning.sample_around(config, task, state, env_state, key, terminal_value=terminal_value)
     best = jnp.argmin(costs)
     state = state.replace(knots=samples[best], cost=costs[best])

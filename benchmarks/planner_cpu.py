@@ -25,11 +25,18 @@ takes ~1.5x longer).
     python benchmarks/planner_cpu.py --tasks cartpole --planners mppi --backends native --no-judo
     python benchmarks/planner_cpu.py --clock wall --planners dial cma_es ilqr --no-judo --seeds 3 \
         --out benchmarks/results/planner_cpu/planner_cpu_wall.json
+    python benchmarks/planner_cpu.py --tasks cartpole --backends native --no-judo --seeds 6 --clock wall \
+        --planners ps mppi cem --sample-factors 1 --config noise_scale=0.1 noise_ramp=2 \
+        --out benchmarks/results/planner_cpu/planner_cpu_cartpole_wall.json
+
+``--config NAME=VALUE`` sets planner fields after Judo's settings (each for the planners
+that have it); a row records them under "overrides".
 """
 
 from __future__ import annotations
 
 import argparse
+import dataclasses
 import json
 import os
 import platform
@@ -65,8 +72,11 @@ TASKS = {
 JUDO_ROLLOUTS, JUDO_KNOTS, RATE_HZ = 32, 4, 20.0
 
 
-def problem(task: str, planner: str, samples: int, backend: str, seconds: float) -> realtime.Problem:
-    """The env's closed-loop problem, planned at Judo's settings on `backend`."""
+def problem(
+    task: str, planner: str, samples: int, backend: str, seconds: float, overrides: dict | None = None
+) -> realtime.Problem:
+    """The env's closed-loop problem, planned at Judo's settings on `backend`, with the
+    planner's fields in `overrides` (those it has) set last."""
     spec = TASKS[task]
     setup = mjzoo.envs.planning(spec["env"])
     module = PLANNERS[planner]
@@ -76,6 +86,8 @@ def problem(task: str, planner: str, samples: int, backend: str, seconds: float)
         fields.update(num_samples=samples, num_knots=JUDO_KNOTS)
     if "num_elites" in fields:
         fields["num_elites"] = max(2, samples // 8)
+    owned = {f.name for cls in (module.Config, module.Hyperparams) for f in dataclasses.fields(cls)}
+    fields.update({k: v for k, v in (overrides or {}).items() if k in owned})
     overrides = {**setup.plan_overrides, "dt": spec["plan_dt"], "ctrl_dt": spec["plan_dt"], "episode_steps": 10**9}
     plan_task = mjzoo.envs.make(spec["env"], **overrides)
     plan_task = setup.plan_view(plan_task) if setup.plan_view else plan_task
@@ -95,9 +107,11 @@ def problem(task: str, planner: str, samples: int, backend: str, seconds: float)
     )
 
 
-def measure(task: str, planner: str, samples: int, backend: str, seconds: float, seeds: int, clock: str) -> dict:
+def measure(
+    task: str, planner: str, samples: int, backend: str, seconds: float, seeds: int, clock: str, overrides: dict
+) -> dict:
     runs = []
-    p = problem(task, planner, samples, backend, seconds)
+    p = problem(task, planner, samples, backend, seconds, overrides)
     build = time.perf_counter()
     p.tasks  # noqa: B018 (native: builds and checks the C side)
     build = time.perf_counter() - build
@@ -119,6 +133,7 @@ def measure(task: str, planner: str, samples: int, backend: str, seconds: float,
         "score": mean("score"),
         "seeds": seeds,
         "clock": clock,
+        "overrides": {k: v for k, v in overrides.items() if hasattr(p.config, k) or hasattr(p.hyperparams, k)},
         "setup_s": build,
         "runs": runs,
     }
@@ -155,6 +170,16 @@ def judo(args, out: Path) -> dict | None:
     return json.loads(out.read_text())
 
 
+def _field(item: str, parser: argparse.ArgumentParser) -> tuple[str, float]:
+    """("noise_ramp", 2.0) from "noise_ramp=2" (a number; ints stay ints), or one line of error."""
+    name, _, value = item.partition("=")
+    try:
+        number = float(value)
+    except ValueError:
+        parser.error(f"--config {item!r}: expected NAME=NUMBER")
+    return name, int(number) if number.is_integer() and "." not in value else number
+
+
 def table(rows: list[dict]) -> str:
     lines = [
         "| task | planner | K | backend | replan ms (median / p95) | C rollouts ms | overhead ms | Hz | success |",
@@ -187,6 +212,14 @@ def main() -> None:
         help="simulated: replan every 0.05 s of simulated time with no sleeping, as judo_peer.py "
         "does (the like-for-like latency); wall: mjzoo plan's real-time runner",
     )
+    parser.add_argument(
+        "--config",
+        nargs="+",
+        default=[],
+        metavar="NAME=VALUE",
+        help="planner fields set after Judo's settings, each for the planners that have it "
+        "(e.g. noise_scale=0.1 noise_ramp=2)",
+    )
     parser.add_argument("--threads", type=int, default=native.physical_cores())
     parser.add_argument("--judo-python", default=str(ROOT / ".judo" / "venv" / "bin" / "python"))
     parser.add_argument("--no-judo", action="store_true")
@@ -194,6 +227,7 @@ def main() -> None:
         "--out", type=Path, default=ROOT / "benchmarks" / "results" / "planner_cpu" / "planner_cpu.json"
     )
     args = parser.parse_args()
+    overrides = dict(_field(item, parser) for item in args.config)
     load = [os.getloadavg()]
     rows = []
     for task in args.tasks:
@@ -202,7 +236,7 @@ def main() -> None:
             for factor in [1] if gradient else args.sample_factors:
                 for backend in [b for b in args.backends if not (gradient and b == "native")]:
                     samples = 0 if gradient else JUDO_ROLLOUTS * factor
-                    row = measure(task, planner, samples, backend, args.seconds, args.seeds, args.clock)
+                    row = measure(task, planner, samples, backend, args.seconds, args.seeds, args.clock, overrides)
                     rows.append(row)
                     print(table([row]).splitlines()[-1], flush=True)
     judo_rows = []

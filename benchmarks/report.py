@@ -535,7 +535,7 @@ rollouts are C MuJoCo's share, the rest everything but physics.
             lambda data: data,
         ),
         ["### Planning on a CPU, against Judo", "", *cpu_prose.strip().splitlines(), ""],
-        _file_tables("planner_cpu/planner_cpu.json", cpu),
+        _file_tables("planner_cpu/planner_cpu*.json", cpu),
     )
 
 

@@ -52,6 +52,7 @@ from mjzoo.planning.sampling import controls
 from mjzoo.planning.sampling import half_range
 from mjzoo.planning.sampling import initial_state
 from mjzoo.planning.sampling import mppi_weights
+from mjzoo.planning.sampling import noise_ramp_profile
 from mjzoo.planning.sampling import noise_std
 from mjzoo.planning.sampling import sample_around
 from mjzoo.planning.sampling import sample_costs
@@ -81,6 +82,7 @@ __all__ = [
     "control_limits",
     "half_range",
     "noise_std",
+    "noise_ramp_profile",
     "initial_state",
     "shift",
     "sample_knots",

@@ -52,6 +52,7 @@ __all__ = [
     "PlannerState",
     "configure",
     "noise_std",
+    "noise_ramp_profile",
     "control_limits",
     "half_range",
     "initial_state",
@@ -119,13 +120,20 @@ class SamplingHyperparams:
     ones (inside a jit or vmap) are not.
 
     Attributes:
-      noise_scale: sampling std as a fraction of each actuator's half control range.
+      noise_scale: sampling std as a fraction of each actuator's half control range, at
+        the plan's first knot.
+      noise_ramp: how much wider the noise grows along the horizon: knot k of K samples
+        with noise_scale x (1 + noise_ramp x k / (K - 1)) (`noise_ramp_profile`), so the
+        far knots, which later replans revisit and the warm start holds only as a
+        guess, are searched widely while the controls about to be applied stay near the
+        nominal; 0: the same noise at every knot.
       cvar_alpha: the worst fraction of models CVaR averages over (with risk="cvar").
       termination_cost: cost added once to a rollout whose task terminates (a fall);
         its rewards stop counting there either way (`mjzoo.planning.masked_cost`).
     """
 
     noise_scale: float | Array = 0.3
+    noise_ramp: float | Array = 0.0
     cvar_alpha: float | Array = 0.25
     termination_cost: float | Array = 0.0
 
@@ -141,6 +149,7 @@ class SamplingHyperparams:
         """Field -> (whether its value is in range, elementwise for arrays; the range)."""
         return {
             "noise_scale": (np.greater_equal(self.noise_scale, 0), ">= 0"),
+            "noise_ramp": (np.greater_equal(self.noise_ramp, 0), ">= 0"),
             "cvar_alpha": (
                 np.logical_and(np.greater(self.cvar_alpha, 0), np.less_equal(self.cvar_alpha, 1)),
                 "in (0, 1]",
@@ -172,7 +181,8 @@ class PlannerState:
     Attributes:
       knots: [K, nu] the nominal plan (CEM: the sampling mean).
       std: [K, nu] sampling std in control units (fixed for predictive sampling and
-        MPPI; adapted by CEM).
+        MPPI, noise_ramp included; CEM: the elite fit, which its samples widen by the
+        ramp).
       time: [] environment time (s) at the plan's first knot.
       dt: [] control step of the planning task (s); 0 until the first replan.
       cost: [] cost of the plan chosen at the last replan (inf before).
@@ -206,10 +216,25 @@ def half_range(task: Task | Ensemble | native.Native) -> np.ndarray:
     return np.where(np.isfinite(high - low), (high - low) / 2, 1.0).astype(np.float32)
 
 
-def noise_std(noise_scale: float | Array, task: Task | Ensemble | native.Native, shape: tuple[int, int]) -> Array:
+def noise_ramp_profile(noise_ramp: float | Array, num_knots: int) -> Array:
+    """[K] each knot's noise multiplier, 1 + noise_ramp x k / (K - 1) for knots
+    k = 0..K-1 evenly spaced over the horizon: 1 at the plan's start, 1 + noise_ramp at
+    its end (all 1 for one knot). `noise_ramp` is [] (vmap for a batch)."""
+    along = jnp.linspace(0.0, 1.0, num_knots) if num_knots > 1 else jnp.zeros((1,))
+    return 1.0 + jnp.asarray(noise_ramp, jnp.float32) * along.astype(jnp.float32)
+
+
+def noise_std(
+    noise_scale: float | Array,
+    task: Task | Ensemble | native.Native,
+    shape: tuple[int, int],
+    noise_ramp: float | Array = 0.0,
+) -> Array:
     """[K, nu] sampling std in control units: `noise_scale` ([]) x half of each actuator's
-    control range (x 1 where unlimited), broadcast to the plan's `shape` (K, nu)."""
-    return jnp.broadcast_to(jnp.asarray(noise_scale, jnp.float32) * half_range(task), shape)
+    control range (x 1 where unlimited), grown along the horizon by `noise_ramp` ([];
+    `noise_ramp_profile`), for the plan's `shape` (K, nu)."""
+    ramp = noise_ramp_profile(noise_ramp, shape[0])[:, None]
+    return jnp.broadcast_to(jnp.asarray(noise_scale, jnp.float32) * ramp * half_range(task), shape)
 
 
 def initial_state(
@@ -219,7 +244,8 @@ def initial_state(
     knots: Array | None = None,
 ) -> PlannerState:
     """A plan of `knots` ([K, nu]; default: zero controls, clipped into the limits) with
-    std = noise_scale x half the control range (x 1 for unlimited actuators), holding
+    std = noise_scale x half the control range (x 1 for unlimited actuators; each
+    planner grows it along the horizon by noise_ramp when it samples), holding
     `hyperparams` (default `SamplingHyperparams()`) as float32 leaves.
 
     Committed to the device (unless traced), like the states `plan` returns: a host loop

@@ -220,6 +220,8 @@ def test_configs_and_hyperparams_name_a_bad_field():
         cma_es.Config(num_samples=8, num_elites=9)
     with pytest.raises(ValueError, match=r"sigma_max"):
         cma_es.Hyperparams(sigma_min=0.5, sigma_max=0.1)
+    with pytest.raises(ValueError, match=r"cma_es\.Hyperparams: noise_ramp=1\.0 is invalid; expected 0"):
+        cma_es.Hyperparams(noise_ramp=1.0)  # its covariance shapes the noise along the horizon
     assert cma_es.Config(num_samples=10).parents == 5
 
 

@@ -368,6 +368,44 @@ def test_initial_state_std_is_noise_scale_times_half_range():
     np.testing.assert_array_equal(state.knots, np.broadcast_to([0.0, 0.5], (K, NU)))
 
 
+def test_noise_ramp_profile_hand_computed_under_jit_and_vmap():
+    # 1 + r k / (K - 1): K = 4 knots, r = 3 -> [1, 2, 3, 4]; r = 0 is flat; one knot is 1.
+    profile = jax.jit(planning.noise_ramp_profile, static_argnums=1)
+    np.testing.assert_allclose(profile(3.0, 4), [1.0, 2.0, 3.0, 4.0], rtol=1e-6)
+    np.testing.assert_allclose(profile(0.0, 4), np.ones(4))
+    np.testing.assert_allclose(profile(5.0, 1), [1.0])
+    swept = jax.vmap(lambda r: planning.noise_ramp_profile(r, 3))(jnp.array([0.0, 1.0, 4.0]))
+    np.testing.assert_allclose(swept, [[1.0, 1.0, 1.0], [1.0, 1.5, 2.0], [1.0, 3.0, 5.0]], rtol=1e-6)
+
+
+def test_noise_std_grows_along_the_horizon_by_the_ramp_per_actuator():
+    # Half ranges [1, 0.5]: knot k's std is noise_scale (1 + r k / 2) x half range.
+    mj_model = copy.copy(_task().mj_model)
+    mj_model.actuator_ctrlrange[1] = [0.5, 1.5]
+    task = _task().replace(mj_model=mj_model)
+    std = jax.jit(lambda scale, ramp: planning.noise_std(scale, task, (K, NU), ramp))(0.2, 2.0)
+    np.testing.assert_allclose(std, [[0.2, 0.1], [0.4, 0.2], [0.6, 0.3]], rtol=1e-6)
+    np.testing.assert_allclose(planning.noise_std(0.2, task, (K, NU)), [[0.2, 0.1]] * K, rtol=1e-6)
+
+
+@pytest.mark.parametrize("planner", [predictive_sampling, mppi, cem])
+def test_plans_sample_with_the_ramped_noise(planner, monkeypatch):
+    # Each planner draws its samples with std noise_scale (1 + r k / (K - 1)) = 0.05 x
+    # [1, 3, 5] (CEM: its initial fit, 0.05, widened by the ramp; sigma_min is 0.05).
+    seen = []
+    draw = planning.sampling.sample_knots
+
+    def recording(key, mean, std, *args, **kwargs):
+        jax.debug.callback(lambda s: seen.append(np.asarray(s)), std)
+        return draw(key, mean, std, *args, **kwargs)
+
+    monkeypatch.setattr(planning.sampling, "sample_knots", recording)
+    state = planner.init(CONFIGS[planner], _task(), planner.Hyperparams(noise_scale=0.05, noise_ramp=4.0))
+    jax.jit(planner.plan, static_argnums=0)(CONFIGS[planner], _task(), state, _env_state(0), jax.random.key(1))
+    std = np.broadcast_to(seen[-1], (CONFIGS[planner].num_samples, K, NU))
+    np.testing.assert_allclose(std, np.broadcast_to([[0.05], [0.15], [0.25]], std.shape), rtol=1e-6)
+
+
 def test_initial_state_rejects_warm_start_knots_of_the_wrong_shape():
     config = predictive_sampling.Config(horizon_steps=H, num_knots=K)
     with pytest.raises(ValueError, match=r"warm-start knots must have shape \(3, 2\).*got \(2, 3\)"):
@@ -415,6 +453,7 @@ HYPERPARAMS_OUT_OF_RANGE = [
     (cem, dict(cvar_alpha=0.0), "cvar_alpha"),
     (predictive_sampling, dict(cvar_alpha=1.5), "cvar_alpha"),
     (mppi, dict(noise_scale=-0.1), "noise_scale"),
+    (predictive_sampling, dict(noise_ramp=-1.0), "noise_ramp"),
 ]
 
 
