@@ -156,6 +156,7 @@ def test_a_planner_draws_its_samples_and_plan(planned):
     assert planned.stats()["plan_latency_ms"] > 0
     assert sorted(k for k in planned.controls if k.startswith("config/")) == [
         "config/cvar_alpha",
+        "config/noise_ramp",
         "config/noise_scale",
         "config/temperature",
         "config/termination_cost",
