@@ -151,6 +151,15 @@ def test_plan_cli_runs_in_real_time_and_writes_its_files(tmp_path):
     assert (tmp_path / "plan.png").stat().st_size > 0
 
 
+def test_plan_cli_steps_the_world_where_sim_backend_says(tmp_path):
+    from mjzoo.harness import cli
+
+    argv = ["plan", "predictive_sampling", "pendulum_swingup", "--seconds", "0.2", "--no-video", "--backend", "mjx"]
+    cli.main([*argv, "--sim-backend", "native", "--out", str(tmp_path), "--config", "num_samples=4"])
+    summary = json.loads((tmp_path / "summary.json").read_text())
+    assert summary["backend"] == "mjx" and summary["world"] == "native"
+
+
 def test_pre_sim_step_and_post_rollout_hooks_reach_the_simulation():
     """point_mass's gusts push the mass before every simulation step (xfrc_applied), and
     the post-rollout hook keeps the cost the planner predicted for its chosen plan."""

@@ -363,6 +363,7 @@ def plan(
     video: bool = True,
     impl: Impl = None,
     backend: Literal["auto", "mjx", "native"] = "auto",
+    sim_backend: Literal["mjx", "native"] | None = None,
     prior: Path | None = None,
     render: RenderConfig = RenderConfig(),
 ) -> None:
@@ -392,6 +393,8 @@ def plan(
       seed: the random seed of the reset and the planner's samples.
       video: write plan.mp4.
       backend: where rollouts run: mjx, native (C MuJoCo), or auto (native on a CPU).
+      sim_backend: where the simulated world steps, if not where the rollouts run:
+        native beside an MJX planner on a GPU (a robot's world costs it nothing).
       prior: a PPO or AMP run directory trained on ENV: every replan starts from its
         policy's plan and values the horizon's end by its critic (PPO's).
       render: how the video is drawn.
@@ -411,7 +414,7 @@ def plan(
         runs.refuse_existing(out, PLAN_FILES, "choose a new --out")
         overrides = {**parse_assignments(env_overrides, "--env-overrides"), **({"impl": impl} if impl else {})}
         problem = mjzoo.envs.closed_loop_problem(
-            env, module, cfg, seconds, backend=backend, hyperparams=hyperparams, **overrides
+            env, module, cfg, seconds, backend=backend, hyperparams=hyperparams, sim_backend=sim_backend, **overrides
         )
         problem.tasks  # noqa: B018 (native tasks are checked here: a refusal is one line)
         if prior is not None:
