@@ -57,6 +57,7 @@ from mjzoo.algorithms import dial
 from mjzoo.algorithms import ilqr
 from mjzoo.algorithms import mppi
 from mjzoo.algorithms import predictive_sampling
+from mjzoo.harness.cli import arguments
 from mjzoo.planning import native
 from mjzoo.planning import realtime
 
@@ -86,10 +87,9 @@ def problem(
         fields.update(num_samples=samples, num_knots=JUDO_KNOTS)
     if "num_elites" in fields:
         fields["num_elites"] = max(2, samples // 8)
-    owned = {f.name for cls in (module.Config, module.Hyperparams) for f in dataclasses.fields(cls)}
-    fields.update({k: v for k, v in (overrides or {}).items() if k in owned})
-    overrides = {**setup.plan_overrides, "dt": spec["plan_dt"], "ctrl_dt": spec["plan_dt"], "episode_steps": 10**9}
-    plan_task = mjzoo.envs.make(spec["env"], **overrides)
+    fields.update(_planner_fields(module, overrides or {}))
+    env_overrides = {**setup.plan_overrides, "dt": spec["plan_dt"], "ctrl_dt": spec["plan_dt"], "episode_steps": 10**9}
+    plan_task = mjzoo.envs.make(spec["env"], **env_overrides)
     plan_task = setup.plan_view(plan_task) if setup.plan_view else plan_task
     sim_task = mjzoo.envs.make(spec["env"], episode_steps=10**9)
     config, hyperparams = mjzoo.planning.configure(module, fields)
@@ -105,6 +105,12 @@ def problem(
         backend=backend,
         hyperparams=hyperparams,
     )
+
+
+def _planner_fields(module, overrides: dict) -> dict:
+    """The entries of `overrides` that are fields of the planner `module`'s Config or Hyperparams."""
+    owned = {f.name for cls in (module.Config, module.Hyperparams) for f in dataclasses.fields(cls)}
+    return {k: v for k, v in overrides.items() if k in owned}
 
 
 def measure(
@@ -133,7 +139,7 @@ def measure(
         "score": mean("score"),
         "seeds": seeds,
         "clock": clock,
-        "overrides": {k: v for k, v in overrides.items() if hasattr(p.config, k) or hasattr(p.hyperparams, k)},
+        "overrides": _planner_fields(PLANNERS[planner], overrides),
         "setup_s": build,
         "runs": runs,
     }
@@ -170,14 +176,17 @@ def judo(args, out: Path) -> dict | None:
     return json.loads(out.read_text())
 
 
-def _field(item: str, parser: argparse.ArgumentParser) -> tuple[str, float]:
-    """("noise_ramp", 2.0) from "noise_ramp=2" (a number; ints stay ints), or one line of error."""
-    name, _, value = item.partition("=")
+def _numbers(items: list[str], parser: argparse.ArgumentParser) -> dict[str, int | float]:
+    """{"noise_ramp": 2} from ["noise_ramp=2"] (the CLI's reader; ints stay ints), or one
+    line of error where a value is not a number."""
     try:
-        number = float(value)
-    except ValueError:
-        parser.error(f"--config {item!r}: expected NAME=NUMBER")
-    return name, int(number) if number.is_integer() and "." not in value else number
+        fields = arguments.parse_assignments(tuple(items), "--config")
+    except arguments.UsageError as error:
+        parser.error(str(error))
+    for name, value in fields.items():
+        if isinstance(value, bool) or not isinstance(value, (int, float)):
+            parser.error(f"--config {name}={value!r}: expected NAME=NUMBER")
+    return fields
 
 
 def table(rows: list[dict]) -> str:
@@ -227,7 +236,7 @@ def main() -> None:
         "--out", type=Path, default=ROOT / "benchmarks" / "results" / "planner_cpu" / "planner_cpu.json"
     )
     args = parser.parse_args()
-    overrides = dict(_field(item, parser) for item in args.config)
+    overrides = _numbers(args.config, parser)
     load = [os.getloadavg()]
     rows = []
     for task in args.tasks:

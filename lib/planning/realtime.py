@@ -191,7 +191,7 @@ class _Compiled:
 
 def _compiled(problem: Problem, key: jax.Array, total_steps: int) -> _Compiled:
     planner, config, hooks = problem.planner, problem.config, problem.hooks
-    sim_task, plan_task = problem.tasks
+    plan_task = problem.tasks[1]
     reset_key, plan_key, key = jax.random.split(key, 3)
     # Every argument committed to the device like the jit outputs it alternates with: an
     # uncommitted one would compile the function again, mid-run.
