@@ -248,6 +248,13 @@ def _loop(problem: Problem, sims: Packing, plans: Packing) -> tuple[Callable, ..
     return compile_(problem.physics)(replan_packed), compile_(problem.sim_physics)(step_packed), after_rollout, pack
 
 
+def _stack(problem: Problem, packing: Packing, packed: list) -> Any:
+    """The run's [T] states, from the loop's T packed ones (unpacked in one jit, made once
+    per problem)."""
+    unpack = _functions(problem, ("unpack", packing), lambda: jax.jit(packing.unpack))
+    return unpack(jax.tree.map(lambda *x: jnp.stack(x), *packed))
+
+
 def _timings(wall: float, latencies: list, step_seconds: list, physics_seconds: list, simulated_s: float) -> dict:
     """`realtime`'s report of where the `wall` seconds went (see there)."""
     ms = lambda xs, q=50: 1e3 * float(np.percentile(xs, q)) if xs else float("nan")  # noqa: E731
@@ -318,11 +325,6 @@ def realtime(
             advance_to(due_at(tick + period), planner_state)
             time.sleep(max(0.0, tick + period - time.perf_counter()))
     wall = time.perf_counter() - begin
-
-    def stack(packing: Packing, xs: list) -> Any:
-        unpack = _functions(problem, ("unpack", packing), lambda: jax.jit(packing.unpack))
-        return unpack(jax.tree.map(lambda *x: jnp.stack(x), *xs))
-
-    stacked, plan_states = stack(loop.sims, states), stack(loop.plans, plan_states)
+    stacked, plan_states = _stack(problem, loop.sims, states), _stack(problem, loop.plans, plan_states)
     result = Result(stacked, jnp.stack(controls), -stacked.reward, plan_states.cost, loop.plans.unpack(planner_state))
     return result, _timings(wall, latencies, step_seconds, physics_seconds, total_steps * sim_dt)
