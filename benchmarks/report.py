@@ -544,7 +544,8 @@ def robot_mpc() -> list[str]:
 `benchmarks/robot_mpc.py`: sampling planners on the real robots in real time
 (`mjzoo.planning.realtime`, as `mjzoo plan` runs): the simulation advances with the wall
 clock and waits for no replan, so a slow planner acts late, as it would on a robot. The
-planner's model and the world are the task's own MJX physics, one GPU. Success is the
+planner's model is the task's own MJX physics, on one GPU; the world steps there too
+(world `mjx`) or in C MuJoCo on the host (`native`, `robot_mpc.py --world`). Success is the
 task's own measure (G1 standup: the pelvis within 0.1 m of standing height over the
 last second); replan times are medians over each episode's replans, averaged over
 episodes.
@@ -554,6 +555,7 @@ episodes.
         ("planner", _at("planner")),
         ("samples", _at("num_samples")),
         ("horizon (s)", _at("horizon_s")),
+        ("world", _at("world")),
         ("replan (ms)", _at("replan_ms.median")),
         ("p95 (ms)", _at("replan_ms.p95")),
         ("replans/s", _at("plan_hz")),
