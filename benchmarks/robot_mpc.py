@@ -9,7 +9,9 @@ on a robot. The planner rolls out on MJX; the world steps in C MuJoCo (``--world
 a robot's world costs the planner nothing (one G1 world's MJX step took 14 ms on an
 H200, 70% of the wall clock, before a replan's share). Per row: replan latency (median, p95),
 the achieved replan rate, the success rate over ``--episodes`` seeds by the task's own
-measure, and its mean score. iLQR is left out: its derivatives cost (2n + 1) n forward
+measure, and its mean score. A replan is a `lax.scan` over the horizon's physics steps,
+each over every sample at once: its latency per physics step (``ms_per_physics_step``)
+is what bounds the rate. iLQR is left out: its derivatives cost (2n + 1) n forward
 passes a planning step (n ~ 100 for the G1), a planner for small systems.
 
     python benchmarks/robot_mpc.py                                   # one GPU, ~25 minutes
@@ -43,6 +45,12 @@ PLANNERS = {m.__name__.rsplit(".", 1)[-1]: m for m in (predictive_sampling, mppi
 TASKS = {"g1_standup": {}, "go1_trot": {}, "g1_track": {"clips": "walk"}, "leap_cube_rotate": {}, "panda_pick": {}}
 
 
+def physics_steps(plan_task: mjzoo.Task, horizon_steps: int, control_dt: float) -> int:
+    """The sequential physics steps of one rollout: a replan's latency over them is the
+    cost of one batched MJX step, what bounds the replanning rate."""
+    return horizon_steps * round(control_dt / float(plan_task.model.opt.timestep))
+
+
 def measure(task: str, planner: str, samples: int, episodes: int, smoke: bool, world: str) -> dict:
     """One row: `episodes` real-time closed loops of `planner` at `samples` on `task`."""
     module = PLANNERS[planner]
@@ -67,6 +75,7 @@ def measure(task: str, planner: str, samples: int, episodes: int, smoke: bool, w
             f"  {task} {planner} {samples} seed {seed}: {stats['plan_hz']:.1f} Hz, solved {solved}, score {score:.3g}"
         )
     mean = lambda k: float(np.mean([r[k] for r in runs]))  # noqa: E731
+    steps = physics_steps(problem.plan_task, config.horizon_steps, problem.sim_dt)
     return {
         "task": task,
         "planner": planner,
@@ -74,6 +83,8 @@ def measure(task: str, planner: str, samples: int, episodes: int, smoke: bool, w
         "horizon_s": config.horizon_steps * problem.sim_dt,
         "world": world,
         "replan_ms": {"median": mean("plan_latency_ms"), "p95": mean("plan_latency_p95_ms")},
+        "physics_steps": steps,
+        "ms_per_physics_step": mean("plan_latency_ms") / steps,
         "plan_hz": mean("plan_hz"),
         "success_rate": mean("success"),
         "score": mean("score"),
