@@ -9,7 +9,10 @@ real-time runner (`mjzoo.planning.realtime`, as `mjzoo plan` does) on each backe
 native (C MuJoCo through `mujoco.rollout`) and MJX on the CPU; the planning model takes
 Judo's time step, the simulation is the env's own. Judo (PyPI `judo-rai`, in its own
 environment: ``bash benchmarks/judo_env.sh``) runs its own tasks in the same run, through
-``benchmarks/judo_peer.py``, with the same number of rollout threads.
+``benchmarks/judo_peer.py``, with the same number of rollout threads. ``--tasks leap_cube``
+adds the LEAP hand turning a cube to goal orientations (Judo's flagship) at Judo's
+shipped LEAP settings, which are the env's registered ones (1 s of 20 control steps on
+the task's own model), with no Judo rows: Judo's LEAP task fetches its meshes online.
 
 Per row: replan latency (median, p95), the part spent in C MuJoCo's rollouts (native and
 Judo), the rest (the fixed overhead of a replan), the achieved rate and the closed-loop
@@ -25,6 +28,9 @@ takes ~1.5x longer).
     python benchmarks/planner_cpu.py --tasks cartpole --planners mppi --backends native --no-judo
     python benchmarks/planner_cpu.py --clock wall --planners dial cma_es ilqr --no-judo --seeds 3 \
         --out benchmarks/results/planner_cpu/planner_cpu_wall.json
+    python benchmarks/planner_cpu.py --tasks leap_cube --planners ps mppi cem --backends native --no-judo \
+        --sample-factors 1 --seeds 5 --seconds 40 --clock wall \
+        --out benchmarks/results/planner_cpu/planner_cpu_leap_wall.json
     python benchmarks/planner_cpu.py --tasks cartpole --backends native --no-judo --seeds 6 --clock wall \
         --planners ps mppi cem --sample-factors 1 --config noise_scale=0.1 noise_ramp=2 \
         --out benchmarks/results/planner_cpu/planner_cpu_cartpole_wall.json
@@ -65,11 +71,15 @@ ROOT = Path(__file__).resolve().parent.parent
 PLANNERS = {"ps": predictive_sampling, "cem": cem, "mppi": mppi, "dial": dial, "cma_es": cma_es, "ilqr": ilqr}
 JUDO_PLANNERS = ("ps", "cem", "mppi")  # the optimizers Judo ships, run beside ours
 GRADIENT = ("ilqr",)  # planners on MJX's derivatives: no samples, no knots, no native backend
-# Judo's shipped settings per task: its horizon in planning steps of its time step.
+# Judo's shipped settings per task: its horizon in planning steps of its time step (None:
+# the planning model keeps the task's own steps, the LEAP hand's 0.01 s physics under 0.05 s
+# control; its noise and ramp are the env's registered ones, Judo's).
 TASKS = {
     "cartpole": dict(env="cartpole_swingup", plan_dt=0.04, horizon_steps=25),
     "cylinder_push": dict(env="cylinder_push", plan_dt=0.02, horizon_steps=50),
+    "leap_cube": dict(env="leap_cube_rotate", plan_dt=None, horizon_steps=20),
 }
+JUDO_TASKS = ("cartpole", "cylinder_push")  # judo_peer.py's; its LEAP cube fetches meshes online
 JUDO_ROLLOUTS, JUDO_KNOTS, RATE_HZ = 32, 4, 20.0
 
 
@@ -88,7 +98,8 @@ def problem(
     if "num_elites" in fields:
         fields["num_elites"] = max(2, samples // 8)
     fields.update(_planner_fields(module, overrides or {}))
-    env_overrides = {**setup.plan_overrides, "dt": spec["plan_dt"], "ctrl_dt": spec["plan_dt"], "episode_steps": 10**9}
+    steps = {"dt": spec["plan_dt"], "ctrl_dt": spec["plan_dt"]} if spec["plan_dt"] else {}
+    env_overrides = {**setup.plan_overrides, **steps, "episode_steps": 10**9}
     plan_task = mjzoo.envs.make(spec["env"], **env_overrides)
     plan_task = setup.plan_view(plan_task) if setup.plan_view else plan_task
     sim_task = mjzoo.envs.make(spec["env"], episode_steps=10**9)
@@ -160,7 +171,7 @@ def judo(args, out: Path) -> dict | None:
         "--out",
         str(out),
         "--tasks",
-        *args.tasks,
+        *[t for t in args.tasks if t in JUDO_TASKS],
         "--optimizers",
         *[p for p in args.planners if p in JUDO_PLANNERS],
         "--sample-factors",
@@ -208,7 +219,7 @@ def table(rows: list[dict]) -> str:
 
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
-    parser.add_argument("--tasks", nargs="+", default=list(TASKS), choices=list(TASKS))
+    parser.add_argument("--tasks", nargs="+", default=list(JUDO_TASKS), choices=list(TASKS))
     parser.add_argument("--planners", nargs="+", default=list(PLANNERS), choices=list(PLANNERS))
     parser.add_argument("--sample-factors", nargs="+", type=int, default=[1, 4])
     parser.add_argument("--backends", nargs="+", default=["native", "mjx"], choices=["native", "mjx"])

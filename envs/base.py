@@ -82,24 +82,30 @@ def sampling_setup(
     horizon_steps: int,
     num_knots: int,
     noise_scale: float,
+    num_samples: int = 1024,
+    noise_ramp: float = 0.0,
     dial_iterations: int = 2,
     plan_overrides: dict[str, Any] | None = None,
 ) -> PlanningSetup:
-    """The real robots' setup: every sampling planner at 1024 samples over `horizon_steps`
-    control steps, replanning every step; MPPI at temperature 0.1, CEM and CMA-ES keeping
-    64 elites, DIAL annealing over `dial_iterations`."""
-    sampling = dict(num_samples=1024, horizon_steps=horizon_steps, num_knots=num_knots, noise_scale=noise_scale)
+    """The real robots' setup: every sampling planner at `num_samples` over `horizon_steps`
+    control steps, replanning every step, its noise widening by `noise_ramp` along the
+    horizon (CMA-ES, which adapts its own spread, without); MPPI at temperature 0.1, CEM
+    and CMA-ES keeping 1/16 of the samples (64 of 1024) as elites, DIAL annealing over
+    `dial_iterations`."""
+    sampling = dict(num_samples=num_samples, horizon_steps=horizon_steps, num_knots=num_knots, noise_scale=noise_scale)
+    ramped = dict(sampling, noise_ramp=noise_ramp) if noise_ramp else sampling
+    elites = max(2, num_samples // 16)
     return PlanningSetup(
         seconds=seconds,
         replan_every=1,
         plan_overrides=plan_overrides or {},
         success=success,
         configs={
-            "predictive_sampling": sampling,
-            "mppi": dict(sampling, temperature=0.1),
-            "cem": dict(sampling, num_elites=64),
-            "dial": dict(sampling, iterations=dial_iterations),
-            "cma_es": dict(sampling, num_elites=64),
+            "predictive_sampling": ramped,
+            "mppi": dict(ramped, temperature=0.1),
+            "cem": dict(ramped, num_elites=elites),
+            "dial": dict(ramped, iterations=dial_iterations),
+            "cma_es": dict(sampling, num_elites=elites),
         },
     )
 

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import functools
+import importlib
 
 import jax
 import jax.numpy as jnp
@@ -203,3 +204,26 @@ def test_a_misspelled_name_gets_the_nearest_known_one():
     assert checks.did_you_mean(["nonsense"], ["num_envs", "seed"]) == ""
     with pytest.raises(KeyError, match=r"unknown env 'cartpole_balanse' \(did you mean 'cartpole_balance'\?\)"):
         mjzoo.envs.make("cartpole_balanse")
+
+
+def test_the_robots_sampling_setup_ramps_every_planner_but_cma_es():
+    from mjzoo.envs import base
+
+    setup = base.sampling_setup(
+        5.0, lambda states: (True, 0.0), num_samples=32, horizon_steps=20, num_knots=4, noise_scale=0.2, noise_ramp=4.0
+    )
+    configs = setup.configs
+    assert {name: c["noise_ramp"] for name, c in configs.items() if "noise_ramp" in c} == {
+        "predictive_sampling": 4.0,
+        "mppi": 4.0,
+        "cem": 4.0,
+        "dial": 4.0,
+    }
+    # CMA-ES adapts its own spread (it refuses a ramp); elites are 1/16 of the samples, at least 2.
+    assert configs["cma_es"]["num_elites"] == configs["cem"]["num_elites"] == 2
+    assert {c["num_samples"] for c in configs.values()} == {32}
+    for name, fields in configs.items():  # every planner takes its fields as they are
+        module = importlib.import_module(f"mjzoo.algorithms.{name}")
+        mjzoo.planning.configure(module, fields)
+    default = base.sampling_setup(5.0, None, horizon_steps=25, num_knots=4, noise_scale=0.5).configs
+    assert "noise_ramp" not in default["mppi"] and default["cem"]["num_elites"] == 64

@@ -101,7 +101,7 @@ def test_the_orientation_cost_is_the_squared_angle_to_the_goal(task):
     assert float(leap_cube.orientation_cost(m)(None, state, None, next_state)) == pytest.approx(0.3**2, rel=1e-3)
     assert float(leap_cube.hold_cost(m, hold)(None, state, None, next_state)) == pytest.approx(0.02**2, rel=1e-3)
     weights = mjzoo.params(task)
-    assert float(weights["orientation_weight"]) == 1.0 and float(weights["position_weight"]) == 300.0
+    assert float(weights["orientation_weight"]) == 1.0 and float(weights["position_weight"]) == 1000.0
 
 
 def test_a_drop_ends_the_episode(task):
