@@ -509,6 +509,9 @@ rollouts are C MuJoCo's share, the rest everything but physics. The LEAP cube
 (`--tasks leap_cube`, Judo's LEAP settings, which `leap_cube_rotate` registers) runs
 without Judo, whose LEAP task fetches its meshes online; its success is 10 goals in a row
 without a drop within 40 s. Clock `wall`: in real time (the world does not wait for a replan).
+The score is the task's own measure, averaged over seeds: the cart-pole's worst angle
+from upright over the last second (rad), the push's final distance (m), the LEAP cube's
+goals in a row.
 """
     cpu = [
         ("task", _at("task")),
@@ -522,6 +525,7 @@ without a drop within 40 s. Clock `wall`: in real time (the world does not wait 
         ("rollouts (ms)", _at("rollout_ms.median")),
         ("rest (ms)", _at("overhead_ms.median")),
         ("success", _at("success_rate")),
+        ("score", _at("score")),
         ("seeds", _at("seeds")),
     ]
     return _section(
