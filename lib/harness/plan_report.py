@@ -77,14 +77,18 @@ def _plot(path: Path, time_s: np.ndarray, costs: np.ndarray, controls: np.ndarra
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
 
-    fig, (top, bottom) = plt.subplots(2, 1, sharex=True, figsize=(7, 5))
+    nu = controls.shape[1]
+    many = nu > 6  # a hand's 16 actuators, a humanoid's 29: their legend goes beside the plots, over no line
+    fig, (top, bottom) = plt.subplots(2, 1, sharex=True, figsize=(9 if many else 7, 5), layout="constrained")
     top.plot(time_s, costs)
     top.set_ylabel("cost per step (-reward)")
-    for i in range(controls.shape[1]):
+    for i in range(nu):
         bottom.plot(time_s, controls[:, i], label=task.mj_model.actuator(i).name or f"u{i}")
     bottom.set_ylabel("control")
     bottom.set_xlabel("time (s)")
-    bottom.legend(loc="upper right", fontsize="small")
-    fig.tight_layout()
+    if many:
+        fig.legend(loc="outside right upper", fontsize="x-small", ncols=1 + (nu - 1) // 20)
+    else:
+        bottom.legend(loc="upper right", fontsize="small")
     fig.savefig(path, dpi=100)
     plt.close(fig)
