@@ -307,7 +307,7 @@ def mpc_part(args, report) -> dict:
         for samples in [8] if args.smoke else args.samples:
             fields = dict(num_samples=samples, horizon_steps=4 if args.smoke else 25, num_knots=4)
             if module is cem:
-                fields["num_elites"] = max(2, samples // 16)
+                fields["num_elites"] = mjzoo.envs.base.elite_count(samples)
             config, hyperparams = mjzoo.planning.configure(module, fields)
             run = jax.jit(
                 lambda key, hp, module=module, config=config: closed_loop.run(

@@ -57,7 +57,7 @@ def measure(task: str, planner: str, samples: int, episodes: int, smoke: bool, w
     fields = mjzoo.envs.hyperparameters(task, planner)
     fields["num_samples"] = samples
     if "num_elites" in fields:
-        fields["num_elites"] = max(2, samples // 16)
+        fields["num_elites"] = mjzoo.envs.base.elite_count(samples)
     if smoke:
         fields.update(horizon_steps=4, num_knots=2)
     config, hyperparams = mjzoo.planning.configure(module, fields)

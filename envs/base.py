@@ -24,6 +24,8 @@ __all__ = [
     "brax_asset",
     "EnvSpec",
     "PlanningSetup",
+    "sampling_setup",
+    "elite_count",
     "held_near",
 ]
 
@@ -75,6 +77,11 @@ class PlanningSetup:
         return self.plan_view(task) if self.plan_view else task
 
 
+def elite_count(num_samples: int) -> int:
+    """The elites CEM and CMA-ES keep on the real robots: 1/16 of the samples, at least 2."""
+    return max(2, num_samples // 16)
+
+
 def sampling_setup(
     seconds: float,
     success: Callable[[Any], tuple[bool, float]],
@@ -94,7 +101,7 @@ def sampling_setup(
     `dial_iterations`."""
     sampling = dict(num_samples=num_samples, horizon_steps=horizon_steps, num_knots=num_knots, noise_scale=noise_scale)
     ramped = dict(sampling, noise_ramp=noise_ramp) if noise_ramp else sampling
-    elites = max(2, num_samples // 16)
+    elites = elite_count(num_samples)
     return PlanningSetup(
         seconds=seconds,
         replan_every=1,
