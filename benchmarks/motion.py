@@ -28,8 +28,8 @@ over their steps. Times are wall-clock from the part's start, compile included.
     python benchmarks/motion.py --parts mpc --samples 256 1024
     python benchmarks/motion.py --smoke --parts walk amp mpc      # tiny sizes, on a CPU: checks the script
 
-Results merge into ``benchmarks/results/motion/motion_<card>.json`` after every
-evaluation (a part's re-run replaces its entry).
+Results merge into ``benchmarks/results/motion/motion_<card>.json`` (``--out``) after every
+evaluation (a part's re-run on the same physics, ``--impl``, replaces its entry).
 """
 
 from __future__ import annotations
@@ -52,6 +52,7 @@ from cards import card_name  # noqa: E402
 import mjzoo  # noqa: E402
 import mjzoo.envs  # noqa: E402
 from mjzoo import names  # noqa: E402
+from mjzoo import physics  # noqa: E402
 from mjzoo import running  # noqa: E402
 from mjzoo.algorithms import amp  # noqa: E402
 from mjzoo.algorithms import cem  # noqa: E402
@@ -84,6 +85,7 @@ def episodes(task: mjzoo.Task, act: Callable, keys: jax.Array, steps: int) -> di
     qpos [E, T, nq]; the command error (m/s) where the task has a velocity command."""
 
     address = tuple(int(a[0]) for a in names.free_joint_addresses(task.mj_model, None, "motion"))  # the base
+    task = mjzoo.batching.sized(task, keys.shape[0])  # Warp: a contact pool for every episode
 
     def one(key):
         state = running.reset(task, jax.random.split(key)[0])
@@ -257,7 +259,7 @@ def amp_judge(reference: mjzoo.motion.Reference) -> Callable[[dict], dict]:
 
 def tracking_part(name: str, clips: str | None, args, report) -> dict:
     overrides = {} if clips is None else {"clips": clips}
-    task = mjzoo.envs.make("g1_track", **overrides)
+    task = mjzoo.envs.make("g1_track", impl=args.impl, **overrides)
     names = motion_tracking.G1_CLIPS if clips is None else tuple(clips.split(","))  # the start table's rows
     fields = {**mjzoo.envs.hyperparameters("g1_track", "ppo"), **_steps(args), **(SMOKE if args.smoke else {})}
     steps = 10 if args.smoke else running.episode_steps(task)
@@ -278,7 +280,7 @@ def _steps(args) -> dict:
 
 
 def amp_part(args, report) -> dict:
-    task = mjzoo.envs.make("g1_amp_joystick")
+    task = mjzoo.envs.make("g1_amp_joystick", impl=args.impl)
     reference = mjzoo.envs.reference("g1_amp_joystick", task)
     fields = {
         **mjzoo.envs.hyperparameters("g1_amp_joystick", "amp"),
@@ -297,7 +299,7 @@ def amp_part(args, report) -> dict:
 def mpc_part(args, report) -> dict:
     """Closed-loop MPPI and CEM on the walk clip: the simulation is the task, the planner
     plans on the same task (its reward: the tracking reward)."""
-    task = mjzoo.envs.make("g1_track", clips="walk")
+    task = mjzoo.envs.make("g1_track", clips="walk", impl=args.impl)
     clip_task = per_clip_tasks(task)[0].with_params(start_probabilities=_first_bin(task))
     (walk,) = motion_tracking.g1_clips(("walk",))
     steps = 10 if args.smoke else round((walk.qpos.shape[0] - 1) / walk.fps / 0.02)  # replans, one per 0.02 s step
@@ -361,16 +363,22 @@ def main() -> None:
     parser.add_argument("--eval-envs", type=int, default=64)
     parser.add_argument("--budget", type=float, default=None, help="seconds per part (default: its goal)")
     parser.add_argument("--samples", type=int, nargs="+", default=[1024], help="the MPC's sample counts")
+    parser.add_argument(
+        "--impl", choices=physics.IMPLS, default=None, help="the physics (default: Warp where installed on a GPU)"
+    )
+    parser.add_argument("--out", type=Path, default=OUT, help="the results' folder")
     parser.add_argument("--smoke", action="store_true", help="tiny sizes: checks the script runs, on a CPU")
     args = parser.parse_args()
+    args.impl = args.impl or physics.default_impl()
     card = card_name() + ("_smoke" if args.smoke else "")
-    path = OUT / f"motion_{card}.json"
+    path = args.out / f"motion_{card}.json"
     rows = json.loads(path.read_text())["rows"] if path.is_file() else []
 
     def report(row: dict) -> None:
-        row["device"] = jax.devices()[0].device_kind
-        rows[:] = [r for r in rows if r["part"] != row["part"]] + [row]
-        OUT.mkdir(parents=True, exist_ok=True)
+        row["device"], row["impl"] = jax.devices()[0].device_kind, args.impl
+        same = lambda r: (r["part"], r.get("impl", "jax")) == (row["part"], args.impl)  # noqa: E731
+        rows[:] = [r for r in rows if not same(r)] + [row]
+        args.out.mkdir(parents=True, exist_ok=True)
         path.write_text(json.dumps({"rows": rows}, indent=1, default=float) + "\n")
 
     for part in args.parts:

@@ -5,7 +5,8 @@ For each robot task (`g1_standup`, `go1_trot`, `g1_track` on its walk clip,
 over the task's 0.5 s horizon (its `PLANNING` setup otherwise), the real-time runner
 (`mjzoo.planning.realtime`, as `mjzoo plan` runs) simulates the task against the wall
 clock: the world does not wait for a replan, and a slow planner falls behind as it would
-on a robot. The planner rolls out on MJX; the world steps in C MuJoCo (``--world``), as
+on a robot. The planner rolls out on MJX (``--impl``: MuJoCo Warp where installed); the
+world steps in C MuJoCo (``--world``; beside a planner on Warp, on Warp too), as
 a robot's world costs the planner nothing (one G1 world's MJX step took 14 ms on an
 H200, 70% of the wall clock, before a replan's share). Per row: replan latency (median, p95),
 the achieved replan rate, the success rate over ``--episodes`` seeds by the task's own
@@ -33,6 +34,7 @@ import numpy as np
 
 import mjzoo
 import mjzoo.envs
+from mjzoo import physics
 from mjzoo.algorithms import cem
 from mjzoo.algorithms import cma_es
 from mjzoo.algorithms import dial
@@ -51,7 +53,7 @@ def physics_steps(plan_task: mjzoo.Task, horizon_steps: int, control_dt: float) 
     return horizon_steps * round(control_dt / float(plan_task.model.opt.timestep))
 
 
-def measure(task: str, planner: str, samples: int, episodes: int, smoke: bool, world: str) -> dict:
+def measure(task: str, planner: str, samples: int, episodes: int, smoke: bool, world: str, impl: str = "jax") -> dict:
     """One row: `episodes` real-time closed loops of `planner` at `samples` on `task`."""
     module = PLANNERS[planner]
     fields = mjzoo.envs.hyperparameters(task, planner)
@@ -63,7 +65,15 @@ def measure(task: str, planner: str, samples: int, episodes: int, smoke: bool, w
     config, hyperparams = mjzoo.planning.configure(module, fields)
     seconds = 0.1 if smoke else None
     problem = mjzoo.envs.closed_loop_problem(
-        task, module, config, seconds=seconds, backend="mjx", hyperparams=hyperparams, sim_backend=world, **TASKS[task]
+        task,
+        module,
+        config,
+        seconds=seconds,
+        backend="mjx",
+        hyperparams=hyperparams,
+        sim_backend=world,
+        impl=impl,
+        **TASKS[task],
     )
     start = time.perf_counter()
     runs = []
@@ -82,6 +92,7 @@ def measure(task: str, planner: str, samples: int, episodes: int, smoke: bool, w
         "num_samples": samples,
         "horizon_s": config.horizon_steps * problem.sim_dt,
         "world": world,
+        "impl": impl,
         "replan_ms": {"median": mean("plan_latency_ms"), "p95": mean("plan_latency_p95_ms")},
         "physics_steps": steps,
         "ms_per_physics_step": mean("plan_latency_ms") / steps,
@@ -103,8 +114,14 @@ def main() -> None:
     parser.add_argument(
         "--world",
         choices=["native", "mjx"],
-        default="native",
-        help="where the simulated world steps (the planner: MJX)",
+        default=None,
+        help="where the simulated world steps (default: C MuJoCo; beside a planner on Warp, MJX on Warp)",
+    )
+    parser.add_argument(
+        "--impl",
+        choices=physics.IMPLS,
+        default=None,
+        help="the planner's physics (default: Warp where installed on a GPU; a native world: C MuJoCo)",
     )
     parser.add_argument("--smoke", action="store_true", help="8 samples, a 4-step horizon, 0.1 s, one episode")
     parser.add_argument("--out", type=Path, default=ROOT / "benchmarks" / "results" / "robot_mpc")
@@ -115,11 +132,15 @@ def main() -> None:
     name = device.device_kind.lower().replace(" ", "_") if device.platform == "gpu" else "cpu"
     args.out.mkdir(parents=True, exist_ok=True)
     path = args.out / f"robot_mpc_{name}{'_smoke' if args.smoke else ''}.json"
+    impl = args.impl or physics.default_impl()
+    if impl == "warp" and args.world == "native":  # C MuJoCo's states are MJX-JAX's, not Warp's
+        parser.error("a planner on MuJoCo Warp plans from a world on MJX: --world mjx (or --impl jax)")
+    args.world = args.world or ("mjx" if impl == "warp" else "native")
     rows = []
     for task in args.tasks:
         for planner in args.planners:
             for samples in args.samples:
-                rows.append(measure(task, planner, samples, args.episodes, args.smoke, args.world))
+                rows.append(measure(task, planner, samples, args.episodes, args.smoke, args.world, impl))
                 meta = {"device": device.device_kind, "jax": jax.__version__, "smoke": args.smoke}
                 path.write_text(json.dumps({"meta": meta, "rows": rows}, indent=1))
     print(f"wrote {path}")

@@ -19,7 +19,8 @@ Humanoid in 17 on an RTX 4090; mjlab's G1 flat velocity within ~1 h on an RTX 50
 
 A variant stops once every seed tracks or after ``--budget`` seconds (default: the goal,
 5 min flat, 15 rough). Results merge into ``benchmarks/results/robots/robots_<card>.json``
-after every evaluation (a variant's re-run with the same seeds replaces its entry), with
+(``--out``) after every evaluation (a variant's re-run with the same seeds on the same
+physics, ``--impl``, replaces its entry), with
 the curves of tracking error against seconds in a figure. ``--runs`` keeps seed 0's
 policy as a run that `mjzoo export` and `mjzoo sim2sim` take.
 """
@@ -43,6 +44,7 @@ sys.path.insert(0, str(Path(__file__).parent))
 from cards import card_name  # noqa: E402
 
 import mjzoo.envs  # noqa: E402
+from mjzoo import physics  # noqa: E402
 from mjzoo.algorithms import ppo  # noqa: E402
 from mjzoo.envs import robot_joystick  # noqa: E402
 from mjzoo.harness import checkpoints  # noqa: E402
@@ -73,6 +75,7 @@ def train(
     budget: float,
     report: Callable[[dict], None],
     run_dir: Path | None,
+    impl: str = "jax",
 ) -> dict[str, Any]:
     """Every seed of one robot and terrain in one vmapped program: up to `evals` chunks of
     updates, each followed by a tracking evaluation, until every seed tracks or `budget`
@@ -81,9 +84,9 @@ def train(
     start = time.perf_counter()
     robot, terrain = variant.split(":")
     name = f"{robot}_joystick"
-    task = mjzoo.envs.make(name, terrain=terrain)  # on a terrain: the curriculum, auto-reset inside
+    task = mjzoo.envs.make(name, terrain=terrain, impl=impl)  # on a terrain: the curriculum, auto-reset inside
     # Evaluated where the curriculum ends: the hardest row (flat: the task itself).
-    judge = task if terrain == "flat" else robot_joystick.robot_joystick(robot, terrain=terrain, level=1.0)
+    judge = task if terrain == "flat" else robot_joystick.robot_joystick(robot, terrain=terrain, level=1.0, impl=impl)
     fields = mjzoo.envs.hyperparameters(name, "ppo")
     fields.update(SMOKE if smoke else {})
     if steps:
@@ -216,7 +219,9 @@ def plot(rows: list[dict], path: Path) -> None:
                     t,
                     [p[key] for p in run["curve"]],
                     color=f"C{rows.index(row)}",
-                    label=f"{row['variant']}, {len(row['seeds'])} seed(s) in one program" if i == 0 else None,
+                    label=f"{row['variant']} ({row.get('impl', 'jax')}), {len(row['seeds'])} seed(s) in one program"
+                    if i == 0
+                    else None,
                 )
     for ax, key, unit in zip(axes, ("linear_error", "yaw_error"), ("m/s", "rad/s")):
         ax.axhline(GOAL[key], color="k", linestyle="--", linewidth=0.8)
@@ -243,16 +248,22 @@ def main() -> None:
     parser.add_argument(
         "--runs", type=Path, default=None, help="save seed 0's policy as a run in RUNS/<robot>_<terrain>"
     )
+    parser.add_argument(
+        "--impl", choices=physics.IMPLS, default=None, help="the physics (default: Warp where installed on a GPU)"
+    )
+    parser.add_argument("--out", type=Path, default=OUT, help="the results' folder")
     parser.add_argument("--smoke", action="store_true", help="tiny sizes: checks the script runs, on a CPU")
     args = parser.parse_args()
+    args.impl = args.impl or physics.default_impl()
     card = card_name() + ("_smoke" if args.smoke else "")
-    path = OUT / f"robots_{card}.json"
+    path = args.out / f"robots_{card}.json"
     rows = json.loads(path.read_text())["rows"] if path.is_file() else []
 
     def report(row: dict) -> None:  # after every evaluation: a run stopped midway keeps its curve
-        row["device"] = jax.devices()[0].device_kind
-        rows[:] = [r for r in rows if (r["variant"], r["seeds"]) != (row["variant"], row["seeds"])] + [row]
-        OUT.mkdir(parents=True, exist_ok=True)
+        row["device"], row["impl"] = jax.devices()[0].device_kind, args.impl
+        same = lambda r: (r["variant"], r["seeds"], r.get("impl", "jax")) == (row["variant"], row["seeds"], args.impl)  # noqa: E731
+        rows[:] = [r for r in rows if not same(r)] + [row]
+        args.out.mkdir(parents=True, exist_ok=True)
         path.write_text(json.dumps({"rows": rows}, indent=1) + "\n")
 
     for variant in args.variants:
@@ -267,6 +278,7 @@ def main() -> None:
             budget,
             report,
             args.runs,
+            args.impl,
         )
         plot(rows, path.with_suffix(".png"))
         median = row["median_seconds_to_tracking"]

@@ -226,7 +226,9 @@ def closed_loop_problem(
     limit; `overrides` go to both tasks. A Playground env steps MJX itself, so it plans
     on MJX ("auto": "mjx", with a warning on a CPU; "native" is refused). `hyperparams`:
     the planner's numbers (None: its defaults; `mjzoo.planning.configure`). `sim_backend`:
-    where the world steps if not on `backend` ("native": C MuJoCo beside an MJX planner)."""
+    where the world steps if not on `backend` ("native": C MuJoCo beside an MJX planner).
+    A model stepped natively is built on MJX-JAX (``impl="jax"``), whose states C MuJoCo
+    replays; a planner on MuJoCo Warp needs its world on MJX too (``sim_backend="mjx"``)."""
     # Imported here, not at the top: the registry is data (records of envs) and loads
     # nothing of the real-time machinery until a problem is asked for.
     from mjzoo.planning.realtime import Problem
@@ -249,13 +251,17 @@ def closed_loop_problem(
         backend = "mjx"
     own_limit = _is_user(spec) or _is_playground(spec)  # a factory may not take episode_steps
     unlimited = {} if own_limit else {"episode_steps": 10**9}
-    sim_task = build(**unlimited)
+    # C MuJoCo replays a model's states through MJX's JAX implementation, so a model that
+    # steps natively is built on it, whatever `impl` says (MuJoCo Warp is a GPU host's default).
+    on_jax = {"impl": "jax"} if accepts(spec, "impl", catch_all=False) else {}
+    native = lambda stepped: functools.partial(build, **on_jax) if stepped == "native" else build  # noqa: E731
+    sim_task = native(sim_backend or backend)(**unlimited)
     seconds = seconds or setup.seconds or episode_steps(sim_task, spec, "seconds") * control_dt(sim_task)
     return Problem(
         planner=planner,
         config=config,
         sim_task=sim_task,
-        plan_task=setup.plan_task(build, **unlimited),
+        plan_task=setup.plan_task(native(backend), **unlimited),
         seconds=seconds,
         replan_every=setup.replan_every,
         hooks=setup.hooks,

@@ -379,6 +379,23 @@ def test_a_warp_task_of_one_substep_per_control_step_evaluates():
     np.testing.assert_allclose(returns, 20.0, rtol=1e-4)  # hanging still: cos 0 = 1 a step
 
 
+@needs_warp
+def test_a_warp_tracking_evaluation_gives_every_episode_its_contacts():
+    """`tracking.closed_loop` sizes Warp's contact pool for its episodes: before, one
+    world's pool served them all, and the episodes without contacts fell through the floor
+    (a G1's tracking and joystick evaluations on a GPU counted nearly every one as a fall)."""
+    from mjzoo.interop import tracking
+
+    def falls(impl: str) -> np.ndarray:
+        task = mjzoo.envs.make("ant_joystick", impl=impl)
+        act = lambda obs: jnp.zeros(task.action_size)  # noqa: E731
+        return np.asarray(jax.jit(lambda k: tracking.closed_loop(task, act, k, 16, 20))(jax.random.key(0))[3])
+
+    warp, jax_ = falls("warp"), falls("jax")
+    assert not jax_.any()  # resting ants stand for a second (unsized, Warp had 12 of 16 fall)
+    np.testing.assert_array_equal(warp, jax_)
+
+
 WARP_TWO_DEVICES = """
 import os, sys
 import jax, numpy as np

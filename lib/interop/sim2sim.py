@@ -28,6 +28,7 @@ import mujoco
 import numpy as np
 from mujoco import mjx
 
+from mjzoo import batching
 from mjzoo import physics
 from mjzoo.interop import deployment
 from mjzoo.running import reset
@@ -337,4 +338,5 @@ def starts(task: Task, key: Array, num_envs: int) -> State:
     """The start states of `mjzoo.learning.evaluate(task, policy, key, num_envs)`'s
     episodes, [num_envs] leading axis: C runs from the same states as JAX's evaluation."""
     keys = jax.random.split(key, num_envs)
+    task = batching.sized(task, num_envs)  # Warp: a contact pool for every episode
     return jax.jit(jax.vmap(lambda k: reset(task, jax.random.split(k)[0])))(keys)

@@ -35,6 +35,7 @@ import jax.numpy as jnp
 import mujoco
 import numpy as np
 
+from mjzoo import batching
 from mjzoo import names
 from mjzoo import params as task_params
 from mjzoo.catalog import commands
@@ -125,6 +126,7 @@ def closed_loop(
       began before the episode ended, fell [E, T] bool: it ended there by a termination).
     """
     address = _free_joint(task.mj_model)
+    task = batching.sized(task, num_envs)  # Warp: a contact pool for every episode
 
     def one(key):
         state = reset(task, jax.random.split(key)[0])

@@ -13,6 +13,7 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 import pytest
+from mujoco import mjx
 
 import mjzoo
 import mjzoo.envs
@@ -224,3 +225,18 @@ def test_the_world_steps_in_c_mujoco_beside_an_mjx_planner():
     assert np.abs(c_qpos - c_qpos[0]).max() > 1e-3  # it moved
     with pytest.raises(ValueError, match="unknown sim_backend 'c'"):
         dataclasses.replace(problems[None], sim_backend="c")
+
+
+def test_a_natively_stepped_model_is_built_on_mjx_jax_whatever_impl_says():
+    """C MuJoCo replays MJX-JAX states, so `closed_loop_problem` builds the models it steps
+    natively with ``impl="jax"``: on a GPU host, where MuJoCo Warp is the default, and
+    under an explicit ``impl="warp"`` (which on this CPU would otherwise fail to load)."""
+    config, hyperparams = planning.configure(predictive_sampling, dict(num_samples=4, horizon_steps=3, num_knots=2))
+    problem = mjzoo.envs.closed_loop_problem(
+        "pendulum_swingup", predictive_sampling, config, seconds=0.1, backend="native", impl="warp"
+    )
+    assert problem.sim_task.model.impl == problem.plan_task.model.impl == mjx.Impl.JAX
+    with pytest.raises(ValueError, match="impl='warp' needs"):  # an MJX planner keeps the asked physics
+        mjzoo.envs.closed_loop_problem(
+            "pendulum_swingup", predictive_sampling, config, backend="mjx", sim_backend="native", impl="warp"
+        )
