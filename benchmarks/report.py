@@ -231,7 +231,13 @@ def _section(title: str, prose: str, *parts: list[str]) -> list[str]:
 def _tracking_rows(data: dict) -> list[dict]:
     """One row per robot, terrain and seed of benchmarks/robots.py's JSON."""
     return [
-        {"robot": row["robot"], "terrain": row["terrain"], "envs": row["hyperparameters"]["num_envs"], **run}
+        {
+            "robot": row["robot"],
+            "terrain": row["terrain"],
+            "impl": row.get("impl", "jax"),
+            "envs": row["hyperparameters"]["num_envs"],
+            **run,
+        }
         for row in data["rows"]
         for run in row["runs"]
     ]
@@ -252,6 +258,7 @@ iterations, pushes of 0.5 m/s).
     runs = [
         ("robot", _at("robot")),
         ("terrain", _at("terrain")),
+        ("physics", _at("impl")),
         ("envs", _at("envs")),
         ("seed", _at("seed")),
         ("to tracking (s)", _at("seconds_to_tracking")),
@@ -559,13 +566,20 @@ last second); replan times are medians over each episode's replans, averaged ove
 episodes. A replan scans the horizon's physics steps in sequence, each over all samples
 at once, so the replan over those steps (ms / physics step: one batched MJX step; DIAL
 runs its iterations' rollouts in it) is what bounds the rate: the contact-rich G1
-(49 contact pairs, 5 solver iterations) costs ~9 times the Go1's.
+(49 contact pairs, 5 solver iterations) costs ~9 times the Go1's. Physics `warp`: the
+planner on MuJoCo Warp, its world on Warp too (C MuJoCo's states are MJX-JAX's, which a
+Warp planner cannot start from); one G1 world's Warp step took 35-37 ms of each 20 ms
+control step, so those loops ran at half real time and their replans/s are low for that
+reason. Their ms / physics step, the planner's own, hardly moves from 256 to 1024
+samples (1.27, 1.48): a per-step floor of kernel launches, where MJX-JAX's grows with
+the batch (2.64, 4.23).
 """
     columns = [
         ("task", _at("task")),
         ("planner", _at("planner")),
         ("samples", _at("num_samples")),
         ("horizon (s)", _at("horizon_s")),
+        ("physics", _at("impl")),
         ("world", _at("world")),
         ("replan (ms)", _at("replan_ms.median")),
         ("p95 (ms)", _at("replan_ms.p95")),
@@ -584,7 +598,10 @@ def _motion_rows(data: dict) -> list[dict]:
     out = []
     for row in data["rows"]:
         if row["part"] == "mpc":
-            out += [{"part": "mpc", **r, "seconds": r["steps"] / r["replan_hz"]} for r in row["rows"]]
+            out += [
+                {"part": "mpc", "impl": row.get("impl", "jax"), **r, "seconds": r["steps"] / r["replan_hz"]}
+                for r in row["rows"]
+            ]
             continue
         for run in row["runs"]:
             final = run["final"]
@@ -593,6 +610,7 @@ def _motion_rows(data: dict) -> list[dict]:
             out.append(
                 {
                     "part": row["part"],
+                    "impl": row.get("impl", "jax"),
                     "seed": run["seed"],
                     **final,
                     "success": min(success) if success else None,
@@ -611,10 +629,12 @@ def motion() -> list[str]:
 shown); *amp*: AMP on `g1_amp_joystick` (style error against the clips' nearest window,
 command error, falls over 64 episodes); *mpc*: MPPI and CEM tracking the walk clip
 closed loop. Times are wall-clock from the part's start, compile included; a row is the
-part's last evaluation.
+part's last evaluation. The main file's walk shared its GPU with another run;
+`motion_nvidia_h200_unshared.json` is the walk alone on one, stopped by a 540 s budget.
 """
     columns = [
         ("part", _at("part")),
+        ("physics", _at("impl")),
         ("seed", _at("seed")),
         ("planner", _at("planner")),
         ("samples", _at("num_samples")),
