@@ -29,8 +29,8 @@ takes ~1.5x longer).
     python benchmarks/planner_cpu.py --clock wall --planners dial cma_es ilqr --no-judo --seeds 3 \
         --out benchmarks/results/planner_cpu/planner_cpu_wall.json
     python benchmarks/planner_cpu.py --tasks leap_cube --planners ps mppi cem --backends native --no-judo \
-        --sample-factors 1 --seeds 5 --seconds 40 --clock wall \
-        --out benchmarks/results/planner_cpu/planner_cpu_leap_wall.json
+        --sample-factors 1 --seeds 5 --seconds 120 --clock wall \
+        --out benchmarks/results/planner_cpu/planner_cpu_leap_wall_120s.json   # 40 s: ..._leap_wall.json
     python benchmarks/planner_cpu.py --tasks cartpole --backends native --no-judo --seeds 6 --clock wall \
         --planners ps mppi cem --sample-factors 1 --config noise_scale=0.1 noise_ramp=2 \
         --out benchmarks/results/planner_cpu/planner_cpu_cartpole_wall.json

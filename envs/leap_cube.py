@@ -261,9 +261,10 @@ def goals_in_a_row(states, goals: int = GOALS_TO_SOLVE) -> tuple[bool, float]:
 # Judo's shipped LEAP settings: 32 samples over 1 s (20 control steps, 4 knots), noise
 # 0.2 rad widening 5x along the horizon, replanning every step (20 Hz), on a CPU's native
 # rollouts (a GPU's MJX step of this scene costs 2.4 ms at 1024 samples: 4 replans a
-# second over 1 s). Their model never reaches a goal (module docstring).
+# second over 1 s). Their model never reaches a goal (module docstring). A run lasts 120 s:
+# a goal takes 4-12 s on 2 CPU cores, so 40 s runs rarely had time for 10 of them.
 PLANNING = base.sampling_setup(
-    40.0,
+    120.0,
     functools.partial(goals_in_a_row, goals=GOALS_TO_SOLVE),
     num_samples=32,
     horizon_steps=20,
