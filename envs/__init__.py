@@ -254,14 +254,18 @@ def closed_loop_problem(
     # C MuJoCo replays a model's states through MJX's JAX implementation, so a model that
     # steps natively is built on it, whatever `impl` says (MuJoCo Warp is a GPU host's default).
     on_jax = {"impl": "jax"} if accepts(spec, "impl", catch_all=False) else {}
-    native = lambda stepped: functools.partial(build, **on_jax) if stepped == "native" else build  # noqa: E731
-    sim_task = native(sim_backend or backend)(**unlimited)
+
+    def builder(stepped_on: str) -> Callable[..., Task]:
+        natively = (default_backend() if stepped_on == "auto" else stepped_on) == "native"
+        return functools.partial(build, **on_jax) if natively else build
+
+    sim_task = builder(sim_backend or backend)(**unlimited)
     seconds = seconds or setup.seconds or episode_steps(sim_task, spec, "seconds") * control_dt(sim_task)
     return Problem(
         planner=planner,
         config=config,
         sim_task=sim_task,
-        plan_task=setup.plan_task(native(backend), **unlimited),
+        plan_task=setup.plan_task(builder(backend), **unlimited),
         seconds=seconds,
         replan_every=setup.replan_every,
         hooks=setup.hooks,

@@ -236,6 +236,8 @@ def test_a_natively_stepped_model_is_built_on_mjx_jax_whatever_impl_says():
         "pendulum_swingup", predictive_sampling, config, seconds=0.1, backend="native", impl="warp"
     )
     assert problem.sim_task.model.impl == problem.plan_task.model.impl == mjx.Impl.JAX
+    auto = mjzoo.envs.closed_loop_problem("pendulum_swingup", predictive_sampling, config, seconds=0.1, impl="warp")
+    assert auto.physics == "native" and auto.plan_task.model.impl == mjx.Impl.JAX  # "auto" on a CPU: native
     with pytest.raises(ValueError, match="impl='warp' needs"):  # an MJX planner keeps the asked physics
         mjzoo.envs.closed_loop_problem(
             "pendulum_swingup", predictive_sampling, config, backend="mjx", sim_backend="native", impl="warp"
