@@ -26,7 +26,8 @@ Observation, a dict (PPO's ``policy_obs_key="state"``, ``value_obs_key="privileg
                     (11 x 7 points, 0.1 m apart) under the base: the critic's view
 Reward terms (weights, named parameters): velocity tracking exp(-|v_xy - c_xy|^2 / 0.25)
 (1.0) and yaw-rate tracking (0.5); feet air time past 0.1 s while commanded to move
-(0.5 quadruped, 1.0 humanoids); costs: vertical velocity^2 (2.0), roll/pitch rate^2
+(0.5 quadruped, 1.0 humanoids), alive (1 a step not terminated: 1.0 humanoids, 0
+quadruped); costs: vertical velocity^2 (2.0), roll/pitch rate^2
 (0.05), tilt sin^2 (5.0), base height from the keyframe's (10), action rate (0.01),
 torque^2 (2e-4), joint limits past 95% (1.0), foot slip (0.1), standing still at zero
 command (0.5). Terminated when tilted over 1 rad or the base drops below `min_height`.
@@ -49,6 +50,7 @@ from jax.tree_util import Partial
 import mjzoo
 from mjzoo import motion
 from mjzoo import physics as physics_lib
+from mjzoo.builder import alive
 from mjzoo.builder import named
 from mjzoo.catalog import actuators
 from mjzoo.catalog import commands
@@ -81,12 +83,16 @@ class Robot:
     min_height: float  # m: terminated below
     action_scale: float  # rad per unit of action
     air_time_weight: float
+    # Per step survived. A humanoid held at its pose by its servos falls within ~1 s and,
+    # until a gait is learned, its costs outweigh its rewards (G1: -0.38 a step): without
+    # a bonus for staying up, falling early is what the return pays for.
+    alive_weight: float = 0.0
 
 
 ROBOTS = {
-    "g1": Robot("unitree_g1", ("left_foot", "right_foot"), 0.4, 0.5, 1.0),
-    "t1": Robot("booster_t1", ("left_foot_1", "right_foot_1"), 0.35, 1.0, 1.0),
-    "berkeley_humanoid": Robot("berkeley_humanoid", ("l_foot1", "r_foot1"), 0.25, 0.5, 1.0),
+    "g1": Robot("unitree_g1", ("left_foot", "right_foot"), 0.4, 0.5, 1.0, alive_weight=1.0),
+    "t1": Robot("booster_t1", ("left_foot_1", "right_foot_1"), 0.35, 1.0, 1.0, alive_weight=1.0),
+    "berkeley_humanoid": Robot("berkeley_humanoid", ("l_foot1", "r_foot1"), 0.25, 0.5, 1.0, alive_weight=1.0),
     "go1": Robot("unitree_go1", ("FR", "FL", "RR", "RL"), 0.12, 0.5, 0.5),
 }
 TERRAINS = {"flat": None, "rough": ("rough", "slope_up", "slope_down"), "stairs": ("stairs_up", "stairs_down")}
@@ -207,6 +213,7 @@ def robot_joystick(
             "tracking": (rewards.linear_velocity_tracking(m, 0.25), 1.0),
             "yaw_tracking": (rewards.angular_velocity_tracking(m, 0.25), 0.5),
             "air_time": (rewards.feet_air_time(0.1, min_command=0.1), spec.air_time_weight),
+            "alive": (alive, spec.alive_weight),
         },
         costs={
             "vertical": (rewards.vertical_velocity(m), 2.0),

@@ -77,3 +77,25 @@ def test_unknown_robot_and_terrain():
         robot_joystick.robot_joystick("h2")
     with pytest.raises(ValueError, match="terrain='lava' is unknown"):
         robot_joystick.robot_joystick("go1", terrain="lava")
+
+
+def test_a_humanoid_is_paid_for_staying_up():
+    """Held at its pose by its servos (zero action), the G1 falls within ~1.5 s; while it
+    is up, its reward must be positive, or falling early is what the return pays for (it
+    was -0.38 a step before the alive term, and every G1 evaluation episode fell)."""
+    task = mjzoo.envs.make("g1_joystick")
+    keys = jax.random.split(jax.random.key(0), 4)
+
+    def body(states, key):
+        zero = jnp.zeros(task.action_size)
+        after = jax.vmap(lambda s, k: mjzoo.running.transition(task, s, zero, k))(states, jax.random.split(key, 4))
+        return after, (after.reward, after.terminated, after.metrics["reward/alive"])
+
+    states = jax.vmap(lambda k: mjzoo.reset(task, k))(keys)
+    rewards_, ended, alive = jax.jit(lambda s: jax.lax.scan(body, s, jax.random.split(jax.random.key(1), 100))[1])(
+        states
+    )
+    up = np.cumsum(np.asarray(ended), 0) == 0  # [T, 4] steps before each episode's fall
+    assert np.asarray(ended).any(0).all()  # each falls within the 2 s
+    np.testing.assert_array_equal(np.asarray(alive)[up], 1.0)  # the term: 1 a step survived
+    assert float(np.asarray(rewards_)[up].mean()) > 0.3
