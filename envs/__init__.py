@@ -233,6 +233,7 @@ def closed_loop_problem(
     # nothing of the real-time machinery until a problem is asked for.
     from mjzoo.planning.realtime import Problem
     from mjzoo.planning.realtime import default_backend
+    from mjzoo.planning.realtime import resolve_backend
 
     setup = planning(spec)
     build = functools.partial(make, spec, **overrides)
@@ -256,8 +257,7 @@ def closed_loop_problem(
     on_jax = {"impl": "jax"} if accepts(spec, "impl", catch_all=False) else {}
 
     def builder(stepped_on: str) -> Callable[..., Task]:
-        natively = (default_backend() if stepped_on == "auto" else stepped_on) == "native"
-        return functools.partial(build, **on_jax) if natively else build
+        return functools.partial(build, **on_jax) if resolve_backend(planner, stepped_on) == "native" else build
 
     sim_task = builder(sim_backend or backend)(**unlimited)
     seconds = seconds or setup.seconds or episode_steps(sim_task, spec, "seconds") * control_dt(sim_task)

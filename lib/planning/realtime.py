@@ -46,7 +46,7 @@ from mjzoo.running import reset
 from mjzoo.tree import Packing
 from mjzoo.types import Task
 
-__all__ = ["Problem", "offline", "realtime", "BACKENDS", "default_backend", "planner_backends"]
+__all__ = ["Problem", "offline", "realtime", "BACKENDS", "default_backend", "planner_backends", "resolve_backend"]
 
 BACKENDS = ("auto", "mjx", "native")
 
@@ -60,6 +60,15 @@ def planner_backends(planner: ModuleType) -> tuple[str, ...]:
     """Where `planner` plans: its module's ``BACKENDS`` (a planner that differentiates
     MJX, `ilqr`, has only "mjx"), by default both."""
     return tuple(getattr(planner, "BACKENDS", ("mjx", "native")))
+
+
+def resolve_backend(planner: ModuleType, backend: str) -> str:
+    """Where `planner` plans on `backend`: "mjx" or "native" as given; "auto": native on a
+    CPU where the planner runs there, else mjx."""
+    if backend != "auto":
+        return backend
+    preferred = default_backend()
+    return preferred if preferred in planner_backends(planner) else "mjx"
 
 
 @dataclasses.dataclass(frozen=True)
@@ -118,10 +127,7 @@ class Problem:
     def physics(self) -> str:
         """The backend in use: "mjx" or "native" ("auto": native on a CPU where the
         planner runs there, else mjx)."""
-        if self.backend != "auto":
-            return self.backend
-        preferred = default_backend()
-        return preferred if preferred in planner_backends(self.planner) else "mjx"
+        return resolve_backend(self.planner, self.backend)
 
     @property
     def sim_physics(self) -> str:
