@@ -53,8 +53,21 @@ def physics_steps(plan_task: mjzoo.Task, horizon_steps: int, control_dt: float) 
     return horizon_steps * round(control_dt / float(plan_task.model.opt.timestep))
 
 
-def measure(task: str, planner: str, samples: int, episodes: int, smoke: bool, world: str, impl: str = "jax") -> dict:
-    """One row: `episodes` real-time closed loops of `planner` at `samples` on `task`."""
+def measure(
+    task: str,
+    planner: str,
+    samples: int,
+    episodes: int,
+    smoke: bool,
+    world: str,
+    impl: str = "jax",
+    clock: str = "wall",
+    plan_physics: dict | None = None,
+) -> dict:
+    """One row: `episodes` closed loops of `planner` at `samples` on `task`, against the
+    wall clock (or in simulated time: the world waits for each replan), the planner's
+    model built with `plan_physics` (`mjzoo.physics.load`'s options: a coarser step, fewer
+    solver iterations) over the task's own."""
     module = PLANNERS[planner]
     fields = mjzoo.envs.hyperparameters(task, planner)
     fields["num_samples"] = samples
@@ -72,13 +85,14 @@ def measure(task: str, planner: str, samples: int, episodes: int, smoke: bool, w
         backend="mjx",
         hyperparams=hyperparams,
         sim_backend=world,
+        plan_overrides=plan_physics,
         impl=impl,
         **TASKS[task],
     )
     start = time.perf_counter()
     runs = []
     for seed in range(episodes):
-        result, stats = realtime.realtime(problem, jax.random.key(seed), clock="wall")
+        result, stats = realtime.realtime(problem, jax.random.key(seed), clock=clock)
         solved, score = problem.success(jax.device_get(result.states))
         runs.append({**stats, "success": bool(solved), "score": float(score)})
         print(
@@ -93,6 +107,8 @@ def measure(task: str, planner: str, samples: int, episodes: int, smoke: bool, w
         "horizon_s": config.horizon_steps * problem.sim_dt,
         "world": world,
         "impl": impl,
+        "clock": clock,
+        "plan_physics": plan_physics or {},
         "replan_ms": {"median": mean("plan_latency_ms"), "p95": mean("plan_latency_p95_ms")},
         "physics_steps": steps,
         "ms_per_physics_step": mean("plan_latency_ms") / steps,
@@ -103,6 +119,18 @@ def measure(task: str, planner: str, samples: int, episodes: int, smoke: bool, w
         "seconds_with_compile": time.perf_counter() - start,
         "runs": runs,
     }
+
+
+def parse_option(parser: argparse.ArgumentParser, text: str) -> tuple[str, float | int]:
+    """``NAME=VALUE`` of a physics option: a number (an int where it is whole)."""
+    name, sep, value = text.partition("=")
+    try:
+        number = float(value)
+    except ValueError:
+        number = None
+    if not sep or number is None:
+        parser.error(f"--plan-physics: {text!r} is not NAME=NUMBER (e.g. dt=0.01)")
+    return name, int(number) if number.is_integer() and "." not in value else number
 
 
 def main() -> None:
@@ -123,6 +151,19 @@ def main() -> None:
         default=None,
         help="the planner's physics (default: Warp where installed on a GPU; a native world: C MuJoCo)",
     )
+    parser.add_argument(
+        "--clock",
+        choices=["wall", "simulated"],
+        default="wall",
+        help="wall: real time (the world waits for no planner); simulated: the world waits for each replan",
+    )
+    parser.add_argument(
+        "--plan-physics",
+        nargs="+",
+        default=[],
+        metavar="NAME=VALUE",
+        help="the planner's model only, e.g. dt=0.01 iterations=2 ls_iterations=4 (mjzoo.physics.load's options)",
+    )
     parser.add_argument("--smoke", action="store_true", help="8 samples, a 4-step horizon, 0.1 s, one episode")
     parser.add_argument("--out", type=Path, default=ROOT / "benchmarks" / "results" / "robot_mpc")
     args = parser.parse_args()
@@ -136,11 +177,16 @@ def main() -> None:
     if impl == "warp" and args.world == "native":  # C MuJoCo's states are MJX-JAX's, not Warp's
         parser.error("a planner on MuJoCo Warp plans from a world on MJX: --world mjx (or --impl jax)")
     args.world = args.world or ("mjx" if impl == "warp" else "native")
+    plan_physics = dict(parse_option(parser, text) for text in args.plan_physics)
     rows = []
     for task in args.tasks:
         for planner in args.planners:
             for samples in args.samples:
-                rows.append(measure(task, planner, samples, args.episodes, args.smoke, args.world, impl))
+                rows.append(
+                    measure(
+                        task, planner, samples, args.episodes, args.smoke, args.world, impl, args.clock, plan_physics
+                    )
+                )
                 meta = {"device": device.device_kind, "jax": jax.__version__, "smoke": args.smoke}
                 path.write_text(json.dumps({"meta": meta, "rows": rows}, indent=1))
     print(f"wrote {path}")

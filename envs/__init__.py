@@ -217,6 +217,7 @@ def closed_loop_problem(
     backend: str = "auto",
     hyperparams: Any | None = None,
     sim_backend: str | None = None,
+    plan_overrides: dict[str, Any] | None = None,
     **overrides: Any,
 ) -> Problem:
     """The task's closed-loop problem (its `planning` setup): the task as the world, its
@@ -228,7 +229,9 @@ def closed_loop_problem(
     the planner's numbers (None: its defaults; `mjzoo.planning.configure`). `sim_backend`:
     where the world steps if not on `backend` ("native": C MuJoCo beside an MJX planner).
     A model stepped natively is built on MJX-JAX (``impl="jax"``), whose states C MuJoCo
-    replays; a planner on MuJoCo Warp needs its world on MJX too (``sim_backend="mjx"``)."""
+    replays; a planner on MuJoCo Warp needs its world on MJX too (``sim_backend="mjx"``).
+    `plan_overrides` go to the planning task alone, over the setup's own: a planner's
+    model may be coarser than the world, e.g. ``dict(dt=0.01, iterations=2)``."""
     # Imported here, not at the top: the registry is data (records of envs) and loads
     # nothing of the real-time machinery until a problem is asked for.
     from mjzoo.planning.realtime import Problem
@@ -236,6 +239,8 @@ def closed_loop_problem(
     from mjzoo.planning.realtime import resolve_backend
 
     setup = planning(spec)
+    if plan_overrides:
+        setup = dataclasses.replace(setup, plan_overrides={**setup.plan_overrides, **plan_overrides})
     build = functools.partial(make, spec, **overrides)
     if _is_playground(spec):
         if backend == "native":
