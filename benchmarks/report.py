@@ -162,6 +162,16 @@ def _rate(path: str) -> Callable[[dict], object]:
     return get
 
 
+def _options(path: str) -> Callable[[dict], object]:
+    """A dict of options at `path` as "dt=0.01 iterations=2"; None where absent or empty."""
+
+    def get(row: dict) -> object:
+        options = _at(path)(row)
+        return " ".join(f"{k}={v}" for k, v in options.items()) if options else None
+
+    return get
+
+
 def _percent(path: str) -> Callable[[dict], object]:
     def get(row: dict) -> object:
         x = _at(path)(row)
@@ -572,7 +582,10 @@ Warp planner cannot start from); one G1 world's Warp step took 35-37 ms of each 
 control step, so those loops ran at half real time and their replans/s are low for that
 reason. Their ms / physics step, the planner's own, hardly moves from 256 to 1024
 samples (1.27, 1.48): a per-step floor of kernel launches, where MJX-JAX's grows with
-the batch (2.64, 4.23).
+the batch (2.64, 4.23). Clock `simulated` (`--clock simulated`): the world waits for each
+replan, so success says whether the planner can do the task at one replan a control
+step, apart from its rate; plan physics (`--plan-physics`) is the planner's model where
+it is coarser than the world's (a longer step, fewer solver iterations).
 """
     columns = [
         ("task", _at("task")),
@@ -581,6 +594,8 @@ the batch (2.64, 4.23).
         ("horizon (s)", _at("horizon_s")),
         ("physics", _at("impl")),
         ("world", _at("world")),
+        ("clock", _at("clock")),
+        ("plan physics", _options("plan_physics")),
         ("replan (ms)", _at("replan_ms.median")),
         ("p95 (ms)", _at("replan_ms.p95")),
         ("ms / physics step", _at("ms_per_physics_step")),
@@ -629,8 +644,9 @@ def motion() -> list[str]:
 shown); *amp*: AMP on `g1_amp_joystick` (style error against the clips' nearest window,
 command error, falls over 64 episodes); *mpc*: MPPI and CEM tracking the walk clip
 closed loop. Times are wall-clock from the part's start, compile included; a row is the
-part's last evaluation. The main file's walk shared its GPU with another run;
-`motion_nvidia_h200_unshared.json` is the walk alone on one, stopped by a 540 s budget.
+part's last evaluation. The main file's MJX-JAX walk shared its GPU with another run,
+its MuJoCo Warp walk had one alone; `motion_nvidia_h200_unshared.json` is the MJX-JAX
+walk alone on one, stopped by a 540 s budget.
 """
     columns = [
         ("part", _at("part")),

@@ -26,10 +26,10 @@ Observation, a dict (PPO's ``policy_obs_key="state"``, ``value_obs_key="privileg
                     (11 x 7 points, 0.1 m apart) under the base: the critic's view
 Reward terms (weights, named parameters): velocity tracking exp(-|v_xy - c_xy|^2 / 0.25)
 (1.0) and yaw-rate tracking (0.5); feet air time past 0.1 s while commanded to move
-(0.5 quadruped, 1.0 humanoids), alive (1 a step not terminated: 1.0 humanoids, 0
+(0.5 quadruped, 1.0 humanoids), alive (1 a step not terminated: 2.0 humanoids, 0
 quadruped); costs: vertical velocity^2 (2.0), roll/pitch rate^2
 (0.05), tilt sin^2 (5.0), base height from the keyframe's (10), action rate (0.01),
-torque^2 (2e-4), joint limits past 95% (1.0), foot slip (0.1), standing still at zero
+torque^2 (2e-4 quadruped, 0 humanoids), joint limits past 95% (1.0), foot slip (0.1), standing still at zero
 command (0.5). Terminated when tilted over 1 rad or the base drops below `min_height`.
 
 Terrains: "flat" (the scene's plane), "rough" (rough, slopes up and down: 6 rows of
@@ -71,7 +71,18 @@ from mjzoo.robots import scenes
 from mjzoo.robots import terrain as terrain_lib
 from mjzoo.types import Task
 
-__all__ = ["Robot", "ROBOTS", "TERRAINS", "robot_joystick", "G1", "T1", "GO1", "BERKELEY_HUMANOID", "PPO"]
+__all__ = [
+    "Robot",
+    "ROBOTS",
+    "TERRAINS",
+    "robot_joystick",
+    "G1",
+    "T1",
+    "GO1",
+    "BERKELEY_HUMANOID",
+    "PPO",
+    "HUMANOID_PPO",
+]
 
 
 @dataclasses.dataclass(frozen=True)
@@ -83,16 +94,20 @@ class Robot:
     min_height: float  # m: terminated below
     action_scale: float  # rad per unit of action
     air_time_weight: float
-    # Per step survived. A humanoid held at its pose by its servos falls within ~1 s and,
-    # until a gait is learned, its costs outweigh its rewards (G1: -0.38 a step): without
-    # a bonus for staying up, falling early is what the return pays for.
+    # Per step survived, and the torque cost's weight. A humanoid held at its pose by its
+    # servos falls within ~1 s, and under PPO's first exploration noise (actions
+    # tanh(N(0, 0.69^2))) its costs outweighed its rewards (G1: -2.15 a step alive, of
+    # which torque^2 -1.32): falling early was what the return paid for. Humanoids pay 2
+    # a step up and no torque cost (Playground's G1 and T1 have none): +0.15 a step (T1
+    # +1.03, Berkeley Humanoid +0.92) under that noise.
     alive_weight: float = 0.0
+    torque_weight: float = 2e-4
 
 
 ROBOTS = {
-    "g1": Robot("unitree_g1", ("left_foot", "right_foot"), 0.4, 0.5, 1.0, alive_weight=1.0),
-    "t1": Robot("booster_t1", ("left_foot_1", "right_foot_1"), 0.35, 1.0, 1.0, alive_weight=1.0),
-    "berkeley_humanoid": Robot("berkeley_humanoid", ("l_foot1", "r_foot1"), 0.25, 0.5, 1.0, alive_weight=1.0),
+    "g1": Robot("unitree_g1", ("left_foot", "right_foot"), 0.4, 0.5, 1.0, 2.0, 0.0),
+    "t1": Robot("booster_t1", ("left_foot_1", "right_foot_1"), 0.35, 1.0, 1.0, 2.0, 0.0),
+    "berkeley_humanoid": Robot("berkeley_humanoid", ("l_foot1", "r_foot1"), 0.25, 0.5, 1.0, 2.0, 0.0),
     "go1": Robot("unitree_go1", ("FR", "FL", "RR", "RL"), 0.12, 0.5, 0.5),
 }
 TERRAINS = {"flat": None, "rough": ("rough", "slope_up", "slope_down"), "stairs": ("stairs_up", "stairs_down")}
@@ -115,6 +130,7 @@ PPO = dict(
     value_obs_key="privileged_state",
     total_steps=100_000_000,
 )
+HUMANOID_PPO = dict(PPO, entropy_coef=5e-3)  # Playground's for its G1, T1 and Berkeley Humanoid
 
 
 @functools.lru_cache(maxsize=16)
@@ -221,7 +237,7 @@ def robot_joystick(
             "tilt": (rewards.flat_orientation(m), 5.0),
             "height": (rewards.base_height(m, float(m.key_qpos[0][2])), 10.0),
             "action_rate": (Partial(rewards.action_rate), 0.01),
-            "torque": (Partial(rewards.torque), 2e-4),
+            "torque": (Partial(rewards.torque), spec.torque_weight),
             "joint_limits": (rewards.joint_limits(m, 0.95), 1.0),
             "foot_slip": (Partial(rewards.foot_slip), 0.1),
             "stand_still": (rewards.stand_still(m), 0.5),
@@ -268,7 +284,7 @@ def _spec(robot: str, description: str) -> base.EnvSpec:
 
     make.__name__ = f"{robot}_joystick"
     make.__doc__ = f"{description}: `robot_joystick({robot!r})`, on a terrain with its curriculum."
-    return base.EnvSpec(make=make, description=description, ppo=PPO)
+    return base.EnvSpec(make=make, description=description, ppo=PPO if robot == "go1" else HUMANOID_PPO)
 
 
 G1 = _spec("g1", "Unitree G1 humanoid following velocity commands (terrain='flat' | 'rough')")

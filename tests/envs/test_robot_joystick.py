@@ -80,22 +80,27 @@ def test_unknown_robot_and_terrain():
 
 
 def test_a_humanoid_is_paid_for_staying_up():
-    """Held at its pose by its servos (zero action), the G1 falls within ~1.5 s; while it
-    is up, its reward must be positive, or falling early is what the return pays for (it
-    was -0.38 a step before the alive term, and every G1 evaluation episode fell)."""
+    """Under PPO's first exploration noise (actions tanh(N(0, 0.69^2)): a zero-initialised
+    log std through softplus) the G1 falls within ~1 s; while it is up, its reward must
+    be positive, or falling early is what the return pays for (it was -2.15 a step, with
+    a torque cost and alive at 1, and every G1 evaluation episode fell after 70M steps)."""
     task = mjzoo.envs.make("g1_joystick")
-    keys = jax.random.split(jax.random.key(0), 4)
+    n = 8
+    keys = jax.random.split(jax.random.key(0), n)
 
     def body(states, key):
-        zero = jnp.zeros(task.action_size)
-        after = jax.vmap(lambda s, k: mjzoo.running.transition(task, s, zero, k))(states, jax.random.split(key, 4))
+        noise, step = jax.random.split(key)
+        actions = jnp.tanh(0.69 * jax.random.normal(noise, (n, task.action_size)))
+        after = jax.vmap(lambda s, a, k: mjzoo.running.transition(task, s, a, k))(
+            states, actions, jax.random.split(step, n)
+        )
         return after, (after.reward, after.terminated, after.metrics["reward/alive"])
 
     states = jax.vmap(lambda k: mjzoo.reset(task, k))(keys)
     rewards_, ended, alive = jax.jit(lambda s: jax.lax.scan(body, s, jax.random.split(jax.random.key(1), 100))[1])(
         states
     )
-    up = np.cumsum(np.asarray(ended), 0) == 0  # [T, 4] steps before each episode's fall
+    up = np.cumsum(np.asarray(ended), 0) == 0  # [T, n] steps before each episode's fall
     assert np.asarray(ended).any(0).all()  # each falls within the 2 s
-    np.testing.assert_array_equal(np.asarray(alive)[up], 1.0)  # the term: 1 a step survived
-    assert float(np.asarray(rewards_)[up].mean()) > 0.3
+    np.testing.assert_array_equal(np.asarray(alive)[up], 2.0)  # the term: 2 a step survived
+    assert float(np.asarray(rewards_)[up].mean()) > 0.0
