@@ -576,9 +576,9 @@ last second); replan times are medians over each episode's replans, averaged ove
 episodes. A replan scans the horizon's physics steps in sequence, each over all samples
 at once, so the replan over those steps (ms / physics step: one batched MJX step; DIAL
 runs its iterations' rollouts in it) is what bounds the rate: the contact-rich G1
-(49 contact pairs, 5 solver iterations) costs ~9 times the Go1's. Physics `warp`: the
-planner on MuJoCo Warp, its world on Warp too (C MuJoCo's states are MJX-JAX's, which a
-Warp planner cannot start from); one G1 world's Warp step took 35-37 ms of each 20 ms
+(49 contact pairs, 5 solver iterations) costs ~9 times the Go1's. Physics `warp`, world
+`mjx`: the planner on MuJoCo Warp and its world on Warp too (run before a Warp planner
+could start from C MuJoCo's states); one G1 world's Warp step took 20-37 ms of each 20 ms
 control step, so those loops ran at half real time and their replans/s are low for that
 reason. Their ms / physics step, the planner's own, hardly moves from 256 to 1024
 samples (1.27, 1.48): a per-step floor of kernel launches, where MJX-JAX's grows with

@@ -6,7 +6,7 @@ over the task's 0.5 s horizon (its `PLANNING` setup otherwise), the real-time ru
 (`mjzoo.planning.realtime`, as `mjzoo plan` runs) simulates the task against the wall
 clock: the world does not wait for a replan, and a slow planner falls behind as it would
 on a robot. The planner rolls out on MJX (``--impl``: MuJoCo Warp where installed); the
-world steps in C MuJoCo (``--world``; beside a planner on Warp, on Warp too), as
+world steps in C MuJoCo (``--world``), as
 a robot's world costs the planner nothing (one G1 world's MJX step took 14 ms on an
 H200, 70% of the wall clock, before a replan's share). Per row: replan latency (median, p95),
 the achieved replan rate, the success rate over ``--episodes`` seeds by the task's own
@@ -143,13 +143,13 @@ def main() -> None:
         "--world",
         choices=["native", "mjx"],
         default=None,
-        help="where the simulated world steps (default: C MuJoCo; beside a planner on Warp, MJX on Warp)",
+        help="where the simulated world steps (default: C MuJoCo; mjx: on the planner's physics)",
     )
     parser.add_argument(
         "--impl",
         choices=physics.IMPLS,
         default=None,
-        help="the planner's physics (default: Warp where installed on a GPU; a native world: C MuJoCo)",
+        help="the planner's physics (default: MuJoCo Warp where installed on a GPU, else MJX-JAX)",
     )
     parser.add_argument(
         "--clock",
@@ -174,9 +174,7 @@ def main() -> None:
     args.out.mkdir(parents=True, exist_ok=True)
     path = args.out / f"robot_mpc_{name}{'_smoke' if args.smoke else ''}.json"
     impl = args.impl or physics.default_impl()
-    if impl == "warp" and args.world == "native":  # C MuJoCo's states are MJX-JAX's, not Warp's
-        parser.error("a planner on MuJoCo Warp plans from a world on MJX: --world mjx (or --impl jax)")
-    args.world = args.world or ("mjx" if impl == "warp" else "native")
+    args.world = args.world or "native"
     plan_physics = dict(parse_option(parser, text) for text in args.plan_physics)
     rows = []
     for task in args.tasks:

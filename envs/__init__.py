@@ -229,7 +229,7 @@ def closed_loop_problem(
     the planner's numbers (None: its defaults; `mjzoo.planning.configure`). `sim_backend`:
     where the world steps if not on `backend` ("native": C MuJoCo beside an MJX planner).
     A model stepped natively is built on MJX-JAX (``impl="jax"``), whose states C MuJoCo
-    replays; a planner on MuJoCo Warp needs its world on MJX too (``sim_backend="mjx"``).
+    replays (a planner on MuJoCo Warp starts each replan from it: `mjzoo.physics.switch_impl`).
     `plan_overrides` go to the planning task alone, over the setup's own: a planner's
     model may be coarser than the world, e.g. ``dict(dt=0.01, iterations=2)``."""
     # Imported here, not at the top: the registry is data (records of envs) and loads

@@ -31,6 +31,7 @@ from pathlib import Path
 from typing import Any
 
 import jax
+import jax.numpy as jnp
 import mujoco
 from mujoco import mjx
 
@@ -45,6 +46,7 @@ __all__ = [
     "with_options",
     "step",
     "forward",
+    "switch_impl",
     "OPTIONS",
     "IMPLS",
     "default_impl",
@@ -260,6 +262,19 @@ def forward(model: mjx.Model, data: mjx.Data) -> mjx.Data:
     if isinstance(model, StandIn):
         return mjx.forward(model, data)
     return _forward(model, data)
+
+
+def switch_impl(data: mjx.Data, like: mjx.Data) -> mjx.Data:
+    """`data` on `like`'s implementation: its public fields (the state and what MJX
+    computed of it: qpos, qvel, act, ctrl, time, poses, sensordata, ...) over `like`'s
+    own (`_impl`: MJX-JAX's or MuJoCo Warp's contacts, constraint rows and buffers, which
+    the next step computes afresh). How a planner on Warp starts from a world stepped in
+    C MuJoCo or on MJX-JAX; `data` itself where both are on one implementation."""
+    if data.impl == like.impl:
+        return data
+    public = [f.name for f in dataclasses.fields(data) if f.name != "_impl"]
+    cast = lambda x, y: jnp.asarray(x, jnp.result_type(y))  # noqa: E731
+    return like.replace(**{n: jax.tree.map(cast, getattr(data, n), getattr(like, n)) for n in public})
 
 
 # Jitted so that JAX traces the physics once per model layout and reuses it: a task's

@@ -29,6 +29,7 @@ from mjzoo import running
 from mjzoo.catalog import contacts as catalog_contacts
 from mjzoo.harness import cli
 from mjzoo.harness import training
+from mjzoo.planning import realtime
 from mjzoo.testing import check_task
 
 # A 2 kg box resting on the floor: four corner contacts carrying m g between them.
@@ -433,3 +434,43 @@ def test_warp_training_on_two_devices_matches_one_device(cpu_devices_env):
     )
     assert result.returncode == 0, result.stderr[-3000:]
     assert "max qpos difference" in result.stdout
+
+
+@needs_warp
+def test_a_warp_planner_plans_from_a_natively_stepped_world():
+    """A planner on MuJoCo Warp beside a world in C MuJoCo (whose states are MJX-JAX's):
+    the world's state is carried onto Warp's data (`physics.switch_impl`) at each replan,
+    so from the same start and key its first plan is the one it makes beside a world on
+    Warp; the closed loop then runs on."""
+    from mjzoo.algorithms import mppi
+
+    fields = dict(num_samples=8, horizon_steps=5, num_knots=3)
+    config, hyperparams = mjzoo.planning.configure(
+        mppi, {**mjzoo.envs.hyperparameters("pendulum_swingup", "mppi"), **fields}
+    )
+    runs, problems = {}, {}
+    for world in ("native", "mjx"):
+        problem = mjzoo.envs.closed_loop_problem(
+            "pendulum_swingup",
+            mppi,
+            config,
+            seconds=0.2,
+            backend="mjx",
+            hyperparams=hyperparams,
+            sim_backend=world,
+            impl="warp",
+        )
+        assert problem.plan_task.model.impl == mjx.Impl.WARP
+        runs[world] = realtime.realtime(problem, jax.random.key(0), clock="simulated")[0]
+        problems[world] = problem
+    with pytest.raises(ValueError, match="clock='simulated'"):  # one jitted scan, one implementation
+        realtime.offline(problems["native"], jax.random.key(0))
+    assert runs["native"].controls.shape[0] == 10 and np.isfinite(runs["native"].costs).all()
+    np.testing.assert_allclose(runs["native"].controls[0], runs["mjx"].controls[0], atol=1e-5)
+
+    jax_data = mjzoo.reset(mjzoo.envs.make("pendulum_swingup", impl="jax"), jax.random.key(1)).data
+    warp_data = mjzoo.reset(mjzoo.envs.make("pendulum_swingup", impl="warp"), jax.random.key(2)).data
+    moved = physics.switch_impl(jax_data, warp_data)
+    assert moved.impl == mjx.Impl.WARP and physics.switch_impl(jax_data, jax_data) is jax_data
+    np.testing.assert_array_equal(moved.qpos, jax_data.qpos)
+    np.testing.assert_array_equal(moved.xpos, jax_data.xpos)

@@ -30,6 +30,7 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
+from mjzoo.physics import switch_impl
 from mjzoo.planning import closed_loop
 from mjzoo.planning.closed_loop import Hooks
 from mjzoo.planning.closed_loop import Result
@@ -92,6 +93,8 @@ class Problem:
       sim_backend: where the simulated world steps, if not on `backend`: "native" runs
         it in C MuJoCo beside an MJX planner, as a robot's world costs the planner
         nothing (one G1 world's MJX step took 14 ms on a GPU, C's a fraction of one).
+        A planner on MuJoCo Warp starts each replan from the world's state carried onto
+        Warp's data (`mjzoo.physics.switch_impl`).
       hyperparams: the planner's `Hyperparams` (numbers); None: its defaults.
         `mjzoo.planning.configure` gives (config, hyperparams) from one dict of fields.
     """
@@ -159,6 +162,11 @@ def offline(
     compile; the per-replan latency includes the simulation steps in between.
     `compiler_options` go to XLA for this compile only (e.g. to undo a global
     ``--xla_backend_optimization_level=0`` for a long run)."""
+    if _impls_differ(problem):
+        raise ValueError(
+            "offline: the planner's physics and the world's are on different MJX implementations "
+            "(MuJoCo Warp beside MJX-JAX or C MuJoCo); run it with realtime(problem, key, clock='simulated')"
+        )
     reset_key, run_key = jax.random.split(key)
     sim_state = reset(problem.sim_task, reset_key)
     static = (problem.planner, problem.config)
@@ -204,10 +212,11 @@ def _compiled(problem: Problem, key: jax.Array, total_steps: int) -> _Compiled:
     step_keys = list(committed(jax.random.split(key, total_steps + 1)))
     plan_keys = list(committed(jax.random.split(plan_key, total_steps + 1)))
     sim_state = committed(reset(problem.sim_task, reset_key))
+    to_plan = _functions(problem, "to_plan", lambda: _to_planner(problem))
     first_plan = _functions(
         problem,
         "first_plan",
-        lambda: jax.jit(lambda s, h: closed_loop.first_plan(planner, config, plan_task, s, hooks, h)),
+        lambda: jax.jit(lambda s, h: closed_loop.first_plan(planner, config, plan_task, to_plan(s), hooks, h)),
     )
     planner_state = committed(first_plan(sim_state, problem.hyperparams))
     # The loop carries both states packed, a few arrays each (`mjzoo.tree.Packing`): a
@@ -238,9 +247,11 @@ def _loop(problem: Problem, sims: Packing, plans: Packing) -> tuple[Callable, ..
     """The real-time loop's jitted (replan, step, after_rollout, pack) over packed states."""
     planner, config, hooks = problem.planner, problem.config, problem.hooks
     sim_task, plan_task = problem.tasks
+    to_plan = _functions(problem, "to_plan", lambda: _to_planner(problem))
 
     def replan_packed(p, s, k, v):
-        return plans.pack(closed_loop.replan(planner, config, plan_task, plans.unpack(p), sims.unpack(s), k, hooks, v))
+        state = to_plan(sims.unpack(s))
+        return plans.pack(closed_loop.replan(planner, config, plan_task, plans.unpack(p), state, k, hooks, v))
 
     def step_packed(p, s, k):
         state, control = closed_loop.sim_step(config, sim_task, plans.unpack(p), sims.unpack(s), k, hooks)
@@ -252,6 +263,29 @@ def _loop(problem: Problem, sims: Packing, plans: Packing) -> tuple[Callable, ..
     after_rollout = jax.jit(lambda s, p: sims.pack(closed_loop.after_rollout(hooks, sims.unpack(s), plans.unpack(p))))
     pack = jax.jit(lambda s, p: (sims.pack(s), plans.pack(p)))
     return compile_(problem.physics)(replan_packed), compile_(problem.sim_physics)(step_packed), after_rollout, pack
+
+
+def _impls_differ(problem: Problem) -> bool:
+    """Whether the planner's MJX implementation differs from the world's."""
+    plan = problem.plan_task.task if isinstance(problem.plan_task, Ensemble) else problem.plan_task
+    return problem.physics != "native" and plan.model.impl != problem.sim_task.model.impl
+
+
+def _to_planner(problem: Problem) -> Callable[[Any], Any]:
+    """The world's state as the planner's physics holds it: the state itself where both
+    step on one implementation (or the planner in C MuJoCo, which replays MJX-JAX states);
+    else carried onto a state of the planner's (a planner on MuJoCo Warp beside a world in
+    C MuJoCo or on MJX-JAX: `mjzoo.physics.switch_impl`), its metrics as the planner's."""
+    if not _impls_differ(problem):
+        return lambda state: state
+    plan = problem.plan_task.task if isinstance(problem.plan_task, Ensemble) else problem.plan_task
+    like = committed(reset(plan, jax.random.key(0)))
+
+    def to_plan(state: Any) -> Any:
+        metrics = {k: state.metrics.get(k, v) for k, v in like.metrics.items()}
+        return state.replace(data=switch_impl(state.data, like.data), metrics=metrics)
+
+    return to_plan
 
 
 def _stack(problem: Problem, packing: Packing, packed: list) -> Any:
