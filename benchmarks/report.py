@@ -607,6 +607,27 @@ it is coarser than the world's (a longer step, fewer solver iterations).
     return _section("Whole-body MPC on the robots", prose, _file_tables("robot_mpc/robot_mpc_*.json", columns))
 
 
+def guided_mpc() -> list[str]:
+    if not _files("guided_mpc/guided_mpc_*.json"):  # measured on a GPU: no section until then
+        return []
+    prose = """
+`benchmarks/guided_mpc.py`: MPPI plain and guided by a PPO policy trained on the task
+(`mjzoo.planning.prior`: each replan starts from the policy's plan and values the
+horizon's end by its critic) at equal samples, beside the policy alone; the task's own
+success measure over the episodes, the world in C MuJoCo. Clock `simulated`: the world
+waits for each replan, so the rows compare what each planner finds with its samples.
+"""
+    columns = [
+        ("task", _at("task")),
+        ("planner", _at("planner")),
+        ("samples", _at("num_samples")),
+        ("success", _at("success_rate")),
+        ("score", _at("score")),
+        ("replan (ms)", _at("replan_ms")),
+    ]
+    return _section("Policy-guided sampling", prose, _file_tables("guided_mpc/guided_mpc_*.json", columns))
+
+
 def _motion_rows(data: dict) -> list[dict]:
     """One row per part and seed of benchmarks/motion.py's JSON (its last evaluation; a
     clip set's worst clip), one per planner and sample count for the MPC."""
@@ -841,6 +862,7 @@ def render() -> str:
         *offpolicy(),
         *planning(),
         *robot_mpc(),
+        *guided_mpc(),
         *scaling(),
         *startup(),
         *physics(),

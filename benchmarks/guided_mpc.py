@@ -1,0 +1,174 @@
+"""Policy-guided sampling against plain sampling at equal samples, on the real robots.
+
+For each task (`go1_trot`, `g1_standup`): PPO trains on the task itself (``mjzoo train
+ppo TASK``, a run directory under ``--runs``; ``--run TASK=DIR`` reuses one), then at each
+sample count MPPI plans closed loop twice from the same starts: plain (the task's
+`PLANNING` setup) and guided by the trained policy (`mjzoo.planning.prior`: every replan
+starts from the policy's plan and values the horizon's end by its critic). The policy
+alone (its deterministic action at every control step, no planner) is the third row. Per
+row: the task's own success rate and mean score over ``--episodes`` seeds, replan
+latency. ``--clock simulated`` (the default) makes the world wait for each replan, so the
+rows compare what each finds with its samples, apart from its rate; ``--clock wall``
+runs them in real time. The world steps in C MuJoCo, the planner on MJX (``--impl``).
+
+    python benchmarks/guided_mpc.py --train-steps 50000000                 # one GPU
+    python benchmarks/guided_mpc.py --tasks go1_trot --run go1_trot=runs/go1-trot-ppo
+    python benchmarks/guided_mpc.py --smoke                                # tiny sizes, on a CPU
+
+Results: ``benchmarks/results/guided_mpc/guided_mpc_<device>.json`` (each row as it finishes).
+"""
+
+from __future__ import annotations
+
+import argparse
+import dataclasses
+import json
+import subprocess
+import sys
+import tempfile
+import time
+from pathlib import Path
+
+import jax
+import numpy as np
+
+import mjzoo
+import mjzoo.envs
+from mjzoo import physics
+from mjzoo.algorithms import mppi
+from mjzoo.harness.cli import runs as run_dirs
+from mjzoo.planning import prior as prior_lib
+from mjzoo.planning import realtime
+
+ROOT = Path(__file__).resolve().parent.parent
+TASKS = ("go1_trot", "g1_standup")
+
+
+def train(task: str, out: Path, steps: int, impl: str, smoke: bool) -> Path:
+    """PPO on `task` through the CLI (its checkpoints, curves and metrics in `out`)."""
+    config = ["num_envs=8", "unroll_length=4", "num_minibatches=2", "num_epochs=1"] if smoke else []
+    if smoke:
+        config += ["--eval-count", "1", "--eval-envs", "2"]
+    argv = [sys.executable, "-m", "mjzoo", "train", "ppo", task, "--out", str(out), "--impl", impl]
+    argv += ["--config", f"total_steps={steps}", *config, "--no-video"]
+    subprocess.run(argv, check=True)
+    return out
+
+
+def policy_alone(problem: realtime.Problem, prior: prior_lib.PolicyPrior, episodes: int) -> dict:
+    """The policy's own closed loop: its deterministic action each control step."""
+    task = problem.sim_task
+    steps = round(problem.seconds / problem.sim_dt)
+
+    def episode(key):
+        def body(state, k):
+            nxt = mjzoo.running.transition(task, state, prior.act(state.obs), k)
+            return nxt, nxt
+
+        return jax.lax.scan(body, mjzoo.reset(task, key), jax.random.split(key, steps))[1]
+
+    run = jax.jit(episode)
+    outcomes = [problem.success(jax.device_get(run(jax.random.key(seed)))) for seed in range(episodes)]
+    return {"success_rate": float(np.mean([s for s, _ in outcomes])), "score": float(np.mean([c for _, c in outcomes]))}
+
+
+def planned(problem: realtime.Problem, episodes: int, clock: str) -> dict:
+    """`episodes` closed loops of `problem` (seeds 0..episodes-1)."""
+    runs = []
+    for seed in range(episodes):
+        result, stats = realtime.realtime(problem, jax.random.key(seed), clock=clock)
+        solved, score = problem.success(jax.device_get(result.states))
+        runs.append({"success": bool(solved), "score": float(score), "plan_latency_ms": stats["plan_latency_ms"]})
+    mean = lambda k: float(np.mean([r[k] for r in runs]))  # noqa: E731
+    return {"success_rate": mean("success"), "score": mean("score"), "replan_ms": mean("plan_latency_ms"), "runs": runs}
+
+
+def measure(task: str, run: Path, samples: list[int], args: argparse.Namespace, impl: str) -> list[dict]:
+    """The policy alone, then plain and guided MPPI at each sample count, on `task`."""
+    rows = []
+    for n in samples:
+        fields = {**mjzoo.envs.hyperparameters(task, "mppi"), "num_samples": n}
+        if args.smoke:
+            fields.update(horizon_steps=4, num_knots=2)
+        config, hyperparams = mjzoo.planning.configure(mppi, fields)
+        problem = mjzoo.envs.closed_loop_problem(
+            task,
+            mppi,
+            config,
+            seconds=0.2 if args.smoke else None,
+            backend="mjx",
+            hyperparams=hyperparams,
+            sim_backend="native",
+            impl=impl,
+        )
+        prior = run_dirs.policy_prior(run, problem.plan_task)
+        if not rows:
+            rows.append(
+                {
+                    "task": task,
+                    "planner": "policy alone",
+                    "num_samples": 0,
+                    **policy_alone(problem, prior, args.episodes),
+                }
+            )
+            print(f"  {task} policy alone: success {rows[-1]['success_rate']:.2f}, score {rows[-1]['score']:.3g}")
+        guided = dataclasses.replace(
+            problem,
+            hooks=prior_lib.guided(problem.hooks, config, prior),
+            terminal_value=prior_lib.terminal_value(prior),
+        )
+        for name, p in (("mppi", problem), ("mppi + policy prior", guided)):
+            start = time.perf_counter()
+            row = {"task": task, "planner": name, "num_samples": n, **planned(p, args.episodes, args.clock)}
+            row["seconds_with_compile"] = time.perf_counter() - start
+            rows.append(row)
+            print(
+                f"  {task} {name} {n}: success {row['success_rate']:.2f}, score {row['score']:.3g}, {row['replan_ms']:.1f} ms"
+            )
+    return rows
+
+
+def main() -> None:
+    parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
+    parser.add_argument("--tasks", nargs="+", default=list(TASKS), choices=TASKS)
+    parser.add_argument("--samples", nargs="+", type=int, default=[16, 64, 256, 1024])
+    parser.add_argument("--episodes", type=int, default=5)
+    parser.add_argument("--train-steps", type=int, default=50_000_000, help="PPO's env steps per task")
+    parser.add_argument("--run", nargs="+", default=[], metavar="TASK=DIR", help="a trained PPO run to reuse")
+    parser.add_argument("--runs", type=Path, default=ROOT / "runs" / "guided_mpc", help="where new runs go")
+    parser.add_argument("--clock", choices=["simulated", "wall"], default="simulated")
+    parser.add_argument("--impl", choices=physics.IMPLS, default=None, help="the planner's and PPO's physics")
+    parser.add_argument("--smoke", action="store_true", help="tiny sizes: checks the script runs, on a CPU")
+    parser.add_argument("--out", type=Path, default=ROOT / "benchmarks" / "results" / "guided_mpc")
+    args = parser.parse_args()
+    given = dict(text.split("=", 1) for text in args.run if "=" in text)
+    if len(given) != len(args.run) or not set(given) <= set(TASKS):
+        parser.error(f"--run takes TASK=DIR with TASK one of {TASKS}")
+    if args.smoke:
+        args.samples, args.episodes, args.train_steps = [8], 1, 64
+        args.runs = Path(tempfile.mkdtemp(prefix="guided_mpc_"))
+    impl = args.impl or physics.default_impl()
+    device = jax.devices()[0]
+    name = device.device_kind.lower().replace(" ", "_") if device.platform == "gpu" else "cpu"
+    args.out.mkdir(parents=True, exist_ok=True)
+    path = args.out / f"guided_mpc_{name}{'_smoke' if args.smoke else ''}.json"
+    meta = {"device": device.device_kind, "jax": jax.__version__, "impl": impl, "clock": args.clock}
+    rows = []
+    for task in args.tasks:
+        start = time.perf_counter()
+        run = (
+            Path(given[task])
+            if task in given
+            else train(task, args.runs / f"{task}-ppo", args.train_steps, impl, args.smoke)
+        )
+        trained = {"task": task, "run": str(run), "train_steps": None if task in given else args.train_steps}
+        trained["train_seconds"] = None if task in given else time.perf_counter() - start
+        meta.setdefault("runs", []).append(trained)
+        for row in measure(task, run, args.samples, args, impl):
+            rows.append(row)
+            path.write_text(json.dumps({"meta": meta, "rows": rows}, indent=1))
+    print(f"wrote {path}")
+
+
+if __name__ == "__main__":
+    main()
