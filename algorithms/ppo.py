@@ -205,6 +205,7 @@ class Hyperparams:
 
     learning_rate: float | Array = 3e-4  # the schedule's base rate (Config.lr_schedule), or the adaptive one's start
     target_kl: float | Array = 0.01  # the KL the adaptive schedule steers to
+    max_learning_rate: float | Array = 1e-2  # the adaptive schedule's ceiling (rsl_rl's)
     max_kl: float | Array = INF  # an update's remaining minibatch steps are skipped once a step's KL exceeds it
     entropy_coef: float | Array = 1e-2  # at the start of the run (Config.entropy_schedule)
     final_entropy_coef: float | Array = 0.0  # at its end, for a decaying schedule
@@ -226,6 +227,7 @@ class Hyperparams:
 HYPERPARAM_RANGES = {
     "learning_rate": (0.0, INF, "()"),
     "target_kl": (0.0, INF, "()"),
+    "max_learning_rate": (0.0, INF, "()"),
     "max_kl": (0.0, INF, "(]"),
     "entropy_coef": (0.0, INF, "[)"),
     "final_entropy_coef": (0.0, INF, "[)"),
@@ -661,7 +663,7 @@ def improve(
         key, entropy_key = jax.random.split(key)
         grads, metrics = grad_fn(params, minibatch, entropy_key)
         kl = metrics["loss/approx_kl"]  # at the params this step starts from
-        lr = schedules.kl_adaptive_lr(lr, kl, hp.target_kl) if every_step else lr
+        lr = schedules.kl_adaptive_lr(lr, kl, hp.target_kl, max_lr=hp.max_learning_rate) if every_step else lr
         stopped = schedules.kl_early_stop(stopped, kl, hp.max_kl)
         optimizer = _optimizer(config, hp, components, lr if adaptive else None)
         updates, new_opt_state = optimizer.update(grads, opt_state, params)
@@ -685,7 +687,7 @@ def improve(
         split_over_devices=config.split_minibatches,
     )
     if config.lr_schedule == "adaptive_update":  # for the next update, by this one's mean KL
-        lr = schedules.kl_adaptive_lr(lr, metrics["loss/approx_kl"], hp.target_kl)
+        lr = schedules.kl_adaptive_lr(lr, metrics["loss/approx_kl"], hp.target_kl, max_lr=hp.max_learning_rate)
     if adaptive:
         metrics["learning_rate"] = lr
     if config.entropy_schedule != "constant":

@@ -60,6 +60,10 @@ VARIANTS: dict[str, dict] = {
     "norms": {**PLAIN, "value_normalization": "popart", "reward_normalization": True},
     "defaults": {},
     "defaults_update_lr": {"lr_schedule": "adaptive_update"},  # the defaults, the rate adapted once per update
+    # The defaults with the adaptive rate's ceiling lowered from rsl_rl's 1e-2: the
+    # learning-quality runs' rates climbed to it, and their KL spiked to 10-800 after.
+    "defaults_lr_cap": {"max_learning_rate": 1e-3},
+    "defaults_lr_cap_kl_stop": {"max_learning_rate": 1e-3, "max_kl": 0.05},
 }
 
 

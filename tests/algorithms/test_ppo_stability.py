@@ -72,7 +72,9 @@ def test_config_errors_name_the_switch(field, value, message):
         dataclasses.replace(ALL_ON, **{field: value})
 
 
-@pytest.mark.parametrize("field,value", [("target_kl", 0.0), ("max_kl", -1.0), ("final_entropy_coef", -0.1)])
+@pytest.mark.parametrize(
+    "field,value", [("target_kl", 0.0), ("max_kl", -1.0), ("final_entropy_coef", -0.1), ("max_learning_rate", 0.0)]
+)
 def test_hyperparameter_errors_name_the_number(field, value):
     with pytest.raises(ValueError, match=f"^ppo.Hyperparams: {field}={value} is invalid"):
         ppo.Hyperparams(**{field: value})
@@ -98,6 +100,17 @@ def test_the_adaptive_rate_follows_the_kl_step_by_step_and_carries_over(rate, ta
     assert float(metrics["learning_rate"]) == once
     state, _ = update(ALL_ON, BLOCK, state)
     assert np.isclose(float(state.learning_rate), steered(once), rtol=1e-5).any(), float(state.learning_rate)
+
+
+def test_the_adaptive_rate_stops_at_its_ceiling():
+    """Every KL far below the target raises the rate by 1.5 a step; from 1e-3 under a
+    ceiling of 1.2e-3 one step reaches it and the rest stay there (the default ceiling,
+    rsl_rl's 1e-2, let the learning-quality runs' rates climb to 1e-2 and their KL spike
+    to 10-800 in the update after)."""
+    hp = ppo.Hyperparams(learning_rate=1e-3, target_kl=1e3, max_learning_rate=1.2e-3)
+    state, metrics = update(ALL_ON, BLOCK, ppo.init(ALL_ON, BLOCK, hp, jax.random.key(0)))
+    np.testing.assert_allclose(float(state.learning_rate), 1.2e-3, rtol=1e-6)
+    np.testing.assert_allclose(float(metrics["learning_rate"]), 1.2e-3, rtol=1e-6)
 
 
 @pytest.mark.parametrize("target_kl,factor", [(1e3, 1.5), (1e-12, 1 / 1.5)])
