@@ -49,6 +49,8 @@ from mjzoo.algorithms import ppo  # noqa: E402
 from mjzoo.envs import robot_joystick  # noqa: E402
 from mjzoo.harness import checkpoints  # noqa: E402
 from mjzoo.harness import settings  # noqa: E402
+from mjzoo.harness.cli.arguments import UsageError  # noqa: E402
+from mjzoo.harness.cli.arguments import parse_assignments  # noqa: E402
 from mjzoo.interop import tracking  # noqa: E402
 
 OUT = Path(__file__).parent / "results" / "robots"
@@ -76,11 +78,13 @@ def train(
     report: Callable[[dict], None],
     run_dir: Path | None,
     impl: str = "jax",
+    overrides: dict[str, Any] | None = None,
 ) -> dict[str, Any]:
     """Every seed of one robot and terrain in one vmapped program: up to `evals` chunks of
     updates, each followed by a tracking evaluation, until every seed tracks or `budget`
     seconds have passed. `report` gets the row so far after each evaluation; `run_dir`, if
-    given, gets seed 0's policy as a run (`save_run`). Returns the row."""
+    given, gets seed 0's policy as a run (`save_run`); `overrides` are PPO fields over the
+    robot's registered ones. Returns the row."""
     start = time.perf_counter()
     robot, terrain = variant.split(":")
     name = f"{robot}_joystick"
@@ -89,6 +93,7 @@ def train(
     judge = task if terrain == "flat" else robot_joystick.robot_joystick(robot, terrain=terrain, level=1.0, impl=impl)
     fields = mjzoo.envs.hyperparameters(name, "ppo")
     fields.update(SMOKE if smoke else {})
+    fields.update(overrides or {})
     if steps:
         fields["total_steps"] = steps
     config, hyperparams = ppo.configure(**fields)
@@ -251,17 +256,30 @@ def main() -> None:
     parser.add_argument(
         "--impl", choices=physics.IMPLS, default=None, help="the physics (default: Warp where installed on a GPU)"
     )
+    parser.add_argument(
+        "--config",
+        nargs="+",
+        default=[],
+        metavar="NAME=VALUE",
+        help="PPO fields over the robot's registered ones, e.g. lr_schedule=constant (a row of its own)",
+    )
     parser.add_argument("--out", type=Path, default=OUT, help="the results' folder")
     parser.add_argument("--smoke", action="store_true", help="tiny sizes: checks the script runs, on a CPU")
     args = parser.parse_args()
     args.impl = args.impl or physics.default_impl()
+    try:
+        overrides = parse_assignments(tuple(args.config), "--config")
+        ppo.configure(**{**robot_joystick.PPO, **overrides})  # a bad name or value: one line, now
+    except (UsageError, ValueError, TypeError) as e:
+        parser.error(str(e))
     card = card_name() + ("_smoke" if args.smoke else "")
     path = args.out / f"robots_{card}.json"
     rows = json.loads(path.read_text())["rows"] if path.is_file() else []
 
     def report(row: dict) -> None:  # after every evaluation: a run stopped midway keeps its curve
-        row["device"], row["impl"] = jax.devices()[0].device_kind, args.impl
-        same = lambda r: (r["variant"], r["seeds"], r.get("impl", "jax")) == (row["variant"], row["seeds"], args.impl)  # noqa: E731
+        row["device"], row["impl"], row["config"] = jax.devices()[0].device_kind, args.impl, overrides
+        key = lambda r: (r["variant"], r["seeds"], r.get("impl", "jax"), r.get("config", {}))  # noqa: E731
+        same = lambda r: key(r) == key(row)  # noqa: E731
         rows[:] = [r for r in rows if not same(r)] + [row]
         args.out.mkdir(parents=True, exist_ok=True)
         path.write_text(json.dumps({"rows": rows}, indent=1) + "\n")
@@ -279,6 +297,7 @@ def main() -> None:
             report,
             args.runs,
             args.impl,
+            overrides,
         )
         plot(rows, path.with_suffix(".png"))
         median = row["median_seconds_to_tracking"]
