@@ -197,11 +197,8 @@ class Config:
 class Hyperparams:
     """PPO's numbers: a pytree of scalars (or of [n] batches of them, to sweep under
     `jax.vmap`). `init` stores them in the train state; changing one never recompiles.
-
     `value_clip_epsilon`, `max_grad_norm` and `max_kl` switch off at inf (the defaults:
-    no value clipping; clipping gradients at norm 1; no early stop): a number, so the
-    switch can be swept too.
-    """
+    no value clipping; clipping gradients at norm 1; no early stop), a number to sweep."""
 
     learning_rate: float | Array = 3e-4  # the schedule's base rate (Config.lr_schedule), or the adaptive one's start
     target_kl: float | Array = 0.01  # the KL the adaptive schedule steers to
