@@ -32,13 +32,16 @@ from pathlib import Path
 import jax
 import numpy as np
 
-import mjzoo
-import mjzoo.envs
-from mjzoo import physics
-from mjzoo.algorithms import mppi
-from mjzoo.harness.cli import runs as run_dirs
-from mjzoo.planning import prior as prior_lib
-from mjzoo.planning import realtime
+sys.path.insert(0, str(Path(__file__).parent))
+from cards import card_name  # noqa: E402
+
+import mjzoo  # noqa: E402
+import mjzoo.envs  # noqa: E402
+from mjzoo import physics  # noqa: E402
+from mjzoo.algorithms import mppi  # noqa: E402
+from mjzoo.harness.cli import runs as run_dirs  # noqa: E402
+from mjzoo.planning import prior as prior_lib  # noqa: E402
+from mjzoo.planning import realtime  # noqa: E402
 
 ROOT = Path(__file__).resolve().parent.parent
 TASKS = ("go1_trot", "g1_standup")
@@ -85,7 +88,7 @@ def planned(problem: realtime.Problem, episodes: int, clock: str) -> dict:
 
 def measure(task: str, run: Path, samples: list[int], args: argparse.Namespace, impl: str) -> list[dict]:
     """The policy alone, then plain and guided MPPI at each sample count, on `task`."""
-    rows = []
+    rows, prior = [], None
     for n in samples:
         fields = {**mjzoo.envs.hyperparameters(task, "mppi"), "num_samples": n}
         if args.smoke:
@@ -101,8 +104,8 @@ def measure(task: str, run: Path, samples: list[int], args: argparse.Namespace, 
             sim_backend="native",
             impl=impl,
         )
-        prior = run_dirs.policy_prior(run, problem.plan_task)
-        if not rows:
+        if prior is None:  # one restore: the planning task is the same at every sample count
+            prior = run_dirs.policy_prior(run, problem.plan_task)
             rows.append(
                 {
                     "task": task,
@@ -148,11 +151,9 @@ def main() -> None:
         args.samples, args.episodes, args.train_steps = [8], 1, 64
         args.runs = Path(tempfile.mkdtemp(prefix="guided_mpc_"))
     impl = args.impl or physics.default_impl()
-    device = jax.devices()[0]
-    name = device.device_kind.lower().replace(" ", "_") if device.platform == "gpu" else "cpu"
     args.out.mkdir(parents=True, exist_ok=True)
-    path = args.out / f"guided_mpc_{name}{'_smoke' if args.smoke else ''}.json"
-    meta = {"device": device.device_kind, "jax": jax.__version__, "impl": impl, "clock": args.clock}
+    path = args.out / f"guided_mpc_{card_name()}{'_smoke' if args.smoke else ''}.json"
+    meta = {"device": jax.devices()[0].device_kind, "jax": jax.__version__, "impl": impl, "clock": args.clock}
     rows = []
     for task in args.tasks:
         start = time.perf_counter()

@@ -26,21 +26,27 @@ from __future__ import annotations
 
 import argparse
 import json
+import sys
 import time
 from pathlib import Path
 
 import jax
 import numpy as np
 
-import mjzoo
-import mjzoo.envs
-from mjzoo import physics
-from mjzoo.algorithms import cem
-from mjzoo.algorithms import cma_es
-from mjzoo.algorithms import dial
-from mjzoo.algorithms import mppi
-from mjzoo.algorithms import predictive_sampling
-from mjzoo.planning import realtime
+sys.path.insert(0, str(Path(__file__).parent))
+from cards import card_name  # noqa: E402
+
+import mjzoo  # noqa: E402
+import mjzoo.envs  # noqa: E402
+from mjzoo import physics  # noqa: E402
+from mjzoo.algorithms import cem  # noqa: E402
+from mjzoo.algorithms import cma_es  # noqa: E402
+from mjzoo.algorithms import dial  # noqa: E402
+from mjzoo.algorithms import mppi  # noqa: E402
+from mjzoo.algorithms import predictive_sampling  # noqa: E402
+from mjzoo.harness.cli.arguments import UsageError  # noqa: E402
+from mjzoo.harness.cli.arguments import parse_assignments  # noqa: E402
+from mjzoo.planning import realtime  # noqa: E402
 
 ROOT = Path(__file__).resolve().parent.parent
 PLANNERS = {m.__name__.rsplit(".", 1)[-1]: m for m in (predictive_sampling, mppi, cem, dial, cma_es)}
@@ -121,18 +127,6 @@ def measure(
     }
 
 
-def parse_option(parser: argparse.ArgumentParser, text: str) -> tuple[str, float | int]:
-    """``NAME=VALUE`` of a physics option: a number (an int where it is whole)."""
-    name, sep, value = text.partition("=")
-    try:
-        number = float(value)
-    except ValueError:
-        number = None
-    if not sep or number is None:
-        parser.error(f"--plan-physics: {text!r} is not NAME=NUMBER (e.g. dt=0.01)")
-    return name, int(number) if number.is_integer() and "." not in value else number
-
-
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     parser.add_argument("--tasks", nargs="+", default=list(TASKS), choices=list(TASKS))
@@ -169,13 +163,19 @@ def main() -> None:
     args = parser.parse_args()
     if args.smoke:
         args.samples, args.episodes = [8], 1
-    device = jax.devices()[0]
-    name = device.device_kind.lower().replace(" ", "_") if device.platform == "gpu" else "cpu"
     args.out.mkdir(parents=True, exist_ok=True)
-    path = args.out / f"robot_mpc_{name}{'_smoke' if args.smoke else ''}.json"
+    path = args.out / f"robot_mpc_{card_name()}{'_smoke' if args.smoke else ''}.json"
     impl = args.impl or physics.default_impl()
     args.world = args.world or "native"
-    plan_physics = dict(parse_option(parser, text) for text in args.plan_physics)
+    try:
+        plan_physics = parse_assignments(tuple(args.plan_physics), "--plan-physics")
+    except UsageError as e:
+        parser.error(str(e))
+    not_numbers = [
+        f"{k}={v!r}" for k, v in plan_physics.items() if isinstance(v, bool) or not isinstance(v, (int, float))
+    ]
+    if not_numbers:
+        parser.error(f"--plan-physics: {', '.join(not_numbers)} is not NAME=NUMBER (e.g. dt=0.01)")
     rows = []
     for task in args.tasks:
         for planner in args.planners:
@@ -185,7 +185,7 @@ def main() -> None:
                         task, planner, samples, args.episodes, args.smoke, args.world, impl, args.clock, plan_physics
                     )
                 )
-                meta = {"device": device.device_kind, "jax": jax.__version__, "smoke": args.smoke}
+                meta = {"device": jax.devices()[0].device_kind, "jax": jax.__version__, "smoke": args.smoke}
                 path.write_text(json.dumps({"meta": meta, "rows": rows}, indent=1))
     print(f"wrote {path}")
 
