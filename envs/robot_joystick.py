@@ -130,7 +130,7 @@ PPO = dict(
     value_obs_key="privileged_state",
     total_steps=100_000_000,
 )
-HUMANOID_PPO = dict(PPO, entropy_coef=5e-3)  # Playground's for its G1, T1 and Berkeley Humanoid
+HUMANOID_PPO = dict(PPO, entropy_coef=5e-3, lr_schedule="constant")  # Playground's for its G1, T1, Berkeley Humanoid
 
 
 @functools.lru_cache(maxsize=16)

@@ -91,20 +91,29 @@ def _scale_field(field: StaticValue, ids, low, high, model, key) -> dict[str, Ar
 
 
 def scale_friction(mj_model: mujoco.MjModel, low: float = 0.5, high: float = 1.5, geoms: Names = None) -> Randomizer:
-    """Multiplies the friction of each named geom (None: every geom) by U(low, high).
+    """Multiplies the friction of each named geom (None: every geom), and of each explicit
+    contact pair (``<pair>``) that involves one, by U(low, high).
 
-    Edits ``geom_friction`` [ngeom, 3] (sliding, torsional, rolling; the whole row is
-    scaled, so their ratios are kept). Unitless factors, low >= 0. MuJoCo gives a
-    contact the larger friction of its two geoms, so to randomize the ground the floor
-    alone (``geoms=["floor"]``) suffices only if it is the more frictional of the pair.
+    Edits ``geom_friction`` [ngeom, 3] (sliding, torsional, rolling) and, where the model
+    has such pairs, ``pair_friction`` [npair, 5]: a pair's contact takes its friction
+    from the pair, not its geoms (Playground's robots touch the floor only through
+    pairs). Whole rows are scaled, so their ratios are kept; one factor per geom and
+    one per pair. Unitless factors, low >= 0. MuJoCo gives a geom-geom contact the larger
+    friction of its two geoms, so to randomize the ground the floor alone
+    (``geoms=["floor"]``) suffices only if it is the more frictional of the pair.
     """
     who = "scale_friction"
-    return Partial(
-        _scale_field,
-        StaticValue("geom_friction"),
-        jnp.asarray(names.ids(mj_model, "geom", geoms, who)),
-        *_range(who, low, high, 0.0),
-    )
+    ids = names.ids(mj_model, "geom", geoms, who)
+    pairs = np.flatnonzero(np.isin(mj_model.pair_geom1, ids) | np.isin(mj_model.pair_geom2, ids)).astype(np.int32)
+    return Partial(_scale_friction, jnp.asarray(ids), jnp.asarray(pairs), *_range(who, low, high, 0.0))
+
+
+def _scale_friction(geoms, pairs, low, high, model, key) -> dict[str, Array]:
+    geom_key, pair_key = jax.random.split(key)
+    fields = _scale_field(StaticValue("geom_friction"), geoms, low, high, model, geom_key)
+    if pairs.size:  # a static shape: known when the randomizer is built
+        fields |= _scale_field(StaticValue("pair_friction"), pairs, low, high, model, pair_key)
+    return fields
 
 
 def scale_armature(mj_model: mujoco.MjModel, low: float = 0.8, high: float = 1.2, joints: Names = None) -> Randomizer:

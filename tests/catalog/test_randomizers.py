@@ -262,7 +262,7 @@ def test_with_domain_randomization_draws_each_episode_and_steps_with_it():
 
 # --- friction on a sliding contact ------------------------------------------------------------
 
-PUCK = mujoco.MjModel.from_xml_string("""
+PUCK_XML = """
 <mujoco model="puck">
   <option timestep="0.002"/>
   <worldbody>
@@ -273,7 +273,15 @@ PUCK = mujoco.MjModel.from_xml_string("""
       <geom name="puck" size="0.1" mass="1" friction="0.1"/>
     </body>
   </worldbody>
-</mujoco>""")
+</mujoco>"""
+PUCK = mujoco.MjModel.from_xml_string(PUCK_XML)
+# The same puck touching the floor only through an explicit pair, whose friction (0.5) rules.
+PAIR = '<contact><pair geom1="floor" geom2="puck" friction="0.5 0.5 0.005 1e-4 1e-4"/></contact>'
+PAIRED_PUCK = mujoco.MjModel.from_xml_string(
+    PUCK_XML.replace('friction="0.1"', 'friction="0.1" contype="0" conaffinity="0"').replace(
+        "</mujoco>", PAIR + "</mujoco>"
+    )
+)
 
 
 @jax.jit
@@ -292,6 +300,17 @@ def test_floor_friction_sets_the_sliding_deceleration():
         fields = randomizers.scale_friction(PUCK, s, s, geoms=["floor"])(model, KEY)
         v = slide(model.replace(**fields))
         np.testing.assert_allclose(3.0 - v, 0.5 * s * G * 0.2, rtol=0.1)
+
+
+def test_a_pair_contact_takes_the_friction_of_its_pair():
+    # Geoms' friction does not reach a <pair> contact (the puck's own is 0.1): its pair's does.
+    model = mjx.put_model(PAIRED_PUCK)
+    np.testing.assert_allclose(3.0 - slide(model), 0.5 * G * 0.2, rtol=0.1)
+    fields = randomizers.scale_friction(PAIRED_PUCK, 2.0, 2.0, geoms=["puck"])(model, KEY)
+    np.testing.assert_allclose(fields["pair_friction"][0], [1.0, 1.0, 0.01, 2e-4, 2e-4], rtol=1e-6)
+    np.testing.assert_allclose(3.0 - slide(model.replace(**fields)), 1.0 * G * 0.2, rtol=0.1)
+    # A model without pairs gets no pair field.
+    assert "pair_friction" not in randomizers.scale_friction(PUCK, 2.0, 2.0)(mjx.put_model(PUCK), KEY)
 
 
 # --- construction errors ---------------------------------------------------------------------
