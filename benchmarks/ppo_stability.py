@@ -64,6 +64,9 @@ VARIANTS: dict[str, dict] = {
     # learning-quality runs' rates climbed to it, and their KL spiked to 10-800 after.
     "defaults_lr_cap": {"max_learning_rate": 1e-3},
     "defaults_lr_cap_kl_stop": {"max_learning_rate": 1e-3, "max_kl": 0.05},
+    # The defaults at Brax's constant rate: what the G1 joystick needed (its adaptive
+    # rate sat at the 1e-5 floor, 32 x 4 minibatch steps an update).
+    "defaults_constant_lr": {"lr_schedule": "constant"},
 }
 
 

@@ -246,7 +246,10 @@ def _tracking_rows(data: dict) -> list[dict]:
             "terrain": row["terrain"],
             "impl": row.get("impl", "jax"),
             "envs": row["hyperparameters"]["num_envs"],
-            "settings": " ".join(f"{k}={v}" for k, v in row.get("config", {}).items()) or "the robot's",
+            "settings": " ".join(
+                f"{k}={v}" for k, v in {**row.get("config", {}), **row.get("task_options", {})}.items()
+            )
+            or "the robot's",
             **run,
         }
         for row in data["rows"]
@@ -271,7 +274,7 @@ iterations, pushes of 0.5 m/s).
         ("terrain", _at("terrain")),
         ("physics", _at("impl")),
         ("envs", _at("envs")),
-        ("PPO settings", _at("settings")),
+        ("settings (PPO, task)", _at("settings")),
         ("seed", _at("seed")),
         ("to tracking (s)", _at("seconds_to_tracking")),
         ("steps to tracking", _at("steps_to_tracking")),

@@ -79,18 +79,20 @@ def train(
     run_dir: Path | None,
     impl: str = "jax",
     overrides: dict[str, Any] | None = None,
+    task_options: dict[str, Any] | None = None,
 ) -> dict[str, Any]:
     """Every seed of one robot and terrain in one vmapped program: up to `evals` chunks of
     updates, each followed by a tracking evaluation, until every seed tracks or `budget`
     seconds have passed. `report` gets the row so far after each evaluation; `run_dir`, if
     given, gets seed 0's policy as a run (`save_run`); `overrides` are PPO fields over the
-    robot's registered ones. Returns the row."""
+    robot's registered ones, `task_options` the joystick's own (e.g. gait_frequency). Returns the row."""
     start = time.perf_counter()
     robot, terrain = variant.split(":")
     name = f"{robot}_joystick"
-    task = mjzoo.envs.make(name, terrain=terrain, impl=impl)  # on a terrain: the curriculum, auto-reset inside
+    options = {"terrain": terrain, "impl": impl, **(task_options or {})}
+    task = mjzoo.envs.make(name, **options)  # on a terrain: the curriculum, auto-reset inside
     # Evaluated where the curriculum ends: the hardest row (flat: the task itself).
-    judge = task if terrain == "flat" else robot_joystick.robot_joystick(robot, terrain=terrain, level=1.0, impl=impl)
+    judge = task if terrain == "flat" else robot_joystick.robot_joystick(robot, level=1.0, **options)
     fields = mjzoo.envs.hyperparameters(name, "ppo")
     fields.update(SMOKE if smoke else {})
     fields.update(overrides or {})
@@ -263,6 +265,13 @@ def main() -> None:
         metavar="NAME=VALUE",
         help="PPO fields over the robot's registered ones, e.g. lr_schedule=constant (a row of its own)",
     )
+    parser.add_argument(
+        "--task",
+        nargs="+",
+        default=[],
+        metavar="NAME=VALUE",
+        help="the joystick's options, e.g. gait_frequency=1.375 (a row of its own)",
+    )
     parser.add_argument("--out", type=Path, default=OUT, help="the results' folder")
     parser.add_argument("--smoke", action="store_true", help="tiny sizes: checks the script runs, on a CPU")
     args = parser.parse_args()
@@ -270,6 +279,9 @@ def main() -> None:
     try:
         overrides = parse_assignments(tuple(args.config), "--config")
         ppo.configure(**{**robot_joystick.PPO, **overrides})  # a bad name or value: one line, now
+        task_options = parse_assignments(tuple(args.task), "--task")
+        for variant in args.variants:  # a bad option: one line, now
+            mjzoo.envs.make(f"{variant.split(':')[0]}_joystick", **task_options)
     except (UsageError, ValueError, TypeError) as e:
         parser.error(str(e))
     card = card_name() + ("_smoke" if args.smoke else "")
@@ -278,7 +290,8 @@ def main() -> None:
 
     def report(row: dict) -> None:  # after every evaluation: a run stopped midway keeps its curve
         row["device"], row["impl"], row["config"] = jax.devices()[0].device_kind, args.impl, overrides
-        key = lambda r: (r["variant"], r["seeds"], r.get("impl", "jax"), r.get("config", {}))  # noqa: E731
+        row["task_options"] = task_options
+        key = lambda r: (r["variant"], r["seeds"], r.get("impl", "jax"), r.get("config", {}), r.get("task_options", {}))  # noqa: E731
         same = lambda r: key(r) == key(row)  # noqa: E731
         rows[:] = [r for r in rows if not same(r)] + [row]
         args.out.mkdir(parents=True, exist_ok=True)
@@ -298,6 +311,7 @@ def main() -> None:
             args.runs,
             args.impl,
             overrides,
+            task_options,
         )
         plot(rows, path.with_suffix(".png"))
         median = row["median_seconds_to_tracking"]

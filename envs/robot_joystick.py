@@ -31,6 +31,10 @@ quadruped); costs: vertical velocity^2 (2.0), roll/pitch rate^2
 (0.05), tilt sin^2 (5.0), base height from the keyframe's (10), action rate (0.01),
 torque^2 (2e-4 quadruped, 0 humanoids), joint limits past 95% (1.0), foot slip (0.1), standing still at zero
 command (0.5). Terminated when tilted over 1 rad or the base drops below `min_height`.
+With `gait_frequency` (Hz) the robot also observes a stepping clock (`catalog.gait`: cos
+and sin of each foot's phase; a biped's feet half a cycle apart, the Go1's diagonal pairs
+together) and is paid 1.0 for lifting its feet along the clock's 0.15 m curve while it
+moves or is commanded to (`feet_phase`; Playground's G1 runs its clock at 1.25-1.5 Hz).
 
 Terrains: "flat" (the scene's plane), "rough" (rough, slopes up and down: 6 rows of
 difficulty), "stairs" (stairs up and down). On a terrain each environment starts on a
@@ -56,6 +60,7 @@ from mjzoo.catalog import actuators
 from mjzoo.catalog import commands
 from mjzoo.catalog import curriculum
 from mjzoo.catalog import events
+from mjzoo.catalog import gait
 from mjzoo.catalog import observations
 from mjzoo.catalog import randomizers
 from mjzoo.catalog import resets
@@ -155,6 +160,7 @@ def robot_joystick(
     yaw_rate: tuple[float, float] = (-1.0, 1.0),
     reference: motion.Reference | None = None,
     reference_probability: float = 0.5,
+    gait_frequency: float | None = None,
     **physics_options: Any,
 ) -> Task:
     """`robot`'s joystick (one of `ROBOTS`) on `terrain` (one of `TERRAINS`); on a
@@ -173,11 +179,17 @@ def robot_joystick(
     spec = ROBOTS[robot]
     physics, grid = _scene(robot, terrain, tuple(sorted(physics_options.items())))
     m = physics.mj_model
-    sensed = observations.concat(  # what the robot's IMU and encoders give
+    clock, stepping = (), {}
+    if gait_frequency is not None:
+        offsets = gait.BIPED if len(spec.feet) == 2 else gait.TROT
+        clock = (gait.clock(gait_frequency, offsets),)
+        stepping = {"feet_phase": (gait.feet_phase(m, spec.feet, gait_frequency, offsets), 1.0)}
+    sensed = observations.concat(  # what the robot's IMU and encoders give (and its gait clock)
         observations.base_angular_velocity(m),
         observations.projected_gravity(m),
         observations.joint_positions,
         observations.joint_velocities,
+        *clock,
     )
     privileged = (
         observations.base_linear_velocity(m),
@@ -230,6 +242,7 @@ def robot_joystick(
             "yaw_tracking": (rewards.angular_velocity_tracking(m, 0.25), 0.5),
             "air_time": (rewards.feet_air_time(0.1, min_command=0.1), spec.air_time_weight),
             "alive": (alive, spec.alive_weight),
+            **stepping,
         },
         costs={
             "vertical": (rewards.vertical_velocity(m), 2.0),
@@ -275,9 +288,11 @@ def _spec(robot: str, description: str) -> base.EnvSpec:
         push: float = 0.5,
         noise: float = 0.02,
         max_action_latency: int = 1,
+        gait_frequency: float | None = None,
         **physics_options: Any,
     ) -> Task:
         options = dict(episode_steps=episode_steps, push=push, noise=noise, max_action_latency=max_action_latency)
+        options["gait_frequency"] = gait_frequency
         if TERRAINS.get(terrain) is not None:
             return robot_curriculum(robot, terrain, **options, **physics_options)
         return robot_joystick(robot, terrain=terrain, **options, **physics_options)

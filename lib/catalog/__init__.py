@@ -14,6 +14,7 @@ docs/catalog.md lists every item and how they nest.
     actuators      torque, PD, latency, drops  trackers      action history, feet
     contacts       contact queries             shaping       `tolerance`, `wrap_angle`
     tracking       following motion clips      start_sampling  reference starts, adaptive
+    gait           a stepping clock and its feet-height reward
 """
 
 from mjzoo.catalog import actuators
@@ -21,6 +22,7 @@ from mjzoo.catalog import commands
 from mjzoo.catalog import contacts
 from mjzoo.catalog import curriculum
 from mjzoo.catalog import events
+from mjzoo.catalog import gait
 from mjzoo.catalog import observations
 from mjzoo.catalog import randomizers
 from mjzoo.catalog import resets
@@ -48,6 +50,7 @@ __all__ = [
     "contacts",
     "tracking",
     "start_sampling",
+    "gait",
     "tolerance",
     "wrap_angle",
 ]

@@ -104,3 +104,17 @@ def test_a_humanoid_is_paid_for_staying_up():
     assert np.asarray(ended).any(0).all()  # each falls within the 2 s
     np.testing.assert_array_equal(np.asarray(alive)[up], 2.0)  # the term: 2 a step survived
     assert float(np.asarray(rewards_)[up].mean()) > 0.0
+
+
+@pytest.mark.parametrize("robot, feet", [("g1", 2), ("go1", 4)])
+def test_a_gait_clock_is_observed_and_paid(robot, feet):
+    plain, clocked = (mjzoo.envs.make(f"{robot}_joystick", gait_frequency=f) for f in (None, 1.375))
+    shapes = [
+        jax.eval_shape(lambda k, t=t: mjzoo.reset(t, k), jax.random.key(0)).obs["state"].shape for t in (plain, clocked)
+    ]
+    assert shapes[1][0] == shapes[0][0] + 2 * feet  # cos and sin of each foot's phase
+    state = jax.eval_shape(lambda k: mjzoo.reset(clocked, k), jax.random.key(0))
+    after = jax.eval_shape(
+        lambda s, k: mjzoo.running.transition(clocked, s, jnp.zeros(clocked.action_size), k), state, jax.random.key(1)
+    )
+    assert "reward/feet_phase" in after.metrics
