@@ -27,8 +27,13 @@ Judo's task hooks, as pure functions in `Hooks`:
                                             with what they found (the chosen plan and
                                             its predicted cost), e.g. to log or move a goal
   guide(plan_task, start, planner_state) -> planner_state  before each replan: the plan
-                                            it starts from (a trained policy's,
-                                            `mjzoo.planning.prior.guided`)
+                                            it starts from
+  to_control(sim_task, sim_state, control) -> control  the control the simulation applies for the
+                                            plan's (information flowing planner -> sim;
+                                            a policy plus the plan as its offset,
+                                            `mjzoo.planning.prior.guided`). The planning
+                                            view (`pre_rollout`) must apply the same in
+                                            its rollouts, so such a problem plans in JAX.
 """
 
 from __future__ import annotations
@@ -58,6 +63,10 @@ from mjzoo.types import Task
 __all__ = ["Hooks", "Result", "run", "replan"]
 
 Array = jax.Array
+_IN_JAX = (
+    "closed_loop: a to_control hook (a policy in the loop: mjzoo.planning.prior.guided) needs the planner's "
+    "rollouts in JAX, which C MuJoCo's cannot run; plan on MJX (backend='mjx')"
+)
 
 
 def _as_partial(fn: Callable | None) -> jax.tree_util.Partial | None:
@@ -82,6 +91,7 @@ class Hooks:
     pre_sim_step: Callable | None = None
     post_rollout: Callable | None = None
     guide: Callable | None = None
+    to_control: Callable | None = None
 
     def __post_init__(self) -> None:
         for field in dataclasses.fields(self):
@@ -120,6 +130,8 @@ def replan(
 ) -> PlannerState:
     """One replan from the simulated state, through the hooks (`guide` first sets the plan
     it starts from), valuing final states by `terminal_value` if given."""
+    if hooks.to_control is not None and isinstance(plan_task, Native):
+        raise ValueError(_IN_JAX)
     start = hooks.to_planner(sim_state) if hooks.to_planner else sim_state
     view = with_base(plan_task, lambda t: hooks.pre_rollout(t, start)) if hooks.pre_rollout else plan_task
     if hooks.guide is not None:
@@ -163,6 +175,8 @@ def sim_step(
     if hooks.pre_sim_step is not None:
         sim_state = hooks.pre_sim_step(base_task(sim_task), sim_state, pre_key)
     action = sampling.control_at(config, planner_state, sim_state.data.time, *sampling.control_limits(sim_task))
+    if hooks.to_control is not None:
+        action = hooks.to_control(base_task(sim_task), sim_state, action)
     step = transition_native if isinstance(sim_task, Native) else transition
     next_state = step(sim_task, sim_state, action, step_key)
     if hooks.post_sim_step is not None:

@@ -1,21 +1,25 @@
-"""A trained policy as a planner's prior: every replan searches around the policy's own
-plan, and the horizon's end is valued by the policy's critic.
+"""A trained policy as a planner's prior: the planner searches offsets to the policy's
+own actions, applied in closed loop, and the horizon's end is valued by the policy's critic.
 
     prior = prior_lib.policy_prior(act, value)           # act: obs -> [nu]; value: obs -> []
-    hooks = prior_lib.guided(hooks, config, prior)       # each replan starts from the policy's plan
+    hooks = prior_lib.guided(hooks, prior)               # plans are offsets to the policy
     problem = Problem(mppi, config, sim, plan_task, seconds, hooks=hooks,
                       terminal_value=prior_lib.terminal_value(prior))
 
-At each replan the policy is rolled out deterministically for the plan's horizon through
-the planning task, from the state planned from, and its actions, read at the knots,
-become the nominal plan: sample 0 of every sampling planner (`mppi`, `cem`,
-`predictive_sampling`, `dial`, `cma_es`) and the mean the others are drawn around, or
-`ilqr`'s starting plan. The critic's value of a rollout's final state is added to its
-return (`mjzoo.planning.learned`): the planner optimizes the horizon plus what the
-policy expects to collect after it. Nothing here is per planner: the prior is a hook of
-the closed loop (`closed_loop.Hooks.guide`) and a terminal value, both pytrees whose
-network weights are leaves, so new weights run without compiling again.
-`mjzoo.harness.priors.from_run` builds one from a PPO or AMP run directory.
+The plan is a *residual*: every rollout, and the simulation, applies
+``policy(obs) + offset`` at each step, the policy reading the state it is in (the planning
+view `residual`, and `closed_loop.Hooks.to_control` for the world). A zero offset is the
+policy itself, exactly, whatever the knots, and perturbed rollouts keep its feedback; the
+first plan is zero offsets. An open-loop replay of the policy's rollout read at the
+knots, this module's former nominal plan, was neither: measured on the pendulum with 2
+knots over the planning horizon, it lost the swing-up the policy makes (the numbers in
+`benchmarks/guided_mpc.py`). The critic's value of a rollout's final state is added to
+its return (`mjzoo.planning.learned`): the planner optimizes the horizon plus what the
+policy expects to collect after it. Nothing here is per planner: every sampling planner
+and `ilqr` plan offsets on the residual view, whose rollouts must run in JAX (MJX, not
+C MuJoCo). The prior is a pytree whose network weights are leaves, so new weights run
+without compiling again. `mjzoo.harness.cli.runs.policy_prior` builds one from a PPO or
+AMP run directory.
 """
 
 from __future__ import annotations
@@ -26,14 +30,11 @@ from typing import Callable
 
 import jax
 import jax.numpy as jnp
+import numpy as np
 
-from mjzoo.planning import splines
 from mjzoo.planning.closed_loop import Hooks
 from mjzoo.planning.learned import committed
-from mjzoo.planning.sampling import PlannerState
 from mjzoo.planning.sampling import control_limits
-from mjzoo.running import fill_transition_entries
-from mjzoo.running import transition
 from mjzoo.types import State
 from mjzoo.types import Task
 
@@ -41,10 +42,10 @@ __all__ = [
     "PolicyPrior",
     "policy_prior",
     "from_learner",
-    "rollout_actions",
-    "nominal_knots",
+    "centre",
+    "applied",
+    "residual",
     "terminal_value",
-    "guide",
     "guided",
 ]
 
@@ -100,29 +101,39 @@ class _Deterministic:
         return self.policy(params, obs, jax.random.key(0))  # a deterministic policy ignores its key
 
 
-def rollout_actions(prior: PolicyPrior, task: Task, state: State, horizon_steps: int, key: Array) -> Array:
-    """[H, nu] the policy's actions rolled out for `horizon_steps` through `task` from
-    `state` (its observation at each step), clipped to the control limits."""
+def centre(task: Task) -> np.ndarray:
+    """[nu] the middle of each actuator's control range (0 where unlimited): the plan's
+    zero offset on the `residual` view."""
     low, high = control_limits(task)
-
-    def body(s: State, step_key: Array) -> tuple[State, Array]:
-        action = jnp.clip(prior.act(s.obs), low, high)
-        return transition(task, s, action, step_key), action
-
-    start = fill_transition_entries(task, state)
-    return jax.lax.scan(body, start, jax.random.split(key, horizon_steps))[1]
+    return np.where(np.isfinite(high - low), (low + high) / 2, 0.0).astype(np.float32)
 
 
-def nominal_knots(config: Any, prior: PolicyPrior, task: Task, state: State, key: Array) -> Array:
-    """[K, nu] the policy's plan as a planner's knots: its rollout's actions
-    (`rollout_actions`, `config.horizon_steps` of them) read linearly at the knots'
-    positions (`config.num_knots`; one knot per step: the actions themselves)."""
-    actions = rollout_actions(prior, task, state, config.horizon_steps, key)
-    positions = splines.knot_positions(config.num_knots, config.horizon_steps)
-    steps = jnp.arange(config.horizon_steps, dtype=jnp.float32)
-    if config.horizon_steps == 1:
-        return jnp.broadcast_to(actions[0], (config.num_knots, actions.shape[1]))
-    return splines.interpolate(actions, steps, positions, "linear")
+def applied(prior: PolicyPrior, middle: Array, state: State, control: Array) -> Array:
+    """[nu] the control applied in `state` for a plan's `control` [nu] on the `residual`
+    view: the policy's deterministic action on ``state.obs`` plus the offset ``control -
+    middle`` ([nu] `centre`: the planner's control range, which it clips its plans to,
+    bounds the offsets to +- half of it, and its middle is the policy itself)."""
+    return prior.act(state.obs) + control - middle
+
+
+def _residual_step(prior: PolicyPrior, middle: Array, step: Callable, model: Any, state: State, control, key) -> State:
+    return step(model, state, applied(prior, middle, state, control), key)
+
+
+def _residual_reward(prior: PolicyPrior, middle: Array, reward: Callable, model: Any, state: State, control, after):
+    return reward(model, state, applied(prior, middle, state, control), after)
+
+
+def residual(task: Task, prior: PolicyPrior) -> Task:
+    """`task` whose control is an offset to `prior`'s action: its step and reward see the
+    control `applied` in the state they start from, so a plan at the `centre` of the
+    control range steps as the policy. The planning view of `guided`; the state is the
+    task's own."""
+    middle = jnp.asarray(centre(task))
+    return task.replace(
+        step=jax.tree_util.Partial(_residual_step, prior, middle, task.step),
+        reward=jax.tree_util.Partial(_residual_reward, prior, middle, task.reward),
+    )
 
 
 def _value_of_state(value: jax.tree_util.Partial, model: Any, state: State) -> Array:
@@ -136,27 +147,32 @@ def terminal_value(prior: PolicyPrior) -> jax.tree_util.Partial | None:
     return jax.tree_util.Partial(_value_of_state, prior.value)
 
 
-@dataclasses.dataclass(frozen=True)
-class _Guide:
-    """`guide` for one planner config: frozen, so equal configs give equal (static) hooks."""
-
-    config: Any
-
-    def __call__(self, prior: PolicyPrior, plan_task: Task, start: State, planner_state: PlannerState):
-        return guide(self.config, prior, plan_task, start, planner_state)
+def _view(prior: PolicyPrior, inner: Callable | None, plan_task: Task, start: State) -> Task:
+    """`pre_rollout`: the task's own view (if any), as a residual of the policy."""
+    return residual(inner(plan_task, start) if inner is not None else plan_task, prior)
 
 
-def guide(config: Any, prior: PolicyPrior, plan_task: Task, start: State, planner_state: PlannerState) -> PlannerState:
-    """`planner_state` with the policy's plan from `start` as its knots, anchored at
-    `start`'s time (so the planner's warm-start shift leaves it as it is). The policy's
-    rollout uses fixed keys: the same nominal for the same state."""
-    knots = nominal_knots(config, prior, plan_task, start, jax.random.key(0))
-    return planner_state.replace(knots=knots.astype(planner_state.knots.dtype), time=start.data.time)
+def _to_control(prior: PolicyPrior, sim_task: Task, sim_state: State, control: Array) -> Array:
+    """`to_control`: the world applies the policy plus the plan's offset."""
+    return applied(prior, jnp.asarray(centre(sim_task)), sim_state, control)
 
 
-def guided(hooks: Hooks, config: Any, prior: PolicyPrior) -> Hooks:
-    """`hooks` whose `guide` starts every replan of a planner configured by `config` from
-    `prior`'s plan (the task's other hooks kept)."""
-    if hooks.guide is not None:
+def _policy_first(plan_task: Task, start: State, num_knots: int) -> Array:
+    """`warm_start`: the first plan is the policy itself (zero offsets)."""
+    return jnp.broadcast_to(jnp.asarray(centre(plan_task)), (num_knots, plan_task.action_size))
+
+
+def guided(hooks: Hooks, prior: PolicyPrior) -> Hooks:
+    """`hooks` with which a planner plans offsets to `prior`'s actions, applied in closed
+    loop: its rollouts on the `residual` view (after the task's own `pre_rollout`), the
+    world applying the policy plus the plan (`to_control`), the first plan the policy
+    itself (in place of the task's own warm start, which is in controls). The planning
+    task must step in JAX: `closed_loop.run` and `realtime.Problem` refuse C MuJoCo's."""
+    if hooks.to_control is not None:
         raise ValueError("planning.prior.guided: these hooks guide the planner already")
-    return dataclasses.replace(hooks, guide=jax.tree_util.Partial(_Guide(config), prior))
+    return dataclasses.replace(
+        hooks,
+        pre_rollout=jax.tree_util.Partial(_view, prior, hooks.pre_rollout),
+        warm_start=jax.tree_util.Partial(_policy_first),
+        to_control=jax.tree_util.Partial(_to_control, prior),
+    )

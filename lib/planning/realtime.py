@@ -118,6 +118,11 @@ class Problem:
             raise ValueError(f"Problem: unknown backend {self.backend!r}; choose one of {BACKENDS}")
         if self.sim_backend not in (None, "mjx", "native"):
             raise ValueError(f"Problem: unknown sim_backend {self.sim_backend!r}; choose None, 'mjx' or 'native'")
+        if self.backend == "native" and self.hooks.to_control is not None:
+            raise ValueError(
+                "Problem: a to_control hook (a policy in the loop: mjzoo.planning.prior.guided) needs the "
+                "planner's rollouts in JAX, not C MuJoCo's; plan with backend 'mjx' or 'auto'"
+            )
         supported = planner_backends(self.planner)
         if self.backend != "auto" and self.backend not in supported:
             name = self.planner.__name__.rsplit(".", 1)[-1]
@@ -129,8 +134,9 @@ class Problem:
     @property
     def physics(self) -> str:
         """The backend in use: "mjx" or "native" ("auto": native on a CPU where the
-        planner runs there, else mjx)."""
-        return resolve_backend(self.planner, self.backend)
+        planner runs there, else mjx; mjx for a policy in the loop, `Hooks.to_control`)."""
+        in_jax = self.backend == "auto" and self.hooks.to_control is not None
+        return resolve_backend(self.planner, "mjx" if in_jax else self.backend)
 
     @property
     def sim_physics(self) -> str:

@@ -1,6 +1,7 @@
-"""A trained policy as a planner's prior (`mjzoo.planning.prior`): its nominal plan is its
-own rollout's actions, and on the point mass a briefly trained PPO policy and critic make
-MPPI with 2 samples over 0.2 s reach its goals better than the same MPPI without them."""
+"""A trained policy as a planner's prior (`mjzoo.planning.prior`): the planner plans
+offsets to the policy's actions in closed loop, so a zero offset is the policy exactly, in
+every rollout and in the world; on the point mass a briefly trained PPO policy and critic
+make MPPI with 2 samples over 0.2 s reach its goals better than the same MPPI without them."""
 
 from __future__ import annotations
 
@@ -9,17 +10,17 @@ import functools
 import jax
 import jax.numpy as jnp
 import numpy as np
+import pytest
 
 import mjzoo
 from mjzoo import envs
-from mjzoo import planning
 from mjzoo.algorithms import mppi
 from mjzoo.algorithms import ppo
 from mjzoo.planning import closed_loop
+from mjzoo.planning import native
 from mjzoo.planning import prior
+from mjzoo.planning import realtime
 from mjzoo.running import transition
-
-H = 8
 
 
 @functools.cache
@@ -32,32 +33,72 @@ def _towards_goal(gain, obs):
     return gain * obs[4:6]
 
 
-def test_the_nominal_plan_is_the_policys_rollout():
+def test_the_residual_view_steps_the_policy_plus_the_offset():
     task = _task()
     guide = prior.policy_prior(jax.tree_util.Partial(_towards_goal, jnp.float32(3.0)))
     state = mjzoo.fill_transition_entries(task, mjzoo.reset(task, jax.random.key(0)))
-    key = jax.random.key(1)
-    got = jax.jit(prior.rollout_actions, static_argnums=3)(guide, task, state, H, key)
-    # By hand: step the task with the policy's clipped action, the same keys.
-    low, high = planning.control_limits(task)
-    expected, s = [], state
-    for step_key in jax.random.split(key, H):
-        action = np.clip(3.0 * np.asarray(s.obs[4:6]), low, high)
-        expected.append(action)
-        s = transition(task, s, jnp.asarray(action), step_key)
-    np.testing.assert_allclose(got, np.stack(expected), rtol=1e-5, atol=1e-6)
-    assert np.abs(np.asarray(got)).max() > 0.1  # it moved: not a zero plan matching a zero plan
-    # One knot per step: the knots are the actions; fewer knots read them at their positions.
-    every = mppi.Config(num_samples=4, horizon_steps=H, num_knots=H, interpolation="linear")
-    np.testing.assert_allclose(prior.nominal_knots(every, guide, task, state, key), got, rtol=1e-5, atol=1e-6)
-    ends = mppi.Config(num_samples=4, horizon_steps=H, num_knots=2)
-    np.testing.assert_allclose(
-        prior.nominal_knots(ends, guide, task, state, key), np.asarray(got)[[0, -1]], rtol=1e-5, atol=1e-6
+    view, key, offset = prior.residual(task, guide), jax.random.key(1), jnp.asarray([0.1, -0.2])
+    policy = 3.0 * state.obs[4:6]
+    assert np.abs(np.asarray(policy)).max() > 0.1  # it pushes: not a zero action matching a zero offset
+    for control, applied in ((jnp.zeros(2), policy), (offset, policy + offset)):
+        got = jax.jit(transition)(view, state, control, key)
+        expected = transition(task, state, applied, key)
+        np.testing.assert_allclose(got.data.qpos, expected.data.qpos, rtol=1e-6, atol=1e-7)
+        np.testing.assert_allclose(got.reward, expected.reward, rtol=1e-6, atol=1e-7)
+    # A symmetric control range: the plan's zero offset is the zero control.
+    np.testing.assert_allclose(prior.centre(task), [0.0, 0.0])
+
+
+def _policy_alone(task, act, state, steps):
+    """[T] states and [T, nu] actions of `act` (obs -> action) in closed loop on `task`."""
+
+    def body(s, key):
+        action = act(s.obs)
+        after = transition(task, s, action, key)
+        return after, (after, action)
+
+    return jax.lax.scan(body, state, jax.random.split(jax.random.key(3), steps))[1]
+
+
+def test_with_zero_noise_the_guided_closed_loop_is_the_policy():
+    """Whatever the knots and the planner's model: the world applies the policy's action
+    in its own state plus a zero offset."""
+    world = _task()
+    coarse = envs.make("point_mass", iterations=1, ls_iterations=1, ctrl_dt=0.1)  # the planner's model differs
+    guide = prior.policy_prior(jax.tree_util.Partial(_towards_goal, jnp.float32(3.0)))
+    config = mppi.Config(num_samples=4, horizon_steps=6, num_knots=2)  # 2 knots could not hold its actions
+    state = mjzoo.fill_transition_entries(world, mjzoo.reset(world, jax.random.key(0)))
+    hooks = prior.guided(closed_loop.Hooks(), guide)
+    result = closed_loop.run(
+        mppi, config, world, coarse, state, jax.random.key(4), 20, 1, hooks, None, mppi.Hyperparams(noise_scale=0.0)
     )
-    # The guide hook anchors that plan at the state's time.
-    planner_state = mppi.init(every, task)
-    guided = prior.guide(every, guide, task, state.replace(data=state.data.replace(time=0.7)), planner_state)
-    np.testing.assert_allclose(guided.time, 0.7)
+    # The world's steps take no key here, so the policy alone's keys do not matter.
+    states, actions = _policy_alone(world, guide.act, state, 20)
+    np.testing.assert_allclose(result.controls, actions, rtol=1e-5, atol=1e-6)
+    np.testing.assert_allclose(result.states.data.qpos, states.data.qpos, rtol=1e-5, atol=1e-6)
+    assert np.abs(np.asarray(actions)).max() > 0.1
+
+
+def test_a_policy_in_the_loop_plans_in_jax():
+    """C MuJoCo's rollouts replay fixed controls: they cannot apply a policy per step."""
+    task = _task()
+    guide = prior.policy_prior(jax.tree_util.Partial(_towards_goal, jnp.float32(3.0)))
+    hooks = prior.guided(closed_loop.Hooks(), guide)
+    with pytest.raises(ValueError, match="backend 'mjx'"):
+        realtime.Problem(mppi, FEW, task, task, 0.2, hooks=hooks, backend="native")
+    assert realtime.Problem(mppi, FEW, task, task, 0.2, hooks=hooks).physics == "mjx"  # "auto"
+    with pytest.raises(ValueError, match="plan on MJX"):
+        closed_loop.replan(
+            mppi,
+            FEW,
+            native.wrap(task),
+            mppi.init(FEW, task),
+            mjzoo.reset(task, jax.random.key(0)),
+            jax.random.key(1),
+            hooks,
+        )
+    with pytest.raises(ValueError, match="guide the planner already"):
+        prior.guided(hooks, guide)
 
 
 @functools.cache
@@ -86,7 +127,7 @@ def _closed_loop_return(hooks, terminal_value, seed) -> float:
 
 def test_a_trained_policy_prior_makes_few_samples_do_better():
     guide = _trained_prior()
-    hooks = prior.guided(closed_loop.Hooks(), FEW, guide)
+    hooks = prior.guided(closed_loop.Hooks(), guide)
     seeds = range(4)
     with_prior = [_closed_loop_return(hooks, prior.terminal_value(guide), s) for s in seeds]
     without = [_closed_loop_return(closed_loop.Hooks(), None, s) for s in seeds]

@@ -395,8 +395,8 @@ def plan(
       backend: where rollouts run: mjx, native (C MuJoCo), or auto (native on a CPU).
       sim_backend: where the simulated world steps, if not where the rollouts run:
         native beside an MJX planner on a GPU (a robot's world costs it nothing).
-      prior: a PPO or AMP run directory trained on ENV: every replan starts from its
-        policy's plan and values the horizon's end by its critic (PPO's).
+      prior: a PPO or AMP run directory trained on ENV: the planner plans offsets to its
+        policy's actions, in closed loop, and values the horizon's end by its critic (PPO's).
       render: how the video is drawn.
     """
     from mjzoo.harness import plan_report
@@ -421,7 +421,7 @@ def plan(
             guide = runs.policy_prior(prior, problem.sim_task)
             problem = dataclasses.replace(
                 problem,
-                hooks=planning_prior.guided(problem.hooks, cfg, guide),
+                hooks=planning_prior.guided(problem.hooks, guide),
                 terminal_value=planning_prior.terminal_value(guide),
             )
     key = jax.random.key(seed)
