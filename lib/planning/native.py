@@ -443,7 +443,7 @@ def _probe(task: Task, start: State, present: list[str]) -> _Probe:
     limited = np.asarray(task.mj_model.actuator_ctrllimited, bool)
     rng = np.random.default_rng(0)
     u = rng.uniform(-1.0, 1.0, (2, task.action_size)).astype(np.float32)
-    own = task.action_size == task.mj_model.nu
+    own = task.action_dim is None  # else the actuator's own actions, in [-1, 1]
     actions = np.where(limited, low + (u + 1) / 2 * (high - low), u) if own else u
     keys = jax.random.split(jax.random.key(2), 2)
     moved = start.replace(

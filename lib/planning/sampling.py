@@ -120,7 +120,8 @@ class SamplingHyperparams:
     ones (inside a jit or vmap) are not.
 
     Attributes:
-      noise_scale: sampling std as a fraction of each actuator's half control range, at
+      noise_scale: sampling std as a fraction of half of each action's range
+        (`control_limits`: the ctrlrange, or [-1, 1] for an actuator's own actions), at
         the plan's first knot.
       noise_ramp: how much wider the noise grows along the horizon: knot k of K samples
         with noise_scale x (1 + noise_ramp x k / (K - 1)) (`noise_ramp_profile`), so the
@@ -203,15 +204,22 @@ class PlannerState:
 
 
 def control_limits(task: Task | Ensemble | native.Native) -> tuple[np.ndarray, np.ndarray]:
-    """([nu], [nu]) lower and upper control bounds; +-inf where an actuator is unlimited."""
-    mj_model = base_task(task).mj_model
+    """([A], [A]) lower and upper bounds of the task's actions: each actuator's ctrlrange
+    (+-inf where unlimited), or [-1, 1] where the actions are the task's actuator's own
+    (``Task.action_dim`` set: `mjzoo.task` with a catalog actuator such as
+    `actuators.position_targets`, whose actions are offsets from a pose in [-1, 1])."""
+    task = base_task(task)
+    if task.action_dim is not None:
+        ones = np.ones(task.action_size, np.float32)
+        return -ones, ones
+    mj_model = task.mj_model
     limited = np.asarray(mj_model.actuator_ctrllimited, bool)
     bounds = np.asarray(mj_model.actuator_ctrlrange, np.float32)
     return np.where(limited, bounds[:, 0], -np.inf), np.where(limited, bounds[:, 1], np.inf)
 
 
 def half_range(task: Task | Ensemble | native.Native) -> np.ndarray:
-    """[nu] half of each actuator's control range (1 where unlimited): the unit of noise."""
+    """[A] half of each action's range (`control_limits`; 1 where unlimited): the unit of noise."""
     low, high = control_limits(task)
     return np.where(np.isfinite(high - low), (high - low) / 2, 1.0).astype(np.float32)
 

@@ -65,3 +65,18 @@ def test_the_tasks_are_registered_with_their_planning_setups():
     for name in ("g1_standup", "go1_trot"):
         setup = mjzoo.envs.planning(name)
         assert setup.success is not None and {"mppi", "cem", "dial"} <= set(setup.configs)
+
+
+def test_planners_sample_the_actuators_own_actions():
+    """The robots' actions are servo targets' offsets from a pose, in [-1, 1]
+    (`actuators.position_targets`): planners bound and scale their noise by that, not by
+    the joints' ctrlranges (the Go1's knee range [-2.82, -0.89] held every knee action
+    below -0.89, the target 0.44 rad off its pose, before this was so)."""
+    from mjzoo.planning import sampling
+
+    task = mjzoo.envs.make("go1_trot")
+    low, high = sampling.control_limits(task)
+    np.testing.assert_array_equal(low, -np.ones(12))
+    np.testing.assert_array_equal(high, np.ones(12))
+    np.testing.assert_array_equal(sampling.half_range(task), np.ones(12))
+    assert (task.mj_model.actuator_ctrlrange[:, 1] < 0).any()  # a knee's range: the box it used to be

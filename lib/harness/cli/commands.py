@@ -18,6 +18,7 @@ import numpy as np
 import tyro
 
 import mjzoo
+from mjzoo import learning
 from mjzoo.harness.cli import runs
 from mjzoo.harness.cli.arguments import PLANNERS
 from mjzoo.harness.cli.arguments import ConfigFields
@@ -110,11 +111,11 @@ def demo(env: tuple[str, ...] = (), num_envs: int = 32, steps: int = 250, seed: 
 
 
 def _random_returns(task: mjzoo.Task, keys: jax.Array, steps: int, nu: int):
-    """Per env: the return of the first episode under uniform random controls."""
-    low, high = task.model.actuator_ctrlrange[:, 0], task.model.actuator_ctrlrange[:, 1]
+    """Per env: the return of the first episode under uniform random actions (over the
+    ctrlranges, or [-1, 1] where the task's actuator takes its own: `to_controls`)."""
 
     def policy(obs, key):
-        return jax.random.uniform(key, (nu,), minval=low, maxval=high)
+        return learning.to_controls(task, jax.random.uniform(key, (nu,), minval=-1.0, maxval=1.0))
 
     def one(key):
         reset_key, run_key = jax.random.split(key)

@@ -93,20 +93,25 @@ def float_parameters(task: Task) -> dict[str, np.ndarray]:
 
 def controls(kind: str, task: Task) -> tuple[Act, np.ndarray]:
     """(act, params) for the controls `kind`: "zero", "random" (uniform in each
-    actuator's range) or "sliders" (params: [nu] the slider values, set by the viewer)."""
+    action's range, `action_range`) or "sliders" (params: [nu] the slider values, set by the viewer)."""
     if kind not in CONTROLS:
         raise ValueError(f"controls: unknown {kind!r}; choose one of {', '.join(CONTROLS)}")
-    low, high = ctrl_range(task.mj_model)
+    low, high = action_range(task)
     if kind == "random":
         return jax.tree_util.Partial(_uniform, jnp.asarray(low), jnp.asarray(high)), np.zeros(0, np.float32)
     start = np.clip(np.zeros_like(low), low, high)
     return jax.tree_util.Partial(_given if kind == "sliders" else _zero, jnp.asarray(start)), start
 
 
-def ctrl_range(mj_model: mujoco.MjModel) -> tuple[np.ndarray, np.ndarray]:
-    """([nu], [nu]) each actuator's control range; [-1, 1] where unlimited."""
-    limited = np.asarray(mj_model.actuator_ctrllimited, bool)
-    bounds = np.asarray(mj_model.actuator_ctrlrange, np.float32)
+def action_range(task: Task) -> tuple[np.ndarray, np.ndarray]:
+    """([A], [A]) the range of each of `task`'s actions: [-1, 1] where they are its
+    actuator's own (``task.action_dim`` set, e.g. `actuators.position_targets`), else each
+    actuator's control range, [-1, 1] where unlimited."""
+    if task.action_dim is not None:
+        ones = np.ones(task.action_size, np.float32)
+        return -ones, ones
+    limited = np.asarray(task.mj_model.actuator_ctrllimited, bool)
+    bounds = np.asarray(task.mj_model.actuator_ctrlrange, np.float32)
     return np.where(limited, bounds[:, 0], -1.0), np.where(limited, bounds[:, 1], 1.0)
 
 
