@@ -590,7 +590,11 @@ samples (1.27, 1.48): a per-step floor of kernel launches, where MJX-JAX's grows
 the batch (2.64, 4.23). Clock `simulated` (`--clock simulated`): the world waits for each
 replan, so success says whether the planner can do the task at one replan a control
 step, apart from its rate; plan physics (`--plan-physics`) is the planner's model where
-it is coarser than the world's (a longer step, fewer solver iterations).
+it is coarser than the world's (a longer step, fewer solver iterations). Every row here
+predates 7a83dd6: until then the planners sampled these robots' actions (servo-target
+offsets in [-1, 1]) inside the joints' ctrlranges, with noise scaled by them, so most
+joints could reach only part of their targets' range (the Go1's knee targets never within
+0.44 rad of its pose); the rows measure rates soundly, their success a crippled search.
 """
     columns = [
         ("task", _at("task")),
