@@ -25,6 +25,7 @@ from mjzoo.harness.cli.arguments import algorithm_module
 from mjzoo.harness.cli.arguments import build_planner
 from mjzoo.harness.viewer.sources import CONTROLS
 from mjzoo.harness.viewer.sources import Frame
+from mjzoo.harness.viewer.sources import action_range
 from mjzoo.harness.viewer.sources import controls
 from mjzoo.harness.viewer.sources import float_parameters
 from mjzoo.harness.viewer.sources import host_poses
@@ -55,7 +56,7 @@ class Unstepped:
     def __init__(self, task: mjzoo.Task, control: str = "zero", num_envs: int = 1, hyperparams=None):
         self.mj_model, self.num_envs, self.dt = task.mj_model, num_envs, 0.02
         _, self.act_params = controls(control, task)  # as `viewer.env` makes them
-        self.control_sliders = control == "sliders"
+        self.control_sliders, self.control_range = control == "sliders", action_range(task)
         self._parameters = float_parameters(task)
         if hyperparams is not None:  # as `viewer.planner`'s source: its Hyperparams become sliders
             self.hyperparams, self.set_config = hyperparams, lambda **values: None

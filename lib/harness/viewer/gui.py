@@ -20,7 +20,6 @@ from viser import GuiSliderHandle
 from viser import GuiTextHandle
 from viser import uplot
 
-from mjzoo.harness.viewer.sources import action_range
 from mjzoo.harness.viewer.sources import slider_range
 
 if TYPE_CHECKING:
@@ -125,7 +124,7 @@ def _timeline(viewer: Viewer, controls: dict[str, Any]) -> None:
 def _control_sliders(viewer: Viewer, controls: dict[str, Any]) -> None:
     """One slider per actuator, in its action's range: the actions every env applies."""
     g, source, model = viewer.server.gui, viewer.source, viewer.source.mj_model
-    low, high = action_range(source.task)
+    low, high = source.control_range
     with g.add_folder("Controls"):
         for a in range(model.nu):
             name = mujoco.mj_id2name(model, mujoco.mjtObj.mjOBJ_ACTUATOR, a) or f"actuator{a}"

@@ -154,6 +154,11 @@ class Simulation:
         self.steps += self.chunk
         return self.chunk
 
+    @property
+    def control_range(self) -> tuple[np.ndarray, np.ndarray]:
+        """([A], [A]) the range of each action, for the viewer's control sliders."""
+        return action_range(self.task)
+
     def parameters(self) -> dict[str, np.ndarray]:
         return float_parameters(self.task)
 
