@@ -26,8 +26,6 @@ Judo's task hooks, as pure functions in `Hooks`:
   post_rollout(sim_state, planner_state) -> sim_state    after each batch of rollouts,
                                             with what they found (the chosen plan and
                                             its predicted cost), e.g. to log or move a goal
-  guide(plan_task, start, planner_state) -> planner_state  before each replan: the plan
-                                            it starts from
   to_control(sim_task, sim_state, control) -> control  the control the simulation applies for the
                                             plan's (information flowing planner -> sim;
                                             a policy plus the plan as its offset,
@@ -90,7 +88,6 @@ class Hooks:
     post_sim_step: Callable | None = None
     pre_sim_step: Callable | None = None
     post_rollout: Callable | None = None
-    guide: Callable | None = None
     to_control: Callable | None = None
 
     def __post_init__(self) -> None:
@@ -128,14 +125,12 @@ def replan(
     hooks: Hooks = Hooks(),
     terminal_value: TerminalValue | None = None,
 ) -> PlannerState:
-    """One replan from the simulated state, through the hooks (`guide` first sets the plan
-    it starts from), valuing final states by `terminal_value` if given."""
+    """One replan from the simulated state, through the hooks, valuing final states by
+    `terminal_value` if given."""
     if hooks.to_control is not None and isinstance(plan_task, Native):
         raise ValueError(_IN_JAX)
     start = hooks.to_planner(sim_state) if hooks.to_planner else sim_state
     view = with_base(plan_task, lambda t: hooks.pre_rollout(t, start)) if hooks.pre_rollout else plan_task
-    if hooks.guide is not None:
-        planner_state = hooks.guide(base_task(view), start, planner_state)
     return planner.plan(config, view, planner_state, start, key, terminal_value=terminal_value)[0]
 
 

@@ -35,6 +35,7 @@ from mjzoo.planning import closed_loop
 from mjzoo.planning.closed_loop import Hooks
 from mjzoo.planning.closed_loop import Result
 from mjzoo.planning.ensembles import Ensemble
+from mjzoo.planning.ensembles import base_task
 from mjzoo.planning.learned import TerminalValue
 from mjzoo.planning.learned import as_terminal_value
 from mjzoo.planning.learned import committed
@@ -271,14 +272,9 @@ def _loop(problem: Problem, sims: Packing, plans: Packing) -> tuple[Callable, ..
     return compile_(problem.physics)(replan_packed), compile_(problem.sim_physics)(step_packed), after_rollout, pack
 
 
-def _plan_base(problem: Problem) -> Task:
-    """The planning task (an ensemble's base task)."""
-    return problem.plan_task.task if isinstance(problem.plan_task, Ensemble) else problem.plan_task
-
-
 def _impls_differ(problem: Problem) -> bool:
     """Whether the planner's MJX implementation differs from the world's."""
-    return problem.physics != "native" and _plan_base(problem).model.impl != problem.sim_task.model.impl
+    return problem.physics != "native" and base_task(problem.plan_task).model.impl != problem.sim_task.model.impl
 
 
 def _to_planner(problem: Problem) -> Callable[[Any], Any]:
@@ -288,7 +284,7 @@ def _to_planner(problem: Problem) -> Callable[[Any], Any]:
     C MuJoCo or on MJX-JAX: `mjzoo.physics.switch_impl`), its metrics as the planner's."""
     if not _impls_differ(problem):
         return lambda state: state
-    like = committed(reset(_plan_base(problem), jax.random.key(0)))
+    like = committed(reset(base_task(problem.plan_task), jax.random.key(0)))
 
     def to_plan(state: Any) -> Any:
         metrics = {k: state.metrics.get(k, v) for k, v in like.metrics.items()}

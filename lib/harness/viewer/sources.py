@@ -29,6 +29,7 @@ import numpy as np
 from mjzoo import batching
 from mjzoo.combinators import with_auto_reset
 from mjzoo.parameters import params as task_params
+from mjzoo.planning.sampling import control_limits
 from mjzoo.running import control_dt
 from mjzoo.running import fill_transition_entries
 from mjzoo.running import reset
@@ -106,13 +107,10 @@ def controls(kind: str, task: Task) -> tuple[Act, np.ndarray]:
 def action_range(task: Task) -> tuple[np.ndarray, np.ndarray]:
     """([A], [A]) the range of each of `task`'s actions: [-1, 1] where they are its
     actuator's own (``task.action_dim`` set, e.g. `actuators.position_targets`), else each
-    actuator's control range, [-1, 1] where unlimited."""
-    if task.action_dim is not None:
-        ones = np.ones(task.action_size, np.float32)
-        return -ones, ones
-    limited = np.asarray(task.mj_model.actuator_ctrllimited, bool)
-    bounds = np.asarray(task.mj_model.actuator_ctrlrange, np.float32)
-    return np.where(limited, bounds[:, 0], -1.0), np.where(limited, bounds[:, 1], 1.0)
+    actuator's control range, [-1, 1] where unlimited: the planners' `control_limits`, made
+    finite for a slider."""
+    low, high = control_limits(task)
+    return np.where(np.isfinite(low), low, -1.0), np.where(np.isfinite(high), high, 1.0)
 
 
 def _uniform(low, high, params, obs, key):
