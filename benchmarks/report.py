@@ -247,7 +247,7 @@ def _tracking_rows(data: dict) -> list[dict]:
             "impl": row.get("impl", "jax"),
             "envs": row["hyperparameters"]["num_envs"],
             "settings": " ".join(
-                f"{k}={v}" for k, v in {**row.get("config", {}), **row.get("task_options", {})}.items()
+                f"{k}={v}" for part in ("config", "task_options", "task_params") for k, v in row.get(part, {}).items()
             )
             or "the robot's",
             **run,
@@ -590,11 +590,12 @@ samples (1.27, 1.48): a per-step floor of kernel launches, where MJX-JAX's grows
 the batch (2.64, 4.23). Clock `simulated` (`--clock simulated`): the world waits for each
 replan, so success says whether the planner can do the task at one replan a control
 step, apart from its rate; plan physics (`--plan-physics`) is the planner's model where
-it is coarser than the world's (a longer step, fewer solver iterations). Every row here
-predates 7a83dd6: until then the planners sampled these robots' actions (servo-target
-offsets in [-1, 1]) inside the joints' ctrlranges, with noise scaled by them, so most
-joints could reach only part of their targets' range (the Go1's knee targets never within
-0.44 rad of its pose); the rows measure rates soundly, their success a crippled search.
+it is coarser than the world's (a longer step, fewer solver iterations). Actions: where
+the planners sampled these robots' actions (servo-target offsets in [-1, 1]). Until
+7a83dd6 they sampled them inside the joints' ctrlranges, with noise scaled by them, so
+most joints could reach only part of their targets' range (the Go1's knee targets never
+within 0.44 rad of its pose): those rows measure rates soundly, their success a crippled
+search.
 """
     columns = [
         ("task", _at("task")),
@@ -605,6 +606,7 @@ joints could reach only part of their targets' range (the Go1's knee targets nev
         ("world", _at("world")),
         ("clock", _at("clock")),
         ("plan physics", _options("plan_physics")),
+        ("actions", _at("actions")),
         ("replan (ms)", _at("replan_ms.median")),
         ("p95 (ms)", _at("replan_ms.p95")),
         ("ms / physics step", _at("ms_per_physics_step")),
@@ -621,10 +623,12 @@ def guided_mpc() -> list[str]:
         return []
     prose = """
 `benchmarks/guided_mpc.py`: MPPI plain and guided by a PPO policy trained on the task
-(`mjzoo.planning.prior`: each replan starts from the policy's plan and values the
-horizon's end by its critic) at equal samples, beside the policy alone; the task's own
-success measure over the episodes, the world in C MuJoCo. Clock `simulated`: the world
-waits for each replan, so the rows compare what each planner finds with its samples.
+(`mjzoo.planning.prior.residual`: the planner samples offsets to the policy's actions,
+which rollouts and the world apply in closed loop, and values the horizon's end by the
+policy's critic) at equal samples, beside the policy alone; the task's own success
+measure over the episodes, the world in C MuJoCo, the planner on MuJoCo Warp. Clock
+`simulated`: the world waits for each replan, so the rows compare what each planner
+finds with its samples.
 """
     columns = [
         ("task", _at("task")),

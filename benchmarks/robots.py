@@ -80,12 +80,14 @@ def train(
     impl: str = "jax",
     overrides: dict[str, Any] | None = None,
     task_options: dict[str, Any] | None = None,
+    task_params: dict[str, Any] | None = None,
 ) -> dict[str, Any]:
     """Every seed of one robot and terrain in one vmapped program: up to `evals` chunks of
     updates, each followed by a tracking evaluation, until every seed tracks or `budget`
     seconds have passed. `report` gets the row so far after each evaluation; `run_dir`, if
     given, gets seed 0's policy as a run (`save_run`); `overrides` are PPO fields over the
-    robot's registered ones, `task_options` the joystick's own (e.g. gait_frequency). Returns the row."""
+    robot's registered ones, `task_options` the joystick's own (e.g. gait_frequency),
+    `task_params` its named numbers (`mjzoo.params`: reward weights). Returns the row."""
     start = time.perf_counter()
     robot, terrain = variant.split(":")
     name = f"{robot}_joystick"
@@ -93,6 +95,8 @@ def train(
     task = mjzoo.envs.make(name, **options)  # on a terrain: the curriculum, auto-reset inside
     # Evaluated where the curriculum ends: the hardest row (flat: the task itself).
     judge = task if terrain == "flat" else robot_joystick.robot_joystick(robot, level=1.0, **options)
+    if task_params:
+        task, judge = task.with_params(**task_params), judge.with_params(**task_params)
     fields = mjzoo.envs.hyperparameters(name, "ppo")
     fields.update(SMOKE if smoke else {})
     fields.update(overrides or {})
@@ -272,6 +276,13 @@ def main() -> None:
         metavar="NAME=VALUE",
         help="the joystick's options, e.g. gait_frequency=1.375 (a row of its own)",
     )
+    parser.add_argument(
+        "--params",
+        nargs="+",
+        default=[],
+        metavar="NAME=VALUE",
+        help="the joystick's named numbers (mjzoo.params), e.g. yaw_tracking_weight=1.0 (a row of its own)",
+    )
     parser.add_argument("--out", type=Path, default=OUT, help="the results' folder")
     parser.add_argument("--smoke", action="store_true", help="tiny sizes: checks the script runs, on a CPU")
     args = parser.parse_args()
@@ -280,18 +291,22 @@ def main() -> None:
         overrides = parse_assignments(tuple(args.config), "--config")
         ppo.configure(**{**robot_joystick.PPO, **overrides})  # a bad name or value: one line, now
         task_options = parse_assignments(tuple(args.task), "--task")
-        for variant in args.variants:  # a bad option: one line, now
-            mjzoo.envs.make(f"{variant.split(':')[0]}_joystick", **task_options)
+        task_params = parse_assignments(tuple(args.params), "--params")
+        for variant in args.variants:  # a bad option or name: one line, now
+            mjzoo.envs.make(f"{variant.split(':')[0]}_joystick", **task_options).with_params(**task_params)
     except (UsageError, ValueError, TypeError) as e:
         parser.error(str(e))
+    except KeyError as e:
+        parser.error(f"--params: {e.args[0]}")
     card = card_name() + ("_smoke" if args.smoke else "")
     path = args.out / f"robots_{card}.json"
     rows = json.loads(path.read_text())["rows"] if path.is_file() else []
 
     def report(row: dict) -> None:  # after every evaluation: a run stopped midway keeps its curve
         row["device"], row["impl"], row["config"] = jax.devices()[0].device_kind, args.impl, overrides
-        row["task_options"] = task_options
-        key = lambda r: (r["variant"], r["seeds"], r.get("impl", "jax"), r.get("config", {}), r.get("task_options", {}))  # noqa: E731
+        row["task_options"], row["task_params"] = task_options, task_params
+        chosen = ("config", "task_options", "task_params")
+        key = lambda r: (r["variant"], r["seeds"], r.get("impl", "jax"), *(r.get(k, {}) for k in chosen))  # noqa: E731
         same = lambda r: key(r) == key(row)  # noqa: E731
         rows[:] = [r for r in rows if not same(r)] + [row]
         args.out.mkdir(parents=True, exist_ok=True)
@@ -312,6 +327,7 @@ def main() -> None:
             args.impl,
             overrides,
             task_options,
+            task_params,
         )
         plot(rows, path.with_suffix(".png"))
         median = row["median_seconds_to_tracking"]
