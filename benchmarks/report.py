@@ -262,7 +262,10 @@ def robots() -> list[str]:
 `benchmarks/robots.py` trains the joysticks of [robots.md](robots.md) with PPO on one
 GPU. A policy *tracks* when, over 64 evaluation episodes of 20 s with the task's pushes,
 noise and randomized physics, the mean |v_xy − cmd| ≤ 0.15 m/s, the mean |ω_z − cmd| ≤
-0.2 rad/s and none falls; the time to tracking includes compiling. The G1 is bound by its
+0.2 rad/s and none falls (errors per control step); the time to tracking includes
+compiling. The errors over 1 s windows (velocities and command averaged over the last
+50 control steps; rows since 2026-11-30) say whether the command is followed on
+average, apart from a walker's sway within its gait cycle. The G1 is bound by its
 physics: 10 substeps of 2 ms per control step. `benchmarks/terrain_cost.py` measures
 what a heightfield costs the physics, `scripts/check_robots.py` runs `check_task` on
 every robot and terrain, and `mjzoo sim2sim` drives the exported Go1 policy in C MuJoCo
@@ -281,6 +284,8 @@ iterations, pushes of 0.5 m/s).
         ("final step", _at("final.step")),
         ("final velocity error (m/s)", _at("final.linear_error")),
         ("final yaw-rate error (rad/s)", _at("final.yaw_error")),
+        ("over 1 s: velocity", _at("final.linear_error_1s")),
+        ("yaw rate", _at("final.yaw_error_1s")),
         ("falls", _at("final.falls")),
     ]
     cost = [

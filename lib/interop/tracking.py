@@ -9,7 +9,10 @@ robot benchmarks and of `mjzoo sim2sim`.
 
 Per control step the errors are |v_xy - c_xy| (m/s; v the base's linear velocity in its
 own frame, as `rewards.linear_velocity_tracking` reads it) and |w_z - c_yaw| (rad/s, the
-base's own yaw rate), averaged over the steps an episode lived and then over episodes. A
+base's own yaw rate), averaged over the steps an episode lived and then over episodes.
+With ``window=W`` (`closed_loop`, `velocity_errors`) v, w and c are first averaged over
+the last W steps: over a gait cycle a walker's base sways and yaws back and forth, and
+the windowed errors say whether the joystick's velocity is followed on average. A
 fall is an episode that ends early: the task's terminations in MJX; in C, the base below
 the task's ``min_height`` or tilted past its ``max_tilt``.
 
@@ -46,7 +49,16 @@ from mjzoo.running import reset
 from mjzoo.running import transition
 from mjzoo.types import Task
 
-__all__ = ["Tracking", "base_velocities", "velocity_command", "closed_loop", "summarize", "in_task", "in_mujoco"]
+__all__ = [
+    "Tracking",
+    "base_velocities",
+    "velocity_errors",
+    "velocity_command",
+    "closed_loop",
+    "summarize",
+    "in_task",
+    "in_mujoco",
+]
 
 Array = jax.Array
 
@@ -99,6 +111,19 @@ def base_velocities(qpos: Any, qvel: Any, address: tuple[int, int]) -> tuple[Any
     return stack([vx, vy], -1), qvel[..., qv + 5]
 
 
+def velocity_errors(v_xy: Array, w_z: Array, command: Array, window: int = 1) -> tuple[Array, Array]:
+    """(|v_xy - c_xy| [T] m/s, |w_z - c_yaw| [T] rad/s) of one episode's base velocities
+    (v_xy [T, 2], w_z [T]) against its command [T, 3], each of the three averaged first over
+    the last `window` steps (the first steps: over those so far)."""
+    if not (isinstance(window, int) and window >= 1):
+        raise ValueError(f"tracking.velocity_errors: window={window!r} must be an integer >= 1")
+    gap = jnp.concatenate([v_xy, w_z[:, None]], -1) - command  # [T, 3]
+    total = jnp.cumsum(gap, 0)
+    before = jnp.concatenate([jnp.zeros((min(window, gap.shape[0]), 3)), total[:-window]], 0)[: gap.shape[0]]
+    mean = (total - before) / jnp.minimum(jnp.arange(1, gap.shape[0] + 1), window)[:, None]
+    return jnp.linalg.norm(mean[:, :2], axis=-1), jnp.abs(mean[:, 2])
+
+
 def _summarize(linear: np.ndarray, yaw: np.ndarray, lived: np.ndarray, fell: np.ndarray, seconds: float) -> Tracking:
     """linear, yaw [E, T] errors; lived [E, T] bool; fell [E] bool."""
     steps = np.maximum(lived.sum(1), 1)
@@ -114,8 +139,14 @@ def _summarize(linear: np.ndarray, yaw: np.ndarray, lived: np.ndarray, fell: np.
 
 
 def closed_loop(
-    task: Task, act: Callable[[Any], Array], key: Array, num_envs: int, steps: int, obs_key: str | None = None
-) -> tuple[Array, Array, Array, Array]:
+    task: Task,
+    act: Callable[[Any], Array],
+    key: Array,
+    num_envs: int,
+    steps: int,
+    obs_key: str | None = None,
+    windows: tuple[int, ...] = (1,),
+) -> tuple[Array, ...]:
     """`num_envs` episodes of `steps` steps of ``act(obs) -> action [A] in [-1, 1]`` in
     `task` (traceable: jit it, or call it inside a program of one's own), each from
     ``reset(task, split(key_i)[0])`` as `sim2sim.starts` draws them. `act` sees
@@ -123,8 +154,12 @@ def closed_loop(
 
     Returns:
       (linear error [E, T] m/s, yaw error [E, T] rad/s, lived [E, T] bool: the step
-      began before the episode ended, fell [E, T] bool: it ended there by a termination).
+      began before the episode ended, fell [E, T] bool: it ended there by a termination),
+      then for each further entry of `windows` its pair of errors (`velocity_errors`: the
+      velocities and command averaged over that many steps; the first entry's lead).
     """
+    if not windows:
+        raise ValueError("tracking.closed_loop: windows must name at least one window (1: per step)")
     address = _free_joint(task.mj_model)
     task = batching.sized(task, num_envs)  # Warp: a contact pool for every episode
 
@@ -137,12 +172,19 @@ def closed_loop(
             after = transition(task, state, to_controls(task, act(obs)), key)
             v_xy, w_z = base_velocities(after.data.qpos, after.data.qvel, address)
             command = find(state, commands.VelocityCommandState).command
-            errors = jnp.linalg.norm(v_xy - command[:2]), jnp.abs(w_z - command[2])
             lived = ~done
-            return (after, done | after.terminated | after.truncated), (*errors, lived, lived & after.terminated)
+            return (after, done | after.terminated | after.truncated), (
+                v_xy,
+                w_z,
+                command,
+                lived,
+                lived & after.terminated,
+            )
 
         keys = jax.random.split(jax.random.split(key)[1], steps)
-        return jax.lax.scan(body, (state, jnp.zeros((), bool)), keys)[1]
+        v_xy, w_z, command, lived, fell = jax.lax.scan(body, (state, jnp.zeros((), bool)), keys)[1]
+        errors = [velocity_errors(v_xy, w_z, command, w) for w in windows]
+        return (*errors[0], lived, fell, *(e for pair in errors[1:] for e in pair))
 
     return jax.vmap(one)(jax.random.split(key, num_envs))
 
@@ -155,7 +197,7 @@ def summarize(linear: Any, yaw: Any, lived: Any, fell: Any, seconds: float) -> T
     )
 
 
-_closed_loop = jax.jit(closed_loop, static_argnames=("act", "num_envs", "steps", "obs_key"))
+_closed_loop = jax.jit(closed_loop, static_argnames=("act", "num_envs", "steps", "obs_key", "windows"))
 
 
 def in_task(

@@ -163,6 +163,28 @@ def test_base_velocities_in_the_base_frame():
     np.testing.assert_allclose(jax_v, v_xy, atol=1e-6)
 
 
+def test_windowed_velocity_errors_average_out_a_sway():
+    """A base swaying sideways at ±0.2 m/s and yawing at ±0.4 rad/s about a command it
+    follows on average (1 m/s ahead, no turn): per step its errors are 0.2 and 0.4;
+    over two-step windows (after the first step, a window of one) they vanish."""
+    sway = jnp.asarray([1.0, -1.0, 1.0, -1.0])
+    v_xy = jnp.stack([jnp.ones(4), 0.2 * sway], -1)
+    command = jnp.tile(jnp.asarray([1.0, 0.0, 0.0]), (4, 1))
+    linear, yaw = tracking.velocity_errors(v_xy, 0.4 * sway, command)
+    np.testing.assert_allclose(linear, [0.2] * 4, atol=1e-6)
+    np.testing.assert_allclose(yaw, [0.4] * 4, atol=1e-6)
+    linear, yaw = jax.jit(tracking.velocity_errors, static_argnums=3)(v_xy, 0.4 * sway, command, 2)
+    np.testing.assert_allclose(linear, [0.2, 0, 0, 0], atol=1e-6)
+    np.testing.assert_allclose(yaw, [0.4, 0, 0, 0], atol=1e-6)
+    # A window longer than the episode: the mean so far; [1, 0.5, 1, 1.5] against 0.5
+    linear, _ = tracking.velocity_errors(
+        jnp.asarray([[1.0, 0], [0, 0], [2, 0], [3, 0]]), jnp.zeros(4), 0.5 * command, 9
+    )
+    np.testing.assert_allclose(linear, [0.5, 0.0, 0.5, 1.0], atol=1e-6)
+    with pytest.raises(ValueError, match="window=0"):
+        tracking.velocity_errors(v_xy, sway, command, 0)
+
+
 def test_tracking_of_a_standing_policy_in_both_simulators(tmp_path):
     """Commanded 0.5 m/s forward and no turn, a policy that holds its stance (its feet
     on the floor) moves by millimetres per second: both simulators measure a linear error
