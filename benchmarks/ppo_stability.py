@@ -67,6 +67,9 @@ VARIANTS: dict[str, dict] = {
     # The defaults at Brax's constant rate: what the G1 joystick needed (its adaptive
     # rate sat at the 1e-5 floor, 32 x 4 minibatch steps an update).
     "defaults_constant_lr": {"lr_schedule": "constant"},
+    # The defaults with a rate that decays linearly from 1e-3 to 0 over the run: a policy
+    # that settles at the end of its run rather than wandering from its best.
+    "defaults_linear_lr": {"lr_schedule": "linear", "learning_rate": 1e-3},
 }
 
 
