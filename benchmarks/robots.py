@@ -12,9 +12,10 @@ randomized physics; on a terrain, from the hardest row) and measures velocity tr
 (errors per control step, averaged over the steps and episodes) and its time to tracking
 is the wall-clock from the start of the process's work on the variant (setup and compile
 included). The errors of velocities and command averaged over 1 s windows are reported
-beside them (a walker's base sways and yaws back and forth within a gait cycle). The goal: flat terrain within 5
-minutes, rough within 15 (anchors: Playground's Go1 joystick in 7 min and Berkeley
-Humanoid in 17 on an RTX 4090; mjlab's G1 flat velocity within ~1 h on an RTX 5090).
+beside them (a walker's base sways and yaws back and forth within a gait cycle). The
+goal: flat terrain within 5 minutes, rough within 15 (anchors: Playground's Go1
+joystick in 7 min and Berkeley Humanoid in 17 on an RTX 4090; mjlab's G1 flat velocity
+within ~1 h on an RTX 5090).
 
     python benchmarks/robots.py --variants go1:flat --seeds 3 --budget 400 --runs runs/robots
     python benchmarks/robots.py --smoke --variants go1:flat     # tiny sizes, on a CPU

@@ -10,8 +10,8 @@ robot benchmarks and of `mjzoo sim2sim`.
 Per control step the errors are |v_xy - c_xy| (m/s; v the base's linear velocity in its
 own frame, as `rewards.linear_velocity_tracking` reads it) and |w_z - c_yaw| (rad/s, the
 base's own yaw rate), averaged over the steps an episode lived and then over episodes.
-With ``window=W`` (`closed_loop`, `velocity_errors`) v, w and c are first averaged over
-the last W steps: over a gait cycle a walker's base sways and yaws back and forth, and
+Over a window of W steps (`velocity_errors`, `closed_loop`'s `windows`) v, w and c are
+first averaged over the last W steps: over a gait cycle a walker's base sways and yaws back and forth, and
 the windowed errors say whether the joystick's velocity is followed on average. A
 fall is an episode that ends early: the task's terminations in MJX; in C, the base below
 the task's ``min_height`` or tilted past its ``max_tilt``.
