@@ -57,7 +57,8 @@ def _per_device(folder: Path) -> Iterator[tuple[dict, list[str]]]:
     """Each JSON of `folder` (one per device: "<folder name>_<card>.json") and its heading."""
     for path in sorted(folder.glob(f"{folder.name}_*.json")):
         data = json.loads(path.read_text())
-        yield data, [f"### {data['device']} ([{path.name}]({_link(path)}))", ""]
+        note = [f"> {data['note']}", ""] if data.get("note") else []
+        yield data, [f"### {data['device']} ([{path.name}]({_link(path)}))", "", *note]
 
 
 def _figures(folder: Path) -> list[str]:
