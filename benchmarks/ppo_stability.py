@@ -73,6 +73,9 @@ VARIANTS: dict[str, dict] = {
     # The defaults at Playground's DM Control discount (0.995, against 0.99): on the CPU no
     # rate schedule kept CartpoleSwingup's evaluations from wandering; its config did.
     "defaults_discount_995": {"discount": 0.995},
+    # The defaults with Playground's DM Control update: 32 minibatches x 16 epochs a batch
+    # (the defaults: 8 x 4), the one size that differs in its steady translated config.
+    "defaults_playground_update": {"num_minibatches": 32, "num_epochs": 16},
 }
 
 
