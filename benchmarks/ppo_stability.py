@@ -160,7 +160,9 @@ def main() -> None:
             rows = saved_rows(path)
             for row in data["rows"]:
                 rows = [summarize(r) for r in merged(rows, row, ("env", "impl", "reward_scale"))]
-            path.write_text(json.dumps({"device": data["device"], "rows": rows}, indent=1))
+            kept = json.loads(path.read_text()) if path.is_file() else {}  # its note stays
+            note = {"note": kept["note"]} if "note" in kept else {}
+            path.write_text(json.dumps({"device": data["device"], **note, "rows": rows}, indent=1))
         args.envs = []  # only the report below
     else:
         print(
