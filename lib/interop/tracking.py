@@ -11,8 +11,9 @@ Per control step the errors are |v_xy - c_xy| (m/s; v the base's linear velocity
 own frame, as `rewards.linear_velocity_tracking` reads it) and |w_z - c_yaw| (rad/s, the
 base's own yaw rate), averaged over the steps an episode lived and then over episodes.
 Over a window of W steps (`velocity_errors`, `closed_loop`'s `windows`) v, w and c are
-first averaged over the last W steps: over a gait cycle a walker's base sways and yaws back and forth, and
-the windowed errors say whether the joystick's velocity is followed on average. A
+first averaged over the last W steps: over a gait cycle a walker's base sways and yaws
+back and forth, and the windowed errors say whether the joystick's velocity is followed
+on average. A
 fall is an episode that ends early: the task's terminations in MJX; in C, the base below
 the task's ``min_height`` or tilted past its ``max_tilt``.
 
@@ -119,8 +120,9 @@ def velocity_errors(v_xy: Array, w_z: Array, command: Array, window: int = 1) ->
         raise ValueError(f"tracking.velocity_errors: window={window!r} must be an integer >= 1")
     gap = jnp.concatenate([v_xy, w_z[:, None]], -1) - command  # [T, 3]
     total = jnp.cumsum(gap, 0)
-    before = jnp.concatenate([jnp.zeros((min(window, gap.shape[0]), 3)), total[:-window]], 0)[: gap.shape[0]]
-    mean = (total - before) / jnp.minimum(jnp.arange(1, gap.shape[0] + 1), window)[:, None]
+    steps = gap.shape[0]
+    before = jnp.concatenate([jnp.zeros((window, 3)), total])[:steps]  # the sum `window` steps back
+    mean = (total - before) / jnp.minimum(jnp.arange(1, steps + 1), window)[:, None]
     return jnp.linalg.norm(mean[:, :2], axis=-1), jnp.abs(mean[:, 2])
 
 
