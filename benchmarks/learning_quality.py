@@ -377,10 +377,18 @@ def saved_rows(path: Path) -> list[dict]:
     return json.loads(path.read_text())["rows"] if path.exists() else []
 
 
+def kept_note(path: Path) -> dict:
+    """``{"note": ...}`` of the results file at `path`, or {}: a rewrite keeps what was written there by hand."""
+    data = json.loads(path.read_text()) if path.exists() else {}
+    return {"note": data["note"]} if "note" in data else {}
+
+
 def save(path: Path, rows: list[dict], device: str) -> None:
     path.write_text(
         json.dumps(
-            {"device": device, "jax": jax.__version__, "summary": summary(rows), "rows": rows}, indent=1, default=float
+            {"device": device, **kept_note(path), "jax": jax.__version__, "summary": summary(rows), "rows": rows},
+            indent=1,
+            default=float,
         )
     )
 

@@ -34,6 +34,7 @@ sys.path.insert(0, str(Path(__file__).parent))
 from learning_quality import SMOKE_STEPS  # noqa: E402
 from learning_quality import card_name  # noqa: E402
 from learning_quality import default_steps  # noqa: E402
+from learning_quality import kept_note  # noqa: E402
 from learning_quality import load  # noqa: E402
 from learning_quality import merged  # noqa: E402
 from learning_quality import ppo_fields  # noqa: E402
@@ -128,6 +129,11 @@ def plot(rows: list[dict], out: Path, card: str) -> list[Path]:
     return paths
 
 
+def write(path: Path, device: str, rows: list[dict]) -> None:
+    """The results file at `path`: its rows, and the note it had."""
+    path.write_text(json.dumps({"device": device, **kept_note(path), "rows": rows}, indent=1))
+
+
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     parser.add_argument("--envs", nargs="+", default=["humanoid_walk"])
@@ -160,9 +166,7 @@ def main() -> None:
             rows = saved_rows(path)
             for row in data["rows"]:
                 rows = [summarize(r) for r in merged(rows, row, ("env", "impl", "reward_scale"))]
-            kept = json.loads(path.read_text()) if path.is_file() else {}  # its note stays
-            note = {"note": kept["note"]} if "note" in kept else {}
-            path.write_text(json.dumps({"device": data["device"], **note, "rows": rows}, indent=1))
+            write(path, data["device"], rows)
         args.envs = []  # only the report below
     else:
         print(
@@ -197,7 +201,7 @@ def main() -> None:
             )
             row["trainers"][variant] = result
             summarize(row)
-            path.write_text(json.dumps({"device": jax.devices()[0].device_kind, "rows": rows}, indent=1))
+            write(path, jax.devices()[0].device_kind, rows)
             print(
                 f"  {time.perf_counter() - start:.0f} s; {result.get('seeds_reaching_target', '-')} reached", flush=True
             )
