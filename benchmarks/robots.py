@@ -18,6 +18,7 @@ joystick in 7 min and Berkeley Humanoid in 17 on an RTX 4090; mjlab's G1 flat ve
 within ~1 h on an RTX 5090).
 
     python benchmarks/robots.py --variants go1:flat --seeds 3 --budget 400 --runs runs/robots
+    python benchmarks/robots.py --variants g1:flat --seeds 2 --algorithm fast_td3 --steps 10000000
     python benchmarks/robots.py --smoke --variants go1:flat     # tiny sizes, on a CPU
 
 A variant stops once every seed tracks or after ``--budget`` seconds (default: the goal,
@@ -25,7 +26,9 @@ A variant stops once every seed tracks or after ``--budget`` seconds (default: t
 (``--out``) after every evaluation (a variant's re-run with the same seeds on the same
 physics, ``--impl``, replaces its entry), with
 the curves of tracking error against seconds in a figure. ``--runs`` keeps seed 0's
-policy as a run that `mjzoo export` and `mjzoo sim2sim` take.
+policy as a run that `mjzoo export` and `mjzoo sim2sim` take. ``--algorithm`` trains
+with an off-policy learner instead (offpolicy.py's settings: FastTD3's recipe, SAC at its
+scale), measured the same way: issue 50's goal is the G1 tracking sooner than PPO.
 """
 
 from __future__ import annotations
@@ -45,6 +48,9 @@ import numpy as np
 
 sys.path.insert(0, str(Path(__file__).parent))
 from cards import card_name  # noqa: E402
+from offpolicy import MODULES  # noqa: E402
+from offpolicy import STEPS  # noqa: E402
+from offpolicy import fields as offpolicy_fields  # noqa: E402
 
 import mjzoo.envs  # noqa: E402
 from mjzoo import physics  # noqa: E402
@@ -88,13 +94,15 @@ def train(
     overrides: dict[str, Any] | None = None,
     task_options: dict[str, Any] | None = None,
     task_params: dict[str, Any] | None = None,
+    algorithm_name: str = "ppo",
 ) -> dict[str, Any]:
     """Every seed of one robot and terrain in one vmapped program: up to `evals` chunks of
     updates, each followed by a tracking evaluation, until every seed tracks or `budget`
     seconds have passed. `report` gets the row so far after each evaluation; `run_dir`, if
     given, gets seed 0's policy as a run (`save_run`); `overrides` are PPO fields over the
     robot's registered ones, `task_options` the joystick's own (e.g. gait_frequency),
-    `task_params` its named numbers (`mjzoo.params`: reward weights). Returns the row."""
+    `task_params` its named numbers (`mjzoo.params`: reward weights), `algorithm_name` the
+    learner (`offpolicy.MODULES`). Returns the row."""
     start = time.perf_counter()
     robot, terrain = variant.split(":")
     name = f"{robot}_joystick"
@@ -104,21 +112,27 @@ def train(
     judge = task if terrain == "flat" else robot_joystick.robot_joystick(robot, level=1.0, **options)
     if task_params:
         task, judge = task.with_params(**task_params), judge.with_params(**task_params)
-    fields = mjzoo.envs.hyperparameters(name, "ppo")
-    fields.update(SMOKE if smoke else {})
+    module = MODULES[algorithm_name]
+    if algorithm_name == "ppo":
+        fields = mjzoo.envs.hyperparameters(name, "ppo")
+        fields.update(SMOKE if smoke else {})
+    else:  # offpolicy.py's settings, its smoke sizes included
+        fields = offpolicy_fields(algorithm_name, name, STEPS.get(name, 10_000_000), smoke)
+        fields.update({"total_steps": 256} if smoke else {})
     fields.update(overrides or {})
     if steps:
         fields["total_steps"] = steps
-    config, hyperparams = ppo.configure(**fields)
-    algorithm = ppo.make(config)
+    config, hyperparams = module.configure(**fields)
+    algorithm = module.make(config)
+    policy = module.policy(config, judge, deterministic=True)
     per_chunk = max(1, config.num_updates // evals)
     eval_steps = 10 if smoke else round(EVAL_SECONDS / 0.02)
 
-    def chunk(state: ppo.TrainState, key: jax.Array):
+    def chunk(state: Any, key: jax.Array):
         state, _ = jax.lax.scan(lambda s, _: algorithm.update(task, s), state, None, length=per_chunk)
-        act = ppo.acting(config, judge, ppo.policy_params(state), deterministic=True)
+        params, unused = module.policy_params(state), jax.random.key(0)  # deterministic: no key drawn
         linear, yaw, lived, fell, *over_1s = tracking.closed_loop(
-            judge, lambda obs: act((), obs, jnp.zeros((), bool), None)[1], key, eval_envs, eval_steps, windows=WINDOWS
+            judge, lambda obs: policy(params, obs, unused), key, eval_envs, eval_steps, windows=WINDOWS
         )
         steps_lived = jnp.maximum(lived.sum(1), 1)
         errors = dict(zip(ERRORS, (linear, yaw, *over_1s)))
@@ -147,7 +161,10 @@ def train(
             ),
             flush=True,
         )
-        row = summarize(variant, fields, seeds, curves, eval_envs, eval_steps, start, smoke)
+        row = {
+            "algorithm": algorithm_name,
+            **summarize(variant, fields, seeds, curves, eval_envs, eval_steps, start, smoke),
+        }
         report(row)
         if row["seeds_tracking"] == len(seeds) or seconds > budget:
             break
@@ -235,7 +252,8 @@ def plot(rows: list[dict], path: Path) -> None:
                     t,
                     [p[key] for p in run["curve"]],
                     color=f"C{rows.index(row)}",
-                    label=f"{row['variant']} ({row.get('impl', 'jax')}), {len(row['seeds'])} seed(s) in one program"
+                    label=f"{row['variant']} {row.get('algorithm', 'ppo')} ({row.get('impl', 'jax')}), "
+                    f"{len(row['seeds'])} seed(s) in one program"
                     if i == 0
                     else None,
                 )
@@ -288,17 +306,24 @@ def main() -> None:
         metavar="NAME=VALUE",
         help="the joystick's named numbers (mjzoo.params), e.g. yaw_tracking_weight=1.0 (a row of its own)",
     )
+    parser.add_argument(
+        "--algorithm", choices=sorted(MODULES), default="ppo", help="the learner (off-policy: offpolicy.py's settings)"
+    )
     parser.add_argument("--out", type=Path, default=OUT, help="the results' folder")
     parser.add_argument("--smoke", action="store_true", help="tiny sizes: checks the script runs, on a CPU")
     args = parser.parse_args()
     args.impl = args.impl or physics.default_impl()
     try:
         overrides = parse_assignments(tuple(args.config), "--config")
-        ppo.configure(**{**robot_joystick.PPO, **overrides})  # a bad name or value: one line, now
+        if args.runs and args.algorithm != "ppo":
+            raise UsageError("--runs keeps PPO runs only (an off-policy state carries its whole replay)")
         task_options = parse_assignments(tuple(args.task), "--task")
         task_params = parse_assignments(tuple(args.params), "--params")
-        for variant in args.variants:  # a bad option or name: one line, now
-            mjzoo.envs.make(f"{variant.split(':')[0]}_joystick", **task_options).with_params(**task_params)
+        for variant in args.variants:  # a bad option, name or field: one line, now
+            name = f"{variant.split(':')[0]}_joystick"
+            mjzoo.envs.make(name, **task_options).with_params(**task_params)
+            base = robot_joystick.PPO if args.algorithm == "ppo" else offpolicy_fields(args.algorithm, name, 1, False)
+            MODULES[args.algorithm].configure(**{**base, **overrides})
     except (UsageError, ValueError, TypeError) as e:
         parser.error(str(e))
     except KeyError as e:
@@ -311,7 +336,13 @@ def main() -> None:
         row["device"], row["impl"], row["config"] = jax.devices()[0].device_kind, args.impl, overrides
         row["task_options"], row["task_params"] = task_options, task_params
         chosen = ("config", "task_options", "task_params")
-        key = lambda r: (r["variant"], r["seeds"], r.get("impl", "jax"), *(r.get(k, {}) for k in chosen))  # noqa: E731
+        key = lambda r: (  # noqa: E731
+            r["variant"],
+            r["seeds"],
+            r.get("impl", "jax"),
+            r.get("algorithm", "ppo"),
+            *(r.get(k, {}) for k in chosen),
+        )
         same = lambda r: key(r) == key(row)  # noqa: E731
         rows[:] = [r for r in rows if not same(r)] + [row]
         args.out.mkdir(parents=True, exist_ok=True)
@@ -333,6 +364,7 @@ def main() -> None:
             overrides,
             task_options,
             task_params,
+            args.algorithm,
         )
         plot(rows, path.with_suffix(".png"))
         median = row["median_seconds_to_tracking"]
