@@ -246,6 +246,7 @@ def _tracking_rows(data: dict) -> list[dict]:
             "robot": row["robot"],
             "terrain": row["terrain"],
             "impl": row.get("impl", "jax"),
+            "learner": row.get("algorithm", "ppo"),
             "envs": row["hyperparameters"]["num_envs"],
             "settings": " ".join(
                 f"{k}={v}" for part in ("config", "task_options", "task_params") for k, v in row.get(part, {}).items()
@@ -260,8 +261,8 @@ def _tracking_rows(data: dict) -> list[dict]:
 
 def robots() -> list[str]:
     prose = """
-`benchmarks/robots.py` trains the joysticks of [robots.md](robots.md) with PPO on one
-GPU. A policy *tracks* when, over 64 evaluation episodes of 20 s with the task's pushes,
+`benchmarks/robots.py` trains the joysticks of [robots.md](robots.md) with PPO (or,
+`--algorithm`, an off-policy learner) on one GPU. A policy *tracks* when, over 64 evaluation episodes of 20 s with the task's pushes,
 noise and randomized physics, the mean |v_xy − cmd| ≤ 0.15 m/s, the mean |ω_z − cmd| ≤
 0.2 rad/s and none falls (errors per control step); the time to tracking includes
 compiling. The errors over 1 s windows (velocities and command averaged over the last
@@ -277,8 +278,9 @@ iterations, pushes of 0.5 m/s).
         ("robot", _at("robot")),
         ("terrain", _at("terrain")),
         ("physics", _at("impl")),
+        ("learner", _at("learner")),
         ("envs", _at("envs")),
-        ("settings (PPO, task)", _at("settings")),
+        ("settings (learner, task)", _at("settings")),
         ("seed", _at("seed")),
         ("to tracking (s)", _at("seconds_to_tracking")),
         ("steps to tracking", _at("steps_to_tracking")),
