@@ -169,7 +169,7 @@ def train(
         if row["seeds_tracking"] == len(seeds) or seconds > budget:
             break
     if run_dir is not None:
-        save_run(run_dir / variant.replace(":", "_"), name, terrain, config, jax.tree.map(lambda x: x[0], state))
+        save_run(run_dir / variant.replace(":", "_"), name, terrain, config, state)
     return row
 
 
@@ -216,15 +216,21 @@ def summarize(
 
 
 def save_run(out: Path, name: str, terrain: str, config: ppo.Config, state: ppo.TrainState, envs: int = 16) -> None:
-    """One seed's train state as a run directory that `mjzoo export` and `mjzoo sim2sim`
-    read: task.json, config.json and a checkpoint, its per-env leaves cut to `envs` envs
-    (config.json says so) so that the run is megabytes rather than the 8192 envs' state."""
+    """Seed 0 of the vmapped train `state` as a run directory that `mjzoo export` and
+    `mjzoo sim2sim` read: task.json, config.json and a checkpoint of `envs` envs (config.json
+    says so), megabytes rather than the 8192 envs' state. Its env states are fresh MJX-JAX
+    ones, as the run's readers build the task: a Warp state also shares buffers across
+    worlds, with no seed axis to take seed 0 from."""
     envs = min(envs, config.num_envs)
     small = dataclasses.replace(config, num_envs=envs)
-    state = state.replace(
-        collector=jax.tree.map(lambda x: x[:envs], state.collector),
+    learner = jax.tree.map(lambda x: x[0], state.replace(collector=None))
+    fresh = jax.jit(ppo.make(small).init)(
+        mjzoo.envs.make(name, terrain=terrain, impl="jax"), learner.hyperparams, jax.random.key(0)
+    )
+    state = learner.replace(
+        collector=fresh.collector,
         reward_scaling=dataclasses.replace(
-            state.reward_scaling, discounted_return=state.reward_scaling.discounted_return[:envs]
+            learner.reward_scaling, discounted_return=learner.reward_scaling.discounted_return[:envs]
         ),
     )
     checkpoints.save(out / "checkpoints", int(state.updates), state)
