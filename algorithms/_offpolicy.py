@@ -50,6 +50,9 @@ class ReplayConfig:
     critic_hidden_sizes: tuple[int, ...] = (256, 256)
     activation: Literal["relu", "swish", "elu", "tanh"] = "relu"
     layer_norm: bool = False  # in the critics' hidden layers
+    # "bfloat16": mixed precision in the hidden layers (params, output layers, gradients
+    # and the optimizer stay float32): the large critics' matmuls bound a big-batch update.
+    compute_dtype: Literal["float32", "bfloat16"] = "float32"
     normalize_observations: bool = False
     # A dict observation: the entry each network sees ("outer/inner" nests); None: all of it.
     policy_obs_key: str | None = None
@@ -67,6 +70,7 @@ class ReplayConfig:
             {
                 "learning_starts": (checks.is_count(self.learning_starts + 1), "an integer >= 0"),
                 "activation": (self.activation in ACTIVATIONS, f"one of {sorted(ACTIVATIONS)}"),
+                "compute_dtype": (self.compute_dtype in ("float32", "bfloat16"), "float32 or bfloat16"),
             },
         )
 
@@ -77,6 +81,17 @@ class ReplayConfig:
     @property
     def num_updates(self) -> int:
         return max(1, self.total_steps // self.steps_per_update)
+
+
+def actor_critic(config: ReplayConfig, policy_size: int, critic_size: int) -> tuple[networks.Network, networks.Network]:
+    """The policy MLP ([..., policy_size] out) and the twin critics ([2, ..., critic_size]
+    out) of `config`'s sizes, activation and arithmetic; layer norm in the critics if asked."""
+    activation, dtype = ACTIVATIONS[config.activation], jnp.dtype(config.compute_dtype)
+    policy_net = networks.mlp(policy_size, config.policy_hidden_sizes, activation, compute_dtype=dtype)
+    critic = networks.mlp(
+        critic_size, config.critic_hidden_sizes, activation, compute_dtype=dtype, layer_norm=config.layer_norm
+    )
+    return policy_net, twin(critic)
 
 
 def twin(network: networks.Network) -> networks.Network:

@@ -152,10 +152,7 @@ class TrainState:
 
 
 def _networks(config: Config, task: Task) -> tuple[networks.Network, networks.Network]:
-    activation = _offpolicy.ACTIVATIONS[config.activation]
-    policy_net = networks.mlp(task.action_size, config.policy_hidden_sizes, activation)
-    critic = networks.mlp(config.num_atoms, config.critic_hidden_sizes, activation, layer_norm=config.layer_norm)
-    return policy_net, _offpolicy.twin(critic)
+    return _offpolicy.actor_critic(config, task.action_size, config.num_atoms)
 
 
 def _optimizer(hp: Hyperparams) -> optax.GradientTransformation:

@@ -118,10 +118,7 @@ class TrainState:
 
 
 def _networks(config: Config, task: Task) -> tuple[networks.Network, networks.Network]:
-    activation = _offpolicy.ACTIVATIONS[config.activation]
-    policy_net = networks.mlp(2 * task.action_size, config.policy_hidden_sizes, activation)
-    critic = networks.mlp(1, config.critic_hidden_sizes, activation, layer_norm=config.layer_norm)
-    return policy_net, _offpolicy.twin(critic)
+    return _offpolicy.actor_critic(config, 2 * task.action_size, 1)
 
 
 @functools.partial(jax.jit, static_argnums=0)

@@ -34,6 +34,7 @@ MODULES = pytest.mark.parametrize("module", [sac, fast_td3], ids=["sac", "fast_t
         ("n_steps", 0, "n_steps=0 is invalid; expected an integer >= 1"),
         ("learning_starts", -1, "learning_starts=-1 is invalid; expected an integer >= 0"),
         ("activation", "gelu", "activation='gelu' is invalid"),
+        ("compute_dtype", "float16", "compute_dtype='float16' is invalid; expected float32 or bfloat16"),
     ],
 )
 def test_config_errors_name_the_field(module, field, value, message):
@@ -68,6 +69,25 @@ def test_updates_warm_up_then_learn_in_one_jit(module):
     act = module.policy(config, task)
     ctrl = jax.jit(act)(module.policy_params(second), second.collector.env_state.obs[0], jax.random.key(1))
     assert ctrl.shape == (task.action_size,) and -1 <= float(ctrl[0]) <= 1
+
+
+@MODULES
+def test_bfloat16_arithmetic_keeps_float32_params_and_near_float32_outputs(module):
+    """Mixed precision: the same params give the critics' outputs of float32 within
+    bfloat16's resolution, and an update learns with params (and gradients) in float32."""
+    config, task = SMALL[module], block_task()
+    mixed = dataclasses.replace(config, compute_dtype="bfloat16")
+    state = module.init(mixed, task, module.Hyperparams(), jax.random.key(0))
+    inputs = state.params["critic"][0]["kernel"].shape[1]  # [2, in, out]: the twins' first layer
+    x = jax.random.normal(jax.random.key(1), (8, inputs))
+    exact, rounded = (module._networks(c, task)[1].apply(state.params["critic"], x) for c in (config, mixed))
+    assert rounded.dtype == jnp.float32 and exact.shape == rounded.shape
+    np.testing.assert_allclose(rounded, exact, atol=0.03 * float(jnp.max(jnp.abs(exact))))
+    assert float(jnp.max(jnp.abs(rounded - exact))) > 0  # it did round
+    for _ in range(2):
+        state, metrics = jax.jit(lambda s: module.update(mixed, task, s))(state)
+    assert np.isfinite(metrics["loss/critic"])
+    assert {leaf.dtype for leaf in jax.tree.leaves(state.params)} == {jnp.dtype(jnp.float32)}
 
 
 def _run(module, tmp_path, name: str, resume: bool = False):
