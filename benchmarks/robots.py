@@ -25,7 +25,7 @@ A variant stops once every seed tracks or after ``--budget`` seconds (default: t
 5 min flat, 15 rough). Results merge into ``benchmarks/results/robots/robots_<card>.json``
 (``--out``) after every evaluation (a variant's re-run with the same seeds on the same
 physics, ``--impl``, replaces its entry), with
-the curves of tracking error against seconds in a figure. ``--runs`` keeps seed 0's
+the curves of tracking error against seconds in a figure. ``--runs`` keeps the first seed's
 policy as a run that `mjzoo export` and `mjzoo sim2sim` take. ``--algorithm`` trains
 with an off-policy learner instead (offpolicy.py's settings: FastTD3's recipe, SAC at its
 scale), measured the same way: issue 50's goal is the G1 tracking sooner than PPO.
@@ -99,7 +99,7 @@ def train(
     """Every seed of one robot and terrain in one vmapped program: up to `evals` chunks of
     updates, each followed by a tracking evaluation, until every seed tracks or `budget`
     seconds have passed. `report` gets the row so far after each evaluation; `run_dir`, if
-    given, gets seed 0's policy as a run (`save_run`); `overrides` are PPO fields over the
+    given, gets the first seed's policy as a run (`save_run`); `overrides` are PPO fields over the
     robot's registered ones, `task_options` the joystick's own (e.g. gait_frequency),
     `task_params` its named numbers (`mjzoo.params`: reward weights), `algorithm_name` the
     learner (`offpolicy.MODULES`). Returns the row."""
@@ -216,11 +216,11 @@ def summarize(
 
 
 def save_run(out: Path, name: str, terrain: str, config: ppo.Config, state: ppo.TrainState, envs: int = 16) -> None:
-    """Seed 0 of the vmapped train `state` as a run directory that `mjzoo export` and
+    """The first seed of the vmapped train `state` as a run directory that `mjzoo export` and
     `mjzoo sim2sim` read: task.json, config.json and a checkpoint of `envs` envs (config.json
     says so), megabytes rather than the 8192 envs' state. Its env states are fresh MJX-JAX
     ones, as the run's readers build the task: a Warp state also shares buffers across
-    worlds, with no seed axis to take seed 0 from."""
+    worlds, with no seed axis to take it from."""
     envs = min(envs, config.num_envs)
     small = dataclasses.replace(config, num_envs=envs)
     learner = jax.tree.map(lambda x: x[0], state.replace(collector=None))
@@ -279,6 +279,9 @@ def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     parser.add_argument("--variants", nargs="+", default=["go1:flat", "g1:flat", "t1:flat", "berkeley_humanoid:flat"])
     parser.add_argument("--seeds", type=int, default=1)
+    parser.add_argument(
+        "--first-seed", type=int, default=0, help="seeds FIRST..FIRST+SEEDS-1 (beside an earlier run's)"
+    )
     parser.add_argument("--steps", type=int, default=None, help="env steps per seed (default: the registered budget)")
     parser.add_argument("--evals", type=int, default=20)
     parser.add_argument("--eval-envs", type=int, default=64)
@@ -286,7 +289,7 @@ def main() -> None:
         "--budget", type=float, default=None, help="seconds per variant before it stops (default: 5 min flat, 15 rough)"
     )
     parser.add_argument(
-        "--runs", type=Path, default=None, help="save seed 0's policy as a run in RUNS/<robot>_<terrain>"
+        "--runs", type=Path, default=None, help="save the first seed's policy as a run in RUNS/<robot>_<terrain>"
     )
     parser.add_argument(
         "--impl", choices=physics.IMPLS, default=None, help="the physics (default: Warp where installed on a GPU)"
@@ -358,7 +361,7 @@ def main() -> None:
         budget = args.budget or (300.0 if variant.endswith(":flat") else 900.0)
         row = train(
             variant,
-            list(range(args.seeds)),
+            list(range(args.first_seed, args.first_seed + args.seeds)),
             args.steps,
             2 if args.smoke else args.evals,
             4 if args.smoke else args.eval_envs,
