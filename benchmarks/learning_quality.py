@@ -98,6 +98,7 @@ from playground import train_brax  # noqa: E402
 from ppo_vs_brax import HYPER  # noqa: E402
 from ppo_vs_brax import mjzoo_config  # noqa: E402
 from ppo_vs_brax import time_to  # noqa: E402
+from report import collapsed  # noqa: E402
 
 import mjzoo  # noqa: E402
 import mjzoo.envs  # noqa: E402
@@ -226,8 +227,10 @@ def train_mjzoo(
             return state, {k: metrics[k] for k in DIAGNOSTICS if k in metrics}
 
         state, diagnostics = jax.lax.scan(update, state, None, length=per_chunk)
-        # Only the mean return leaves the program: XLA drops the evaluation's trajectory.
-        return state, algorithm.evaluate(task, state, key, eval_envs, eval_steps).returns.mean(), diagnostics
+        # Only the mean return and its standard error leave the program: XLA drops the
+        # evaluation's trajectory.
+        returns = algorithm.evaluate(task, state, key, eval_envs, eval_steps).returns
+        return state, (returns.mean(), returns.std() / np.sqrt(eval_envs)), diagnostics
 
     init = jax.jit(jax.vmap(algorithm.init, in_axes=(None, None, 0)))
     donate = () if jax.default_backend() == "cpu" else (1,)  # the CPU backend cannot donate
@@ -235,19 +238,23 @@ def train_mjzoo(
     start = time.perf_counter()
     init_keys, eval_keys = jnp.moveaxis(jax.vmap(jax.random.split)(jax.vmap(jax.random.key)(jnp.asarray(seeds))), 1, 0)
     state = init(task, hyperparams, init_keys)
-    points, diagnostics = [], []
+    points, errors, diagnostics = [], [], []
     for i in range(evals):
-        state, returns, chunk_diagnostics = run(
+        state, (returns, error), chunk_diagnostics = run(
             task, state, jax.vmap(jax.random.fold_in, in_axes=(0, None))(eval_keys, i)
         )
         returns = np.asarray(returns) / scale  # waits for the chunk
+        errors.append(np.asarray(error) / scale)
         diagnostics.append(jax.tree.map(np.asarray, chunk_diagnostics))  # {key: [seed, update]}
         points.append(((i + 1) * per_chunk * config.steps_per_update, time.perf_counter() - start, returns))
         print(
             f"    step {points[-1][0]:,}, {points[-1][1]:.0f} s, returns {', '.join(f'{r:.1f}' for r in returns)}",
             flush=True,
         )
-    runs = [run_record(seed, [(step, t, float(r[i])) for step, t, r in points]) for i, seed in enumerate(seeds)]
+    runs = [
+        run_record(seed, [(step, t, float(r[i])) for step, t, r in points], [float(e[i]) for e in errors])
+        for i, seed in enumerate(seeds)
+    ]
     for i, record in enumerate(runs):  # per update, for a collapse's post-mortem
         record["diagnostics"] = {k: np.concatenate([d[k][i] for d in diagnostics]).tolist() for k in diagnostics[0]}
     per_seed = wall_steps_per_s(runs[0]["curve"])
@@ -289,17 +296,28 @@ def train_brax_runs(env: Any, task: mjzoo.Task, config: dict, seeds: list[int], 
     }
 
 
-def run_record(seed: int, curve: list[tuple[int, float, float]]) -> dict[str, Any]:
-    """One run: its curve, final and best return (after training began), kept fraction."""
-    trained = [ret for step, _, ret in curve if step > 0]
-    final, best = trained[-1], max(trained)
-    return {
+def run_record(seed: int, curve: list[tuple[int, float, float]], errors: list[float] | None = None) -> dict[str, Any]:
+    """One run: its curve, final and best return (after training began), kept fraction.
+    With `errors` (each evaluation's standard error of the mean return, one per curve
+    point), whether a collapse is beyond evaluation noise: best - final more than twice
+    the standard error of that difference. The best of several noisy evaluations is
+    biased up, so a kept fraction below COLLAPSE can be noise on an env whose episodes'
+    returns spread widely."""
+    trained = [(ret, i) for i, (step, _, ret) in enumerate(curve) if step > 0]
+    (final, last), (best, at) = trained[-1], max(trained)
+    kept = final / best if best > 0 else None  # undefined for a non-positive best
+    record = {
         "seed": seed,
         "curve": [list(point) for point in curve],
         "final_return": final,
         "best_return": best,
-        "kept_fraction": final / best if best > 0 else None,  # undefined for a non-positive best
+        "kept_fraction": kept,
     }
+    if errors is not None:
+        margin = 2.0 * float(np.hypot(errors[at], errors[last]))
+        record["eval_standard_errors"] = errors
+        record["collapse_beyond_noise"] = kept is not None and kept < COLLAPSE and best - final > margin
+    return record
 
 
 # --- summaries, the JSON and plots ---------------------------------------------------------
@@ -320,6 +338,8 @@ def summarize(row: dict) -> dict:
             min_kept_fraction=float(np.min(kept)) if kept else None,
             collapsed_runs=sum(k < COLLAPSE for k in kept),
         )
+        if all("collapse_beyond_noise" in r for r in t["runs"]):  # runs since the field was recorded
+            t["collapsed_beyond_noise"] = sum(r["collapse_beyond_noise"] for r in t["runs"])
     better = max(t["final_return"] for t in trainers.values())
     row["better_final_return"] = better
     row["threshold"] = THRESHOLD * better
@@ -473,7 +493,7 @@ def print_table(rows: list[dict]) -> None:
             print(
                 f"{r['env']:<22} {r['steps'] / 1e6:>5.1f}M {r['reward_scale']:>6g} {name:<17} {t['seeds']:>5} "
                 f"{t['final_return']:>8.1f} ± {t['final_return_std']:<6.1f} {t['best_return']:>8.1f} {kept:>5} "
-                f"{t['collapsed_runs']:>9} {ttt:>10} {t['steps_per_s'] or 0:>11,.0f}"
+                f"{collapsed(t):>9} {ttt:>10} {t['steps_per_s'] or 0:>11,.0f}"
             )
 
 

@@ -32,10 +32,18 @@ def _number(x: float | None, digits: int = 1) -> str:
     return "-" if x is None else f"{x:,.{digits}f}"
 
 
+def collapsed(trainer: dict) -> str:
+    """A trainer's collapsed runs, and in brackets those beyond evaluation noise where it
+    was measured (learning_quality.run_record)."""
+    beyond = trainer.get("collapsed_beyond_noise")
+    return f"{trainer['collapsed_runs']}" + ("" if beyond is None else f" ({beyond})")
+
+
 def _trainer_table(rows: list[dict]) -> list[str]:
     """One line per env, reward scale and trainer: final return (mean ± std over seeds),
-    best, the lowest kept fraction of a seed, collapsed seeds, time to 90% of the better
-    final return, steps/s, and how many processes shared the GPU."""
+    best, the lowest kept fraction of a seed, collapsed seeds (in brackets, those beyond
+    evaluation noise, where measured), time to 90% of the better final return, steps/s,
+    and how many processes shared the GPU."""
     lines = [
         "| env | env steps | reward x | trainer | seeds | final (mean ± std) | best | lowest kept | collapsed | "
         "to 90% (s) | steps/s | GPU shared by |",
@@ -47,7 +55,7 @@ def _trainer_table(rows: list[dict]) -> list[str]:
             lines.append(
                 f"| {row['env']} | {row['steps'] / 1e6:.1f}M | {row['reward_scale']:g} | {name} | {t['seeds']} | "
                 f"{t['final_return']:,.1f} ± {t['final_return_std']:,.1f} | {t['best_return']:,.1f} | "
-                f"{_number(t.get('min_kept_fraction'), 2)} | {t['collapsed_runs']} | {to_90} | "
+                f"{_number(t.get('min_kept_fraction'), 2)} | {collapsed(t)} | {to_90} | "
                 f"{_number(t.get('steps_per_s'), 0)} | {t.get('gpu_shared_by', 1)} |"
             )
     return lines
