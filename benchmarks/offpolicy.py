@@ -13,7 +13,7 @@ the evaluation return against env steps and against seconds are written per task
 Tasks: humanoid_walk, g1_joystick (its dict observation: the policy on "state", the
 critic on "privileged_state", as PPO's registered config), and three DM Control envs
 through `mjzoo.interop.playground` (CheetahRun, WalkerWalk, CartpoleSwingup). Whether a
-joystick policy *tracks* its commands (issue 50's goal on the G1) is robots.py's
+joystick policy *tracks* its commands (the off-policy goal on the G1) is robots.py's
 measure: ``robots.py --algorithm fast_td3`` trains with these settings and evaluates it.
 
     python benchmarks/offpolicy.py                     # all tasks, 2 seeds (one H100/H200)

@@ -28,7 +28,7 @@ physics, ``--impl``, replaces its entry), with
 the curves of tracking error against seconds in a figure. ``--runs`` keeps the first seed's
 policy as a run that `mjzoo export` and `mjzoo sim2sim` take. ``--algorithm`` trains
 with an off-policy learner instead (offpolicy.py's settings: FastTD3's recipe, SAC at its
-scale), measured the same way: issue 50's goal is the G1 tracking sooner than PPO.
+scale), measured the same way: does an off-policy learner track sooner than PPO?
 """
 
 from __future__ import annotations
