@@ -61,9 +61,10 @@ from mjzoo.types import Task
 __all__ = ["Hooks", "Result", "run", "replan"]
 
 Array = jax.Array
-_IN_JAX = (
-    "closed_loop: a to_control hook (a policy in the loop: mjzoo.planning.prior.guided) needs the planner's "
-    "rollouts in JAX, which C MuJoCo's cannot run; plan on MJX (backend='mjx')"
+# Why a policy in the loop cannot plan natively: `replan` and `realtime.Problem` both say it.
+NEEDS_JAX_ROLLOUTS = (
+    "a to_control hook (a policy in the loop: mjzoo.planning.prior.guided) needs the planner's "
+    "rollouts in JAX, which C MuJoCo's cannot run; plan on MJX (backend 'mjx' or 'auto')"
 )
 
 
@@ -128,7 +129,7 @@ def replan(
     """One replan from the simulated state, through the hooks, valuing final states by
     `terminal_value` if given."""
     if hooks.to_control is not None and isinstance(plan_task, Native):
-        raise ValueError(_IN_JAX)
+        raise ValueError(f"closed_loop: {NEEDS_JAX_ROLLOUTS}")
     start = hooks.to_planner(sim_state) if hooks.to_planner else sim_state
     view = with_base(plan_task, lambda t: hooks.pre_rollout(t, start)) if hooks.pre_rollout else plan_task
     return planner.plan(config, view, planner_state, start, key, terminal_value=terminal_value)[0]

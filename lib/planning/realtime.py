@@ -120,10 +120,7 @@ class Problem:
         if self.sim_backend not in (None, "mjx", "native"):
             raise ValueError(f"Problem: unknown sim_backend {self.sim_backend!r}; choose None, 'mjx' or 'native'")
         if self.backend == "native" and self.hooks.to_control is not None:
-            raise ValueError(
-                "Problem: a to_control hook (a policy in the loop: mjzoo.planning.prior.guided) needs the "
-                "planner's rollouts in JAX, not C MuJoCo's; plan with backend 'mjx' or 'auto'"
-            )
+            raise ValueError(f"Problem: {closed_loop.NEEDS_JAX_ROLLOUTS}")
         supported = planner_backends(self.planner)
         if self.backend != "auto" and self.backend not in supported:
             name = self.planner.__name__.rsplit(".", 1)[-1]
