@@ -244,24 +244,26 @@ def save_run(out: Path, name: str, terrain: str, config: ppo.Config, state: ppo.
 
 
 def plot(rows: list[dict], path: Path) -> None:
+    """Tracking errors against wall-clock minutes, a colour per row, labelled by robot,
+    learner, physics, settings and seeds, the legend below the axes."""
     import matplotlib
 
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
 
-    fig, axes = plt.subplots(1, 2, figsize=(11, 4))
-    for row in rows:
+    fig, axes = plt.subplots(1, 2, figsize=(12, 5 + 0.22 * len(rows)))
+    colors = plt.get_cmap("tab20").colors
+    for n, row in enumerate(rows):
+        settings = " ".join(
+            f"{k}={v}" for part in ("config", "task_options", "task_params") for k, v in (row.get(part) or {}).items()
+        )
+        what = [row["variant"], row.get("algorithm", "ppo"), f"({row.get('impl', 'jax')})", settings]
+        label = f"{' '.join(w for w in what if w)}, {len(row['seeds'])} seed(s) in one program"
         for i, run in enumerate(row["runs"]):
             t = [p["seconds"] / 60 for p in run["curve"]]
             for ax, key in zip(axes, ("linear_error", "yaw_error")):
                 ax.plot(
-                    t,
-                    [p[key] for p in run["curve"]],
-                    color=f"C{rows.index(row)}",
-                    label=f"{row['variant']} {row.get('algorithm', 'ppo')} ({row.get('impl', 'jax')}), "
-                    f"{len(row['seeds'])} seed(s) in one program"
-                    if i == 0
-                    else None,
+                    t, [p[key] for p in run["curve"]], color=colors[n % len(colors)], label=label if i == 0 else None
                 )
     for ax, key, unit in zip(axes, ("linear_error", "yaw_error"), ("m/s", "rad/s")):
         ax.axhline(GOAL[key], color="k", linestyle="--", linewidth=0.8)
@@ -270,8 +272,9 @@ def plot(rows: list[dict], path: Path) -> None:
             ylabel=f"mean {key.replace('_', ' ')} ({unit})",
             yscale="log",
         )
-    axes[0].legend()
-    fig.tight_layout()
+    handles, labels = axes[0].get_legend_handles_labels()
+    fig.legend(handles, labels, loc="lower center", ncol=2, fontsize=8, frameon=False)
+    fig.tight_layout(rect=(0, 0.025 * -(-len(rows) // 2) + 0.03, 1, 1))  # room for the legend's rows
     fig.savefig(path, dpi=100)
 
 
