@@ -169,7 +169,7 @@ def train(
         if row["seeds_tracking"] == len(seeds) or seconds > budget:
             break
     if run_dir is not None:
-        save_run(run_dir / variant.replace(":", "_"), name, terrain, config, state)
+        save_run(run_dir / variant.replace(":", "_"), name, options, config, state)
     return row
 
 
@@ -215,17 +215,20 @@ def summarize(
     }
 
 
-def save_run(out: Path, name: str, terrain: str, config: ppo.Config, state: ppo.TrainState, envs: int = 16) -> None:
+def save_run(
+    out: Path, name: str, options: dict[str, Any], config: ppo.Config, state: ppo.TrainState, envs: int = 16
+) -> None:
     """The first seed of the vmapped train `state` as a run directory that `mjzoo export` and
     `mjzoo sim2sim` read: task.json, config.json and a checkpoint of `envs` envs (config.json
-    says so), megabytes rather than the 8192 envs' state. Its env states are fresh MJX-JAX
-    ones, as the run's readers build the task: a Warp state also shares buffers across
-    worlds, with no seed axis to take it from."""
+    says so), megabytes rather than the 8192 envs' state. `options` are the joystick's
+    (terrain, gait clock: what shapes its observation), as task.json records them. Its env
+    states are fresh MJX-JAX ones, as the run's readers build the task: a Warp state also
+    shares buffers across worlds, with no seed axis to take it from."""
     envs = min(envs, config.num_envs)
     small = dataclasses.replace(config, num_envs=envs)
     learner = jax.tree.map(lambda x: x[0], state.replace(collector=None))
     fresh = jax.jit(ppo.make(small).init)(
-        mjzoo.envs.make(name, terrain=terrain, impl="jax"), learner.hyperparams, jax.random.key(0)
+        mjzoo.envs.make(name, **{**options, "impl": "jax"}), learner.hyperparams, jax.random.key(0)
     )
     state = learner.replace(
         collector=fresh.collector,
@@ -240,7 +243,8 @@ def save_run(out: Path, name: str, terrain: str, config: ppo.Config, state: ppo.
         "hyperparams": settings.hyperparams_dict(state.hyperparams),
     }
     (out / "config.json").write_text(json.dumps(info, indent=2))
-    (out / "task.json").write_text(json.dumps({"env": name, "overrides": {"terrain": terrain}}, indent=2))
+    overrides = {k: v for k, v in options.items() if k != "impl"}
+    (out / "task.json").write_text(json.dumps({"env": name, "overrides": overrides}, indent=2))
 
 
 def plot(rows: list[dict], path: Path) -> None:
