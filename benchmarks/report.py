@@ -247,6 +247,14 @@ def _section(title: str, prose: str, *parts: list[str]) -> list[str]:
     return [f"## {title}", "", *prose.strip().splitlines(), "", *[line for part in parts for line in part]]
 
 
+def row_settings(row: dict) -> str:
+    """What a robots.py row changed from the robot's registered settings: its learner
+    fields, joystick options and named numbers, as ``NAME=VALUE`` words ("" for none)."""
+    return " ".join(
+        f"{k}={v}" for part in ("config", "task_options", "task_params") for k, v in (row.get(part) or {}).items()
+    )
+
+
 def _tracking_rows(data: dict) -> list[dict]:
     """One row per robot, terrain and seed of benchmarks/robots.py's JSON."""
     return [
@@ -256,10 +264,7 @@ def _tracking_rows(data: dict) -> list[dict]:
             "impl": row.get("impl", "jax"),
             "learner": row.get("algorithm", "ppo"),
             "envs": row["hyperparameters"]["num_envs"],
-            "settings": " ".join(
-                f"{k}={v}" for part in ("config", "task_options", "task_params") for k, v in row.get(part, {}).items()
-            )
-            or "the robot's",
+            "settings": row_settings(row) or "the robot's",
             **run,
         }
         for row in data["rows"]
@@ -270,8 +275,8 @@ def _tracking_rows(data: dict) -> list[dict]:
 def robots() -> list[str]:
     prose = """
 `benchmarks/robots.py` trains the joysticks of [robots.md](robots.md) with PPO (or,
-`--algorithm`, an off-policy learner) on one GPU. A policy *tracks* when, over 64 evaluation episodes of 20 s with the task's pushes,
-noise and randomized physics, the mean |v_xy − cmd| ≤ 0.15 m/s, the mean |ω_z − cmd| ≤
+`--algorithm`, an off-policy learner) on one GPU. A policy *tracks* when, over 64
+evaluation episodes of 20 s with the task's pushes, noise and randomized physics, the mean |v_xy − cmd| ≤ 0.15 m/s, the mean |ω_z − cmd| ≤
 0.2 rad/s and none falls (errors per control step); the time to tracking includes
 compiling. The errors over 1 s windows (velocities and command averaged over the last
 50 control steps; rows since 2026-11-30) say whether the command is followed on

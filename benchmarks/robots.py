@@ -51,6 +51,7 @@ from cards import card_name  # noqa: E402
 from offpolicy import MODULES  # noqa: E402
 from offpolicy import STEPS  # noqa: E402
 from offpolicy import fields as offpolicy_fields  # noqa: E402
+from report import row_settings  # noqa: E402
 
 import mjzoo.envs  # noqa: E402
 from mjzoo import physics  # noqa: E402
@@ -113,13 +114,7 @@ def train(
     if task_params:
         task, judge = task.with_params(**task_params), judge.with_params(**task_params)
     module = MODULES[algorithm_name]
-    if algorithm_name == "ppo":
-        fields = mjzoo.envs.hyperparameters(name, "ppo")
-        fields.update(SMOKE if smoke else {})
-    else:  # offpolicy.py's settings, its smoke sizes included
-        fields = offpolicy_fields(algorithm_name, name, STEPS.get(name, 10_000_000), smoke)
-        fields.update({"total_steps": 256} if smoke else {})
-    fields.update(overrides or {})
+    fields = {**learner_fields(algorithm_name, name, smoke), **(overrides or {})}
     if steps:
         fields["total_steps"] = steps
     config, hyperparams = module.configure(**fields)
@@ -171,6 +166,15 @@ def train(
     if run_dir is not None:
         save_run(run_dir / variant.replace(":", "_"), name, options, config, state)
     return row
+
+
+def learner_fields(algorithm_name: str, name: str, smoke: bool) -> dict[str, Any]:
+    """The learner's fields on joystick `name`: PPO's registered ones, or offpolicy.py's
+    settings for an off-policy learner; tiny sizes if `smoke`."""
+    if algorithm_name == "ppo":
+        return {**mjzoo.envs.hyperparameters(name, "ppo"), **(SMOKE if smoke else {})}
+    fields = offpolicy_fields(algorithm_name, name, STEPS.get(name, 10_000_000), smoke)  # its smoke sizes too
+    return {**fields, **({"total_steps": 256} if smoke else {})}
 
 
 def summarize(
@@ -258,10 +262,7 @@ def plot(rows: list[dict], path: Path) -> None:
     fig, axes = plt.subplots(1, 2, figsize=(12, 5 + 0.22 * len(rows)))
     colors = plt.get_cmap("tab20").colors
     for n, row in enumerate(rows):
-        settings = " ".join(
-            f"{k}={v}" for part in ("config", "task_options", "task_params") for k, v in (row.get(part) or {}).items()
-        )
-        what = [row["variant"], row.get("algorithm", "ppo"), f"({row.get('impl', 'jax')})", settings]
+        what = [row["variant"], row.get("algorithm", "ppo"), f"({row.get('impl', 'jax')})", row_settings(row)]
         label = f"{' '.join(w for w in what if w)}, {len(row['seeds'])} seed(s) in one program"
         for i, run in enumerate(row["runs"]):
             t = [p["seconds"] / 60 for p in run["curve"]]
@@ -338,8 +339,7 @@ def main() -> None:
         for variant in args.variants:  # a bad option, name or field: one line, now
             name = f"{variant.split(':')[0]}_joystick"
             mjzoo.envs.make(name, **task_options).with_params(**task_params)
-            base = robot_joystick.PPO if args.algorithm == "ppo" else offpolicy_fields(args.algorithm, name, 1, False)
-            MODULES[args.algorithm].configure(**{**base, **overrides})
+            MODULES[args.algorithm].configure(**{**learner_fields(args.algorithm, name, False), **overrides})
     except (UsageError, ValueError, TypeError) as e:
         parser.error(str(e))
     except KeyError as e:
