@@ -24,6 +24,9 @@ one computable from `mujoco.MjModel` / `mujoco.MjData` with numpy (MjData's fiel
                                                     velocity as above, then its body's w
   sensordata                    sensors, index      d.sensordata[index] (the named sensors)
   actuator_force                -                   d.actuator_force
+  gait_clock                    frequency, offsets  cos then sin of each foot's phase 2 pi frequency
+                                                    d.time + offset (a stepping clock; d.time is
+                                                    0 at an episode's start)
   previous_action               -                   the previous task action (`action.to_task`
                                                     of the policy's last output); zeros at reset
   command                       record, meaning     the operator's command (a joystick's
@@ -93,6 +96,7 @@ SOURCES = (
     "point_velocity_world",
     "sensordata",
     "actuator_force",
+    "gait_clock",
     "previous_action",
     "command",
 )
@@ -238,6 +242,12 @@ def _cartpole(m, params) -> list[dict[str, Any]]:
     ]
 
 
+def _gait_clock(m, frequency, offsets) -> list[dict[str, Any]]:
+    """`catalog.gait.clock`: its frequency and the feet's phase offsets."""
+    f, phases = float(frequency), [float(o) for o in np.asarray(offsets)]
+    return [dict(name=f"gait_clock({f:g} Hz)", size=2 * len(phases), source="gait_clock", frequency=f, offsets=phases)]
+
+
 _CATALOG = "mjzoo.catalog.observations"
 _OBSERVATIONS.update(
     {
@@ -254,6 +264,7 @@ _OBSERVATIONS.update(
         f"{_CATALOG}:last_action": lambda m: [dict(name="last_action", size=-1, source="previous_action")],
     }
 )
+_OBSERVATIONS["mjzoo.catalog.gait:_clock"] = _gait_clock
 _OBSERVATIONS["mjzoo.envs.cartpole:observation"] = lambda m: _cartpole(m, None)
 
 
@@ -401,6 +412,9 @@ def _term(m: mujoco.MjModel, d: mujoco.MjData, t: dict[str, Any], previous: np.n
         return d.sensordata[t["index"]]
     if s == "actuator_force":
         return d.actuator_force
+    if s == "gait_clock":
+        phase = 2 * np.pi * t["frequency"] * d.time + np.asarray(t["offsets"], float)
+        return np.concatenate([np.cos(phase), np.sin(phase)])
     if s == "previous_action":
         return previous
     if s == "command":

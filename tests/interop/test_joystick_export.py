@@ -13,6 +13,7 @@ import functools
 
 import jax
 import jax.numpy as jnp
+import mujoco
 import numpy as np
 import pytest
 
@@ -20,6 +21,7 @@ import mjzoo
 from mjzoo import physics
 from mjzoo.catalog import actuators
 from mjzoo.catalog import commands
+from mjzoo.catalog import gait
 from mjzoo.catalog import observations
 from mjzoo.catalog import trackers
 from mjzoo.harness import cli
@@ -215,3 +217,20 @@ def test_cli_sim2sim_names_what_is_missing(tmp_path, capsys):
         err = capsys.readouterr().err
         assert exit_info.value.code == 2 and len(err.splitlines()) == 1, err
         assert all(w in err for w in words), err
+
+
+def test_contract_of_a_stepping_clock():
+    """A gait clock (`catalog.gait.clock`) is a term of its own, read from MjData's time:
+    at t = 0.25 s and 1 Hz the biped's feet are a quarter cycle in, half a cycle apart."""
+    p = physics.load(BIPED, ctrl_dt=0.02)
+    task = mjzoo.task(p, observe=observations.concat(observations.joint_positions, gait.clock(1.0)), time_limit=50)
+    terms = deployment.observation_terms(task)
+    assert terms[-1] == dict(
+        name="gait_clock(1 Hz)", size=4, source="gait_clock", frequency=1.0, offsets=[0.0, pytest.approx(np.pi)]
+    )
+    check = deployment.check_observation(task, terms, jax.random.key(0), steps=20)  # 0.4 s: past a half cycle
+    assert check.max_error <= 1e-4
+    m = task.mj_model
+    d = mujoco.MjData(m)
+    d.time = 0.25
+    np.testing.assert_allclose(deployment.frame(terms[-1:], m, d, np.zeros(2)), [0, 0, 1, -1], atol=1e-6)
