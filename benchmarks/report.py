@@ -283,9 +283,12 @@ compiling. The errors over 1 s windows (velocities and command averaged over the
 average, apart from a walker's sway within its gait cycle. The G1 is bound by its
 physics: 10 substeps of 2 ms per control step. `benchmarks/terrain_cost.py` measures
 what a heightfield costs the physics, `scripts/check_robots.py` runs `check_task` on
-every robot and terrain, and `mjzoo sim2sim` drives the exported Go1 policy in C MuJoCo
-under another simulation configuration than training's (2 ms steps, 2 solver
-iterations, pushes of 0.5 m/s).
+every robot and terrain, and `mjzoo sim2sim` drives an exported policy in C MuJoCo
+under another simulation configuration than training's (its physics step and solver
+iterations in the table), with pushes of 0.5 m/s, against the same policy in MJX. The
+first evaluation comes after compiling and one training chunk: compiling takes longest
+on a fresh machine, where MuJoCo Warp builds its kernels (~90 s; later runs load them
+from its cache).
 """
     runs = [
         ("robot", _at("robot")),
@@ -295,6 +298,7 @@ iterations, pushes of 0.5 m/s).
         ("envs", _at("envs")),
         ("settings (learner, task)", _at("settings")),
         ("seed", _at("seed")),
+        ("first evaluation (s)", lambda r: r["curve"][0]["seconds"] if r.get("curve") else None),
         ("to tracking (s)", _at("seconds_to_tracking")),
         ("steps to tracking", _at("steps_to_tracking")),
         ("final step", _at("final.step")),
@@ -321,6 +325,9 @@ iterations, pushes of 0.5 m/s).
     ]
     sim2sim = [
         ("file", _at("file")),
+        ("env", _at("env")),
+        ("C timestep (s)", _at("mujoco.options.timestep")),
+        ("C solver iterations", _at("mujoco.options.iterations")),
         ("C latency (steps)", _at("mujoco.options.latency")),
         ("C velocity error", _at("mujoco.linear_error")),
         ("MJX velocity error", _at("training.linear_error")),
@@ -342,7 +349,7 @@ iterations, pushes of 0.5 m/s).
         _figures(RESULTS / "robots"),
         [""],
         _file_tables("robots/terrain_cost_*.json", cost),
-        ["**Sim-to-sim, the Go1 in C MuJoCo against MJX** (each file holds its command)", ""],
+        ["**Sim-to-sim, exported policies in C MuJoCo against MJX** (each file holds its command)", ""],
         _table(sim_rows, sim2sim),
         ["", f"**[check_task.json]({_link(RESULTS / 'robots' / 'check_task.json')})**", ""],
         _table(check_rows, checks),

@@ -263,7 +263,9 @@ def plot(rows: list[dict], path: Path) -> None:
     colors = plt.get_cmap("tab20").colors
     for n, row in enumerate(rows):
         what = [row["variant"], row.get("algorithm", "ppo"), f"({row.get('impl', 'jax')})", row_settings(row)]
-        label = f"{' '.join(w for w in what if w)}, {len(row['seeds'])} seed(s) in one program"
+        seeds = row["seeds"]
+        which = f"seed {seeds[0]}" if len(seeds) == 1 else f"seeds {', '.join(map(str, seeds))} in one program"
+        label = f"{' '.join(w for w in what if w)}, {which}"
         for i, run in enumerate(row["runs"]):
             t = [p["seconds"] / 60 for p in run["curve"]]
             for ax, key in zip(axes, ("linear_error", "yaw_error")):
