@@ -250,5 +250,9 @@ def plan(
         )
         return state, None
 
-    state, _ = jax.lax.scan(generation, state, jax.random.split(key, config.iterations))
+    keys = jax.random.split(key, config.iterations)
+    if config.iterations == 1:  # no scan: C MuJoCo's rollouts can then run between two jits (`native.split`)
+        state, _ = generation(state, keys[0])
+    else:
+        state, _ = jax.lax.scan(generation, state, keys)
     return state, planning.controls(config, state.knots, *planning.control_limits(task))

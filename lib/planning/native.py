@@ -281,8 +281,9 @@ def split(fn: Callable) -> Callable:
     (its trace of `fn` hands them out; XLA drops the rest), the host runs C, and the
     second jit computes `fn` with C's outputs passed in. Same result, same key use.
     A function that runs C more than once (a planner that iterates: `dial`, `cma_es`
-    with several generations), each call needing the last one's result, or never, runs
-    as one jit instead, C through `jax.pure_callback`.
+    with several generations), each call needing the last one's result, or never, or
+    inside a `lax.scan` (traced once, run many times), runs as one jit instead, C through
+    `jax.pure_callback`.
     """
     engines: list[Engine] = []
 
@@ -316,7 +317,10 @@ def split(fn: Callable) -> Callable:
                 jax.jit(lambda c, ls: outputs(c, *jax.tree.unflatten(treedef, ls))),
             )
         first, second = treedefs[treedef]
-        c_inputs = first(leaves) if first is not None else None
+        try:
+            c_inputs = first(leaves) if first is not None else None
+        except jax.errors.UnexpectedTracerError:  # C's inputs were a scan body's: they cannot leave it
+            c_inputs = None
         if c_inputs is None:
             if first is not None:
                 treedefs[treedef] = (None, jax.jit(lambda ls: fn(*jax.tree.unflatten(treedef, ls))))

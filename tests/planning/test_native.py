@@ -19,6 +19,7 @@ import mjzoo
 import mjzoo.envs
 from mjzoo import physics
 from mjzoo import planning
+from mjzoo.algorithms import cma_es
 from mjzoo.algorithms import dial
 from mjzoo.algorithms import mppi
 from mjzoo.catalog import actuators
@@ -248,6 +249,22 @@ def test_split_runs_an_iterating_replan_as_one_jit():
     one, two = jax.jit(replan)(plan, state, key), native.split(replan)(plan, state, key)
     np.testing.assert_allclose(one.knots, two.knots, rtol=1e-6, atol=1e-7)
     assert float(one.cost) == float(two.cost) and np.isfinite(float(one.cost))
+
+
+@pytest.mark.parametrize("generations", [1, 2])
+def test_split_runs_cma_es_generations(generations):
+    """CMA-ES runs its generations in a `lax.scan` whose body calls C: traced once, so
+    `split` cannot hoist that call and jits the replan whole (it used to raise a leaked
+    tracer); a single generation runs without the scan and splits. Both plan as `jax.jit`."""
+    task = mjzoo.envs.make("pendulum_swingup", episode_steps=10**9)
+    nat = native.wrap(task)
+    config = cma_es.Config(num_samples=8, horizon_steps=10, num_knots=3, iterations=generations)
+    state = mjzoo.fill_transition_entries(task, jax.jit(mjzoo.reset)(task, jax.random.key(0)))
+    replan = lambda p, s, k: closed_loop.replan(cma_es, config, nat, p, s, k)  # noqa: E731
+    plan, key = cma_es.init(config, nat), jax.random.key(1)
+    one, two = jax.jit(replan)(plan, state, key), native.split(replan)(plan, state, key)
+    np.testing.assert_allclose(one.knots, two.knots, rtol=1e-6, atol=1e-7)
+    assert float(one.generation) == generations and float(one.cost) == float(two.cost)
 
 
 def test_native_needs_jax_physics_and_one_model_to_simulate():
