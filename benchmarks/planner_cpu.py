@@ -26,8 +26,10 @@ takes ~1.5x longer).
 
     python benchmarks/planner_cpu.py                       # everything, ~25 minutes
     python benchmarks/planner_cpu.py --tasks cartpole --planners mppi --backends native --no-judo
-    python benchmarks/planner_cpu.py --clock wall --planners dial cma_es ilqr --no-judo --seeds 3 \
+    python benchmarks/planner_cpu.py --clock wall --planners dial cma_es --no-judo --seeds 3 \
         --out benchmarks/results/planner_cpu/planner_cpu_wall.json
+    python benchmarks/planner_cpu.py --clock wall --tasks cartpole --planners ilqr --no-judo --seeds 3 \
+        --out benchmarks/results/planner_cpu/planner_cpu_wall_ilqr.json
     python benchmarks/planner_cpu.py --tasks leap_cube --planners ps mppi cem --backends native --no-judo \
         --sample-factors 1 --seeds 5 --seconds 120 --clock wall \
         --out benchmarks/results/planner_cpu/planner_cpu_leap_wall_120s.json   # 40 s: ..._leap_wall.json
@@ -46,6 +48,7 @@ import dataclasses
 import json
 import os
 import platform
+import shlex
 import subprocess
 import sys
 import tempfile
@@ -259,6 +262,7 @@ def main() -> None:
                     row = measure(task, planner, samples, backend, args.seconds, args.seeds, args.clock, overrides)
                     rows.append(row)
                     print(table([row]).splitlines()[-1], flush=True)
+                    save(args, rows, [], load + [os.getloadavg()])  # a run stopped midway keeps its rows
     judo_rows = []
     if not args.no_judo:
         with tempfile.TemporaryDirectory() as tmp:
@@ -281,6 +285,14 @@ def main() -> None:
                 }
             )
     load.append(os.getloadavg())
+    ratios = save(args, rows, judo_rows, load)
+    print(table(sorted(rows + judo_rows, key=lambda r: (r["task"], r["planner"], r["num_samples"], r["backend"]))))
+    print("native / judo replan latency:", json.dumps({k: round(v, 2) for k, v in ratios.items()}))
+    print(f"wrote {args.out}")
+
+
+def save(args: argparse.Namespace, rows: list[dict], judo_rows: list[dict], load: list) -> dict[str, float]:
+    """Writes the run's JSON to ``args.out``; returns native/Judo replan-latency ratios."""
     ratios = {}
     for r in rows:
         peer = [
@@ -303,13 +315,12 @@ def main() -> None:
         "seconds": args.seconds,
         "rate_hz": RATE_HZ,
         "native_over_judo_latency": ratios,
+        "command": shlex.join(["python", *sys.argv]),
         "rows": rows + judo_rows,
     }
     args.out.parent.mkdir(parents=True, exist_ok=True)
     args.out.write_text(json.dumps(result, indent=1))
-    print(table(sorted(rows + judo_rows, key=lambda r: (r["task"], r["planner"], r["num_samples"], r["backend"]))))
-    print("native / judo replan latency:", json.dumps({k: round(v, 2) for k, v in ratios.items()}))
-    print(f"wrote {args.out}")
+    return ratios
 
 
 if __name__ == "__main__":
