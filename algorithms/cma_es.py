@@ -251,8 +251,5 @@ def plan(
         return state, None
 
     keys = jax.random.split(key, config.iterations)
-    if config.iterations == 1:  # no scan: C MuJoCo's rollouts can then run between two jits (`native.split`)
-        state, _ = generation(state, keys[0])
-    else:
-        state, _ = jax.lax.scan(generation, state, keys)
+    state, _ = planning.iterate(generation, state, keys, in_python=isinstance(task, planning.Native))
     return state, planning.controls(config, state.knots, *planning.control_limits(task))

@@ -116,8 +116,10 @@ def anneal(
     num_samples: int,
     temperature: float | jax.Array,
     key: Array,
+    in_python: bool = False,
 ) -> tuple[Array, Array, Array]:
-    """DIAL's inner loop, for any cost: an MPPI step per noise level.
+    """DIAL's inner loop, for any cost: an MPPI step per noise level, in a `lax.scan`
+    or, with `in_python` (C MuJoCo's rollouts), unrolled (`planning.iterate`).
 
     Args:
       costs_of: (samples [N, K, nu], key) -> ([N] costs, [] anything carried out: dt).
@@ -138,9 +140,13 @@ def anneal(
         cost = jnp.sum(weights * jnp.where(weights > 0, costs, 0.0))
         return (jnp.tensordot(weights, samples, axes=1), cost, extra), None
 
-    _, extra = jax.eval_shape(costs_of, jnp.zeros((num_samples, *knots.shape), knots.dtype), key)
-    start = (knots, jnp.float32(jnp.inf), jnp.zeros(extra.shape, extra.dtype))
-    return jax.lax.scan(iteration, start, (stds, jax.random.split(key, stds.shape[0])))[0]
+    if in_python:  # no scan: the carry's extra needs no value before the first iteration
+        extra = None  # (and tracing costs_of for its shape would call C MuJoCo once more)
+    else:
+        _, shape = jax.eval_shape(costs_of, jnp.zeros((num_samples, *knots.shape), knots.dtype), key)
+        extra = jnp.zeros(shape.shape, shape.dtype)
+    start = (knots, jnp.float32(jnp.inf), extra)
+    return planning.iterate(iteration, start, (stds, jax.random.split(key, stds.shape[0])), in_python=in_python)[0]
 
 
 def plan(
@@ -166,6 +172,16 @@ def plan(
             config, task, env_state, samples, key, terminal_value, hp.cvar_alpha, hp.termination_cost
         )
 
-    knots, cost, dt = anneal(costs_of, state.knots, stds, low, high, config.num_samples, hp.temperature, key)
+    knots, cost, dt = anneal(
+        costs_of,
+        state.knots,
+        stds,
+        low,
+        high,
+        config.num_samples,
+        hp.temperature,
+        key,
+        isinstance(task, planning.Native),
+    )
     state = state.replace(knots=knots, std=stds[-1], cost=cost, dt=dt)
     return state, planning.controls(config, knots, low, high)

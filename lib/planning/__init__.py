@@ -51,6 +51,7 @@ from mjzoo.planning.sampling import control_limits
 from mjzoo.planning.sampling import controls
 from mjzoo.planning.sampling import half_range
 from mjzoo.planning.sampling import initial_state
+from mjzoo.planning.sampling import iterate
 from mjzoo.planning.sampling import mppi_weights
 from mjzoo.planning.sampling import noise_ramp_profile
 from mjzoo.planning.sampling import noise_std
@@ -84,6 +85,7 @@ __all__ = [
     "noise_std",
     "noise_ramp_profile",
     "initial_state",
+    "iterate",
     "shift",
     "sample_knots",
     "sample_around",

@@ -252,11 +252,8 @@ def _roll(engine: Engine, base: Task, models: Any, start: State, controls: Array
         applied,
     )
     host = _HOST.get()
-    if isinstance(host, list):  # `split`'s first pass: hand C's inputs out instead
-        host.append((engine, args))
-        out = tuple(jnp.zeros(s.shape, s.dtype) for s in out_shapes)
-    elif host is not None:  # `split`'s second pass: C's outputs come in
-        out = tuple(host)
+    if host is not None:  # `split` traces: C's outputs come from the host, or its inputs go there
+        out = host.call(engine, args, out_shapes)
     else:
         out = jax.pure_callback(engine, out_shapes, *args, vmap_method="sequential")
     return _from_c(engine, *out)
@@ -272,61 +269,77 @@ def _from_c(engine: Engine, states: Array, sensordata: Array) -> dict[str, Array
 _HOST: contextvars.ContextVar = contextvars.ContextVar("mjzoo_native_host", default=None)
 
 
+class _Host:
+    """A C call site's part while `split` traces: the first calls get the outputs C gave
+    (`given`); the later ones hand their inputs out (`calls`) and get zeros, which no
+    output of the traced stage depends on."""
+
+    def __init__(self, given: list):
+        self.given, self.calls, self.seen = given, [], 0
+
+    def call(self, engine: Engine, args: tuple, out_shapes: tuple) -> tuple:
+        if self.seen < len(self.given):
+            out = tuple(self.given[self.seen])
+        else:
+            self.calls.append((engine, args))
+            out = tuple(jnp.zeros(s.shape, s.dtype) for s in out_shapes)
+        self.seen += 1
+        return out
+
+
 def split(fn: Callable) -> Callable:
-    """`jax.jit(fn)` for a function that runs C MuJoCo once (a replan or a simulation
-    step on `Native` tasks), as two jits around a call of C MuJoCo from the host.
+    """`jax.jit(fn)` for a function that runs C MuJoCo (a replan or a simulation step on
+    `Native` tasks), as jits around calls of C MuJoCo from the host.
 
     One jit reaches C through `jax.pure_callback`, which costs ~0.3 ms a call on a CPU:
-    more than a whole replan's work besides physics. The first jit computes C's inputs
-    (its trace of `fn` hands them out; XLA drops the rest), the host runs C, and the
-    second jit computes `fn` with C's outputs passed in. Same result, same key use.
-    A function that runs C more than once (a planner that iterates: `dial`, `cma_es`
-    with several generations), each call needing the last one's result, or never, or
-    inside a `lax.scan` (traced once, run many times), runs as one jit instead, C through
-    `jax.pure_callback`.
+    more than a whole replan's work besides physics. Here, for a function that calls C
+    n times in sequence (n = 1 for a replan, n = `iterations` for DIAL's and CMA-ES's,
+    unrolled by `planning.iterate`, each call needing the last one's result), stage j < n
+    computes the inputs of call j from the outputs of calls < j (its trace of `fn` hands
+    them out; XLA drops the rest), the host runs C, and stage n computes `fn` with every
+    output passed in. n + 1 jits; same result, same key use. A function whose C call
+    sits in a `lax.scan` (traced once, run many times: CMA-ES's generations) runs as one
+    jit instead, C through `jax.pure_callback`.
     """
-    engines: list[Engine] = []
+    plans: dict = {}
 
-    def inputs(*args):
-        calls: list = []
-        token = _HOST.set(calls)
-        try:
-            fn(*args)
-        finally:
-            _HOST.reset(token)
-        if len(calls) != 1:
-            return None  # `run` jits the function whole instead
-        engines[:] = [calls[0][0]]
-        return calls[0][1]
+    def stage(treedef, j: int, plan: dict):
+        def run_stage(given: list, leaves: list):
+            host = _Host(given)
+            token = _HOST.set(host)
+            try:
+                result = fn(*jax.tree.unflatten(treedef, leaves))
+            finally:
+                _HOST.reset(token)
+            if j == 0:
+                plan["calls"] = len(host.calls)
+            if j == plan["calls"]:
+                return result
+            engine, inputs = host.calls[0]
+            plan["engines"][j] = engine
+            return inputs
 
-    def outputs(c_states, *args):
-        token = _HOST.set(c_states)
-        try:
-            return fn(*args)
-        finally:
-            _HOST.reset(token)
-
-    treedefs: dict = {}
+        return jax.jit(run_stage)
 
     def run(*args):
         # Flattened once, in Python (an mjx.Data flattens slowly); the jits take the list.
         leaves, treedef = jax.tree.flatten(args)
-        if treedef not in treedefs:
-            treedefs[treedef] = (
-                jax.jit(lambda ls: inputs(*jax.tree.unflatten(treedef, ls))),
-                jax.jit(lambda c, ls: outputs(c, *jax.tree.unflatten(treedef, ls))),
-            )
-        first, second = treedefs[treedef]
-        try:
-            c_inputs = first(leaves) if first is not None else None
-        except jax.errors.UnexpectedTracerError:  # C's inputs were a scan body's: they cannot leave it
-            c_inputs = None
-        if c_inputs is None:
-            if first is not None:
-                treedefs[treedef] = (None, jax.jit(lambda ls: fn(*jax.tree.unflatten(treedef, ls))))
-            return treedefs[treedef][1](leaves)
-        c_states = engines[0](*jax.tree.map(np.asarray, c_inputs))
-        return second(c_states, leaves)
+        plan = plans.setdefault(treedef, {"stages": [], "engines": {}, "calls": None, "whole": None})
+        if plan["whole"] is not None:
+            return plan["whole"](leaves)
+        given: list = []
+        while True:
+            j = len(given)
+            if j == len(plan["stages"]):
+                plan["stages"].append(stage(treedef, j, plan))
+            try:
+                out = plan["stages"][j](given, leaves)
+            except jax.errors.UnexpectedTracerError:  # C's inputs were a scan body's: they cannot leave it
+                plan["whole"] = jax.jit(lambda ls: fn(*jax.tree.unflatten(treedef, ls)))
+                return plan["whole"](leaves)
+            if j == plan["calls"]:
+                return out
+            given.append(plan["engines"][j](*jax.tree.map(np.asarray, out)))
 
     return run
 

@@ -322,8 +322,8 @@ def realtime(
 
     Returns the run and where its time went: the achieved ``plan_hz``, each replan's
     latency (median, p95), of which ``plan_physics_ms`` was C MuJoCo's rollouts on the
-    native backend, the simulation's cost per control step (``sim_step_ms``), the busy
-    share of the wall clock and the real-time factor."""
+    native backend (all of a replan's calls), the simulation's cost per control step
+    (``sim_step_ms``), the busy share of the wall clock and the real-time factor."""
     if clock not in ("wall", "simulated"):
         raise ValueError(f"realtime: clock must be 'wall' or 'simulated', got {clock!r}")
     plan_task = problem.tasks[1]  # before sim_dt: a native simulation knows its step
@@ -333,8 +333,10 @@ def realtime(
     loop = _compiled(problem, key, total_steps)
     replan, step, hooks, value = loop.replan, loop.step, problem.hooks, problem.terminal_value
     sim_state, planner_state = loop.sim_state, loop.planner_state
-    physics_seconds = plan_task.engine.seconds if isinstance(plan_task, Native) else []
-    physics_seconds.clear()
+    c_calls = plan_task.engine.seconds if isinstance(plan_task, Native) else None  # each C call's seconds
+    if c_calls is not None:
+        c_calls.clear()
+    physics_seconds = []  # each replan's C seconds: the sum of its calls (DIAL's iterations make several)
 
     states, controls, plan_states, latencies, step_seconds = [], [], [], [], []
     simulated = clock == "simulated"
@@ -353,8 +355,11 @@ def realtime(
     while len(states) < total_steps:
         tick = time.perf_counter()
         replan_key = loop.plan_keys[len(latencies) % total_steps]
+        calls_before = len(c_calls) if c_calls is not None else 0
         new_plan = jax.block_until_ready(replan(planner_state, sim_state, replan_key, value))
         latencies.append(time.perf_counter() - tick)
+        if c_calls is not None:
+            physics_seconds.append(sum(c_calls[calls_before:]))
         if not simulated:
             advance_to(due_at(time.perf_counter()), planner_state)  # the world did not wait
         planner_state = new_plan

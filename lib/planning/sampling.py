@@ -27,6 +27,7 @@ import numbers
 import typing
 from types import ModuleType
 from typing import Any
+from typing import Callable
 from typing import Mapping
 
 import jax
@@ -401,6 +402,20 @@ def sample_costs(
     costs = aggregate(costs, config.risk, cvar_alpha)
     # A sample whose physics blew up must never win.
     return jnp.where(jnp.isfinite(costs), costs, jnp.inf), dt
+
+
+def iterate(body: Callable, carry: Any, xs: Any, *, in_python: bool = False) -> tuple[Any, Any]:
+    """`jax.lax.scan(body, carry, xs)`, or with `in_python` the same loop unrolled in
+    Python: a planner's iterations on a `Native` task, each running C MuJoCo, which
+    `native.split` then runs from the host between jits (a scan's body is traced once,
+    so its C call could only run through `jax.pure_callback`, a slower replan)."""
+    if not in_python:
+        return jax.lax.scan(body, carry, xs)
+    ys = []
+    for i in range(jax.tree.leaves(xs)[0].shape[0]):
+        carry, y = body(carry, jax.tree.map(lambda x, i=i: x[i], xs))
+        ys.append(y)
+    return carry, jax.tree.map(lambda *y: jnp.stack(y), *ys)
 
 
 def sample_around(
