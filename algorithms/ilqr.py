@@ -86,12 +86,18 @@ class Config:
       iterations: the most iLQR iterations per replan.
       line_search_steps: step sizes alpha = beta^i, i < L, tried at once in each forward pass (L).
       unroll: `lax.scan` unroll of the rollout loop.
+      linearize_steps: planning steps linearized at once (vmapped; a `lax.map` runs the
+        groups in turn). None: one at a time on a CPU, where larger batches run no
+        faster and can hang (jaxlib 0.10's batched LAPACK solves wait on the thread pool
+        they run in: two at once on a 2-core CPU wait forever, as MJX's contact solver's
+        did at a 30-step horizon), the whole horizon on an accelerator.
     """
 
     horizon_steps: int = 25
     iterations: int = 4
     line_search_steps: int = 8
     unroll: int = 1
+    linearize_steps: int | None = None
 
     def __post_init__(self) -> None:
         checks.fields(
@@ -102,6 +108,7 @@ class Config:
                 "iterations": (self.iterations >= 1, ">= 1"),
                 "line_search_steps": (self.line_search_steps >= 1, ">= 1"),
                 "unroll": (self.unroll >= 1, ">= 1"),
+                "linearize_steps": (self.linearize_steps is None or self.linearize_steps >= 1, "None or >= 1"),
             },
         )
 
@@ -293,6 +300,7 @@ def linearize(
     weights: Array,
     value_weights: Array,
     terminal_value: TerminalValue | None = None,
+    steps_at_once: int | None = None,
 ) -> tuple[Array, Array, Array]:
     """Derivatives of each step around a trajectory, by forward-mode AD through MJX.
 
@@ -304,6 +312,8 @@ def linearize(
     Args:
       states: `State` [H], each step's start; controls: [H, nu]; keys: [H].
       weights, value_weights: [H] (0 or 1: which rewards count, where the value is paid).
+      steps_at_once: steps vmapped together, groups in turn (`Config.linearize_steps`);
+        None: all H.
 
     Returns:
       (f_z [H, nx, n] = d x_{t+1} / d(x, u), c_z [H, n], c_zz [H, n, n]), n = nx + nu.
@@ -327,7 +337,10 @@ def linearize(
         curvature = (gradients[1 : n + 1] - gradients[n + 1 :]) / (2 * eps[:, None])
         return jacobians[0, :nx], gradients[0], (curvature + curvature.T) / 2
 
-    return jax.vmap(step)(states, controls, keys, weights, value_weights)
+    inputs = (states, controls, keys, weights, value_weights)
+    if steps_at_once is None or steps_at_once >= controls.shape[0]:
+        return jax.vmap(step)(*inputs)
+    return jax.lax.map(lambda x: step(*x), inputs, batch_size=steps_at_once if steps_at_once > 1 else None)
 
 
 def backward(
@@ -399,6 +412,9 @@ def plan(
     keys = jax.random.split(key, horizon)
     nx = _vector(start).shape[0]
     alphas = hp.step_decay ** jnp.arange(config.line_search_steps, dtype=jnp.float32)
+    steps_at_once = config.linearize_steps
+    if steps_at_once is None:
+        steps_at_once = 1 if jax.default_backend() == "cpu" else horizon
 
     def run(controls, gains, reference):
         return rollout(
@@ -412,7 +428,7 @@ def plan(
         ended = jnp.cumsum(terminated.astype(jnp.int32))
         weights = (ended - terminated.astype(jnp.int32) == 0).astype(jnp.float32)
         value_weights = jnp.zeros(horizon).at[-1].set((ended[-1] == 0).astype(jnp.float32))
-        return linearize(task, states, controls, keys, weights, value_weights, terminal_value)
+        return linearize(task, states, controls, keys, weights, value_weights, terminal_value, steps_at_once)
 
     # One rollout program serves the first nominal (pass 0: with k = K = 0 every
     # candidate is the warm start) and each iteration's line search (passes 1..N).

@@ -26,10 +26,12 @@ takes ~1.5x longer).
 
     python benchmarks/planner_cpu.py                       # everything, ~25 minutes
     python benchmarks/planner_cpu.py --tasks cartpole --planners mppi --backends native --no-judo
-    python benchmarks/planner_cpu.py --clock wall --planners dial cma_es --no-judo --seeds 3 \
+    python benchmarks/planner_cpu.py --clock wall --planners mppi dial cma_es --no-judo --seeds 3 \
         --out benchmarks/results/planner_cpu/planner_cpu_wall.json
-    python benchmarks/planner_cpu.py --clock wall --tasks cartpole --planners ilqr --no-judo --seeds 3 \
-        --out benchmarks/results/planner_cpu/planner_cpu_wall_ilqr.json
+    python benchmarks/planner_cpu.py --clock wall --planners dial --backends native --no-judo --seeds 3 \
+        --out benchmarks/results/planner_cpu/planner_cpu_wall_dial_native.json
+    python benchmarks/planner_cpu.py --clock wall --tasks cartpole cylinder_push --planners ilqr --backends mjx \
+        --no-judo --seeds 3 --out benchmarks/results/planner_cpu/planner_cpu_wall_ilqr.json
     python benchmarks/planner_cpu.py --tasks leap_cube --planners ps mppi cem --backends native --no-judo \
         --sample-factors 1 --seeds 5 --seconds 120 --clock wall \
         --out benchmarks/results/planner_cpu/planner_cpu_leap_wall_120s.json   # 40 s: ..._leap_wall.json

@@ -120,6 +120,29 @@ def test_a_vmapped_sweep_is_one_program_with_each_members_own_plan():
     assert len({a.tobytes() for a in alone}) == len(members), "the swept numbers changed nothing"
 
 
+def test_linearizing_steps_in_groups_gives_the_same_derivatives():
+    """`linearize` vmaps every step at once, or runs groups of them in turn (one at a time
+    is the CPU's default: it keeps jaxlib's batched solves from hanging): the same numbers."""
+    task, env_state = _pendulum(), _swinging()
+    horizon = 5
+    controls = jnp.linspace(-1.0, 1.0, horizon)[:, None]
+    keys = jax.random.split(jax.random.key(2), horizon)
+    low, high = planning.control_limits(task)
+    no_gains, no_reference = jnp.zeros((horizon, 1, 2)), jnp.zeros((horizon, 2))
+    _, states, _, _ = ilqr.rollout(task, env_state, controls, no_gains, no_reference, keys, low, high)
+    ones = jnp.ones(horizon)
+    grouped = [
+        jax.jit(lambda t, s, c, k, n=n: ilqr.linearize(t, s, c, k, ones, ones, None, n))(task, states, controls, keys)
+        for n in (None, 1, 2)
+    ]
+    for f_z, c_z, c_zz in grouped[1:]:
+        np.testing.assert_allclose(f_z, grouped[0][0], rtol=1e-5, atol=1e-6)
+        np.testing.assert_allclose(c_z, grouped[0][1], rtol=1e-5, atol=1e-6)
+        # central differences of float32 gradients: ~1e-4 of rounding, against entries up to ~20
+        np.testing.assert_allclose(c_zz, grouped[0][2], rtol=1e-3, atol=1e-3)
+    assert float(jnp.abs(grouped[0][0]).max()) > 0.1  # real dynamics, not zeros
+
+
 def test_the_closed_loop_swings_the_pendulum_up():
     config, hyperparams = planning.configure(ilqr, envs.hyperparameters("pendulum_swingup", "ilqr"))
     problem = envs.closed_loop_problem("pendulum_swingup", ilqr, config, hyperparams=hyperparams)
