@@ -8,7 +8,7 @@ same lookup finds them there once the archive is unpacked onto the Python path:
 
     mkdir -p /tmp/robots && tar -xJf .robots/robots.tar.xz -C /tmp/robots && export PYTHONPATH=/tmp/robots
 
-(ignore the archive's folder in .git/info/exclude and name it in the device call's carry.)
+(.robots/ is git-ignored: a device call takes it when its carry names it.)
 Prints the archive's size: a device call carries at most 64 MiB with the working tree.
 """
 
