@@ -11,8 +11,8 @@ task goes:
 
 A replan stays one jit: the controls a rollout applies are computed in JAX from its
 actions (the task's own step, its physics recorded, not run), C MuJoCo rolls them out
-through `jax.pure_callback` (`split`: the same as two jits around a host call of C,
-without the callback's ~0.3 ms), and the returned states are replayed through the task's own
+through `jax.pure_callback` (`split`: the same as jits around host calls of C,
+without the callback's ~0.3 ms a call), and the returned states are replayed through the task's own
 `transition` (its physics replaced by C's states: `mjzoo.physics.StandIn`), which gives
 the reward terms, terminations and observations. After a step, `data` holds:
   from C MuJoCo        time, qpos, qvel, act, sensordata (sensors are computed before a
@@ -298,8 +298,8 @@ def split(fn: Callable) -> Callable:
     computes the inputs of call j from the outputs of calls < j (its trace of `fn` hands
     them out; XLA drops the rest), the host runs C, and stage n computes `fn` with every
     output passed in. n + 1 jits; same result, same key use. A function whose C call
-    sits in a `lax.scan` (traced once, run many times: CMA-ES's generations) runs as one
-    jit instead, C through `jax.pure_callback`.
+    sits in a `lax.scan` (traced once, run many times: a planner's own loop that is not
+    `planning.iterate`'s) runs as one jit instead, C through `jax.pure_callback`.
     """
     plans: dict = {}
 

@@ -261,7 +261,7 @@ def _loop(problem: Problem, sims: Packing, plans: Packing) -> tuple[Callable, ..
         state, control = closed_loop.sim_step(config, sim_task, plans.unpack(p), sims.unpack(s), k, hooks)
         return sims.pack(state), control
 
-    # Native: two jits around a host call of C each (`native.split`), not one jit through
+    # Native: jits around host calls of C (`native.split`), not one jit through
     # `jax.pure_callback`, whose ~0.3 ms a call a replan and every simulation step would pay.
     compile_ = lambda physics: native_split if physics == "native" else jax.jit  # noqa: E731
     after_rollout = jax.jit(lambda s, p: sims.pack(closed_loop.after_rollout(hooks, sims.unpack(s), plans.unpack(p))))
