@@ -5,6 +5,8 @@ Judo pins its own mujoco), e.g. as a subprocess of ``benchmarks/planner_cpu.py``
 
     .judo/venv/bin/python benchmarks/judo_peer.py --out judo.json \\
         --tasks cartpole cylinder_push --optimizers ps cem mppi --sample-factors 1 4
+    .judo/venv/bin/python benchmarks/judo_peer.py --out judo_leap.json --tasks leap_cube \\
+        --sample-factors 1 --seconds 120 --leap-meshes MENAGERIE/leap_hand/assets
 
 For each task x optimizer x sample factor, Judo's `Controller` (shipped task overrides,
 `num_rollouts` times the factor) closes the loop on Judo's `MJSimulation` (C MuJoCo),
@@ -26,6 +28,7 @@ import dataclasses
 import json
 import os
 import platform
+import shutil
 import subprocess
 import sys
 import time
@@ -44,9 +47,16 @@ from judo.simulation import MJSimulation
 from judo.utils.mj_rollout_backend import MJRolloutBackend
 from mujoco.rollout import Rollout
 
-# Every Judo task downloads a mesh archive from GitHub on construction; these tasks use
-# no meshes, so the benchmark runs offline.
+# Every Judo task downloads a mesh archive from GitHub on construction; the benchmark runs
+# offline instead: cart-pole and push use no meshes, and the LEAP hand's meshes come from
+# MuJoCo Menagerie (``--leap-meshes``, the files of the same names). They are visual only in
+# Judo's LEAP scene (density 0, no contacts, every body has its own inertial), so Judo's
+# physics is unchanged by whichever meshes fill the folder.
 judo.tasks.base.download_and_extract_meshes = lambda *args, **kwargs: None
+LEAP_MESHES = Path(judo.MODEL_PATH) / "meshes" / "leap"  # where Judo's LEAP scene reads them
+LEAP_MESH_FILES = "palm_right base proximal medial distal tip thumb_base thumb_proximal thumb_distal thumb_tip".split()
+LEAP_DROP_Z = -0.3  # Judo's LeapCube resets the cube when it falls below this height (m)
+GOALS_TO_SOLVE = 10  # mjzoo's leap_cube_rotate: solved at 10 goals before the first drop
 
 WARMUP_REPLANS = 5  # per episode, left out of the latency statistics
 LAST_SECONDS = 1.0  # cart-pole's success window at the end of the run
@@ -135,20 +145,57 @@ def _score(task_name: str, sim: MJSimulation) -> float:
     return float(np.linalg.norm(qpos[2:4] - sim.task.config.goal_pos[:2]))
 
 
+def fill_leap_meshes(source: Path) -> None:
+    """Copies Menagerie's LEAP meshes from `source` into Judo's mesh folder (in Judo's own
+    environment) where they are missing; one clear error naming a missing file."""
+    LEAP_MESHES.mkdir(parents=True, exist_ok=True)
+    for name in LEAP_MESH_FILES:
+        target = LEAP_MESHES / f"{name}.obj"
+        if not target.exists():
+            mesh = source / f"{name}.obj"
+            if not mesh.is_file():
+                raise SystemExit(f"judo_peer: --leap-meshes {source} has no {name}.obj (Menagerie's leap_hand/assets)")
+            shutil.copyfile(mesh, target)
+
+
+def _count_goals(sim: MJSimulation) -> dict[str, list[float]]:
+    """Records, on Judo's LEAP simulation, the times of goals reached and of drops: its
+    `post_sim_step` redraws the goal when the cube is within 0.4 rad of it and resets the
+    cube (drawing a goal too) when it falls below `LEAP_DROP_Z`."""
+    task, events = sim.task, {"goals": [], "drops": []}
+    post_sim_step = task.post_sim_step
+
+    def counted() -> None:
+        dropped, goal = task.data.qpos[2] < LEAP_DROP_Z, task.goal_quat
+        post_sim_step()
+        if dropped:
+            events["drops"].append(float(task.data.time))
+        elif task.goal_quat is not goal:
+            events["goals"].append(float(task.data.time))
+
+    task.post_sim_step = counted
+    return events
+
+
 def episode(task_name: str, optimizer: str, factor: int, threads: int, seed: int, seconds: float) -> dict:
     """One closed-loop run from a random initial state (Judo's `Task.reset`, seeded).
 
     Returns per-replan wall times (s) of the whole replan and of `mujoco.rollout` in it,
-    and the score: cart-pole the max |angle| over the last second, push the final distance.
+    and the score: cart-pole the max |angle| over the last second, push the final distance,
+    LEAP cube the goals reached before the cube first drops.
     """
-    # Judo samples resets and planner noise from numpy's global RNG.
+    # Judo samples resets, goals and planner noise from numpy's global RNG.
     np.random.seed(seed)
     sim = MJSimulation(init_task=task_name)
+    events = _count_goals(sim) if task_name == "leap_cube" else None
     ctrl = _controller(task_name, optimizer, factor, threads)
     timed: _TimedRollout = ctrl.rollout_backend._rollout_obj
     stages = _time_stages(ctrl)
     period = 1.0 / ctrl.controller_cfg.control_freq
-    steps = round(seconds / sim.timestep)
+    # The simulation's own step (sim.timestep is the planning model's: the LEAP hand's
+    # simulation steps 0.002 s under a planning step of 0.01 s).
+    dt = float(sim.task.sim_model.opt.timestep)
+    steps = round(seconds / dt)
     next_replan, spline, replan_s, tail = 0.0, None, [], []
     for step in range(steps):
         if sim.task.data.time >= next_replan - 1e-9:
@@ -160,16 +207,16 @@ def episode(task_name: str, optimizer: str, factor: int, threads: int, seed: int
             spline = SplineData(ctrl.times, ctrl.nominal_knots).spline()
             next_replan += period
         sim.step(spline(sim.task.data.time))
-        if (steps - 1 - step) * sim.timestep < LAST_SECONDS - 1e-9:
+        if events is None and (steps - 1 - step) * dt < LAST_SECONDS - 1e-9:
             tail.append(_score(task_name, sim))
     ctrl.rollout_backend._rollout_obj.close()
-    final = _score(task_name, sim)
+    out = {"seed": seed, "replan_s": replan_s, "rollout_s": list(timed.seconds), "stages_s": stages}
+    if events is not None:  # the goals before the first drop, as mjzoo's leap_cube_rotate counts them
+        first_drop = min(events["drops"], default=np.inf)
+        return {**out, **events, "score": float(sum(t < first_drop for t in events["goals"]))}
     return {
-        "seed": seed,
-        "replan_s": replan_s,
-        "rollout_s": list(timed.seconds),
-        "stages_s": stages,
-        "score": max(tail) if task_name == "cartpole" else final,
+        **out,
+        "score": max(tail) if task_name == "cartpole" else _score(task_name, sim),
         "judo_success": bool(sim.task.success(sim.task.sim_model, sim.task.data)),
     }
 
@@ -231,9 +278,15 @@ def row(
         "overhead_stages_ms": {k: _stats_ms(v) for k, v in stages.items()},
         "scores": scores.tolist(),
         "mean_score": float(scores.mean()),
-        "judo_success_rate": float(np.mean([r["judo_success"] for r in runs])),
     }
     out["num_rollouts"] = out["settings"]["optimizer"]["num_rollouts"]
+    if task_name == "leap_cube":
+        out["success_rate"] = float(np.mean(scores >= GOALS_TO_SOLVE))
+        out["goals"] = [len(r["goals"]) for r in runs]
+        out["drops"] = [len(r["drops"]) for r in runs]
+        out["score_meaning"] = f"goals reached before the cube first drops; success >= {GOALS_TO_SOLVE}"
+        return out
+    out["judo_success_rate"] = float(np.mean([r["judo_success"] for r in runs]))
     if task_name == "cartpole":
         out["success_rate"] = float(np.mean(scores < 0.2))
         out["score_meaning"] = "max |pole angle from upright| (rad) over the last 1 s; success < 0.2"
@@ -274,6 +327,12 @@ def main() -> None:
     parser.add_argument("--seconds", type=float, default=8.0, help="simulated seconds per episode")
     parser.add_argument("--seeds", type=int, default=3)
     parser.add_argument(
+        "--leap-meshes",
+        type=Path,
+        default=None,
+        help="Menagerie's leap_hand/assets folder: fills Judo's LEAP mesh folder offline (leap_cube)",
+    )
+    parser.add_argument(
         "--threads",
         type=int,
         default=None,
@@ -281,6 +340,11 @@ def main() -> None:
     )
     args = parser.parse_args()
     threads = _physical_cores() if args.threads is None else args.threads
+    if "leap_cube" in args.tasks:
+        if args.leap_meshes is None and not LEAP_MESHES.is_dir():
+            parser.error("leap_cube needs --leap-meshes (Menagerie's leap_hand/assets): Judo's own are online")
+        if args.leap_meshes is not None:
+            fill_leap_meshes(args.leap_meshes)
 
     load_before = _loadavg()
     rows = []

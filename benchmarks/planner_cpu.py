@@ -12,7 +12,10 @@ environment: ``bash benchmarks/judo_env.sh``) runs its own tasks in the same run
 ``benchmarks/judo_peer.py``, with the same number of rollout threads. ``--tasks leap_cube``
 adds the LEAP hand turning a cube to goal orientations (Judo's flagship) at Judo's
 shipped LEAP settings, which are the env's registered ones (1 s of 20 control steps on
-the task's own model), with no Judo rows: Judo's LEAP task fetches its meshes online.
+the task's own model), beside Judo on its own LEAP task, which runs offline with
+Menagerie's LEAP meshes in place of the ones it downloads (they are visual only there).
+Each peer plans on its own scene: Judo's (elliptic cones, 100 Newton iterations, the
+cube's pips as collision geoms) and mjzoo's (Playground's LEAP scene and solver settings).
 
 Per row: replan latency (median, p95), the part spent in C MuJoCo's rollouts (native and
 Judo), the rest (the fixed overhead of a replan), the achieved rate and the closed-loop
@@ -35,6 +38,8 @@ takes ~1.5x longer).
     python benchmarks/planner_cpu.py --tasks leap_cube --planners ps mppi cem --backends native --no-judo \
         --sample-factors 1 --seeds 5 --seconds 120 --clock wall \
         --out benchmarks/results/planner_cpu/planner_cpu_leap_wall_120s.json   # 40 s: ..._leap_wall.json
+    python benchmarks/planner_cpu.py --tasks leap_cube --planners mppi --backends native --sample-factors 1 \
+        --seeds 3 --seconds 120 --out benchmarks/results/planner_cpu/planner_cpu_leap_judo.json
     python benchmarks/planner_cpu.py --tasks cartpole --backends native --no-judo --seeds 6 --clock wall \
         --planners ps mppi cem --sample-factors 1 --config noise_scale=0.1 noise_ramp=2 \
         --out benchmarks/results/planner_cpu/planner_cpu_cartpole_wall.json
@@ -71,6 +76,7 @@ from mjzoo.algorithms import predictive_sampling
 from mjzoo.harness.cli import arguments
 from mjzoo.planning import native
 from mjzoo.planning import realtime
+from mjzoo.robots import models
 
 ROOT = Path(__file__).resolve().parent.parent
 PLANNERS = {"ps": predictive_sampling, "cem": cem, "mppi": mppi, "dial": dial, "cma_es": cma_es, "ilqr": ilqr}
@@ -84,7 +90,7 @@ TASKS = {
     "cylinder_push": dict(env="cylinder_push", plan_dt=0.02, horizon_steps=50),
     "leap_cube": dict(env="leap_cube_rotate", plan_dt=None, horizon_steps=20),
 }
-JUDO_TASKS = ("cartpole", "cylinder_push")  # judo_peer.py's; its LEAP cube fetches meshes online
+DEFAULT_TASKS = ("cartpole", "cylinder_push")  # leap_cube on request: its runs are long
 JUDO_ROLLOUTS, JUDO_KNOTS, RATE_HZ = 32, 4, 20.0
 
 
@@ -176,7 +182,7 @@ def judo(args, out: Path) -> dict | None:
         "--out",
         str(out),
         "--tasks",
-        *[t for t in args.tasks if t in JUDO_TASKS],
+        *args.tasks,
         "--optimizers",
         *[p for p in args.planners if p in JUDO_PLANNERS],
         "--sample-factors",
@@ -188,6 +194,8 @@ def judo(args, out: Path) -> dict | None:
         "--threads",
         str(args.threads),
     ]
+    if "leap_cube" in args.tasks:  # Judo's LEAP scene reads its (visual) meshes from Menagerie's offline
+        command += ["--leap-meshes", str(models.menagerie("leap_hand", download=False) / "assets")]
     subprocess.run(command, check=True, env={k: v for k, v in os.environ.items() if k != "PYTHONPATH"})
     return json.loads(out.read_text())
 
@@ -224,7 +232,7 @@ def table(rows: list[dict]) -> str:
 
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
-    parser.add_argument("--tasks", nargs="+", default=list(JUDO_TASKS), choices=list(TASKS))
+    parser.add_argument("--tasks", nargs="+", default=list(DEFAULT_TASKS), choices=list(TASKS))
     parser.add_argument("--planners", nargs="+", default=list(PLANNERS), choices=list(PLANNERS))
     parser.add_argument("--sample-factors", nargs="+", type=int, default=[1, 4])
     parser.add_argument("--backends", nargs="+", default=["native", "mjx"], choices=["native", "mjx"])
@@ -284,6 +292,7 @@ def main() -> None:
                     "success_rate": r["success_rate"],
                     "score": r.get("mean_score"),
                     "seeds": len(r.get("scores", [])),
+                    **{k: r[k] for k in ("goals", "drops", "scores") if k in r},
                 }
             )
     load.append(os.getloadavg())

@@ -556,9 +556,13 @@ horizon, replanning every 0.05 s of simulated time), 2 rollout threads each. mjz
 *native* backend rolls out in C MuJoCo through `mujoco.rollout` and scores the samples
 with the task's own JAX reward; *mjx* is MJX on the CPU. Replan times are medians; the
 rollouts are C MuJoCo's share, the rest everything but physics. The LEAP cube
-(`--tasks leap_cube`, Judo's LEAP settings, which `leap_cube_rotate` registers) runs
-without Judo, whose LEAP task fetches its meshes online; its success is 10 goals in a row
-without a drop within the run (40 s, then 120 s: `_120s`). Clock `wall`: in real time (the world does not wait for a replan).
+(`--tasks leap_cube`, Judo's LEAP settings, which `leap_cube_rotate` registers): its
+success is 10 goals in a row without a drop within the run (40 s, then 120 s: `_120s`);
+`_judo` puts Judo on its own LEAP task beside it, offline, with Menagerie's LEAP meshes in
+place of the ones Judo downloads (visual only in its scene). Each peer plans on its own
+scene there: Judo's has elliptic friction cones, 100 Newton iterations and the cube's
+pips as collision geoms, mjzoo's is Playground's. Clock `wall`: in real time (the world
+does not wait for a replan).
 The score is the task's own measure, averaged over seeds: the cart-pole's worst angle
 from upright over the last second (rad), the push's final distance (m), the LEAP cube's
 goals in a row.
